@@ -1,0 +1,87 @@
+"""The lecture's camera and its rays, and a default camera for files that have none.
+
+The camera has an eye, axes u (right), v (up) and n (pointing *back*, away from the view), and a window
+in the near plane N = 1 that spans [-W, W] x [-H, H] with H = tan(viewAngle / 2) and W = H * aspect.
+Rows count from the bottom and columns from the left, as in the lecture; unlike the lecture's pixel
+corners, rays go through pixel *centres*, so the traced image overlays a rasterised preview exactly.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .model import Camera, Scene
+
+DEFAULT_VIEW_ANGLE = 40.0
+#: Default camera direction (from the scene's centre toward the eye): in front, a little right and above
+#: (SDL scenes are y-up).
+DEFAULT_VIEW_DIRECTION = (0.45, 0.55, 1.0)
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    eye: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    n: np.ndarray
+    half_height: float  # H at N = 1
+    half_width: float  # W at N = 1
+
+    @classmethod
+    def from_camera(cls, camera: Camera, aspect: float) -> "CameraFrame":
+        eye = np.asarray(camera.eye, dtype=float)
+        n = eye - np.asarray(camera.look, dtype=float)
+        if not np.linalg.norm(n) > 0:
+            raise ValueError("camera eye and look-at point coincide")
+        n /= np.linalg.norm(n)
+        u = np.cross(np.asarray(camera.up, dtype=float), n)
+        if not np.linalg.norm(u) > 1e-12:
+            raise ValueError("camera up vector is parallel to the viewing direction")
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        if not 0.0 < camera.view_angle < 180.0:
+            raise ValueError(f"camera view angle must be between 0 and 180 degrees, not {camera.view_angle}")
+        h = math.tan(math.radians(camera.view_angle) / 2.0)
+        return cls(eye, u, v, n, h, h * aspect)
+
+    def directions(self, rows: np.ndarray, cols: np.ndarray, n_rows: int, n_cols: int,
+                   dy: np.ndarray | float = 0.5, dx: np.ndarray | float = 0.5) -> np.ndarray:
+        """Directions of the rays through (row from bottom, column) + (dx, dy) within the pixel: (N, 3).
+
+        ``dir = -n + W (2 (c + dx) / nCols - 1) u + H (2 (r + dy) / nRows - 1) v``; t = 1 is on the near plane.
+        """
+        su = self.half_width * (2.0 * (np.asarray(cols, float) + dx) / n_cols - 1.0)
+        sv = self.half_height * (2.0 * (np.asarray(rows, float) + dy) / n_rows - 1.0)
+        return -self.n[None, :] + su[:, None] * self.u[None, :] + sv[:, None] * self.v[None, :]
+
+
+def scene_bounds(compiled) -> tuple[np.ndarray, np.ndarray] | None:
+    """World bounding box of the bounded primitives of a compiled scene, or None if there are none."""
+    boxes = [c for c in (p.world_corners() for p in compiled.primitives if p.bounded) if c is not None]
+    if not boxes:
+        return None
+    pts = np.concatenate(boxes)
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def framing_camera(compiled, aspect: float = 4 / 3) -> Camera:
+    """A camera that sees the whole scene: from in front, a little right and above, the bounding sphere
+    of the bounded objects filling the narrower of the two view angles."""
+    bounds = scene_bounds(compiled)
+    if bounds is None:
+        center, radius = np.zeros(3), 1.0
+    else:
+        lo, hi = bounds
+        center, radius = 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-9)
+    half_v = math.radians(DEFAULT_VIEW_ANGLE) / 2.0
+    half_h = math.atan(math.tan(half_v) * aspect)
+    distance = 1.05 * radius / math.sin(min(half_v, half_h))
+    direction = np.asarray(DEFAULT_VIEW_DIRECTION) / np.linalg.norm(DEFAULT_VIEW_DIRECTION)
+    eye = center + distance * direction
+    return Camera(tuple(eye), tuple(center), (0.0, 1.0, 0.0), DEFAULT_VIEW_ANGLE)
+
+
+def scene_camera(scene: Scene, compiled, aspect: float) -> Camera:
+    return scene.camera if scene.camera is not None else framing_camera(compiled, aspect)

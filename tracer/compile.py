@@ -1,0 +1,314 @@
+"""Scene model -> what the tracer runs: primitives with inverse matrices, CSG trees, material and light
+tables, and the set of *live effects*.
+
+Deciding here, once per scene, which effects exist (shadows, reflection, refraction, CSG, each shape
+kind, textures) is what lets the tracer do no work at all for the others: the shading code branches on
+``CompiledScene.effects`` once per batch, never per ray.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Union
+
+import numpy as np
+
+from .intersect import analytic
+from .intersect.csg import combine, sheet_to_pairs
+from .intersect.hits import HitArrays
+from .intersect.torus import intersect_torus
+from .model import (CSG, POLYHEDRON_KINDS, Camera, Material, Scene, SceneObject, Shape, TORUS_TUBE_RADIUS,
+                    iter_shapes)
+from .transforms import transform_points
+
+#: Radius of a sphere around the origin that holds each bounded generic shape (for culling and framing).
+GENERIC_BOUND = {"sphere": 1.0, "cube": np.sqrt(3.0), "square": np.sqrt(2.0),
+                 "taperedCylinder": np.sqrt(2.0), "cylinder": np.sqrt(2.0), "cone": np.sqrt(2.0),
+                 "torus": 1.0 + TORUS_TUBE_RADIUS}
+
+
+def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
+    """The first hit per ray with t_min < t < t_max (K = 1; t = inf where there is none)."""
+    valid = (hits.t > t_min[:, None]) & (hits.t < t_max[:, None])
+    if hits.slots == 0:
+        return HitArrays.empty(hits.count, 1)
+    first = np.argmax(valid, axis=1)[:, None]
+    out = hits.take(first)
+    out.t[~valid.any(axis=1), 0] = np.inf
+    return out
+
+
+class Primitive:
+    """One shape, ready to intersect world rays."""
+
+    def __init__(self, shape: Shape, index: int, material_id: int):
+        self.shape = shape
+        self.index = index
+        self.kind = shape.kind
+        self.material_id = material_id
+        self.matrix = shape.matrix
+        self.inverse = np.linalg.inv(shape.matrix)
+        if not np.all(np.isfinite(self.inverse)):
+            raise ValueError(f"shape {index} ({shape.kind}) has a singular transform")
+        # World normal = generic normal through the inverse-transpose; as row vectors: n_g @ inverse[:3,:3].
+        self.normal_matrix = self.inverse[:3, :3]
+        self.thin = shape.kind == "square"
+        self.bounded = shape.kind != "plane"
+        self._mesh = None
+        self._planes = None
+        if shape.kind in POLYHEDRON_KINDS:
+            from .geometry.polyhedra import face_planes
+            self._planes = face_planes(shape.kind)
+        elif shape.kind in ("teapot", "mesh"):
+            from .intersect.mesh import TriangleMesh
+            self._mesh = TriangleMesh(shape.mesh)
+        self.center, self.radius = self._world_bounding_sphere()
+
+    def _generic_points(self) -> Optional[np.ndarray]:
+        if self._mesh is not None or self._planes is not None:
+            return np.asarray(self.shape.mesh.vertices, dtype=np.float64)
+        if self.kind == "plane":
+            return None
+        r = GENERIC_BOUND[self.kind]
+        if self.kind in ("taperedCylinder", "cylinder", "cone"):
+            ring = np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 9)[:-1]])
+            top = max(self.shape.small_radius, 0.0)
+            # Corners of the square that bounds each disc: the frustum lies inside their hull.
+            box = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
+            return np.concatenate([np.c_[box, np.zeros(4)], np.c_[box * top, np.ones(4)], np.c_[ring, np.zeros(8)]])
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+        if self.kind == "sphere":
+            return corners
+        if self.kind == "square":
+            return corners * (1, 1, 0)
+        if self.kind == "torus":
+            return corners * (r, r, TORUS_TUBE_RADIUS)
+        return corners * (1.0 if self.kind == "cube" else r)
+
+    def _world_bounding_sphere(self):
+        pts = self._generic_points()
+        if pts is None:
+            return None, np.inf
+        world = transform_points(self.matrix, pts)
+        lo, hi = world.min(axis=0), world.max(axis=0)
+        center = 0.5 * (lo + hi)
+        return center, float(np.linalg.norm(hi - lo) * 0.5) * (1 + 1e-9)
+
+    def world_corners(self) -> Optional[np.ndarray]:
+        pts = self._generic_points()
+        return None if pts is None else transform_points(self.matrix, pts)
+
+    def generic_hits(self, o: np.ndarray, d: np.ndarray) -> HitArrays:
+        kind = self.kind
+        if kind == "sphere":
+            return analytic.intersect_sphere(o, d)
+        if kind == "cube":
+            return analytic.intersect_cube(o, d)
+        if kind == "square":
+            return analytic.intersect_square(o, d)
+        if kind == "plane":
+            return analytic.intersect_plane(o, d)
+        if kind in ("taperedCylinder", "cylinder", "cone"):
+            return analytic.intersect_tapered_cylinder(o, d, self.shape.small_radius)
+        if kind == "torus":
+            return intersect_torus(o, d)
+        if self._planes is not None:
+            return analytic.intersect_convex_polyhedron(o, d, *self._planes)
+        return self._mesh.all_hits(o, d)
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
+        """All hits along the whole world lines, world normals, ``shape`` = this primitive's index."""
+        n = origins.shape[0]
+        candidates = self.may_hit(origins, directions)
+        idx = np.nonzero(candidates)[0]
+        o, d = self.to_generic(origins[idx], directions[idx])
+        # Move each generic origin to the line's point nearest the generic centre: every shape's
+        # equation then has O(1) coefficients, however far away the ray started.
+        with np.errstate(invalid="ignore", divide="ignore"):
+            shift = -np.einsum("ij,ij->i", o, d) / np.einsum("ij,ij->i", d, d)
+        shift = np.where(np.isfinite(shift), shift, 0.0)
+        local = self.generic_hits(o + shift[:, None] * d, d)
+        local.t = local.t + shift[:, None]
+        local.normal = local.normal @ self.normal_matrix
+        local.shape[np.isfinite(local.t)] = self.index
+        if self.thin:
+            local = sheet_to_pairs(local)
+        if idx.size == n:
+            return local
+        full = HitArrays.empty(n, local.slots)
+        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start"):
+            getattr(full, name)[idx] = getattr(local, name)
+        return full
+
+    def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
+        """The first hit with t_min < t < t_max per ray (K = 1); meshes prune with their BVH."""
+        if self._mesh is None:
+            return first_after(self.intersect(origins, directions), t_min, t_max)
+        n = origins.shape[0]
+        idx = np.nonzero(self.may_hit(origins, directions))[0]
+        out = HitArrays.empty(n, 1)
+        if idx.size:
+            o, d = self.to_generic(origins[idx], directions[idx])
+            local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
+            local.normal = local.normal @ self.normal_matrix
+            local.shape[np.isfinite(local.t)] = self.index
+            for name in ("t", "entering", "normal", "part", "uv", "shape"):
+                getattr(out, name)[idx] = getattr(local, name)
+        return out
+
+    def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
+        """Whether anything of this shape lies on each ray between t_min and t_max (shadow feelers)."""
+        if self._mesh is None:
+            return np.isfinite(self.first_hit(origins, directions, t_min, t_max).t[:, 0])
+        blocked = np.zeros(origins.shape[0], dtype=bool)
+        idx = np.nonzero(self.may_hit(origins, directions))[0]
+        if idx.size:
+            o, d = self.to_generic(origins[idx], directions[idx])
+            blocked[idx] = self._mesh.any_hit(o, d, t_min[idx], t_max[idx])
+        return blocked
+
+    def to_generic(self, origins, directions):
+        return transform_points(self.inverse, origins), directions @ self.inverse[:3, :3].T
+
+    def may_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Rays whose line passes within the bounding sphere (all rays for unbounded shapes)."""
+        if not np.isfinite(self.radius):
+            return np.ones(origins.shape[0], dtype=bool)
+        to_center = self.center - origins
+        dd = np.einsum("ij,ij->i", directions, directions)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            along = np.einsum("ij,ij->i", to_center, directions) / dd
+        perp = to_center - along[:, None] * directions
+        return np.einsum("ij,ij->i", perp, perp) <= self.radius * self.radius
+
+
+class CSGNode:
+    def __init__(self, op: str, left: "Node", right: "Node"):
+        self.op = op
+        self.left = left
+        self.right = right
+        self.thin = False
+        self.bounded = left.bounded and (op != "union" or right.bounded)
+        self.center, self.radius = self._bound()
+
+    def _bound(self):
+        if self.op == "union":
+            if not self.bounded:
+                return None, np.inf
+            lo = np.minimum(self.left.center - self.left.radius, self.right.center - self.right.radius)
+            hi = np.maximum(self.left.center + self.left.radius, self.right.center + self.right.radius)
+            return 0.5 * (lo + hi), float(np.linalg.norm(hi - lo) * 0.5)
+        if self.op == "intersection" and not self.left.bounded:
+            return self.right.center, self.right.radius
+        return self.left.center, self.left.radius
+
+    def leaves(self):
+        for child in (self.left, self.right):
+            if isinstance(child, CSGNode):
+                yield from child.leaves()
+            else:
+                yield child
+
+    def may_hit(self, origins, directions):
+        if not np.isfinite(self.radius):
+            return np.ones(origins.shape[0], dtype=bool)
+        return Primitive.may_hit(self, origins, directions)  # same sphere test
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
+        return combine(self.op, self.left.intersect(origins, directions),
+                       self.right.intersect(origins, directions), origins, directions)
+
+
+    def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
+        return first_after(self.intersect(origins, directions), t_min, t_max)
+
+    def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
+        return np.isfinite(self.first_hit(origins, directions, t_min, t_max).t[:, 0])
+
+
+Node = Union[Primitive, CSGNode]
+
+
+@dataclass
+class MaterialTable:
+    """Materials as arrays indexed by material id (so shading gathers per ray)."""
+
+    materials: list[Material]
+    ambient: np.ndarray = field(init=False)
+    diffuse: np.ndarray = field(init=False)
+    specular: np.ndarray = field(init=False)
+    emissive: np.ndarray = field(init=False)
+    specular_exponent: np.ndarray = field(init=False)
+    reflectivity: np.ndarray = field(init=False)
+    transparency: np.ndarray = field(init=False)
+    speed_of_light: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        m = self.materials
+        self.ambient = np.array([x.ambient for x in m], dtype=float).reshape(-1, 3)
+        self.diffuse = np.array([x.diffuse for x in m], dtype=float).reshape(-1, 3)
+        self.specular = np.array([x.specular for x in m], dtype=float).reshape(-1, 3)
+        self.emissive = np.array([x.emissive for x in m], dtype=float).reshape(-1, 3)
+        self.specular_exponent = np.array([x.specular_exponent for x in m], dtype=float)
+        self.reflectivity = np.array([x.reflectivity for x in m], dtype=float)
+        self.transparency = np.array([x.transparency for x in m], dtype=float)
+        self.speed_of_light = np.array([x.speed_of_light for x in m], dtype=float)
+
+
+@dataclass
+class CompiledScene:
+    scene: Scene
+    objects: list[Node]
+    primitives: list[Primitive]
+    materials: MaterialTable
+    light_positions: np.ndarray  # (L, 3)
+    light_colors: np.ndarray  # (L, 3)
+    effects: frozenset[str]
+
+    @property
+    def settings(self):
+        return self.scene.settings
+
+
+def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict) -> Node:
+    if isinstance(obj, CSG):
+        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids),
+                       _compile_object(obj.right, primitives, material_ids))
+    mat_id = material_ids.setdefault(obj.material, len(material_ids))
+    prim = Primitive(obj, len(primitives), mat_id)
+    primitives.append(prim)
+    return prim
+
+
+def live_effects(scene: Scene) -> frozenset[str]:
+    """Which effects this scene can show at all; the tracer computes nothing for the others."""
+    settings = scene.settings
+    shapes = scene.shapes()
+    materials = [s.material for s in shapes]
+    effects = {f"shape:{s.kind}" for s in shapes}
+    lit = any(any(c > 0 for c in m.diffuse + m.specular) for m in materials)
+    if scene.lights and lit:
+        effects.add("lighting")
+        effects.add("shadows")
+    deep = settings.max_recursion_depth > 0
+    if deep and any(m.reflectivity >= settings.min_reflectivity and m.reflectivity > 0 for m in materials):
+        effects.add("reflection")
+    if deep and any(m.transparency >= settings.min_transparency and m.transparency > 0 for m in materials):
+        effects.add("refraction")
+    if any(isinstance(o, CSG) for o in scene.objects):
+        effects.add("csg")
+    if any(m.texture != 0 for m in materials):
+        effects.add("textures")
+    return frozenset(effects)
+
+
+def compile_scene(scene: Scene) -> CompiledScene:
+    primitives: list[Primitive] = []
+    material_ids: dict[Material, int] = {}
+    objects = [_compile_object(obj, primitives, material_ids) for obj in scene.objects]
+    table = MaterialTable(list(material_ids) or [Material()])
+    lights = scene.lights
+    return CompiledScene(
+        scene=scene, objects=objects, primitives=primitives, materials=table,
+        light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
+        light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
+        effects=live_effects(scene))

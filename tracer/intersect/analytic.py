@@ -1,0 +1,198 @@
+"""Rays against the closed-form generic shapes, in generic coordinates, vectorised over rays.
+
+Each function takes origins and directions of shape (N, 3) and returns :class:`HitArrays` with every
+crossing of the *whole line*.  The generic shapes (SDL.md):
+
+* sphere: ``|p| = 1``;  cube: ``[-1, 1]^3``;  square: ``z = 0, |x|, |y| <= 1`` (no inside: a thin sheet);
+* plane: ``z = 0``, the boundary of the half-space ``z <= 0`` (its inside, for CSG);
+* tapered cylinder with top radius s: wall ``x^2 + y^2 = (1 + (s - 1) z)^2`` for ``0 <= z <= 1``, base disc
+  at z = 0 (radius 1) and cap disc at z = 1 (radius s);
+* convex polyhedra: intersection of half-spaces ``n . p <= d`` (Cyrus–Beck clipping).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .hits import HitArrays
+from .quadratic import solve_quadratic
+
+# Points this close (relative) to a rim still count as on the shape, so rays through edges do not leak.
+EDGE_TOLERANCE = 1e-12
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit) -> HitArrays:
+    """Pack one entering and one exiting hit per ray (where ``hit``) into a 2-slot HitArrays."""
+    n = t_in.shape[0]
+    out = HitArrays.empty(n, 2)
+    out.t[:, 0] = np.where(hit, t_in, np.inf)
+    out.t[:, 1] = np.where(hit, t_out, np.inf)
+    out.entering[:, 0] = hit
+    out.normal[:, 0] = np.where(hit[:, None], n_in, 0.0)
+    out.normal[:, 1] = np.where(hit[:, None], n_out, 0.0)
+    out.part[:, 0] = np.where(hit, part_in, -1)
+    out.part[:, 1] = np.where(hit, part_out, -1)
+    return out
+
+
+def intersect_sphere(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+    a = _dot(direction, direction)
+    b = _dot(origin, direction)
+    c = _dot(origin, origin) - 1.0
+    # b^2 - ac = a (1 - |o_perp|^2), with o_perp the point of the line nearest the centre: no cancellation
+    # when the origin is far away.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        perp = origin - (b / a)[:, None] * direction
+    disc = a * (1.0 - _dot(perp, perp))
+    t_lo, t_hi, real = solve_quadratic(a, b, c, disc)
+    hit = real & (a > 0.0)
+    p_lo = origin + np.nan_to_num(t_lo)[:, None] * direction
+    p_hi = origin + np.nan_to_num(t_hi)[:, None] * direction
+    return _two_hits(t_lo, t_hi, p_lo, p_hi, 0, 0, hit)
+
+
+def _slab_interval(o: np.ndarray, d: np.ndarray, lo: float, hi: float):
+    """Entry and exit parameters of a line with the slab lo <= x <= hi (±inf for parallel lines)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_a = (lo - o) / d
+        t_b = (hi - o) / d
+    parallel = d == 0.0
+    inside = (o >= lo) & (o <= hi)
+    near = np.where(parallel, np.where(inside, -np.inf, np.inf), np.fmin(t_a, t_b))
+    far = np.where(parallel, np.where(inside, np.inf, -np.inf), np.fmax(t_a, t_b))
+    return near, far
+
+
+def intersect_cube(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+    near, far = _slab_interval(origin, direction, -1.0, 1.0)  # (N, 3) each
+    axis_in = np.argmax(near, axis=1)
+    axis_out = np.argmin(far, axis=1)
+    rows = np.arange(origin.shape[0])
+    t_in = near[rows, axis_in]
+    t_out = far[rows, axis_out]
+    hit = (t_in <= t_out) & np.isfinite(t_in) & np.isfinite(t_out)
+    sign = np.sign(direction)
+    n_in = np.zeros_like(origin)
+    n_out = np.zeros_like(origin)
+    n_in[rows, axis_in] = -sign[rows, axis_in]
+    n_out[rows, axis_out] = sign[rows, axis_out]
+    # Faces numbered 2*axis + (1 on the + side): the entering face is on the - side when d > 0.
+    part_in = 2 * axis_in + (sign[rows, axis_in] < 0)
+    part_out = 2 * axis_out + (sign[rows, axis_out] > 0)
+    return _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit)
+
+
+def _z_plane_crossing(origin: np.ndarray, direction: np.ndarray, z: float = 0.0):
+    dz = direction[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (z - origin[:, 2]) / dz
+    crosses = dz != 0.0
+    point = origin + np.where(crosses, t, 0.0)[:, None] * direction
+    return np.where(crosses, t, np.nan), crosses, point
+
+
+def _one_hit(t, hit, entering, normal, part=0) -> HitArrays:
+    out = HitArrays.empty(t.shape[0], 1)
+    out.t[:, 0] = np.where(hit, t, np.inf)
+    out.entering[:, 0] = hit & entering
+    out.normal[:, 0] = np.where(hit[:, None], normal, 0.0)
+    out.part[:, 0] = np.where(hit, part, -1)
+    return out
+
+
+def intersect_square(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+    t, crosses, p = _z_plane_crossing(origin, direction)
+    limit = 1.0 + EDGE_TOLERANCE
+    hit = crosses & (np.abs(p[:, 0]) <= limit) & (np.abs(p[:, 1]) <= limit)
+    out = _one_hit(t, hit, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
+    out.uv[:, 0] = np.where(hit[:, None], p[:, :2], 0.0)
+    return out
+
+
+def intersect_plane(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+    t, crosses, p = _z_plane_crossing(origin, direction)
+    out = _one_hit(t, crosses, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
+    out.uv[:, 0] = np.where(crosses[:, None], p[:, :2], 0.0)
+    # The half-space z <= 0 holds the line at t = -inf when it rises, or when it runs inside, parallel.
+    dz = direction[:, 2]
+    out.inside_at_start = (dz > 0.0) | ((dz == 0.0) & (origin[:, 2] < 0.0))
+    return out
+
+
+def _convex_hits(candidates_t: np.ndarray, candidates_n: np.ndarray, valid: np.ndarray) -> HitArrays:
+    """A convex solid is entered at its first valid crossing and left at its last."""
+    t_min = np.where(valid, candidates_t, np.inf)
+    t_max = np.where(valid, candidates_t, -np.inf)
+    i_in = np.argmin(t_min, axis=1)
+    i_out = np.argmax(t_max, axis=1)
+    rows = np.arange(candidates_t.shape[0])
+    hit = valid.any(axis=1)
+    return _two_hits(t_min[rows, i_in], t_max[rows, i_out], candidates_n[rows, i_in],
+                     candidates_n[rows, i_out], i_in, i_out, hit)
+
+
+def tapered_cylinder_normal(points: np.ndarray, small_radius: float) -> np.ndarray:
+    """Outward normal of the wall at (N, 3) points: the gradient of x^2 + y^2 - (1 + k z)^2."""
+    k = small_radius - 1.0
+    radius = 1.0 + k * points[:, 2]
+    normal = np.stack([points[:, 0], points[:, 1], -k * radius], axis=1)
+    # At a cone's apex the gradient vanishes; the axis is the only sensible direction there.
+    degenerate = np.einsum("ij,ij->i", normal, normal) < 1e-300
+    normal[degenerate] = (0.0, 0.0, 1.0)
+    return normal
+
+
+def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_radius: float) -> HitArrays:
+    """Parts: 0 wall, 1 base disc (z = 0), 2 cap disc (z = 1)."""
+    k = small_radius - 1.0
+    ox, oy, oz = origin.T
+    dx, dy, dz = direction.T
+    r0 = 1.0 + k * oz
+    a = dx * dx + dy * dy - k * k * dz * dz
+    b = ox * dx + oy * dy - k * dz * r0
+    c = ox * ox + oy * oy - r0 * r0
+    t_lo, t_hi, real = solve_quadratic(a, b, c)
+    n = origin.shape[0]
+    ts = np.full((n, 4), np.nan)
+    normals = np.zeros((n, 4, 3))
+    valid = np.zeros((n, 4), dtype=bool)
+    for slot, t_wall in enumerate((t_lo, t_hi)):
+        finite = real & np.isfinite(t_wall)
+        p = origin + np.where(finite, t_wall, 0.0)[:, None] * direction
+        on_wall = finite & (p[:, 2] >= -EDGE_TOLERANCE) & (p[:, 2] <= 1.0 + EDGE_TOLERANCE)
+        ts[:, slot] = t_wall
+        normals[:, slot] = tapered_cylinder_normal(p, small_radius)
+        valid[:, slot] = on_wall
+    for slot, (z, radius, nz) in ((2, (0.0, 1.0, -1.0)), (3, (1.0, small_radius, 1.0))):
+        t, crosses, p = _z_plane_crossing(origin, direction, z)
+        inside = p[:, 0] ** 2 + p[:, 1] ** 2 <= radius * radius * (1.0 + EDGE_TOLERANCE)
+        ts[:, slot] = t
+        normals[:, slot] = (0.0, 0.0, nz)
+        valid[:, slot] = crosses & inside & (radius > 0.0)
+    hits = _convex_hits(ts, normals, valid)
+    hits.part = np.where(hits.part >= 2, hits.part - 1, np.where(hits.part >= 0, 0, -1)).astype(np.int32)
+    return hits
+
+
+def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
+                                plane_normals: np.ndarray, plane_offsets: np.ndarray) -> HitArrays:
+    """Cyrus–Beck: the line is inside where it is on the inner side of every face plane."""
+    num = plane_offsets[None, :] - origin @ plane_normals.T  # (N, F): > 0 means origin inside that plane
+    den = direction @ plane_normals.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+    entering_face = den < 0.0
+    exiting_face = den > 0.0
+    t_in_each = np.where(entering_face, t, -np.inf)
+    t_out_each = np.where(exiting_face, t, np.inf)
+    i_in = np.argmax(t_in_each, axis=1)
+    i_out = np.argmin(t_out_each, axis=1)
+    rows = np.arange(origin.shape[0])
+    t_in = t_in_each[rows, i_in]
+    t_out = t_out_each[rows, i_out]
+    outside_parallel = ((den == 0.0) & (num < 0.0)).any(axis=1)
+    hit = ~outside_parallel & np.isfinite(t_in) & np.isfinite(t_out) & (t_in <= t_out)
+    return _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)

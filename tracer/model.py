@@ -1,0 +1,198 @@
+"""The scene model: plain data that SDL, Blender and USD all build.
+
+Nothing here knows about SDL syntax or about how rays are traced.  Matrices are
+4x4 float64 arrays that map a shape's *generic* coordinates to world
+coordinates (column vectors: ``world = matrix @ generic``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Optional, Union
+
+import numpy as np
+
+Color = tuple[float, float, float]
+Vec3 = tuple[float, float, float]
+
+#: Generic shapes whose geometry is a closed-form surface.
+ANALYTIC_KINDS = ("sphere", "cube", "square", "plane", "taperedCylinder", "cylinder", "cone", "torus")
+#: Built-in convex polyhedra (the book loads these from .3vn files).
+POLYHEDRON_KINDS = ("tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond")
+#: Shapes made of triangles.
+MESH_KINDS = ("teapot", "mesh")
+SHAPE_KINDS = ANALYTIC_KINDS + POLYHEDRON_KINDS + MESH_KINDS
+
+#: Tube radius of the generic torus (its ring radius is 1), as the book draws it.
+TORUS_TUBE_RADIUS = 0.2
+
+
+@dataclass(frozen=True)
+class SourceLocation:
+    """Where something came from, for messages: file (may be None for text), line and column (1-based)."""
+
+    file: Optional[str]
+    line: int
+    column: int = 0
+
+    def __str__(self) -> str:
+        name = self.file or "<sdl>"
+        return f"{name}:{self.line}:{self.column}" if self.column else f"{name}:{self.line}"
+
+
+@dataclass(frozen=True)
+class Material:
+    """Surface properties; SDL's defaults (see docs/sdl.md)."""
+
+    ambient: Color = (0.1, 0.1, 0.1)
+    diffuse: Color = (0.8, 0.8, 0.8)
+    specular: Color = (0.0, 0.0, 0.0)
+    emissive: Color = (0.0, 0.0, 0.0)
+    specular_exponent: float = 1.0
+    reflectivity: float = 0.0
+    transparency: float = 0.0
+    speed_of_light: float = 1.0
+    specular_fraction: float = 0.0
+    surface_roughness: float = 1.0
+    texture: int = 0
+    parameters: tuple[float, ...] = ()
+
+
+@dataclass
+class MeshData:
+    """A polygon mesh in generic coordinates.
+
+    ``faces`` holds, per polygon, its vertex indices and its normal indices (same length, 0-based),
+    as the ``.3vn`` format does.  ``normals`` may be empty: then flat face normals are used.
+    """
+
+    vertices: np.ndarray  # (V, 3) float64
+    normals: np.ndarray  # (N, 3) float64
+    faces: list[tuple[tuple[int, ...], tuple[int, ...]]]
+    #: Where the data came from (a file path, or e.g. "built-in:icosahedron").
+    origin: str = ""
+
+    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""
+        tri_v: list[tuple[int, int, int]] = []
+        tri_n: list[tuple[int, int, int]] = []
+        for verts, norms in self.faces:
+            norms = tuple(norms) if len(norms) == len(verts) else (-1,) * len(verts)
+            for k in range(1, len(verts) - 1):
+                tri_v.append((verts[0], verts[k], verts[k + 1]))
+                tri_n.append((norms[0], norms[k], norms[k + 1]))
+        return (np.asarray(tri_v, dtype=np.int64).reshape(-1, 3),
+                np.asarray(tri_n, dtype=np.int64).reshape(-1, 3))
+
+
+@dataclass
+class Shape:
+    """One generic shape placed in the world.
+
+    ``kind`` is the SDL keyword (``cylinder`` and ``cone`` stay themselves so that they are written back
+    as they were read; :attr:`small_radius` gives their taper).  ``mesh`` is filled for polyhedra, the
+    teapot and meshes; ``mesh_file`` keeps the file name a ``mesh`` statement gave.
+    """
+
+    kind: str
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
+    material: Material = field(default_factory=Material)
+    tapered_radius: float = 1.0  # only for taperedCylinder
+    mesh: Optional[MeshData] = None
+    mesh_file: Optional[str] = None
+    #: Names of the def macros this shape was made inside, outermost first (for grouping in Blender).
+    groups: tuple[str, ...] = ()
+    source: Optional[SourceLocation] = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in SHAPE_KINDS:
+            raise ValueError(f"unknown shape kind {self.kind!r}")
+        self.matrix = np.array(self.matrix, dtype=np.float64).reshape(4, 4)
+
+    @property
+    def small_radius(self) -> float:
+        """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
+        return {"cylinder": 1.0, "cone": 0.0}.get(self.kind, self.tapered_radius)
+
+    @cached_property
+    def inverse(self) -> np.ndarray:
+        return np.linalg.inv(self.matrix)
+
+
+@dataclass
+class CSG:
+    """A boolean of two objects: ``op`` is ``union``, ``intersection`` or ``difference``."""
+
+    op: str
+    left: "SceneObject"
+    right: "SceneObject"
+    groups: tuple[str, ...] = ()
+    source: Optional[SourceLocation] = None
+
+    OPS = ("union", "intersection", "difference")
+
+    def __post_init__(self) -> None:
+        if self.op not in self.OPS:
+            raise ValueError(f"unknown boolean {self.op!r}")
+
+    def leaves(self) -> list[Shape]:
+        return [s for child in (self.left, self.right) for s in iter_shapes(child)]
+
+
+SceneObject = Union[Shape, CSG]
+
+
+def iter_shapes(obj: SceneObject):
+    """Every primitive shape in an object, left to right."""
+    if isinstance(obj, CSG):
+        yield from iter_shapes(obj.left)
+        yield from iter_shapes(obj.right)
+    else:
+        yield obj
+
+
+@dataclass(frozen=True)
+class Light:
+    """A point light (no attenuation with distance, as in the book)."""
+
+    position: Vec3
+    color: Color
+
+
+@dataclass(frozen=True)
+class Camera:
+    """The lecture's camera: eye, look-at point, up vector and vertical view angle in degrees."""
+
+    eye: Vec3
+    look: Vec3
+    up: Vec3 = (0.0, 1.0, 0.0)
+    view_angle: float = 45.0
+
+
+@dataclass
+class Settings:
+    """Scene-wide settings; SDL's defaults."""
+
+    global_ambient: Color = (0.1, 0.1, 0.1)
+    background: Color = (0.0, 0.0, 0.6)
+    min_reflectivity: float = 0.5
+    min_transparency: float = 0.5
+    max_recursion_depth: int = 3
+
+
+@dataclass
+class Scene:
+    objects: list[SceneObject] = field(default_factory=list)
+    lights: list[Light] = field(default_factory=list)
+    camera: Optional[Camera] = None  # None: the renderer frames the scene (see tracer.camera)
+    settings: Settings = field(default_factory=Settings)
+    #: makePixmap: image number -> file path (resolved against the scene file's folder).
+    pixmaps: dict[int, str] = field(default_factory=dict)
+    #: The file this scene was read from, if any.
+    source: Optional[Path] = None
+    #: Problems found while reading in lenient mode, one message each ("file:line:col: what").
+    warnings: list[str] = field(default_factory=list)
+
+    def shapes(self) -> list[Shape]:
+        return [s for obj in self.objects for s in iter_shapes(obj)]

@@ -1,0 +1,128 @@
+"""Rendering an image in blocks, coarse to fine, as the lecture's ``Camera::raytrace(scn, blockSize)``.
+
+With block size B, one ray is traced per B x B block of pixels (through the centre of the block's
+lower-left pixel) and the whole block takes its colour.  Progressive rendering runs passes B, B/2, ..., 1;
+each pass traces only the pixels that are new at its stride, so every earlier sample is reused.
+
+Work is cut into tiles (the unit that is traced as one vectorised batch and reported to the caller):
+after each tile of each pass, ``on_tile`` receives a :class:`TileUpdate`, and ``cancel()`` is checked.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Union
+
+import numpy as np
+
+from .camera import CameraFrame, scene_camera
+from .compile import CompiledScene, compile_scene
+from .errors import RenderCancelled, TracerError
+from .model import Scene
+from .trace import RayCounts, Tracer
+
+#: Width/height limit: a 16k x 16k float image is already 3 GiB.
+MAX_DIMENSION = 16384
+DEFAULT_TILE = 64
+
+
+@dataclass
+class TileUpdate:
+    """One finished tile of one pass.  Pixel rectangle in image coordinates (row 0 at the top)."""
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+    block_size: int  # this pass's stride
+    pass_index: int
+    pass_count: int
+    tiles_done: int  # over all passes, this one included
+    tiles_total: int
+    image: np.ndarray  # the whole film so far, (height, width, 3) float32, row 0 at the top (a view)
+
+    @property
+    def fraction(self) -> float:
+        return self.tiles_done / self.tiles_total
+
+
+@dataclass
+class RenderResult:
+    image: np.ndarray  # (height, width, 3) float32, row 0 at the top, linear colour, not clipped
+    rays: RayCounts
+    seconds: float
+    backend: str = "numpy"
+    effects: frozenset = field(default_factory=frozenset)
+
+    def stats(self) -> dict:
+        return {"rays": self.rays.as_dict(), "seconds": round(self.seconds, 6), "backend": self.backend,
+                "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
+                "effects": sorted(self.effects)}
+
+
+def block_passes(block_size: int, progressive: bool) -> list[int]:
+    """Strides of the passes: [B] or [B, B/2, ..., 1] (B rounded down to a power of two when progressive)."""
+    if block_size < 1:
+        raise TracerError(f"block size must be at least 1, not {block_size}")
+    if not progressive:
+        return [block_size]
+    top = 1 << (int(block_size).bit_length() - 1)
+    passes = []
+    while top >= 1:
+        passes.append(top)
+        top //= 2
+    return passes
+
+
+def check_size(width: int, height: int) -> None:
+    for name, value in (("width", width), ("height", height)):
+        if not 1 <= value <= MAX_DIMENSION:
+            raise TracerError(f"image {name} must be between 1 and {MAX_DIMENSION} pixels, not {value}")
+
+
+def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block_size: int = 1,
+           progressive: bool = False, tile: int = DEFAULT_TILE,
+           on_tile: Optional[Callable[[TileUpdate], None]] = None,
+           cancel: Optional[Callable[[], bool]] = None) -> RenderResult:
+    """Ray trace ``scene`` into a (height, width, 3) float32 image."""
+    check_size(width, height)
+    started = time.perf_counter()
+    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+    camera = scene_camera(compiled.scene, compiled, width / height)
+    frame = CameraFrame.from_camera(camera, width / height)
+    tracer = Tracer(compiled)
+    passes = block_passes(block_size, progressive)
+    # The film is stored bottom row first, as the lecture counts rows; the caller sees it flipped.
+    film = np.zeros((height, width, 3), dtype=np.float32)
+    shown = film[::-1]
+    tile = max(tile, passes[0])
+    tile -= tile % passes[0]  # tiles start on multiples of every stride
+    tiles = [(r, c) for r in range(0, height, tile) for c in range(0, width, tile)]
+    total = len(tiles) * len(passes)
+    done = 0
+    for pass_index, stride in enumerate(passes):
+        first_pass = pass_index == 0
+        for r0, c0 in tiles:
+            if cancel is not None and cancel():
+                raise RenderCancelled("render cancelled")
+            r1, c1 = min(r0 + tile, height), min(c0 + tile, width)
+            rows = np.arange(r0, r1, stride)
+            cols = np.arange(c0, c1, stride)
+            grid_r, grid_c = np.meshgrid(rows, cols, indexing="ij")
+            samples = film[grid_r, grid_c]  # earlier passes' samples keep their colour
+            new = np.ones(grid_r.shape, dtype=bool) if first_pass else \
+                (grid_r % (2 * stride) != 0) | (grid_c % (2 * stride) != 0)
+            rr, cc = grid_r[new], grid_c[new]
+            if rr.size:
+                directions = frame.directions(rr, cc, height, width)
+                origins = np.broadcast_to(frame.eye, directions.shape)
+                samples[new] = tracer.camera_rays(np.ascontiguousarray(origins), directions)
+            block = np.repeat(np.repeat(samples, stride, axis=0), stride, axis=1)
+            film[r0:r1, c0:c1] = block[: r1 - r0, : c1 - c0]
+            done += 1
+            if on_tile is not None:
+                on_tile(TileUpdate(x0=c0, y0=height - r1, x1=c1, y1=height - r0, block_size=stride,
+                                   pass_index=pass_index, pass_count=len(passes), tiles_done=done,
+                                   tiles_total=total, image=shown))
+    return RenderResult(image=np.ascontiguousarray(shown), rays=tracer.counts,
+                        seconds=time.perf_counter() - started, effects=compiled.effects)

@@ -1,0 +1,269 @@
+"""Whitted ray tracing, vectorised over a batch of rays (the NumPy reference path).
+
+The recursion follows the lecture: local Phong shading with shadow feelers, then, while the ray's level
+is below maxRecursionDepth, reflected and transmitted rays weighted by reflectivity and transparency.
+Each effect runs only if the compiled scene says it is live, and every ray cast is counted.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .compile import CompiledScene
+from .numerics import RELATIVE_EPSILON
+
+RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
+#: How many nested transparent objects a ray remembers being inside.
+MEDIA_DEPTH = 8
+
+
+@dataclass
+class RayCounts:
+    camera: int = 0
+    shadow: int = 0
+    reflection: int = 0
+    refraction: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {k: int(getattr(self, k)) for k in RAY_KINDS}
+
+    def add(self, other: "RayCounts") -> None:
+        for k in RAY_KINDS:
+            setattr(self, k, getattr(self, k) + getattr(other, k))
+
+
+@dataclass
+class SurfaceHits:
+    """The first hit of each ray of a batch."""
+
+    hit: np.ndarray  # (N,) bool
+    t: np.ndarray
+    normal: np.ndarray  # (N, 3) unit world normal, out of the solid
+    entering: np.ndarray
+    shape: np.ndarray  # primitive index
+    obj: np.ndarray  # top-level object index
+    part: np.ndarray
+    uv: np.ndarray
+
+
+def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
+               t_min: np.ndarray | float = 0.0) -> SurfaceHits:
+    n = origins.shape[0]
+    t_min = np.broadcast_to(np.asarray(t_min, dtype=float), (n,))
+    best = SurfaceHits(hit=np.zeros(n, bool), t=np.full(n, np.inf), normal=np.zeros((n, 3)),
+                       entering=np.zeros(n, bool), shape=np.full(n, -1), obj=np.full(n, -1),
+                       part=np.full(n, -1), uv=np.zeros((n, 2)))
+    for index, obj in enumerate(scene.objects):
+        h = obj.first_hit(origins, directions, t_min, best.t)
+        closer = h.t[:, 0] < best.t
+        if not closer.any():
+            continue
+        best.t = np.where(closer, h.t[:, 0], best.t)
+        best.normal[closer] = h.normal[closer, 0]
+        best.entering[closer] = h.entering[closer, 0]
+        best.shape[closer] = h.shape[closer, 0]
+        best.obj[closer] = index
+        best.part[closer] = h.part[closer, 0]
+        best.uv[closer] = h.uv[closer, 0]
+    best.hit = np.isfinite(best.t)
+    length = np.linalg.norm(best.normal, axis=1, keepdims=True)
+    best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
+    return best
+
+
+def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
+             t_max: float = 1.0) -> np.ndarray:
+    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max?"""
+    n = origins.shape[0]
+    blocked = np.zeros(n, dtype=bool)
+    for obj in scene.objects:
+        open_rays = np.nonzero(~blocked)[0]
+        if open_rays.size == 0:
+            break
+        m = open_rays.size
+        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays],
+                                          np.zeros(m), np.full(m, t_max))
+    return blocked
+
+
+@dataclass
+class Media:
+    """The transparent objects each ray is inside, innermost last (a small stack per ray)."""
+
+    objects: np.ndarray  # (N, MEDIA_DEPTH) int, -1 = empty
+    speeds: np.ndarray  # (N, MEDIA_DEPTH)
+    depth: np.ndarray  # (N,)
+
+    @classmethod
+    def air(cls, n: int) -> "Media":
+        return cls(np.full((n, MEDIA_DEPTH), -1), np.ones((n, MEDIA_DEPTH)), np.zeros(n, dtype=int))
+
+    def subset(self, rows) -> "Media":
+        return Media(self.objects[rows], self.speeds[rows], self.depth[rows])
+
+    def current_speed(self) -> np.ndarray:
+        top = np.maximum(self.depth - 1, 0)
+        return np.where(self.depth > 0, self.speeds[np.arange(self.depth.size), top], 1.0)
+
+    def entered(self, obj: np.ndarray, speed: np.ndarray) -> "Media":
+        out = Media(self.objects.copy(), self.speeds.copy(), self.depth.copy())
+        room = out.depth < MEDIA_DEPTH
+        rows = np.nonzero(room)[0]
+        out.objects[rows, out.depth[rows]] = obj[rows]
+        out.speeds[rows, out.depth[rows]] = speed[rows]
+        out.depth[rows] += 1
+        return out
+
+    def left(self, obj: np.ndarray) -> "Media":
+        """Without the innermost entry for ``obj`` (unchanged where the ray was not known to be inside it)."""
+        out = Media(self.objects.copy(), self.speeds.copy(), self.depth.copy())
+        cols = np.arange(MEDIA_DEPTH)[None, :]
+        match = (out.objects == obj[:, None]) & (cols < out.depth[:, None])
+        has = match.any(axis=1)
+        last = MEDIA_DEPTH - 1 - np.argmax(match[:, ::-1], axis=1)
+        rows = np.nonzero(has)[0]
+        for j in range(MEDIA_DEPTH - 1):  # close the gap left by the removed entry
+            shift = rows[last[rows] <= j]
+            out.objects[shift, j] = out.objects[shift, j + 1]
+            out.speeds[shift, j] = out.speeds[shift, j + 1]
+        out.objects[rows, MEDIA_DEPTH - 1] = -1
+        out.depth[rows] -= 1
+        return out
+
+
+def _offset_scale(points: np.ndarray, origins: np.ndarray) -> np.ndarray:
+    """Distance to move a secondary ray's origin off the surface: relative to the coordinates' size
+    (the hit point and the ray it came from), never a fixed number."""
+    magnitude = np.maximum(np.max(np.abs(points), axis=1), np.max(np.abs(origins), axis=1))
+    return RELATIVE_EPSILON * (1.0 + magnitude)
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+class Tracer:
+    """Shades batches of rays for one compiled scene, counting every ray it casts."""
+
+    def __init__(self, scene: CompiledScene):
+        self.scene = scene
+        self.counts = RayCounts()
+        self.effects = scene.effects
+        self.material_of = np.array([p.material_id for p in scene.primitives] or [0], dtype=int)
+        self.background = np.asarray(scene.settings.background, dtype=float)
+        self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
+
+    def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        self.counts.camera += origins.shape[0]
+        return self.shade(origins, directions, 0, Media.air(origins.shape[0]))
+
+    def shade(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media) -> np.ndarray:
+        n = origins.shape[0]
+        color = np.broadcast_to(self.background, (n, 3)).copy()
+        if n == 0:
+            return color
+        hits = first_hits(self.scene, origins, directions)
+        idx = np.nonzero(hits.hit)[0]
+        if idx.size == 0:
+            return color
+        o, d = origins[idx], directions[idx]
+        t = hits.t[idx]
+        point = o + t[:, None] * d
+        outward = hits.normal[idx]
+        # Shade the side the ray arrives on: the normal faces the incoming ray.
+        facing = np.where((_dot(outward, d) > 0.0)[:, None], -outward, outward)
+        mats = self.scene.materials
+        mat = self.material_of[hits.shape[idx]]
+        offset = _offset_scale(point, o)[:, None]
+        local = mats.emissive[mat] + self.ambient_light * mats.ambient[mat]
+        if "lighting" in self.effects:
+            local += self._direct_light(point, facing, d, mat, offset)
+        color[idx] = local
+        if level < self.scene.settings.max_recursion_depth:
+            if "reflection" in self.effects:
+                color[idx] += self._reflection(point, facing, d, mat, offset, level, media.subset(idx))
+            if "refraction" in self.effects:
+                color[idx] += self._refraction(point, facing, d, mat, offset, level, media.subset(idx),
+                                               hits.entering[idx], hits.obj[idx])
+        return color
+
+    def _direct_light(self, point, normal, direction, mat, offset) -> np.ndarray:
+        mats = self.scene.materials
+        total = np.zeros_like(point)
+        to_eye = -direction / np.linalg.norm(direction, axis=1, keepdims=True)
+        feeler_start = point + offset * normal
+        for light_pos, light_color in zip(self.scene.light_positions, self.scene.light_colors):
+            to_light = light_pos - point
+            s = to_light / np.linalg.norm(to_light, axis=1, keepdims=True)
+            lambert = _dot(s, normal)
+            # A light behind the surface does not reach it (the surface itself is in the way).
+            lit = lambert > 0.0
+            if "shadows" in self.effects and lit.any():
+                rows = np.nonzero(lit)[0]
+                self.counts.shadow += rows.size
+                lit[rows] &= ~occluded(self.scene, feeler_start[rows], light_pos - feeler_start[rows])
+            rows = np.nonzero(lit)[0]
+            if rows.size == 0:
+                continue
+            m = mat[rows]
+            contribution = lambert[rows, None] * mats.diffuse[m]
+            half = s[rows] + to_eye[rows]
+            half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-300)
+            h_dot_m = _dot(half, normal[rows])
+            with np.errstate(under="ignore"):
+                phong = np.where(h_dot_m > 0.0, np.power(np.maximum(h_dot_m, 0.0), mats.specular_exponent[m]), 0.0)
+            contribution += phong[:, None] * mats.specular[m]
+            total[rows] += contribution * light_color
+        return total
+
+    def _reflection(self, point, normal, direction, mat, offset, level, media) -> np.ndarray:
+        settings = self.scene.settings
+        mats = self.scene.materials
+        k = mats.reflectivity[mat]
+        rows = np.nonzero((k >= settings.min_reflectivity) & (k > 0.0))[0]
+        out = np.zeros_like(point)
+        if rows.size:
+            out[rows] = k[rows, None] * self._reflected(point[rows], normal[rows], direction[rows],
+                                                        offset[rows], level, media.subset(rows))
+        return out
+
+    def _reflected(self, point, normal, direction, offset, level, media) -> np.ndarray:
+        r = direction - 2.0 * _dot(direction, normal)[:, None] * normal
+        self.counts.reflection += point.shape[0]
+        return self.shade(point + offset * normal, r, level + 1, media)
+
+    def _refraction(self, point, normal, direction, mat, offset, level, media, entering, obj) -> np.ndarray:
+        settings = self.scene.settings
+        mats = self.scene.materials
+        k = mats.transparency[mat]
+        rows = np.nonzero((k >= settings.min_transparency) & (k > 0.0))[0]
+        out = np.zeros_like(point)
+        if rows.size == 0:
+            return out
+        point, normal, direction, offset = point[rows], normal[rows], direction[rows], offset[rows]
+        media, entering, obj, k, mat = media.subset(rows), entering[rows], obj[rows], k[rows], mat[rows]
+        c1 = media.current_speed()
+        inside = media.entered(obj, mats.speed_of_light[mat])
+        outside = media.left(obj)
+        after = Media(np.where(entering[:, None], inside.objects, outside.objects),
+                      np.where(entering[:, None], inside.speeds, outside.speeds),
+                      np.where(entering, inside.depth, outside.depth))
+        c2 = np.where(entering, mats.speed_of_light[mat], outside.current_speed())
+        ratio = c2 / c1  # sin(theta2) / sin(theta1), Snell's law with speeds
+        unit = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+        cos1 = -_dot(unit, normal)
+        k2 = 1.0 - ratio * ratio * (1.0 - cos1 * cos1)
+        through = k2 >= 0.0
+        result = np.zeros_like(point)
+        tr = np.nonzero(through)[0]
+        if tr.size:
+            transmitted = ratio[tr, None] * unit[tr] + (ratio[tr] * cos1[tr] - np.sqrt(k2[tr]))[:, None] * normal[tr]
+            self.counts.refraction += tr.size
+            result[tr] = self.shade(point[tr] - offset[tr] * normal[tr], transmitted, level + 1, after.subset(tr))
+        tir = np.nonzero(~through)[0]
+        if tir.size:  # total internal reflection: the light stays in the medium it came from
+            result[tir] = self._reflected(point[tir], normal[tir], direction[tir], offset[tir], level,
+                                          media.subset(tir))
+        out[rows] = k[:, None] * result
+        return out

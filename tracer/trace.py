@@ -143,6 +143,26 @@ def _dot(a, b):
     return np.einsum("ij,ij->i", a, b)
 
 
+def reflect(direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Mirror (N, 3) directions about unit normals: r = d - 2 (d . m) m."""
+    return direction - 2.0 * _dot(direction, normal)[:, None] * normal
+
+
+def refract(direction: np.ndarray, normal: np.ndarray, ratio: np.ndarray):
+    """Transmitted unit directions by Snell's law with speeds, and where total internal reflection occurs.
+
+    ``normal`` faces the incoming ray (d . m < 0); ``ratio`` = c2 / c1 = sin(theta2) / sin(theta1).
+    Returns ``(transmitted, total_internal)``; transmitted rows are NaN where total_internal is True.
+    """
+    unit = direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    cos1 = -_dot(unit, normal)
+    cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1)
+    total_internal = cos2_squared < 0.0
+    with np.errstate(invalid="ignore"):
+        transmitted = ratio[:, None] * unit + (ratio * cos1 - np.sqrt(cos2_squared))[:, None] * normal
+    return transmitted, total_internal
+
+
 class Tracer:
     """Shades batches of rays for one compiled scene, counting every ray it casts."""
 
@@ -229,7 +249,7 @@ class Tracer:
         return out
 
     def _reflected(self, point, normal, direction, offset, level, media) -> np.ndarray:
-        r = direction - 2.0 * _dot(direction, normal)[:, None] * normal
+        r = reflect(direction, normal)
         self.counts.reflection += point.shape[0]
         return self.shade(point + offset * normal, r, level + 1, media)
 
@@ -250,18 +270,14 @@ class Tracer:
                       np.where(entering[:, None], inside.speeds, outside.speeds),
                       np.where(entering, inside.depth, outside.depth))
         c2 = np.where(entering, mats.speed_of_light[mat], outside.current_speed())
-        ratio = c2 / c1  # sin(theta2) / sin(theta1), Snell's law with speeds
-        unit = direction / np.linalg.norm(direction, axis=1, keepdims=True)
-        cos1 = -_dot(unit, normal)
-        k2 = 1.0 - ratio * ratio * (1.0 - cos1 * cos1)
-        through = k2 >= 0.0
+        transmitted, total_internal = refract(direction, normal, c2 / c1)
         result = np.zeros_like(point)
-        tr = np.nonzero(through)[0]
+        tr = np.nonzero(~total_internal)[0]
         if tr.size:
-            transmitted = ratio[tr, None] * unit[tr] + (ratio[tr] * cos1[tr] - np.sqrt(k2[tr]))[:, None] * normal[tr]
             self.counts.refraction += tr.size
-            result[tr] = self.shade(point[tr] - offset[tr] * normal[tr], transmitted, level + 1, after.subset(tr))
-        tir = np.nonzero(~through)[0]
+            result[tr] = self.shade(point[tr] - offset[tr] * normal[tr], transmitted[tr], level + 1,
+                                    after.subset(tr))
+        tir = np.nonzero(total_internal)[0]
         if tir.size:  # total internal reflection: the light stays in the medium it came from
             result[tir] = self._reflected(point[tir], normal[tir], direction[tir], offset[tir], level,
                                           media.subset(tir))

@@ -1,0 +1,27 @@
+# Quick start:  make demo   (sets up .venv, renders scenes/lecture.sdl to out/lecture.png)
+#               make test   (sets up if needed, runs the whole suite)
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup demo test clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml requirements-dev.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements-dev.txt
+	$(PY) -m pip install -q --no-deps -e .
+	touch $(STAMP)
+
+demo: setup
+	mkdir -p out
+	$(PY) -m tracer render scenes/lecture.sdl -o out/lecture.png --width 640 --height 480 --stats
+
+test: setup
+	$(PY) -m pytest -q
+
+clean:
+	rm -rf $(VENV) out build *.egg-info

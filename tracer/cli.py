@@ -1,0 +1,179 @@
+"""``python -m tracer``: render SDL scenes and describe them.
+
+Errors in the user's input end the program with one line on stderr and exit status 2 — never a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .errors import RenderCancelled, SDLError, TracerError
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def _add_scene_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", help="SDL scene file")
+    p.add_argument("--lenient", action="store_true",
+                   help="read what can be read: print one warning per problem in the file and go on")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m tracer",
+                                     description="Ray trace SDL scenes (F. S. Hill's Scene Description Language).")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("render", help="ray trace a scene to an image file")
+    _add_scene_options(r)
+    r.add_argument("-o", "--output", required=True, help="image file to write (.png, .bmp, .ppm, .jpg, .tif)")
+    r.add_argument("--width", type=int, default=640)
+    r.add_argument("--height", type=int, default=480)
+    r.add_argument("--block-size", type=int, default=1, metavar="B",
+                   help="trace one ray per BxB block of pixels (the lecture's blockSize; default 1)")
+    r.add_argument("--progressive", action="store_true",
+                   help="refine coarse to fine: passes B, B/2, ..., 1, reusing earlier samples")
+    r.add_argument("--max-depth", type=int, default=None, metavar="N",
+                   help="override the scene's maxRecursionDepth")
+    r.add_argument("--stats", action="store_true",
+                   help="print JSON statistics (ray counts, seconds, backend) on stdout")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+
+    i = sub.add_parser("info", help="list a scene's objects, lights and live effects")
+    _add_scene_options(i)
+    i.add_argument("--json", action="store_true", help="print JSON instead of text")
+    return parser
+
+
+def _load(args):
+    from .sdl.parser import load
+
+    scene = load(args.scene, strict=not args.lenient)
+    for message in scene.warnings:
+        print(f"warning: {message}", file=sys.stderr)
+    return scene
+
+
+class _Progress:
+    """A one-line percentage on stderr, only when stderr is a terminal."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled and sys.stderr.isatty()
+        self.shown = -1
+
+    def __call__(self, update) -> None:
+        percent = int(100 * update.fraction)
+        if self.enabled and percent != self.shown:
+            self.shown = percent
+            sys.stderr.write(f"\rtracing: {percent:3d}%  (block size {update.block_size})")
+            sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.shown >= 0:
+            sys.stderr.write("\n")
+
+
+def _render(args) -> int:
+    from .imageio import save_image
+    from .render import render
+
+    scene = _load(args)
+    if args.max_depth is not None:
+        if args.max_depth < 0:
+            raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")
+        scene.settings.max_recursion_depth = args.max_depth
+    progress = _Progress(not args.quiet)
+    try:
+        result = render(scene, args.width, args.height, block_size=args.block_size,
+                        progressive=args.progressive, on_tile=progress)
+    finally:
+        progress.close()
+    save_image(result.image, args.output)
+    if args.stats:
+        print(json.dumps(result.stats()))
+    return 0
+
+
+def describe(scene) -> dict:
+    """What ``info`` prints: objects, lights, camera, settings and live effects."""
+    from .compile import compile_scene
+    from .model import CSG
+
+    def obj_info(obj):
+        if isinstance(obj, CSG):
+            return {"boolean": obj.op, "groups": list(obj.groups), "children": [obj_info(obj.left), obj_info(obj.right)]}
+        info = {"shape": obj.kind, "position": [round(float(x), 6) for x in obj.matrix[:3, 3]],
+                "groups": list(obj.groups)}
+        if obj.mesh_file:
+            info["file"] = obj.mesh_file
+        return info
+
+    compiled = compile_scene(scene)
+    camera = scene.camera
+    return {
+        "objects": [obj_info(o) for o in scene.objects],
+        "lights": [{"position": list(l.position), "color": list(l.color)} for l in scene.lights],
+        "camera": None if camera is None else {"eye": list(camera.eye), "look": list(camera.look),
+                                               "up": list(camera.up), "viewAngle": camera.view_angle},
+        "effects": sorted(compiled.effects),
+        "warnings": list(scene.warnings),
+    }
+
+
+def _info(args) -> int:
+    info = describe(_load(args))
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+
+    def lines(obj, indent):
+        pad = "  " * indent
+        group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
+        if "boolean" in obj:
+            yield f"{pad}{obj['boolean']}{group}"
+            for child in obj["children"]:
+                yield from lines(child, indent + 1)
+        else:
+            extra = f" {obj['file']}" if "file" in obj else ""
+            yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
+
+    print(f"objects: {len(info['objects'])}")
+    for obj in info["objects"]:
+        for line in lines(obj, 1):
+            print(line)
+    print(f"lights: {len(info['lights'])}")
+    for light in info["lights"]:
+        print(f"  at ({', '.join(f'{x:g}' for x in light['position'])}) colour "
+              f"({', '.join(f'{x:g}' for x in light['color'])})")
+    cam = info["camera"]
+    print("camera: " + ("default (frames the scene)" if cam is None else
+                        f"eye {tuple(cam['eye'])} look {tuple(cam['look'])} angle {cam['viewAngle']:g}"))
+    print("live effects: " + (", ".join(info["effects"]) or "none"))
+    return 0
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        with np.errstate(all="ignore"):
+            return {"render": _render, "info": _info}[args.command](args)
+    except (SDLError, TracerError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except FileNotFoundError as err:
+        print(f"error: {err.filename or err}: no such file", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as err:
+        print(f"error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
+        return EXIT_USAGE
+    except RenderCancelled:
+        print("error: cancelled", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except KeyboardInterrupt:
+        print("\ninterrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED

@@ -19,7 +19,8 @@ from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
 from .errors import RenderCancelled, TracerError
 from .model import Scene
-from .trace import RayCounts, Tracer
+from .backend import make_tracer
+from .trace import RayCounts
 
 #: Width/height limit: a 16k x 16k float image is already 3 GiB.
 MAX_DIMENSION = 16384
@@ -83,14 +84,14 @@ def check_size(width: int, height: int) -> None:
 def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block_size: int = 1,
            progressive: bool = False, tile: int = DEFAULT_TILE,
            on_tile: Optional[Callable[[TileUpdate], None]] = None,
-           cancel: Optional[Callable[[], bool]] = None) -> RenderResult:
+           cancel: Optional[Callable[[], bool]] = None, backend: str = "auto") -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image."""
     check_size(width, height)
     started = time.perf_counter()
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     camera = scene_camera(compiled.scene, compiled, width / height)
     frame = CameraFrame.from_camera(camera, width / height)
-    tracer = Tracer(compiled)
+    tracer = make_tracer(compiled, backend)
     passes = block_passes(block_size, progressive)
     # The film is stored bottom row first, as the lecture counts rows; the caller sees it flipped.
     film = np.zeros((height, width, 3), dtype=np.float32)
@@ -125,4 +126,4 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
                                    pass_index=pass_index, pass_count=len(passes), tiles_done=done,
                                    tiles_total=total, image=shown))
     return RenderResult(image=np.ascontiguousarray(shown), rays=tracer.counts,
-                        seconds=time.perf_counter() - started, effects=compiled.effects)
+                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)

@@ -1,0 +1,45 @@
+"""Choosing who does the per-ray work: the C core when it is built and can trace the scene, else NumPy.
+
+A backend is an object with ``camera_rays(origins, directions) -> (N, 3) colours``, a ``counts``
+attribute (:class:`tracer.trace.RayCounts`) and a ``name`` ("c" or "numpy").
+"""
+from __future__ import annotations
+
+import warnings
+
+from .compile import CompiledScene
+from .errors import TracerError
+from .trace import Tracer
+
+BACKENDS = ("auto", "c", "numpy")
+_warned = False
+
+
+def make_tracer(compiled: CompiledScene, backend: str = "auto"):
+    if backend not in BACKENDS:
+        raise TracerError(f"unknown backend {backend!r} (use one of {', '.join(BACKENDS)})")
+    if backend in ("auto", "c"):
+        try:
+            from .native import NativeTracer, load_error
+        except ImportError:  # the native package itself is absent in this build
+            NativeTracer, load_error = None, "the C core is not part of this installation"
+        if NativeTracer is not None and load_error is None:
+            reason = NativeTracer.unsupported(compiled)
+            if reason is None:
+                return NativeTracer(compiled)
+            if backend == "c":
+                raise TracerError(f"the C core cannot trace this scene: {reason}")
+        elif backend == "c":
+            raise TracerError(f"the C core is not available: {load_error}")
+        else:
+            _warn_once(load_error)
+    tracer = Tracer(compiled)
+    tracer.name = "numpy"
+    return tracer
+
+
+def _warn_once(reason) -> None:
+    global _warned
+    if reason and not _warned:
+        _warned = True
+        warnings.warn(f"C core unavailable ({reason}); using the slower NumPy path", RuntimeWarning, stacklevel=3)

@@ -21,9 +21,12 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto"):
     if backend in ("auto", "c"):
         try:
             from .native import NativeTracer, load_error
-        except ImportError:  # the native package itself is absent in this build
-            NativeTracer, load_error = None, "the C core is not part of this installation"
-        if NativeTracer is not None and load_error is None:
+        except ImportError:  # no C core in this source tree at all: NumPy is simply the backend
+            NativeTracer, load_error = None, None
+        if NativeTracer is None:
+            if backend == "c":
+                raise TracerError("the C core is not part of this installation")
+        elif load_error is None:
             reason = NativeTracer.unsupported(compiled)
             if reason is None:
                 return NativeTracer(compiled)

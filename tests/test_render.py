@@ -1,0 +1,156 @@
+"""Rendering: blocks, progressive passes, callbacks, cancel, the camera, shading values, live effects."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from helpers import Camera, Light, rotation, scaling, scene_of, shape, translation
+from tracer.camera import CameraFrame, framing_camera
+from tracer.compile import compile_scene
+from tracer.errors import RenderCancelled, TracerError
+from tracer.render import block_passes, render
+from tracer.trace import Tracer
+
+
+def _scene(**settings):
+    return scene_of(
+        shape("plane", rotation(-90, 1, 0, 0), diffuse=(0.5, 0.5, 0.5)),
+        shape("sphere", translation(0, 1, 0), diffuse=(0.9, 0.1, 0.1), specular=(0.6, 0.6, 0.6),
+              specular_exponent=30),
+        shape("cube", translation(2.2, 0.7, 0) @ scaling(0.7, 0.7, 0.7), diffuse=(0.1, 0.8, 0.1)),
+        lights=[Light((4, 6, 5), (1, 1, 1))],
+        camera=Camera((0, 2.5, 7), (0, 0.8, 0), (0, 1, 0), 45), **settings)
+
+
+def test_block_passes():
+    assert block_passes(8, progressive=True) == [8, 4, 2, 1]
+    assert block_passes(6, progressive=True) == [4, 2, 1]
+    assert block_passes(3, progressive=False) == [3]
+    with pytest.raises(TracerError):
+        block_passes(0, progressive=False)
+
+
+def test_block_size_fills_blocks_with_lower_left_sample():
+    full = render(_scene(), 48, 32).image
+    blocky = render(_scene(), 48, 32, block_size=4).image
+    h = full.shape[0]
+    for top in range(0, h, 4):
+        for left in range(0, 48, 4):
+            block = blocky[top:top + 4, left:left + 4]
+            # Rows count from the bottom: a block's sample is its lower-left pixel.
+            bottom_row = h - 1 - ((h - 1 - (top + 3)) // 4 * 4)
+            sample = full[bottom_row, left]
+            assert np.all(block == sample)
+
+
+def test_progressive_traces_each_pixel_once_and_matches_full_render():
+    seen = []
+    result = render(_scene(), 40, 30, block_size=8, progressive=True, tile=16, on_tile=seen.append)
+    assert result.rays.camera == 40 * 30
+    assert np.array_equal(result.image, render(_scene(), 40, 30).image)
+    strides = [u.block_size for u in seen]
+    assert strides == sorted(strides, reverse=True) and set(strides) == {8, 4, 2, 1}
+    fractions = [u.fraction for u in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    # Each pass's tiles cover the image exactly once.
+    for stride in (8, 4, 2, 1):
+        cover = np.zeros((30, 40), dtype=int)
+        for u in seen:
+            if u.block_size == stride:
+                cover[u.y0:u.y1, u.x0:u.x1] += 1
+        assert np.all(cover == 1)
+
+
+def test_cancel_stops_between_tiles():
+    calls = []
+    with pytest.raises(RenderCancelled):
+        render(_scene(), 64, 64, tile=16, on_tile=calls.append, cancel=lambda: len(calls) >= 3)
+    assert len(calls) == 3
+
+
+@pytest.mark.parametrize("width, height", [(0, 10), (10, -1), (100000, 10)])
+def test_bad_image_sizes_are_refused(width, height):
+    with pytest.raises(TracerError, match="between 1 and"):
+        render(_scene(), width, height)
+
+
+def test_shading_matches_blinn_phong_by_hand():
+    # One ray straight down onto the top of a unit sphere; light above and to the side.
+    mat = dict(ambient=(0.2, 0.3, 0.4), diffuse=(0.5, 0.6, 0.7), specular=(0.8, 0.8, 0.8),
+               specular_exponent=10, emissive=(0.01, 0.02, 0.03))
+    light_pos, light_col = np.array([3.0, 4.0, 0.0]), np.array([0.9, 0.8, 0.7])
+    scene = scene_of(shape("sphere", **mat), lights=[Light(tuple(light_pos), tuple(light_col))],
+                     global_ambient=(0.5, 0.5, 0.5))
+    color = Tracer(compile_scene(scene)).camera_rays(np.array([[0.0, 5.0, 0.0]]), np.array([[0.0, -1.0, 0.0]]))[0]
+    p, m, v = np.array([0, 1.0, 0]), np.array([0, 1.0, 0]), np.array([0, 1.0, 0])
+    s = (light_pos - p) / np.linalg.norm(light_pos - p)
+    h = (s + v) / np.linalg.norm(s + v)
+    expected = (np.array(mat["emissive"]) + 0.5 * np.array(mat["ambient"])
+                + light_col * (np.dot(s, m) * np.array(mat["diffuse"]) + np.dot(h, m) ** 10 * 0.8))
+    assert color == pytest.approx(expected, rel=1e-12)
+
+
+def test_symmetric_scene_gives_symmetric_image():
+    scene = scene_of(
+        shape("plane", rotation(-90, 1, 0, 0), diffuse=(0.5, 0.5, 0.5)),
+        shape("sphere", translation(0, 1, 0), diffuse=(0.8, 0.3, 0.2), specular=(0.5, 0.5, 0.5), specular_exponent=20),
+        shape("cone", translation(-2, 0, 0) @ rotation(-90, 1, 0, 0)),
+        shape("cone", translation(2, 0, 0) @ rotation(-90, 1, 0, 0)),
+        lights=[Light((0, 6, 4), (1, 1, 1))], camera=Camera((0, 2, 8), (0, 1, 0), (0, 1, 0), 40))
+    image = render(scene, 64, 48).image
+    assert np.abs(image - image[:, ::-1]).max() < 1e-9
+    assert np.abs(image - image[::-1]).max() > 0.1  # and it is not trivially uniform
+
+
+def test_default_camera_frames_every_object():
+    objects = [shape("sphere", translation(x, y, z)) for x, y, z in [(-5, 0, 0), (6, 2, -3), (0, -4, 2)]]
+    scene = scene_of(*objects, background=(0, 0, 0))
+    compiled = compile_scene(scene)
+    cam = framing_camera(compiled, 4 / 3)
+    frame = CameraFrame.from_camera(cam, 4 / 3)
+    for obj in objects:
+        c = obj.matrix[:3, 3]
+        rel = c - frame.eye
+        depth = -np.dot(rel, frame.n)
+        x = np.dot(rel, frame.u) / depth / frame.half_width
+        y = np.dot(rel, frame.v) / depth / frame.half_height
+        assert depth > 0 and abs(x) < 0.9 and abs(y) < 0.9
+    image = render(scene, 80, 60).image
+    assert (image.max(axis=2) > 0).mean() > 0.01  # the objects are visible
+
+
+def _counts(scene):
+    return render(scene, 24, 18).rays
+
+
+def test_only_live_effects_cast_rays():
+    base = _counts(_scene())
+    assert base.shadow > 0 and base.reflection == 0 and base.refraction == 0
+    dark = _scene()
+    dark.lights.clear()
+    assert _counts(dark).shadow == 0
+    mirror = _scene()
+    mirror.objects.append(shape("cube", translation(-2.2, 0.7, 0), reflectivity=0.8))
+    with_mirror = _counts(mirror)
+    assert with_mirror.reflection > 0 and with_mirror.refraction == 0
+    weak = _scene()
+    weak.objects.append(shape("cube", translation(-2.2, 0.7, 0), reflectivity=0.3))  # below minReflectivity 0.5
+    assert _counts(weak).reflection == 0
+    glass = _scene()
+    glass.objects.append(shape("sphere", translation(-2.2, 1, 1), transparency=0.9, speed_of_light=0.7))
+    assert _counts(glass).refraction > 0
+    flat = _scene(max_recursion_depth=0)
+    flat.objects.append(shape("sphere", translation(-2.2, 1, 1), transparency=0.9, reflectivity=0.9))
+    counts = _counts(flat)
+    assert counts.reflection == 0 and counts.refraction == 0
+    assert "refraction" not in compile_scene(flat).effects
+
+
+def test_rays_go_through_pixel_centres():
+    frame = CameraFrame.from_camera(Camera((0, 0, 0), (0, 0, -1), (0, 1, 0), 90), 2.0)
+    d = frame.directions(np.array([0]), np.array([0]), 2, 4)[0]
+    # 4 columns span [-W, W] = [-2, 2]: the first centre is at -2 + 0.5; 2 rows over [-1, 1]: -0.5.
+    assert d == pytest.approx([-1.5, -0.5, -1.0])
+    assert frame.half_height == pytest.approx(math.tan(math.radians(45)))

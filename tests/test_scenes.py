@@ -1,0 +1,110 @@
+"""Every bundled scene reads cleanly, renders, and shows its objects where they are."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tracer
+from tracer.camera import CameraFrame, scene_camera
+from tracer.compile import compile_scene
+from tracer.model import Shape
+
+SCENES = sorted((Path(__file__).parent.parent / "scenes").glob("*.sdl"))
+WIDTH, HEIGHT = 160, 120
+
+
+def test_there_are_scenes_for_every_feature():
+    kinds, effects = set(), set()
+    for path in SCENES:
+        scene = tracer.load(path)
+        kinds |= {s.kind for s in scene.shapes()}
+        effects |= compile_scene(scene).effects
+        if any(s.groups for s in scene.shapes()):
+            effects.add("def/use")
+    assert {"sphere", "cube", "square", "plane", "taperedCylinder", "cylinder", "cone", "torus", "teapot",
+            "mesh", "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond"} <= kinds
+    assert {"shadows", "reflection", "refraction", "csg", "def/use"} <= effects
+
+
+def _project(frame: CameraFrame, point):
+    rel = np.asarray(point) - frame.eye
+    depth = -np.dot(rel, frame.n)
+    x = np.dot(rel, frame.u) / depth / frame.half_width
+    y = np.dot(rel, frame.v) / depth / frame.half_height
+    col = int((x + 1) / 2 * WIDTH)
+    row_from_bottom = int((y + 1) / 2 * HEIGHT)
+    return depth, row_from_bottom, col
+
+
+def _dominant(color) -> int | None:
+    """The clearly strongest channel of a colour, if it has one."""
+    c = np.asarray(color)
+    order = np.argsort(c)
+    return int(order[-1]) if c[order[-1]] > 1.2 * c[order[-2]] + 0.02 else None
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
+def test_scene_renders_objects_in_their_colours(path):
+    scene = tracer.load(path)
+    assert scene.warnings == []
+    result = tracer.render(scene, WIDTH, HEIGHT)
+    image = result.image
+    assert image.shape == (HEIGHT, WIDTH, 3) and np.all(np.isfinite(image))
+    compiled = compile_scene(scene)
+    frame = CameraFrame.from_camera(scene_camera(scene, compiled, WIDTH / HEIGHT), WIDTH / HEIGHT)
+    checked = 0
+    for obj in compiled.objects:
+        if not obj.bounded:
+            continue
+        leaves = {id(p.shape) for p in (obj.leaves() if hasattr(obj, "leaves") else [obj])}
+        # Look at the centre, or near it where the centre is hollow (a drilled CSG object).
+        for offset in [(0, 0)] + [(a * 0.3, b * 0.3) for a in (-1, 1) for b in (-1, 1)]:
+            aim = obj.center + obj.radius * (offset[0] * frame.u + offset[1] * frame.v)
+            depth, row, col = _project(frame, aim)
+            if depth <= 0 or not (0 <= row < HEIGHT and 0 <= col < WIDTH):
+                continue
+            # The pixel's ray must meet this very object first.
+            direction = frame.directions(np.array([row]), np.array([col]), HEIGHT, WIDTH)[0]
+            first = tracer.hits(compiled, frame.eye, direction)
+            if first and id(first[0].shape) in leaves:
+                break
+        else:
+            continue
+        mat = first[0].shape.material
+        hue = _dominant(mat.diffuse)
+        if hue is None or mat.reflectivity > 0 or mat.transparency > 0 or mat.texture:
+            continue
+        pixel = image[HEIGHT - 1 - row, col]
+        assert _dominant(pixel) == hue, f"{first[0].shape.kind} at pixel {(row, col)} is {pixel}, diffuse {mat.diffuse}"
+        checked += 1
+    # In the glass scene the coloured blocks stand behind the glass: only the floor is in plain view.
+    assert checked >= (1 if path.stem == "glass" else 3), "too few objects could be checked"
+
+
+def test_lecture_scene_has_its_cylinders_spheres_three_cones_and_two_lights():
+    scene = tracer.load(Path(__file__).parent.parent / "scenes" / "lecture.sdl")
+    kinds = [s.kind for s in scene.shapes()]
+    assert kinds.count("cone") == 3 and kinds.count("cylinder") >= 2 and kinds.count("sphere") >= 2
+    assert len(scene.lights) == 2
+
+
+def test_jack_is_built_with_macros():
+    scene = tracer.load(Path(__file__).parent.parent / "scenes" / "jack.sdl")
+    grouped = [s for s in scene.shapes() if "jack" in s.groups]
+    assert len(grouped) == 2 * 10  # two jacks, each three arms of three parts and a hub
+    assert all(isinstance(s, Shape) for s in grouped)
+
+
+def test_glass_scene_refracts():
+    scene = tracer.load(Path(__file__).parent.parent / "scenes" / "glass.sdl")
+    with_glass = tracer.render(scene, 80, 60)
+    assert with_glass.rays.refraction > 0 and with_glass.rays.reflection > 0
+    for shape in scene.shapes():
+        if shape.material.transparency > 0:
+            shape.material = type(shape.material)(**{**shape.material.__dict__, "transparency": 0.0})
+    opaque = tracer.render(scene, 80, 60)
+    assert opaque.rays.refraction == 0
+    changed = np.abs(with_glass.image - opaque.image).max(axis=2) > 0.05
+    assert changed.mean() > 0.05  # the glass objects look different from opaque ones

@@ -1,0 +1,212 @@
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from tracer.errors import SDLError
+from tracer.meshio import format_3vn, read_3vn, write_3vn, write_text_atomic
+from tracer.model import MeshData
+
+# A square pyramid: 5 vertices, 5 normals (one per face), a quad base and four triangles.
+PYRAMID = """5 5 5
+-1 -1 0
+1 -1 0
+1 1 0
+-1 1 0
+0 0 1
+0 0 -1
+0 -0.707 0.707
+0.707 0 0.707
+0 0.707 0.707
+-0.707 0 0.707
+4 3 2 1 0 0 0 0 0
+3 0 1 4 1 1 1
+3 1 2 4 2 2 2
+3 2 3 4 3 3 3
+3 3 0 4 4 4 4
+"""
+
+
+def write(tmp_path, text, name="m.3vn"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_reads_vertices_normals_and_faces(tmp_path):
+    mesh = read_3vn(write(tmp_path, PYRAMID))
+    assert mesh.vertices.shape == (5, 3) and mesh.vertices.dtype == np.float64
+    assert mesh.vertices[4].tolist() == [0, 0, 1]
+    assert mesh.normals[1].tolist() == [0, -0.707, 0.707]
+    assert mesh.faces[0] == ((3, 2, 1, 0), (0, 0, 0, 0))
+    assert mesh.faces[4] == ((3, 0, 4), (4, 4, 4))
+    assert len(mesh.faces) == 5
+    assert mesh.origin.endswith("m.3vn")
+    tri_v, _ = mesh.triangles()
+    assert len(tri_v) == 2 + 4  # the quad fans into two triangles
+
+
+def test_line_breaks_carry_no_meaning(tmp_path):
+    squashed = " ".join(PYRAMID.split())
+    spread = "\n\n".join(PYRAMID.split()) + "\n\n\n"
+    a = read_3vn(write(tmp_path, squashed, "a.3vn"))
+    b = read_3vn(write(tmp_path, spread, "b.3vn"))
+    c = read_3vn(write(tmp_path, PYRAMID.replace("\n", "\r\n").replace(" ", "\t"), "c.3vn"))
+    for mesh in (b, c):
+        assert np.array_equal(mesh.vertices, a.vertices)
+        assert np.array_equal(mesh.normals, a.normals)
+        assert mesh.faces == a.faces
+
+
+def test_round_trip(tmp_path):
+    mesh = read_3vn(write(tmp_path, PYRAMID))
+    out = tmp_path / "out.3vn"
+    write_3vn(mesh, out)
+    again = read_3vn(out)
+    assert np.array_equal(again.vertices, mesh.vertices)
+    assert np.array_equal(again.normals, mesh.normals)
+    assert again.faces == mesh.faces
+
+
+finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)
+
+
+@st.composite
+def meshes(draw):
+    nv = draw(st.integers(3, 8))
+    nn = draw(st.integers(1, 4))
+    vertices = np.array(draw(st.lists(finite, min_size=3 * nv, max_size=3 * nv))).reshape(nv, 3)
+    normals = np.array(draw(st.lists(finite, min_size=3 * nn, max_size=3 * nn))).reshape(nn, 3)
+    faces = []
+    for _ in range(draw(st.integers(0, 5))):
+        n = draw(st.integers(3, 6))
+        faces.append((tuple(draw(st.lists(st.integers(0, nv - 1), min_size=n, max_size=n))),
+                      tuple(draw(st.lists(st.integers(0, nn - 1), min_size=n, max_size=n)))))
+    return MeshData(vertices, normals, faces)
+
+
+@settings(max_examples=50, deadline=None)
+@given(meshes())
+def test_random_meshes_round_trip_exactly(tmp_path_factory, mesh):
+    path = tmp_path_factory.mktemp("rt") / "r.3vn"
+    write_3vn(mesh, path)
+    again = read_3vn(path)
+    assert np.array_equal(again.vertices, mesh.vertices)
+    assert np.array_equal(again.normals, mesh.normals)
+    assert again.faces == mesh.faces
+
+
+def test_faces_without_normals_get_a_face_normal(tmp_path):
+    square = MeshData(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.zeros((0, 3)),
+                      [((0, 1, 2, 3), ())])
+    path = tmp_path / "sq.3vn"
+    write_3vn(square, path)
+    again = read_3vn(path)
+    assert again.faces == [((0, 1, 2, 3), (0, 0, 0, 0))]
+    assert np.allclose(again.normals, [[0, 0, 1]])  # counter-clockwise seen from +z
+
+
+def test_write_refuses_non_finite_numbers_and_leaves_nothing(tmp_path):
+    bad = MeshData(np.array([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]]), np.zeros((0, 3)), [((0, 1, 2), ())])
+    with pytest.raises(ValueError):
+        write_3vn(bad, tmp_path / "bad.3vn")
+    assert os.listdir(tmp_path) == []
+
+
+def test_atomic_write_keeps_old_file_when_writing_fails(tmp_path, monkeypatch):
+    target = tmp_path / "keep.txt"
+    target.write_text("old")
+
+    def boom(*args):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        write_text_atomic(target, "new")
+    assert target.read_text() == "old"
+    assert os.listdir(tmp_path) == ["keep.txt"]
+
+
+def test_format_is_counts_then_data():
+    mesh = MeshData(np.array([[0, 0, 0], [1, 0, 0], [0, 1.5, 0]]), np.array([[0, 0, 1.0]]),
+                    [((0, 1, 2), (0, 0, 0))])
+    assert format_3vn(mesh).split("\n") == ["3 1 1", "0 0 0", "1 0 0", "0 1.5 0", "0 0 1", "3 0 1 2 0 0 0", ""]
+
+
+# --- errors: each names the file and the line -----------------------------------------------------------
+
+def error_for(tmp_path, text):
+    path = write(tmp_path, text, "bad.3vn")
+    with pytest.raises(SDLError) as info:
+        read_3vn(path)
+    return info.value
+
+
+def test_bad_number_names_file_line_and_word(tmp_path):
+    err = error_for(tmp_path, PYRAMID.replace("1 1 0", "1 oops 0"))
+    assert err.file.endswith("bad.3vn") and err.line == 4 and err.token == "oops"
+    assert "bad.3vn:4:" in str(err)
+
+
+def test_nan_is_not_a_number(tmp_path):
+    err = error_for(tmp_path, PYRAMID.replace("0 0 1\n", "0 0 nan\n", 1))
+    assert err.line == 6 and err.token == "nan"
+
+
+def test_vertex_index_out_of_range(tmp_path):
+    err = error_for(tmp_path, PYRAMID.replace("3 1 2 4 2 2 2", "3 1 2 5 2 2 2"))
+    assert err.line == 14 and err.token == "5" and "out of range" in err.message
+    assert err.expected == "0..4"
+
+
+def test_normal_index_out_of_range(tmp_path):
+    err = error_for(tmp_path, PYRAMID.replace("3 2 3 4 3 3 3", "3 2 3 4 3 -1 3"))
+    assert err.line == 15 and err.token == "-1"
+
+
+def test_face_with_fewer_than_three_vertices(tmp_path):
+    err = error_for(tmp_path, "3 1 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n2 0 1 0 0\n")
+    assert err.line == 6 and "at least 3" in err.message
+
+
+def test_truncated_file(tmp_path):
+    err = error_for(tmp_path, PYRAMID[:PYRAMID.rindex("3 3 0 4")])
+    assert "ends early" in err.message
+    err = error_for(tmp_path, "5 5")
+    assert "ends early" in err.message and err.line == 1
+
+
+def test_truncated_last_face(tmp_path):
+    err = error_for(tmp_path, "3 1 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n4 0 1 2 1\n0 0 0\n")
+    # A quad promises four normal indices; only three are there.
+    assert "ends early" in err.message and "normal index of face 0" in err.message
+    assert err.line == 7  # the last line of the file
+
+
+def test_extra_data_after_last_face(tmp_path):
+    err = error_for(tmp_path, PYRAMID + "7\n")
+    assert err.line == 17 and err.token == "7"
+
+
+def test_counts_must_be_whole_numbers(tmp_path):
+    err = error_for(tmp_path, "2.5 0 0")
+    assert err.line == 1 and err.token == "2.5"
+    err = error_for(tmp_path, "-1 0 0")
+    assert err.token == "-1"
+
+
+def test_empty_file(tmp_path):
+    err = error_for(tmp_path, "")
+    assert "ends early" in err.message
+
+
+def test_indices_into_empty_normal_list(tmp_path):
+    err = error_for(tmp_path, "3 0 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 0 0 0\n")
+    assert err.line == 5 and "no normals" in err.message
+
+
+def test_missing_file_is_an_sdl_error(tmp_path):
+    with pytest.raises(SDLError) as info:
+        read_3vn(tmp_path / "nope.3vn")
+    assert "nope.3vn" in str(info.value)

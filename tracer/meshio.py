@@ -1,0 +1,174 @@
+"""Read and write the book's ``.3vn`` polygon mesh format.
+
+Layout (docs/sdl.md): ``numVerts numNorms numFaces``, then numVerts vertices ``x y z``, numNorms normals
+``nx ny nz``, then per face its vertex count n, n vertex indices and n normal indices, all 0-based.  Line
+breaks carry no meaning: any white space separates numbers, so the reader works on a stream of numbers and
+only keeps line numbers for its messages.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator, Union
+
+import numpy as np
+
+from .errors import SDLError
+from .model import MeshData
+from .sdl.lexer import to_float
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class _Numbers:
+    """The white-space separated words of a file, read one at a time as numbers, with line numbers."""
+
+    def __init__(self, text: str, file: str):
+        self.file = file
+        self.words: list[tuple[str, int]] = [
+            (word, line) for line, text_line in enumerate(text.split("\n"), start=1) for word in text_line.split()]
+        self.pos = 0
+        self.last_line = max(1, text.count("\n") + (0 if text.endswith("\n") else 1))
+
+    def error(self, message: str, line: int, token=None, expected=None) -> SDLError:
+        return SDLError(message, file=self.file, line=line, token=token, expected=expected)
+
+    def _next_word(self, what: str) -> tuple[str, int]:
+        if self.pos >= len(self.words):
+            raise self.error(f"file ends early: expected {what}", self.last_line)
+        word = self.words[self.pos]
+        self.pos += 1
+        return word
+
+    def real(self, what: str, index: int) -> float:
+        word, line = self._next_word(f"{what} {index}")
+        value = to_float(word)
+        if value is None:
+            raise self.error(f"expected a number for {what} {index}", line, token=word)
+        return value
+
+    def integer(self, what: str, low: int, high: int) -> int:
+        """An integer in [low, high]; a number written as a float with no fraction ('3.0') is accepted."""
+        word, line = self._next_word(what)
+        value = to_float(word)
+        if value is None or not value.is_integer():
+            raise self.error(f"expected a whole number for {what}", line, token=word)
+        if not low <= value <= high:
+            raise self.error(f"{what} out of range", line, token=word, expected=f"{low}..{high}")
+        return int(value)
+
+    def index(self, what: str, count: int, things: str) -> int:
+        """A 0-based index into a list of ``count`` things."""
+        if count == 0:
+            word, line = self._next_word(what)
+            raise self.error(f"{what} out of range: the file has no {things}", line, token=word)
+        return self.integer(what, 0, count - 1)
+
+    def leftover(self) -> Iterator[tuple[str, int]]:
+        return iter(self.words[self.pos:])
+
+
+def read_3vn(path: PathLike) -> MeshData:
+    """Read a ``.3vn`` file.  Any problem in its content raises SDLError naming the file and line."""
+    name = os.fspath(path)
+    try:
+        # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number.
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
+    numbers = _Numbers(text, name)
+    big = 2**31 - 1  # counts beyond this are certainly corrupt, and would exhaust memory before the check
+    num_verts = numbers.integer("the vertex count", 0, big)
+    num_norms = numbers.integer("the normal count", 0, big)
+    num_faces = numbers.integer("the face count", 0, big)
+    # Cheap sanity check before allocating: each vertex and normal needs 3 words, each face at least 7.
+    if 3 * (num_verts + num_norms) + 7 * num_faces > len(numbers.words):
+        raise numbers.error("file ends early: the counts at its start promise more numbers than it holds",
+                            numbers.last_line)
+
+    vertices = np.array([numbers.real("vertex", i) for i in range(num_verts) for _ in range(3)],
+                        dtype=np.float64).reshape(num_verts, 3)
+    normals = np.array([numbers.real("normal", i) for i in range(num_norms) for _ in range(3)],
+                       dtype=np.float64).reshape(num_norms, 3)
+    faces: list[tuple[tuple[int, ...], tuple[int, ...]]] = []
+    for f in range(num_faces):
+        n = numbers.integer(f"the vertex count of face {f}", 0, big)
+        if n < 3:
+            line = numbers.words[numbers.pos - 1][1]
+            raise numbers.error(f"face {f} has {n} vertices; a face needs at least 3", line, token=str(n))
+        verts = tuple(numbers.index(f"a vertex index of face {f}", num_verts, "vertices") for _ in range(n))
+        norms = tuple(numbers.index(f"a normal index of face {f}", num_norms, "normals") for _ in range(n))
+        faces.append((verts, norms))
+    for word, line in numbers.leftover():
+        raise numbers.error("unexpected data after the last face (are the counts at the start right?)",
+                            line, token=word)
+    return MeshData(vertices=vertices, normals=normals, faces=faces, origin=name)
+
+
+def _fmt(x: float) -> str:
+    """Shortest text that reads back as exactly the same float."""
+    x = float(x)
+    if not np.isfinite(x):
+        raise ValueError(f"cannot write the non-finite number {x!r} to a .3vn file")
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
+
+
+def format_3vn(mesh: MeshData) -> str:
+    """The ``.3vn`` text of a mesh.
+
+    The format needs a normal index for every corner.  Faces that have none (a mesh with flat normals)
+    get a computed face normal appended to the normal list, which shades the same way.
+    """
+    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    normals = [tuple(n) for n in np.asarray(mesh.normals, dtype=np.float64).reshape(-1, 3)]
+    face_lines = []
+    for verts, norms in mesh.faces:
+        if len(verts) < 3:
+            raise ValueError(f"a face needs at least 3 vertices, not {len(verts)}")
+        if len(norms) != len(verts):
+            normals.append(tuple(_face_normal(vertices[list(verts)])))
+            norms = (len(normals) - 1,) * len(verts)
+        face_lines.append(" ".join(str(int(i)) for i in (len(verts), *verts, *norms)))
+    lines = [f"{len(vertices)} {len(normals)} {len(face_lines)}"]
+    lines += [" ".join(_fmt(c) for c in v) for v in vertices]
+    lines += [" ".join(_fmt(c) for c in n) for n in normals]
+    lines += face_lines
+    return "\n".join(lines) + "\n"
+
+
+def _face_normal(points: np.ndarray) -> np.ndarray:
+    """Unit normal of a polygon by Newell's method (works for non-planar and non-convex polygons too)."""
+    nxt = np.roll(points, -1, axis=0)
+    normal = np.array([np.sum((points[:, 1] - nxt[:, 1]) * (points[:, 2] + nxt[:, 2])),
+                       np.sum((points[:, 2] - nxt[:, 2]) * (points[:, 0] + nxt[:, 0])),
+                       np.sum((points[:, 0] - nxt[:, 0]) * (points[:, 1] + nxt[:, 1]))])
+    length = np.linalg.norm(normal)
+    return normal / length if length > 0 else np.array([0.0, 0.0, 1.0])
+
+
+def write_3vn(mesh: MeshData, path: PathLike) -> None:
+    """Write a mesh as ``.3vn``, atomically: either the whole new file is there or the old one is untouched."""
+    write_text_atomic(path, format_3vn(mesh))
+
+
+def write_text_atomic(path: PathLike, text: str) -> None:
+    """Write ``text`` to a temporary file in the same folder, then rename it over ``path``.
+
+    Renaming within one folder is atomic, so readers never see half a file; if anything fails, the
+    temporary file is removed and ``path`` is left as it was.
+    """
+    target = Path(path)
+    handle, temp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8", newline="\n") as out:
+            out.write(text)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(temp_name, target)
+    except BaseException:
+        try:
+            os.unlink(temp_name)
+        except OSError:
+            pass
+        raise

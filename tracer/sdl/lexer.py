@@ -1,0 +1,60 @@
+"""Split SDL text into tokens, each with the line and column where it starts.
+
+The rules (docs/sdl.md): tokens are separated by white space; ``{`` and ``}`` are always tokens of their own;
+``!`` starts a comment that runs to the end of the line.  Unlike the book's lexer, a comment *ends* the token
+before it, so ``sphere!x`` followed by ``cube`` on the next line gives ``sphere`` and ``cube``.
+
+The lexer does not decide what a token means: a file name such as ``../meshes/pawn.3vn`` is one token like
+any other, and the parser decides whether a token is a keyword, a number or a name.
+"""
+from __future__ import annotations
+
+import math
+import re
+from typing import NamedTuple, Optional
+
+
+class Token(NamedTuple):
+    text: str
+    line: int  # 1-based
+    column: int  # 1-based, counted in characters
+
+
+# A brace on its own, or a run of characters that are neither white space nor braces.
+_TOKEN_RE = re.compile(r"[{}]|[^\s{}]+")
+
+# Decimal floats only: no 'nan', 'inf', hex or underscores, which Python's float() would also take.
+NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+
+
+def tokenize(text: str) -> list[Token]:
+    """All tokens of ``text`` in order.  Comments and white space are dropped."""
+    tokens: list[Token] = []
+    # Split on '\n' only (not str.splitlines, which also breaks at form feeds and other rare characters),
+    # so that line numbers agree with what editors show; a trailing '\r' is white space.
+    for line_number, line in enumerate(text.split("\n"), start=1):
+        comment = line.find("!")
+        if comment >= 0:
+            line = line[:comment]
+        for match in _TOKEN_RE.finditer(line):
+            tokens.append(Token(match.group(), line_number, match.start() + 1))
+    return tokens
+
+
+def end_position(text: str) -> tuple[int, int]:
+    """(line, column) just after the last character of ``text``, for messages about the end of the file."""
+    lines = text.split("\n")
+    return len(lines), len(lines[-1]) + 1
+
+
+def is_number(text: str) -> bool:
+    """True if ``text`` is a decimal number literal that gives a finite float."""
+    return to_float(text) is not None
+
+
+def to_float(text: str) -> Optional[float]:
+    """The value of a decimal number literal, or None if ``text`` is not one (or overflows to infinity)."""
+    if not NUMBER_RE.fullmatch(text):
+        return None
+    value = float(text)
+    return value if math.isfinite(value) else None

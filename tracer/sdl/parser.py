@@ -1,0 +1,574 @@
+"""Read SDL text into a :class:`tracer.model.Scene`.
+
+The reader is one loop over statements.  Two things make SDL more than a flat list:
+
+* ``use name`` splices a macro body into the input.  The token source is therefore a stack of frames (the
+  file, then each macro body being read); the names of the frames on the stack are the macros being
+  expanded, which gives shapes their ``groups`` and lets ``use`` refuse a macro that uses itself.
+* ``union``/``intersection``/``difference`` take the next two *objects*.  Rather than recursing, the reader
+  keeps a stack of booleans still waiting for operands and hands every finished object to the innermost one.
+
+Neither needs Python recursion, so deep nesting in a file cannot crash the reader.
+
+Errors come in two kinds.  *Syntax* problems (a word where a number belongs, an unknown keyword) abandon the
+statement: in strict mode they raise :class:`SDLError`; in lenient mode they become one warning and reading
+resumes at the next keyword.  *Semantic* problems (a missing mesh file, ``pop`` with nothing pushed) are found
+after the statement has been read whole: strict mode raises, lenient mode warns and carries on without that
+statement or shape.
+"""
+from __future__ import annotations
+
+import difflib
+import functools
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable, Optional, Union
+
+import numpy as np
+
+from .. import transforms
+from ..errors import SDLError
+from ..meshio import read_3vn
+from ..model import (ANALYTIC_KINDS, CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene,
+                     SceneObject, Shape, SourceLocation)
+from .lexer import Token, tokenize, to_float
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+# ---------------------------------------------------------------------------------------------------------
+# Keyword tables (the writer uses them too, so that both sides agree on spelling).
+
+#: Material keywords taking r g b, and the Material field each sets.
+COLOR_MATERIAL = {"ambient": "ambient", "diffuse": "diffuse", "specular": "specular", "emissive": "emissive"}
+#: Material keywords taking one number, and the Material field each sets.
+FLOAT_MATERIAL = {"specularExponent": "specular_exponent", "reflectivity": "reflectivity",
+                  "transparency": "transparency", "speedOfLight": "speed_of_light",
+                  "specularFraction": "specular_fraction", "surfaceRoughness": "surface_roughness"}
+#: The most numbers ``parameters`` may give (as in the book's material record).
+MAX_PARAMETERS = 10
+#: Image numbers ``makePixmap`` accepts.
+PIXMAP_RANGE = range(16)
+CSG_OPS = CSG.OPS
+
+#: Every keyword with the arguments it takes, for messages ("expected 'translate dx dy dz'").
+USAGE: dict[str, str] = {
+    "light": "x y z r g b", "globalAmbient": "r g b", "background": "r g b", "minReflectivity": "f",
+    "minTransparency": "f", "maxRecursionDepth": "n", "makePixmap": "i file",
+    "camera": "ex ey ez lx ly lz ux uy uz viewAngle",
+    **{k: "r g b" for k in COLOR_MATERIAL}, **{k: "f" for k in FLOAT_MATERIAL},
+    "texture": "t", "parameters": "n p1 ... pn", "defaultMaterials": "",
+    "translate": "dx dy dz", "scale": "sx sy sz", "rotate": "angle ux uy uz",
+    "push": "", "pop": "", "identityAffine": "",
+    **{k: "" for k in ANALYTIC_KINDS + POLYHEDRON_KINDS}, "taperedCylinder": "s", "teapot": "", "mesh": "file",
+    **{k: "object object" for k in CSG_OPS},
+    "def": "name { tokens }", "use": "name",
+}
+KEYWORDS = frozenset(USAGE)
+
+#: A guard against macros that do not recurse but still multiply (each using the previous one twice, thirty
+#: deep, is a billion tokens): no real scene splices anywhere near this many tokens.
+MAX_SPLICED_TOKENS = 2_000_000
+
+#: A transform whose linear part is this badly conditioned is treated as singular (e.g. ``scale 1 1 0``).
+MAX_CONDITION = 1e12
+
+
+@functools.lru_cache(maxsize=None)
+def builtin_mesh(kind: str) -> MeshData:
+    """The mesh of a built-in polyhedron or the teapot.
+
+    Imported here, not at the top, so that the parser works (and its tests run) without the geometry
+    modules, and cached because a scene may hold hundreds of copies of one polyhedron.
+    """
+    if kind == "teapot":
+        from ..geometry.teapot import teapot_mesh
+        return teapot_mesh()
+    from ..geometry.polyhedra import polyhedron_mesh
+    return polyhedron_mesh(kind)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Token source with macro splicing.
+
+@dataclass
+class _Frame:
+    """The file, or the body of one macro while ``use`` splices it in."""
+
+    tokens: list[Token]
+    macro: Optional[str]
+    pos: int = 0
+
+    @property
+    def done(self) -> bool:
+        return self.pos >= len(self.tokens)
+
+
+class _TokenSource:
+    def __init__(self, tokens: list[Token]):
+        self._frames = [_Frame(tokens, None)]
+        self._spliced = 0
+
+    def _settle(self) -> None:
+        # A finished macro frame is dropped only when the *next* token is wanted, so that right after reading
+        # a macro's last token (a shape keyword, or the name in a final ``use``) that macro still counts as
+        # being expanded: the shape is in its group, and ``use`` sees the whole chain.
+        frames = self._frames
+        while len(frames) > 1 and frames[-1].done:
+            frames.pop()
+
+    def peek(self) -> Optional[Token]:
+        self._settle()
+        top = self._frames[-1]
+        return None if top.done else top.tokens[top.pos]
+
+    def next(self) -> Optional[Token]:
+        token = self.peek()
+        if token is not None:
+            self._frames[-1].pos += 1
+        return token
+
+    def macros(self) -> tuple[str, ...]:
+        """Names of the macros being expanded, outermost first."""
+        return tuple(f.macro for f in self._frames[1:] if f.macro is not None)
+
+    def splice(self, name: str, body: list[Token]) -> bool:
+        """Read ``body`` next; False if that would pass the expansion budget."""
+        self._spliced += len(body)
+        if self._spliced > MAX_SPLICED_TOKENS:
+            return False
+        self._frames.append(_Frame(body, name))
+        return True
+
+
+@dataclass
+class _PendingBoolean:
+    """A boolean whose operands are still being read; an operand of None was dropped (lenient mode)."""
+
+    op: Token
+    groups: tuple[str, ...]
+    children: list[Optional[SceneObject]] = field(default_factory=list)
+
+
+@dataclass
+class _Macro:
+    body: list[Token]
+    where: Token  # its name in the def, for messages
+
+
+# ---------------------------------------------------------------------------------------------------------
+
+class _Reader:
+    def __init__(self, text: str, base_dir: Optional[PathLike], file: Optional[str], strict: bool):
+        self.file = file
+        self.base_dir = Path(base_dir) if base_dir is not None else None
+        self.strict = strict
+        self.source = _TokenSource(tokenize(text))
+        self.scene = Scene()
+        self.material = Material()
+        self.stack: list[np.ndarray] = [np.eye(4)]
+        self.macros: dict[str, _Macro] = {}
+        self.pending: list[_PendingBoolean] = []
+        self.mesh_cache: dict[str, MeshData] = {}
+        self.reported: set[str] = set()
+        self.handlers: dict[str, Callable[[Token, tuple[str, ...]], None]] = {
+            "light": self._light, "globalAmbient": self._global_ambient, "background": self._background,
+            "minReflectivity": self._min_reflectivity, "minTransparency": self._min_transparency,
+            "maxRecursionDepth": self._max_recursion_depth, "makePixmap": self._make_pixmap,
+            "camera": self._camera,
+            "texture": self._texture, "parameters": self._parameters,
+            "defaultMaterials": self._default_materials,
+            "translate": self._translate, "scale": self._scale, "rotate": self._rotate,
+            "push": self._push, "pop": self._pop, "identityAffine": self._identity,
+            "def": self._def, "use": self._use,
+        }
+        for keyword in COLOR_MATERIAL:
+            self.handlers[keyword] = self._color_material
+        for keyword in FLOAT_MATERIAL:
+            self.handlers[keyword] = self._float_material
+        for keyword in ANALYTIC_KINDS + POLYHEDRON_KINDS + ("teapot", "mesh"):
+            self.handlers[keyword] = self._shape
+        for keyword in CSG_OPS:
+            self.handlers[keyword] = self._boolean
+        assert set(self.handlers) == KEYWORDS
+
+    # -- driving loop -----------------------------------------------------------------------------------
+
+    def read(self) -> Scene:
+        while (token := self.source.next()) is not None:
+            groups = self.source.macros()
+            try:
+                handler = self.handlers.get(token.text)
+                if handler is None:
+                    raise self._unknown(token)
+                handler(token, groups)
+            except SDLError as error:
+                self._report(error)
+                self._resync()
+        self._finish_booleans()
+        return self.scene
+
+    def _report(self, error: SDLError) -> None:
+        """Strict: raise.  Lenient: keep the message and let the caller carry on."""
+        if self.strict:
+            raise error
+        message = str(error)
+        # The same mistake met again (a typo inside a macro used ten times) is still one problem.
+        if message not in self.reported:
+            self.reported.add(message)
+            self.scene.warnings.append(message)
+
+    def _resync(self) -> None:
+        # After a broken statement, skip its leftovers quietly up to the next keyword, so that one mistake
+        # gives one warning rather than one per stray word.
+        while (token := self.source.peek()) is not None and token.text not in KEYWORDS:
+            self.source.next()
+
+    # -- building errors --------------------------------------------------------------------------------
+
+    def _error(self, at: Token, message: str, expected: Optional[str] = None, show_token: bool = True) -> SDLError:
+        return SDLError(message, file=self.file, line=at.line, column=at.column,
+                        token=at.text if show_token else None, expected=expected)
+
+    def _end_of_file(self, keyword: Token, expected: str) -> SDLError:
+        # Pointing at the statement that was cut short helps more than pointing past the last line.
+        return self._error(keyword, f"end of file inside the '{keyword.text}' statement",
+                           expected=expected, show_token=False)
+
+    @staticmethod
+    def _usage(keyword: Token) -> str:
+        args = USAGE.get(keyword.text, "")
+        return f"'{keyword.text} {args}'" if args else f"'{keyword.text}'"
+
+    def _unknown(self, token: Token) -> SDLError:
+        text = token.text
+        if text == "}":
+            return self._error(token, "unbalanced '}': no '{' is open")
+        if text == "{":
+            return self._error(token, "'{' outside a def", expected="'def name { ... }'")
+        if to_float(text) is not None:
+            return self._error(token, "a number where a keyword belongs (too many numbers?)",
+                               expected="a keyword")
+        if text in self.macros:
+            return self._error(token, f"unknown keyword; to expand the macro write 'use {text}'")
+        # Keywords are case-sensitive; a wrong case is the likeliest typo of all.
+        suggestion = [k for k in KEYWORDS if k.lower() == text.lower()] or \
+            difflib.get_close_matches(text, sorted(KEYWORDS), n=1, cutoff=0.7)
+        if suggestion:
+            return self._error(token, f"unknown keyword, did you mean '{suggestion[0]}'?")
+        return self._error(token, "unknown keyword", expected="a keyword")
+
+    # -- reading arguments --------------------------------------------------------------------------------
+
+    def _number_token(self, keyword: Token) -> tuple[float, Token]:
+        token = self.source.peek()
+        if token is None:
+            raise self._end_of_file(keyword, self._usage(keyword))
+        value = to_float(token.text)
+        if value is None:
+            # Left unread: if it is a keyword, reading resumes with it (lenient mode).
+            raise self._error(token, f"expected a number after '{keyword.text}'", expected=self._usage(keyword))
+        self.source.next()
+        return value, token
+
+    def _numbers(self, keyword: Token, count: int) -> tuple[float, ...]:
+        return tuple(self._number_token(keyword)[0] for _ in range(count))
+
+    def _name(self, keyword: Token, what: str) -> Token:
+        """A file or macro name: any word that is not a brace or a keyword."""
+        token = self.source.peek()
+        if token is None:
+            raise self._end_of_file(keyword, self._usage(keyword))
+        if token.text in ("{", "}") or token.text in KEYWORDS:
+            raise self._error(token, f"expected {what} after '{keyword.text}'", expected=self._usage(keyword))
+        self.source.next()
+        return token
+
+    def _location(self, token: Token) -> SourceLocation:
+        return SourceLocation(self.file, token.line, token.column)
+
+    # -- scene settings ---------------------------------------------------------------------------------
+
+    def _light(self, keyword: Token, groups) -> None:
+        x, y, z, r, g, b = self._numbers(keyword, 6)
+        self.scene.lights.append(Light((x, y, z), (r, g, b)))
+
+    def _global_ambient(self, keyword: Token, groups) -> None:
+        self.scene.settings.global_ambient = self._numbers(keyword, 3)
+
+    def _background(self, keyword: Token, groups) -> None:
+        self.scene.settings.background = self._numbers(keyword, 3)
+
+    def _min_reflectivity(self, keyword: Token, groups) -> None:
+        self.scene.settings.min_reflectivity = self._numbers(keyword, 1)[0]
+
+    def _min_transparency(self, keyword: Token, groups) -> None:
+        self.scene.settings.min_transparency = self._numbers(keyword, 1)[0]
+
+    def _max_recursion_depth(self, keyword: Token, groups) -> None:
+        value, token = self._number_token(keyword)
+        if not value.is_integer() or value < 0:
+            return self._report(self._error(token, "maxRecursionDepth must be a whole number >= 0"))
+        self.scene.settings.max_recursion_depth = int(value)
+
+    def _make_pixmap(self, keyword: Token, groups) -> None:
+        index, index_token = self._number_token(keyword)
+        name = self._name(keyword, "an image file name")
+        if not index.is_integer() or int(index) not in PIXMAP_RANGE:
+            return self._report(self._error(
+                index_token, "makePixmap image number out of range",
+                expected=f"a whole number {PIXMAP_RANGE.start}..{PIXMAP_RANGE.stop - 1}"))
+        self.scene.pixmaps[int(index)] = str(self._resolve(name.text))
+
+    def _camera(self, keyword: Token, groups) -> None:
+        numbers = self._numbers(keyword, 10)
+        eye, look, up = numbers[0:3], numbers[3:6], numbers[6:9]
+        angle = numbers[9]
+        forward = np.subtract(look, eye)
+        problem = None
+        if not np.any(forward):
+            problem = "camera eye and look-at point are the same"
+        elif np.linalg.norm(np.cross(forward, up)) <= 1e-12 * np.linalg.norm(forward) * np.linalg.norm(up):
+            problem = "camera up vector is zero or points along the view direction"
+        elif not 0.0 < angle < 180.0:
+            problem = "camera view angle must be between 0 and 180 degrees"
+        if problem:
+            return self._report(self._error(keyword, problem))
+        self.scene.camera = Camera(eye=eye, look=look, up=up, view_angle=angle)
+
+    # -- material ---------------------------------------------------------------------------------------
+
+    def _color_material(self, keyword: Token, groups) -> None:
+        self.material = replace(self.material, **{COLOR_MATERIAL[keyword.text]: self._numbers(keyword, 3)})
+
+    def _float_material(self, keyword: Token, groups) -> None:
+        self.material = replace(self.material, **{FLOAT_MATERIAL[keyword.text]: self._numbers(keyword, 1)[0]})
+
+    def _texture(self, keyword: Token, groups) -> None:
+        value, token = self._number_token(keyword)
+        if not value.is_integer():
+            return self._report(self._error(token, "texture number must be a whole number"))
+        self.material = replace(self.material, texture=int(value))
+
+    def _parameters(self, keyword: Token, groups) -> None:
+        count, count_token = self._number_token(keyword)
+        if not count.is_integer() or count < 0:
+            raise self._error(count_token, "expected how many parameters follow",
+                              expected=f"a whole number 0..{MAX_PARAMETERS}")
+        count = int(count)
+        if count <= MAX_PARAMETERS:
+            self.material = replace(self.material, parameters=self._numbers(keyword, count))
+            return
+        # Too many: warn once, read the numbers that are there (up to the count) and keep the first ten.
+        self._report(self._error(count_token, f"parameters takes at most {MAX_PARAMETERS} numbers",
+                                 expected=f"a whole number 0..{MAX_PARAMETERS}"))
+        values = []
+        while len(values) < count and (token := self.source.peek()) is not None and to_float(token.text) is not None:
+            values.append(to_float(self.source.next().text))
+        self.material = replace(self.material, parameters=tuple(values[:MAX_PARAMETERS]))
+
+    def _default_materials(self, keyword: Token, groups) -> None:
+        self.material = Material()
+
+    # -- transforms -------------------------------------------------------------------------------------
+
+    def _apply(self, matrix: np.ndarray) -> None:
+        # Post-multiply: the statement written last acts on the shape first (M = T·S for "translate scale").
+        self.stack[-1] = self.stack[-1] @ matrix
+
+    def _translate(self, keyword: Token, groups) -> None:
+        self._apply(transforms.translation(*self._numbers(keyword, 3)))
+
+    def _scale(self, keyword: Token, groups) -> None:
+        self._apply(transforms.scaling(*self._numbers(keyword, 3)))
+
+    def _rotate(self, keyword: Token, groups) -> None:
+        angle = self._number_token(keyword)[0]
+        axis = [self._number_token(keyword) for _ in range(3)]
+        try:
+            matrix = transforms.rotation(angle, *(value for value, _ in axis))
+        except ValueError:
+            first = axis[0][1]
+            return self._report(SDLError(
+                "rotate needs a non-zero axis", file=self.file, line=first.line, column=first.column,
+                token=" ".join(token.text for _, token in axis), expected="'rotate angle ux uy uz', axis not 0 0 0"))
+        self._apply(matrix)
+
+    def _push(self, keyword: Token, groups) -> None:
+        self.stack.append(self.stack[-1].copy())
+
+    def _pop(self, keyword: Token, groups) -> None:
+        if len(self.stack) == 1:  # the base transform always stays
+            return self._report(self._error(keyword, "pop without a matching push"))
+        self.stack.pop()
+
+    def _identity(self, keyword: Token, groups) -> None:
+        self.stack[-1] = np.eye(4)
+
+    # -- objects ----------------------------------------------------------------------------------------
+
+    def _place(self, obj: Optional[SceneObject]) -> None:
+        """Give a finished object to the innermost waiting boolean, or to the scene."""
+        while self.pending:
+            boolean = self.pending[-1]
+            boolean.children.append(obj)
+            if len(boolean.children) < 2:
+                return
+            self.pending.pop()
+            obj = self._combine(boolean)
+        if obj is not None:
+            self.scene.objects.append(obj)
+
+    def _combine(self, boolean: _PendingBoolean) -> Optional[SceneObject]:
+        children = [c for c in boolean.children if c is not None]
+        if len(children) == 2:
+            return CSG(boolean.op.text, children[0], children[1], groups=boolean.groups,
+                       source=self._location(boolean.op))
+        # An operand was dropped (lenient mode): the boolean degrades to what is left.
+        return children[0] if children else None
+
+    def _boolean(self, keyword: Token, groups) -> None:
+        self.pending.append(_PendingBoolean(keyword, groups))
+
+    def _finish_booleans(self) -> None:
+        while self.pending:
+            boolean = self.pending.pop()
+            op = boolean.op.text
+            self._report(self._error(boolean.op, f"end of file: '{op}' needs two objects, found "
+                                                 f"{len(boolean.children)}", expected=f"'{op} object object'",
+                                     show_token=False))
+            self._place(self._combine(boolean))
+
+    def _shape(self, keyword: Token, groups) -> None:
+        try:
+            shape = self._read_shape(keyword, groups)
+        except SDLError:
+            self._place(None)  # a broken operand still fills its place in a boolean
+            raise
+        self._place(shape)
+
+    def _read_shape(self, keyword: Token, groups) -> Optional[Shape]:
+        kind = keyword.text
+        shape = Shape(kind, matrix=self.stack[-1].copy(), material=self.material, groups=groups,
+                      source=self._location(keyword))
+        name = None
+        if kind == "taperedCylinder":
+            shape.tapered_radius = self._number_token(keyword)[0]
+        elif kind == "mesh":
+            name = self._name(keyword, "a mesh file name")
+            shape.mesh_file = name.text
+        if _singular(shape.matrix):
+            self._report(self._error(keyword, f"singular transform for '{kind}' (a scale of 0?)",
+                                     expected="a transform with an inverse"))
+            return None
+        if kind == "mesh":
+            shape.mesh = self._mesh_file(name)
+            if shape.mesh is None:
+                return None
+        elif kind in POLYHEDRON_KINDS or kind == "teapot":
+            shape.mesh = builtin_mesh(kind)
+        return shape
+
+    def _resolve(self, name: str) -> Path:
+        return self.base_dir / name if self.base_dir is not None else Path(name)
+
+    def _mesh_file(self, name: Token) -> Optional[MeshData]:
+        """The mesh a ``mesh`` statement names (read once per file), or None after reporting a problem."""
+        path = self._resolve(name.text)
+        key = os.path.normpath(os.path.abspath(path))
+        if key in self.mesh_cache:
+            return self.mesh_cache[key]
+        if not path.is_file():
+            self._report(self._error(name, f"mesh file not found: {path}", expected="an existing .3vn file"))
+            return None
+        try:
+            mesh = read_3vn(path)
+        except SDLError as inner:
+            # The inner message names the .3vn file, its line and the bad word.
+            self._report(self._error(name, f"bad mesh file: {inner}", show_token=False))
+            return None
+        self.mesh_cache[key] = mesh
+        return mesh
+
+    # -- macros -----------------------------------------------------------------------------------------
+
+    def _def(self, keyword: Token, groups) -> None:
+        name = self._name(keyword, "a macro name")
+        brace = self.source.peek()
+        if brace is None:
+            raise self._end_of_file(keyword, self._usage(keyword))
+        if brace.text != "{":
+            raise self._error(brace, f"expected '{{' after 'def {name.text}'", expected=self._usage(keyword))
+        self.source.next()
+        body: list[Token] = []
+        depth = 1  # braces nest (the book's body ends at the first '}')
+        while True:
+            token = self.source.next()
+            if token is None:
+                self.macros.setdefault(name.text, _Macro(body, name))  # lenient mode keeps what was there
+                raise self._error(keyword, f"end of file inside the body of 'def {name.text}'",
+                                  expected="'}'", show_token=False)
+            depth += {"{": 1, "}": -1}.get(token.text, 0)
+            if depth == 0:
+                break
+            body.append(token)
+        self._define(name, body)
+
+    def _define(self, name: Token, body: list[Token]) -> None:
+        earlier = self.macros.get(name.text)
+        self.macros[name.text] = _Macro(body, name)  # lenient mode: the later definition wins
+        if earlier is not None:
+            self._report(self._error(name, f"macro '{name.text}' is already defined "
+                                           f"(line {earlier.where.line})"))
+
+    def _use(self, keyword: Token, groups) -> None:
+        name = self._name(keyword, "a macro name")
+        macro = self.macros.get(name.text)
+        if macro is None:
+            close = difflib.get_close_matches(name.text, sorted(self.macros), n=1, cutoff=0.7)
+            hint = f", did you mean '{close[0]}'?" if close else ""
+            raise self._error(name, f"undefined macro{hint}", expected="a name given by an earlier def")
+        active = self.source.macros()
+        if name.text in active:
+            chain = active[active.index(name.text):] + (name.text,)
+            raise self._error(name, f"macro '{name.text}' uses itself: {' -> '.join(chain)}")
+        if not self.source.splice(name.text, macro.body):
+            raise self._error(name, f"macros expand to more than {MAX_SPLICED_TOKENS} tokens")
+
+
+def _singular(matrix: np.ndarray) -> bool:
+    """True if the transform has no usable inverse (hit tests need M⁻¹)."""
+    linear = matrix[:3, :3]
+    if not np.all(np.isfinite(matrix)):
+        return True
+    det = np.linalg.det(linear)
+    if det == 0.0 or not np.isfinite(det):
+        return True
+    return not np.linalg.cond(linear) <= MAX_CONDITION
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Public entry points.
+
+def parse_sdl(text: str, base_dir: Optional[PathLike] = None, file: Optional[str] = None,
+              strict: bool = True) -> Scene:
+    """Read SDL ``text``.
+
+    ``base_dir`` is where ``mesh`` and ``makePixmap`` file names are looked up (the current folder if None);
+    ``file`` names the text in messages.  With ``strict`` False, problems in the text never raise: each
+    becomes one message in ``scene.warnings`` and reading goes on.
+    """
+    return _Reader(text, base_dir, file, strict).read()
+
+
+def load(path: PathLike, strict: bool = True) -> Scene:
+    """Read an SDL file; names in it are relative to its folder.  A file that cannot be read raises SDLError."""
+    path = Path(path)
+    try:
+        # utf-8-sig drops a byte-order mark; a stray byte in a comment must not stop the read.
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
+    except OSError as exc:
+        raise SDLError(f"cannot read scene file: {exc.strerror or exc}", file=str(path)) from exc
+    scene = parse_sdl(text, base_dir=path.parent, file=str(path), strict=strict)
+    scene.source = path
+    return scene

@@ -40,7 +40,7 @@ def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArr
 class Primitive:
     """One shape, ready to intersect world rays."""
 
-    def __init__(self, shape: Shape, index: int, material_id: int):
+    def __init__(self, shape: Shape, index: int, material_id: int, mesh_cache: Optional[dict] = None):
         self.shape = shape
         self.index = index
         self.kind = shape.kind
@@ -60,7 +60,12 @@ class Primitive:
             self._planes = face_planes(shape.kind)
         elif shape.kind in ("teapot", "mesh"):
             from .intersect.mesh import TriangleMesh
-            self._mesh = TriangleMesh(shape.mesh)
+            # Instances of one mesh (the same MeshData) share one BVH.
+            cache = {} if mesh_cache is None else mesh_cache
+            key = id(shape.mesh)
+            if key not in cache:
+                cache[key] = (shape.mesh, TriangleMesh(shape.mesh))
+            self._mesh = cache[key][1]
         self.center, self.radius = self._world_bounding_sphere()
 
     def _generic_points(self) -> Optional[np.ndarray]:
@@ -269,12 +274,12 @@ class CompiledScene:
         return self.scene.settings
 
 
-def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict) -> Node:
+def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict) -> Node:
     if isinstance(obj, CSG):
-        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids),
-                       _compile_object(obj.right, primitives, material_ids))
+        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids, mesh_cache),
+                       _compile_object(obj.right, primitives, material_ids, mesh_cache))
     mat_id = material_ids.setdefault(obj.material, len(material_ids))
-    prim = Primitive(obj, len(primitives), mat_id)
+    prim = Primitive(obj, len(primitives), mat_id, mesh_cache)
     primitives.append(prim)
     return prim
 
@@ -304,7 +309,8 @@ def live_effects(scene: Scene) -> frozenset[str]:
 def compile_scene(scene: Scene) -> CompiledScene:
     primitives: list[Primitive] = []
     material_ids: dict[Material, int] = {}
-    objects = [_compile_object(obj, primitives, material_ids) for obj in scene.objects]
+    mesh_cache: dict = {}
+    objects = [_compile_object(obj, primitives, material_ids, mesh_cache) for obj in scene.objects]
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
     return CompiledScene(

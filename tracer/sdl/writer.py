@@ -112,17 +112,22 @@ def _replay(statements: list[Statement]) -> np.ndarray:
     return matrix
 
 
-def _rounded(values: tuple[float, ...]) -> tuple[float, ...]:
-    """Values to 12 significant digits, with ones tiny next to the largest set to 0 (noise from the SVD)."""
+def _denoised(values: tuple[float, ...]) -> tuple[float, ...]:
+    """Values tiny next to the largest set to 0 (the SVD's noise, e.g. an axis component of 4e-17)."""
     scale = max(abs(v) for v in values)
-    return tuple(0.0 if abs(v) <= 1e-12 * scale else float(f"{v:.12g}") for v in values)
+    return tuple(0.0 if abs(v) <= 1e-12 * scale else v for v in values)
+
+
+def _rounded(values: tuple[float, ...]) -> tuple[float, ...]:
+    """Values to 12 significant digits, without the noise."""
+    return tuple(float(f"{v:.12g}") for v in _denoised(values))
 
 
 def _tidy(statements: list[Statement]) -> list[list[Statement]]:
     """Rounded versions of rotate and scale statements, which read better ('rotate 45 0 1 0', 'scale 2 2 2')
     and are used only when they still rebuild the matrix to the last few bits.  A rotation axis is tried
     divided by its smallest and by its largest non-zero component, so that (1, 2, 3) comes out whole;
-    the last variant leaves rotations alone and rounds only the scale."""
+    the last variant only clears the noise from rotation axes and rounds the scale."""
     variants = []
     for divide_by in (min, max, None):
         tidy: list[Statement] = []
@@ -131,7 +136,9 @@ def _tidy(statements: list[Statement]) -> list[list[Statement]]:
                 values = _rounded(values)
                 if values == (1.0, 1.0, 1.0):
                     continue
-            elif keyword == "rotate" and divide_by is not None:
+            elif keyword == "rotate" and divide_by is None:
+                values = (values[0], *_denoised(values[1:]))
+            elif keyword == "rotate":
                 axis = np.array(_rounded(values[1:]))
                 axis = axis / divide_by(abs(c) for c in axis if c != 0.0)
                 values = _rounded((values[0],)) + _rounded(tuple(axis))

@@ -257,3 +257,11 @@ def test_parallel_mirrors_at_depth_100():
     color = tr.camera_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]))
     assert tr.counts.reflection == 100
     assert color[0, 0] == pytest.approx(ambient * (1 - r ** 101) / (1 - r), rel=1e-12)
+
+
+@pytest.mark.parametrize("matrix", [scaling(1, 0, 1), np.full((4, 4), np.nan)])
+def test_singular_or_nan_transform_is_a_clear_error(matrix):
+    from tracer.errors import TracerError
+
+    with pytest.raises(TracerError, match="sphere has"):
+        compile_scene(scene_of(shape("sphere", matrix)))

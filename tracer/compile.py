@@ -12,6 +12,7 @@ from typing import Optional, Union
 
 import numpy as np
 
+from .errors import TracerError
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
@@ -37,6 +38,21 @@ def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArr
     return out
 
 
+def _checked_inverse(shape: Shape) -> np.ndarray:
+    """The inverse of a shape's matrix, or a TracerError naming the shape if it has none."""
+    where = f"{shape.source}: " if shape.source else ""
+    m = shape.matrix
+    if not np.all(np.isfinite(m)) or np.any(m[3] != (0, 0, 0, 1)):
+        raise TracerError(f"{where}{shape.kind} has a transform that is not a finite affine matrix")
+    try:
+        inverse = np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        inverse = None
+    if inverse is None or not np.all(np.isfinite(inverse)):
+        raise TracerError(f"{where}{shape.kind} has a singular transform (a scale of 0?)")
+    return inverse
+
+
 class Primitive:
     """One shape, ready to intersect world rays."""
 
@@ -46,9 +62,7 @@ class Primitive:
         self.kind = shape.kind
         self.material_id = material_id
         self.matrix = shape.matrix
-        self.inverse = np.linalg.inv(shape.matrix)
-        if not np.all(np.isfinite(self.inverse)):
-            raise ValueError(f"shape {index} ({shape.kind}) has a singular transform")
+        self.inverse = _checked_inverse(shape)
         # World normal = generic normal through the inverse-transpose; as row vectors: n_g @ inverse[:3,:3].
         self.normal_matrix = self.inverse[:3, :3]
         self.thin = shape.kind == "square"

@@ -1,9 +1,8 @@
-import math
 
 import pytest
 from hypothesis import given, strategies as st
 
-from tracer.sdl.lexer import Token, end_position, is_number, to_float, tokenize
+from tracer.sdl.lexer import Token, is_number, to_float, tokenize
 
 
 def texts(source):
@@ -56,12 +55,6 @@ def test_decimal_numbers(text, value):
 def test_things_that_are_not_numbers(text):
     assert not is_number(text)
     assert to_float(text) is None
-
-
-def test_end_position_is_just_past_the_last_character():
-    assert end_position("ab\ncd") == (2, 3)
-    assert end_position("ab\n") == (2, 1)
-    assert end_position("") == (1, 1)
 
 
 @given(st.lists(st.from_regex(r"[A-Za-z0-9.+\-]{1,8}", fullmatch=True), max_size=20))

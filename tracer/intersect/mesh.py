@@ -14,17 +14,28 @@ from ..model import MeshData
 from .hits import HitArrays
 
 #: Inclusive slack on the barycentric test, so that a ray through an edge or vertex shared by two
-#: triangles is never missed by both because of rounding (rounding in u, v is ~1e-16 .. 1e-14 for
-#: sane geometry; this is far above that and far below anything visible).
-BARYCENTRIC_EPSILON = 1e-10
+#: triangles is never missed by both because of rounding.  It is a bound on that rounding, per ray and
+#: triangle: ROUNDING_FACTOR * machine epsilon * |d| L (|e| + R) / |det|, where L = |origin| + R bounds
+#: every coordinate involved and R is the triangle's largest vertex norm (the errors of s = O - P0 and
+#: of the edge vectors are ~eps L and ~eps R, and the barycentrics divide by det).  Keeping the slack
+#: as small as the rounding keeps the band of doubly-hit rays around an edge tiny, so that the doubles
+#: it does produce lie within the deduplication window below.
+ROUNDING_FACTOR = 1e9
+#: ... but never more than this (near-parallel rays have a tiny det and ill-conditioned barycentrics).
+BARYCENTRIC_EPSILON_MAX = 1e-10
 #: A ray is parallel to a triangle's plane when |d . (e1 x e2)| <= this * |d| |e1| |e2|: there the hit
 #: time is pure rounding noise, so no hit is reported (and no NaN or inf is produced).
 PARALLEL_EPSILON = 1e-12
-#: Two hits of one ray with the same entering sign closer than this (relative to |t|, plus the same
-#: fraction of the mesh's size measured in ray-parameter units) are one crossing of a shared edge/vertex.
+#: Two hits of one ray with the same entering sign whose times differ by at most this (relative to
+#: |t|, plus the same fraction of the mesh's size in ray-parameter units) are one crossing: a shared
+#: edge or vertex hit twice through the slack above, or coincident faces.
 DEDUPE_RELATIVE = 1e-12
-#: Node boxes are grown by this fraction of the mesh's size, so that rounding in the slab test can never
-#: cull a triangle that Möller–Trumbore (with its own slack) would hit.
+#: The same, for two triangles that share a vertex (by position): rounding in a hit time grows with
+#: the coordinates and with 1/cos of the angle of incidence, so a neighbour's double can stray further
+#: than 1e-12; this is the project's "same place" (tracer.numerics.RELATIVE_EPSILON).
+DEDUPE_RELATIVE_ADJACENT = 1e-12
+#: Node boxes are grown by this fraction of the mesh's size (plus its distance from the origin), so
+#: that rounding in the slab test can never cull a triangle that Möller–Trumbore, with its slack, hits.
 BOX_PADDING = 1e-9
 
 
@@ -99,6 +110,7 @@ class TriangleMesh:
         else:
             self.bounds = np.zeros((2, 3))
         self.extent = float(np.max(self.bounds[1] - self.bounds[0], initial=0.0)) or 1.0
+        self._magnitude = float(np.max(np.abs(self.bounds), initial=0.0))
 
         self._build_bvh(p.min(axis=1), p.max(axis=1), p.mean(axis=1), leaf_size, bins)
 
@@ -107,8 +119,19 @@ class TriangleMesh:
         self.tri_e1 = np.ascontiguousarray(e1[order])
         self.tri_e2 = np.ascontiguousarray(e2[order])
         self.tri_flip = np.ascontiguousarray(flip[order])
-        # |e1| |e2| per triangle, the scale of the Möller–Trumbore determinant (for the parallel test).
-        self._edge_scale = np.linalg.norm(self.tri_e1, axis=1) * np.linalg.norm(self.tri_e2, axis=1)
+        # Scales for the parallel test and the barycentric slack (see ROUNDING_FACTOR), leaf order.
+        e1_length = np.linalg.norm(self.tri_e1, axis=1)
+        e2_length = np.linalg.norm(self.tri_e2, axis=1)
+        self._radius = np.linalg.norm(p, axis=2).max(axis=1)[order] if len(order) else np.zeros(0)
+        self._edge_scale = e1_length * e2_length
+        self._slack1 = e2_length + self._radius
+        self._slack2 = e1_length + self._radius
+        # Vertex ids after welding equal positions, to tell which triangles touch (for deduplication).
+        if len(order):
+            _, welded = np.unique(vertices, axis=0, return_inverse=True)
+            self._tri_welded = welded.reshape(-1)[tri_v][order]
+        else:
+            self._tri_welded = np.zeros((0, 3), dtype=np.int64)
 
     # ------------------------------------------------------------------ BVH construction
 
@@ -198,7 +221,7 @@ class TriangleMesh:
         return axis, bucket <= best
 
     def _store_nodes(self, lo, hi, left, right, first, count, axes, order) -> None:
-        pad = BOX_PADDING * self.extent
+        pad = BOX_PADDING * (self.extent + self._magnitude)
         self.node_lo = np.array(lo, dtype=np.float64).reshape(-1, 3) - pad
         self.node_hi = np.array(hi, dtype=np.float64).reshape(-1, 3) + pad
         self.node_left = np.array(left, dtype=np.int64)
@@ -238,7 +261,7 @@ class TriangleMesh:
         ray, slot, t, b1, b2 = (np.concatenate(column) for column in zip(*found))
         entering = self._entering(rays.directions[ray], slot)
         ray, slot, t, b1, b2, entering = _dedupe_and_order(
-            ray, slot, t, b1, b2, entering, rays.speed, self.extent)
+            ray, slot, t, b1, b2, entering, rays.speed, self.extent, self._tri_welded)
 
         # Scatter the hits, now sorted by (ray, t), into (N, K) slots.
         counts = np.bincount(ray, minlength=rays.n)
@@ -372,9 +395,15 @@ class TriangleMesh:
         b1 = np.einsum("nkj,nkj->nk", s, pvec) * inv_det
         b2 = np.einsum("nij,nkj->nk", d, qvec) * inv_det
         t = np.einsum("kj,nkj->nk", e2, qvec) * inv_det
-        scale = PARALLEL_EPSILON * rays.speed[idx, None] * self._edge_scale[first:last]
-        eps = BARYCENTRIC_EPSILON
-        hit = (np.abs(det) > scale) & (b1 >= -eps) & (b2 >= -eps) & (b1 + b2 <= 1.0 + eps) & np.isfinite(t)
+        speed = rays.speed[idx, None]
+        abs_det = np.abs(det)
+        rounding = np.minimum(
+            ROUNDING_FACTOR * np.finfo(float).eps * speed * (rays.magnitude[idx, None] + self._radius[first:last])
+            / abs_det, BARYCENTRIC_EPSILON_MAX / np.maximum(self._slack1[first:last], self._slack2[first:last]))
+        slack1 = rounding * self._slack1[first:last]
+        slack2 = rounding * self._slack2[first:last]
+        hit = ((abs_det > PARALLEL_EPSILON * speed * self._edge_scale[first:last])
+               & (b1 >= -slack1) & (b2 >= -slack2) & (b1 + b2 <= 1.0 + slack1 + slack2) & np.isfinite(t))
         return t, b1, b2, hit
 
     # ------------------------------------------------------------------ hit attributes
@@ -412,6 +441,7 @@ class _Rays:
             # +-inf for zero (or subnormal) components, the sign of the zero kept.
             self.inverse = 1.0 / self.directions
         self.speed = np.linalg.norm(self.directions, axis=1)
+        self.magnitude = np.linalg.norm(self.origins, axis=1)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -421,19 +451,21 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
 
 
-def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent):
+def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent, welded):
     """Drop repeated crossings of shared edges/vertices, then sort by (ray, t) with ties alternating.
 
     Duplicates are hits of one ray with the same entering sign whose times differ by at most
-    ``DEDUPE_RELATIVE * (|t| + extent / |d|)``; sorting by (ray, sign, t) puts them next to each other
-    even when hits of the other sign fall between them in time.
+    ``DEDUPE_RELATIVE * (|t| + extent / |d|)``, or ``DEDUPE_RELATIVE_ADJACENT`` times that when the two
+    triangles share a vertex.  Sorting by (ray, sign, t) puts them next to each other even when hits of
+    the other sign fall between them in time.  ``welded`` (T, 3) holds the triangles' vertex ids (leaf
+    order, like ``slot``).
     """
     tol_scale = extent / np.where(speed > 0, speed, 1.0)
     order = np.lexsort((t, entering, ray))
     ray, slot, t, b1, b2, entering = ray[order], slot[order], t[order], b1[order], b2[order], entering[order]
-    tol = DEDUPE_RELATIVE * (np.abs(t) + tol_scale[ray])
+    window = _dedupe_window(slot, t, tol_scale[ray], welded)
     repeat = np.zeros(len(t), dtype=bool)
-    repeat[1:] = (ray[1:] == ray[:-1]) & (entering[1:] == entering[:-1]) & (t[1:] - t[:-1] <= tol[1:])
+    repeat[1:] = (ray[1:] == ray[:-1]) & (entering[1:] == entering[:-1]) & (t[1:] - t[:-1] <= window)
     keep = ~repeat
     ray, slot, t, b1, b2, entering = ray[keep], slot[keep], t[keep], b1[keep], b2[keep], entering[keep]
 
@@ -443,9 +475,9 @@ def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent):
     # order does not change.
     order = np.lexsort((t, ray))
     ray, slot, t, b1, b2, entering = ray[order], slot[order], t[order], b1[order], b2[order], entering[order]
-    tol = DEDUPE_RELATIVE * (np.abs(t) + tol_scale[ray])
+    window = _dedupe_window(slot, t, tol_scale[ray], welded)
     tie = np.zeros(len(t), dtype=bool)  # tie[i]: hits i and i+1 coincide with opposite signs
-    tie[:-1] = (ray[1:] == ray[:-1]) & (entering[1:] != entering[:-1]) & (t[1:] - t[:-1] <= tol[1:])
+    tie[:-1] = (ray[1:] == ray[:-1]) & (entering[1:] != entering[:-1]) & (t[1:] - t[:-1] <= window)
     tie[1:] &= ~tie[:-1]  # pairs do not overlap
     i = np.flatnonzero(tie)
     if len(i):
@@ -458,3 +490,10 @@ def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent):
         for column in (slot, b1, b2, entering):
             column[swap], column[swap + 1] = column[swap + 1], column[swap].copy()
     return ray, slot, t, b1, b2, entering
+
+
+def _dedupe_window(slot, t, tol_scale, welded):
+    """How far apart hits i and i+1 (of a sorted list) may be and still be one place: (len - 1,)."""
+    scale = np.maximum(np.abs(t[1:]), np.abs(t[:-1])) + tol_scale[1:]
+    touching = (welded[slot[1:], :, None] == welded[slot[:-1], None, :]).any(axis=(1, 2))
+    return np.where(touching, DEDUPE_RELATIVE_ADJACENT, DEDUPE_RELATIVE) * scale

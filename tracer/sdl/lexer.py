@@ -41,12 +41,6 @@ def tokenize(text: str) -> list[Token]:
     return tokens
 
 
-def end_position(text: str) -> tuple[int, int]:
-    """(line, column) just after the last character of ``text``, for messages about the end of the file."""
-    lines = text.split("\n")
-    return len(lines), len(lines[-1]) + 1
-
-
 def is_number(text: str) -> bool:
     """True if ``text`` is a decimal number literal that gives a finite float."""
     return to_float(text) is not None

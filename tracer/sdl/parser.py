@@ -457,7 +457,7 @@ class _Reader:
         elif kind == "mesh":
             name = self._name(keyword, "a mesh file name")
             shape.mesh_file = name.text
-        if _singular(shape.matrix):
+        if is_singular(shape.matrix):
             self._report(self._error(keyword, f"singular transform for '{kind}' (a scale of 0?)",
                                      expected="a transform with an inverse"))
             return None
@@ -536,7 +536,7 @@ class _Reader:
             raise self._error(name, f"macros expand to more than {MAX_SPLICED_TOKENS} tokens")
 
 
-def _singular(matrix: np.ndarray) -> bool:
+def is_singular(matrix: np.ndarray) -> bool:
     """True if the transform has no usable inverse (hit tests need M⁻¹)."""
     linear = matrix[:3, :3]
     if not np.all(np.isfinite(matrix)):

@@ -5,23 +5,25 @@ float), and every shape's 4x4 matrix, including shears and mirror images, is reb
 transform statements.  Any invertible 3x3 matrix A factors by the SVD as A = U·diag(s)·Vᵀ with U and V
 rotations (one singular value goes negative when det A < 0), which SDL spells
 ``translate t  rotate <U>  scale s  rotate <Vᵀ>``, since each statement post-multiplies.  Simpler forms
-(pure scale, rotation then scale) are tried first for readability, and used only if they reproduce the
-matrix as closely.
+(pure scale; rotation then scale; scale then rotation) and rounded numbers are tried first for
+readability, and each candidate is used only if replaying it the way the parser does reproduces the matrix
+to a few units in the last place.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import re
 from pathlib import Path
-from typing import Optional, Union
+from typing import Iterator, Optional, Union
 
 import numpy as np
 
 from .. import transforms
 from ..meshio import write_3vn, write_text_atomic
 from ..model import CSG, Material, MeshData, Scene, SceneObject, Shape
-from .parser import COLOR_MATERIAL, FLOAT_MATERIAL, KEYWORDS
+from .parser import COLOR_MATERIAL, FLOAT_MATERIAL, KEYWORDS, is_singular
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -123,28 +125,29 @@ def _rounded(values: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(float(f"{v:.12g}") for v in _denoised(values))
 
 
-def _tidy(statements: list[Statement]) -> list[list[Statement]]:
-    """Rounded versions of rotate and scale statements, which read better ('rotate 45 0 1 0', 'scale 2 2 2')
-    and are used only when they still rebuild the matrix to the last few bits.  A rotation axis is tried
-    divided by its smallest and by its largest non-zero component, so that (1, 2, 3) comes out whole;
-    the last variant only clears the noise from rotation axes and rounds the scale."""
-    variants = []
-    for divide_by in (min, max, None):
+def _tidy(statements: list[Statement]) -> Iterator[list[Statement]]:
+    """Cleaner versions of the rotate and scale statements, best first, which read better
+    ('rotate 45 0 1 0', 'scale 2 2 2') and are used only if they still rebuild the matrix to the last few bits.
+
+    First everything rounded to 12 digits, with the rotation axis divided by its smallest and then by its
+    largest non-zero component (so that (1, 2, 3) comes out whole); then only the noise cleared from the
+    axes, with the scale rounded and then exact.
+    """
+    for style in ("axis/smallest", "axis/largest", "clean axis, round scale", "clean axis"):
         tidy: list[Statement] = []
         for keyword, values in statements:
-            if keyword == "scale":
+            if keyword == "scale" and style != "clean axis":
                 values = _rounded(values)
                 if values == (1.0, 1.0, 1.0):
                     continue
-            elif keyword == "rotate" and divide_by is None:
+            elif keyword == "rotate" and style.startswith("clean"):
                 values = (values[0], *_denoised(values[1:]))
             elif keyword == "rotate":
                 axis = np.array(_rounded(values[1:]))
-                axis = axis / divide_by(abs(c) for c in axis if c != 0.0)
-                values = _rounded((values[0],)) + _rounded(tuple(axis))
+                divisor = (min if style == "axis/smallest" else max)(abs(c) for c in axis if c != 0.0)
+                values = _rounded((values[0],)) + _rounded(tuple(axis / divisor))
             tidy.append((keyword, values))  # translations are written exactly as they are
-        variants.append(tidy)
-    return variants
+        yield tidy
 
 
 def _rotation_then_scale(linear: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -171,6 +174,36 @@ def _rotation_then_scale(linear: np.ndarray) -> list[tuple[np.ndarray, np.ndarra
     return options
 
 
+def _svd(linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A = U diag(s) Vt, accurate to a few units in the last place of the largest s.
+
+    LAPACK's SVD can be off by dozens of units for sheared matrices (1e-12 on entries near 100), so its V
+    is polished with one-sided Jacobi sweeps: rotate pairs of columns of W = A V until they are orthogonal
+    to working precision; then s are the column lengths and U the normalised columns.
+    """
+    _, _, vt = np.linalg.svd(linear)
+    v = vt.T.copy()
+    w = linear @ v
+    for _ in range(30):
+        rotated = False
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            alpha, beta, gamma = w[:, p] @ w[:, p], w[:, q] @ w[:, q], w[:, p] @ w[:, q]
+            if abs(gamma) <= _EPS * math.sqrt(alpha * beta):
+                continue
+            rotated = True
+            zeta = (beta - alpha) / (2.0 * gamma)
+            t = math.copysign(1.0, zeta) / (abs(zeta) + math.hypot(1.0, zeta))
+            c = 1.0 / math.hypot(1.0, t)
+            sn = c * t
+            for m in (w, v):
+                mp, mq = m[:, p].copy(), m[:, q].copy()
+                m[:, p], m[:, q] = c * mp - sn * mq, sn * mp + c * mq
+        if not rotated:
+            break
+    s = np.linalg.norm(w, axis=0)
+    return w / s, s, v.T
+
+
 def transform_statements(matrix: np.ndarray) -> list[Statement]:
     """SDL transform statements that rebuild an affine ``matrix`` when applied after ``identityAffine``."""
     m = np.asarray(matrix, dtype=np.float64).reshape(4, 4)
@@ -194,13 +227,16 @@ def transform_statements(matrix: np.ndarray) -> list[Statement]:
 
     # No shear: rotation then scale (orthogonal columns), or scale then rotation (orthogonal rows).
     simple = [head + _rotate_statement(r) + scale(s) for r, s in _rotation_then_scale(linear)]
-    simple += [head + scale(s) + _rotate_statement(r.T) for r, s in _rotation_then_scale(linear.T)]
-    for statements in [t for plain in simple for t in _tidy(plain)] + simple:
+    if not simple:
+        simple = [head + scale(s) + _rotate_statement(r.T) for r, s in _rotation_then_scale(linear.T)]
+    # Lazily, so that the first form that works ends the search.
+    tidy_first = (t for plain in simple for t in _tidy(plain))
+    for statements in itertools.chain(tidy_first, simple):
         if close(statements):
             return statements
 
     # General case, shears included: A = U diag(s) Vt, with U and Vt turned into proper rotations.
-    u, s, vt = np.linalg.svd(linear)
+    u, s, vt = _svd(linear)
     if np.linalg.det(u) < 0:
         u[:, 2] *= -1
         s[2] *= -1
@@ -299,6 +335,10 @@ def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str
             lines.append(f"{indent}{obj.op}")
             todo += [(obj.right, depth + 1), (obj.left, depth + 1)]
             continue
+        if is_singular(obj.matrix):
+            # The reader refuses such a shape, so writing it would only move the error to the next load.
+            where = f" ({obj.source})" if obj.source else ""
+            raise ValueError(f"cannot write the {obj.kind}{where}: its transform is singular (a scale of 0?)")
         lines += [indent + statement for statement in material_statements(material, obj.material)]
         material = obj.material
         lines.append(f"{indent}{_transform_text(obj.matrix)} {_shape_keyword(obj, mesh_names)}")

@@ -257,6 +257,8 @@ class MaterialTable:
     specular: np.ndarray = field(init=False)
     emissive: np.ndarray = field(init=False)
     specular_exponent: np.ndarray = field(init=False)
+    specular_fraction: np.ndarray = field(init=False)
+    surface_roughness: np.ndarray = field(init=False)
     reflectivity: np.ndarray = field(init=False)
     transparency: np.ndarray = field(init=False)
     speed_of_light: np.ndarray = field(init=False)
@@ -268,6 +270,8 @@ class MaterialTable:
         self.specular = np.array([x.specular for x in m], dtype=float).reshape(-1, 3)
         self.emissive = np.array([x.emissive for x in m], dtype=float).reshape(-1, 3)
         self.specular_exponent = np.array([x.specular_exponent for x in m], dtype=float)
+        self.specular_fraction = np.array([x.specular_fraction for x in m], dtype=float)
+        self.surface_roughness = np.array([x.surface_roughness for x in m], dtype=float)
         self.reflectivity = np.array([x.reflectivity for x in m], dtype=float)
         self.transparency = np.array([x.transparency for x in m], dtype=float)
         self.speed_of_light = np.array([x.speed_of_light for x in m], dtype=float)
@@ -282,6 +286,7 @@ class CompiledScene:
     light_positions: np.ndarray  # (L, 3)
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
+    textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
 
     @property
     def settings(self):
@@ -317,6 +322,8 @@ def live_effects(scene: Scene) -> frozenset[str]:
         effects.add("csg")
     if any(m.texture != 0 for m in materials):
         effects.add("textures")
+    if "lighting" in effects and any(m.specular_fraction > 0 for m in materials):
+        effects.add("cook-torrance")
     return frozenset(effects)
 
 
@@ -327,8 +334,13 @@ def compile_scene(scene: Scene) -> CompiledScene:
     objects = [_compile_object(obj, primitives, material_ids, mesh_cache) for obj in scene.objects]
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
+    effects = live_effects(scene)
+    textures = None
+    if "textures" in effects:
+        from .textures import TextureSet
+        textures = TextureSet(scene, primitives)
     return CompiledScene(
         scene=scene, objects=objects, primitives=primitives, materials=table,
         light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
         light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
-        effects=live_effects(scene))
+        effects=effects, textures=textures)

@@ -148,6 +148,28 @@ def reflect(direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
     return direction - 2.0 * _dot(direction, normal)[:, None] * normal
 
 
+def cook_torrance(normal, to_light, to_eye, specular, roughness) -> np.ndarray:
+    """Cook–Torrance specular light per unit light colour, already multiplied by cos(theta_light).
+
+    Beckmann distribution D with slope ``roughness``, Schlick's Fresnel F with the specular colour as the
+    reflectance at normal incidence, the V-cavity shadowing term G, and the microfacet form
+    F D G / (4 (m.s)(m.v)) times (m.s).  All arguments are per-row arrays.
+    """
+    half = to_light + to_eye
+    half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-300)
+    n_h = np.clip(_dot(normal, half), 1e-12, 1.0)
+    n_v = np.clip(_dot(normal, to_eye), 1e-12, 1.0)
+    n_l = np.clip(_dot(normal, to_light), 0.0, 1.0)
+    v_h = np.clip(_dot(to_eye, half), 1e-12, 1.0)
+    m2 = np.maximum(roughness, 1e-6) ** 2
+    cos2 = n_h * n_h
+    with np.errstate(under="ignore"):
+        distribution = np.exp((cos2 - 1.0) / (cos2 * m2)) / (np.pi * m2 * cos2 * cos2)
+    shadowing = np.minimum(1.0, np.minimum(2.0 * n_h * n_v / v_h, 2.0 * n_h * n_l / v_h))
+    fresnel = specular + (1.0 - specular) * ((1.0 - v_h) ** 5)[:, None]
+    return fresnel * (distribution * shadowing / (4.0 * n_v))[:, None] * (n_l > 0)[:, None]
+
+
 def refract(direction: np.ndarray, normal: np.ndarray, ratio: np.ndarray):
     """Transmitted unit directions by Snell's law with speeds, and where total internal reflection occurs.
 
@@ -196,9 +218,13 @@ class Tracer:
         mats = self.scene.materials
         mat = self.material_of[hits.shape[idx]]
         offset = _offset_scale(point, o)[:, None]
-        local = mats.emissive[mat] + self.ambient_light * mats.ambient[mat]
+        ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
+        if "textures" in self.effects:
+            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx])
+            ambient, diffuse = ambient * texture, diffuse * texture
+        local = mats.emissive[mat] + self.ambient_light * ambient
         if "lighting" in self.effects:
-            local += self._direct_light(point, facing, d, mat, offset)
+            local += self._direct_light(point, facing, d, mat, diffuse, offset)
         color[idx] = local
         if level < self.scene.settings.max_recursion_depth:
             if "reflection" in self.effects:
@@ -208,7 +234,7 @@ class Tracer:
                                                hits.entering[idx], hits.obj[idx])
         return color
 
-    def _direct_light(self, point, normal, direction, mat, offset) -> np.ndarray:
+    def _direct_light(self, point, normal, direction, mat, diffuse, offset) -> np.ndarray:
         mats = self.scene.materials
         total = np.zeros_like(point)
         to_eye = -direction / np.linalg.norm(direction, axis=1, keepdims=True)
@@ -227,14 +253,19 @@ class Tracer:
             if rows.size == 0:
                 continue
             m = mat[rows]
-            contribution = lambert[rows, None] * mats.diffuse[m]
+            contribution = lambert[rows, None] * diffuse[rows]
             half = s[rows] + to_eye[rows]
             half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-300)
             h_dot_m = _dot(half, normal[rows])
             with np.errstate(under="ignore"):
                 phong = np.where(h_dot_m > 0.0, np.power(np.maximum(h_dot_m, 0.0), mats.specular_exponent[m]), 0.0)
-            contribution += phong[:, None] * mats.specular[m]
-            total[rows] += contribution * light_color
+            specular = phong[:, None] * mats.specular[m]
+            if "cook-torrance" in self.effects:
+                fraction = mats.specular_fraction[m][:, None]
+                rough = cook_torrance(normal[rows], s[rows], to_eye[rows], mats.specular[m],
+                                      mats.surface_roughness[m])
+                specular = (1.0 - fraction) * specular + fraction * rough
+            total[rows] += (contribution + specular) * light_color
         return total
 
     def _reflection(self, point, normal, direction, mat, offset, level, media) -> np.ndarray:

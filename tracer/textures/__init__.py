@@ -1,0 +1,50 @@
+"""Textures: solid (procedural) ones and images, looked up at a hit's generic coordinates.
+
+Texture numbers (the material's ``texture``): 0 none, -1 checkerboard, -2 wood grain, -3 marble, i > 0 the
+image loaded by ``makePixmap i``.  A texture's colour *multiplies* the material's ambient and diffuse
+colours (set ``diffuse 1 1 1`` to see it unchanged).  See docs/textures.md.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import TracerError
+from .images import load_image, sample_bilinear
+from .mapping import surface_uv
+from .solid import SOLID_TEXTURES
+
+
+class TextureSet:
+    """The textures a compiled scene uses, with its images loaded once."""
+
+    def __init__(self, scene, primitives):
+        self.primitives = primitives
+        self.images: dict[int, np.ndarray] = {}
+        for number in sorted({p.shape.material.texture for p in primitives}):
+            if number > 0:
+                path = scene.pixmaps.get(number)
+                if path is None:
+                    raise TracerError(f"texture {number} is used but the scene has no 'makePixmap {number} file'")
+                self.images[number] = load_image(path)
+            elif number < 0 and number not in SOLID_TEXTURES:
+                raise TracerError(f"texture {number} is not a known solid texture (use -1, -2 or -3)")
+
+    def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` (1 where untextured)."""
+        out = np.ones_like(points)
+        for index in np.unique(shape_index):
+            prim = self.primitives[index]
+            material = prim.shape.material
+            if material.texture == 0:
+                continue
+            rows = np.nonzero(shape_index == index)[0]
+            generic = points[rows] @ prim.inverse[:3, :3].T + prim.inverse[:3, 3]
+            if material.texture < 0:
+                out[rows] = SOLID_TEXTURES[material.texture](generic, material.parameters)
+            else:
+                u, v, wrap_u, wrap_v = surface_uv(prim.kind, generic, parts[rows])
+                repeat_u, repeat_v = (tuple(material.parameters) + (1.0, 1.0))[:2]
+                if (repeat_u, repeat_v) != (1.0, 1.0):
+                    u, v, wrap_u, wrap_v = u * repeat_u, v * repeat_v, True, True
+                out[rows] = sample_bilinear(self.images[material.texture], u, v, wrap_u, wrap_v)
+        return out

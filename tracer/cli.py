@@ -38,6 +38,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="trace one ray per BxB block of pixels (the lecture's blockSize; default 1)")
     r.add_argument("--progressive", action="store_true",
                    help="refine coarse to fine: passes B, B/2, ..., 1, reusing earlier samples")
+    r.add_argument("--samples", type=int, default=1, metavar="N",
+                   help="rays per pixel for anti-aliasing (default 1: one ray through the pixel centre)")
+    r.add_argument("--sampling", choices=("regular", "jittered", "adaptive"), default="jittered",
+                   help="where the samples go: a regular grid, one random point per stratum, or jittered "
+                        "samples only where neighbouring pixels differ (default jittered)")
+    r.add_argument("--threshold", type=float, default=0.05,
+                   help="adaptive sampling: colour difference between neighbours that triggers refinement")
+    r.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto",
+                   help="who does the per-ray work (default: the C core when it is built)")
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
     r.add_argument("--stats", action="store_true",
@@ -90,7 +99,8 @@ def _render(args) -> int:
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
-                        progressive=args.progressive, on_tile=progress)
+                        progressive=args.progressive, on_tile=progress, samples=args.samples,
+                        sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend)
     finally:
         progress.close()
     save_image(result.image, args.output)

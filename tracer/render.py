@@ -19,6 +19,7 @@ from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
 from .errors import RenderCancelled, TracerError
 from .model import Scene
+from . import sampling
 from .backend import make_tracer
 from .trace import RayCounts
 
@@ -84,9 +85,15 @@ def check_size(width: int, height: int) -> None:
 def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block_size: int = 1,
            progressive: bool = False, tile: int = DEFAULT_TILE,
            on_tile: Optional[Callable[[TileUpdate], None]] = None,
-           cancel: Optional[Callable[[], bool]] = None, backend: str = "auto") -> RenderResult:
-    """Ray trace ``scene`` into a (height, width, 3) float32 image."""
+           cancel: Optional[Callable[[], bool]] = None, backend: str = "auto",
+           samples: int = 1, sampling_mode: str = "jittered",
+           threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0) -> RenderResult:
+    """Ray trace ``scene`` into a (height, width, 3) float32 image.
+
+    ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
+    """
     check_size(width, height)
+    sampling.check(samples, sampling_mode)
     started = time.perf_counter()
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     camera = scene_camera(compiled.scene, compiled, width / height)
@@ -99,8 +106,31 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     tile = max(tile, passes[0])
     tile -= tile % passes[0]  # tiles start on multiples of every stride
     tiles = [(r, c) for r in range(0, height, tile) for c in range(0, width, tile)]
-    total = len(tiles) * len(passes)
+    adaptive = sampling_mode == "adaptive" and samples > 1
+    total = len(tiles) * (len(passes) + adaptive)
     done = 0
+    rng = np.random.default_rng(seed)
+
+    def trace_pixels(rows_from_bottom: np.ndarray, cols: np.ndarray, per_pixel: int) -> np.ndarray:
+        """Mean colour of ``per_pixel`` rays in each of the given pixels."""
+        if per_pixel == 1:
+            dy = dx = 0.5
+            rr, cc = rows_from_bottom, cols
+        else:
+            dy, dx = sampling.offsets(per_pixel, sampling_mode != "regular", rows_from_bottom.size, rng)
+            rr = np.repeat(rows_from_bottom, per_pixel)
+            cc = np.repeat(cols, per_pixel)
+            dy, dx = dy.ravel(), dx.ravel()
+        directions = frame.directions(rr, cc, height, width, dy=dy, dx=dx)
+        origins = np.ascontiguousarray(np.broadcast_to(frame.eye, directions.shape))
+        colors = tracer.camera_rays(origins, directions)
+        return colors.reshape(-1, per_pixel, 3).mean(axis=1)
+
+    def report(r0, c0, r1, c1, stride, pass_index):
+        if on_tile is not None:
+            on_tile(TileUpdate(x0=c0, y0=height - r1, x1=c1, y1=height - r0, block_size=stride,
+                               pass_index=pass_index, pass_count=len(passes) + adaptive, tiles_done=done,
+                               tiles_total=total, image=shown))
     for pass_index, stride in enumerate(passes):
         first_pass = pass_index == 0
         for r0, c0 in tiles:
@@ -110,20 +140,26 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
             rows = np.arange(r0, r1, stride)
             cols = np.arange(c0, c1, stride)
             grid_r, grid_c = np.meshgrid(rows, cols, indexing="ij")
-            samples = film[grid_r, grid_c]  # earlier passes' samples keep their colour
+            colors = film[grid_r, grid_c]  # earlier passes' samples keep their colour
             new = np.ones(grid_r.shape, dtype=bool) if first_pass else \
                 (grid_r % (2 * stride) != 0) | (grid_c % (2 * stride) != 0)
-            rr, cc = grid_r[new], grid_c[new]
-            if rr.size:
-                directions = frame.directions(rr, cc, height, width)
-                origins = np.broadcast_to(frame.eye, directions.shape)
-                samples[new] = tracer.camera_rays(np.ascontiguousarray(origins), directions)
-            block = np.repeat(np.repeat(samples, stride, axis=0), stride, axis=1)
+            if new.any():
+                colors[new] = trace_pixels(grid_r[new], grid_c[new], 1 if adaptive else samples)
+            block = np.repeat(np.repeat(colors, stride, axis=0), stride, axis=1)
             film[r0:r1, c0:c1] = block[: r1 - r0, : c1 - c0]
             done += 1
-            if on_tile is not None:
-                on_tile(TileUpdate(x0=c0, y0=height - r1, x1=c1, y1=height - r0, block_size=stride,
-                                   pass_index=pass_index, pass_count=len(passes), tiles_done=done,
-                                   tiles_total=total, image=shown))
+            report(r0, c0, r1, c1, stride, pass_index)
+    if adaptive:
+        # Refine where neighbours disagree, judged on the finished film (which crosses tile borders).
+        refine = sampling.contrast_mask(film, threshold)
+        for r0, c0 in tiles:
+            if cancel is not None and cancel():
+                raise RenderCancelled("render cancelled")
+            r1, c1 = min(r0 + tile, height), min(c0 + tile, width)
+            rr, cc = np.nonzero(refine[r0:r1, c0:c1])
+            if rr.size:
+                film[rr + r0, cc + c0] = trace_pixels(rr + r0, cc + c0, samples)
+            done += 1
+            report(r0, c0, r1, c1, 1, len(passes))
     return RenderResult(image=np.ascontiguousarray(shown), rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)

@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test clean
+.PHONY: setup demo test clean accuracy
 
 setup: $(STAMP)
 
@@ -25,3 +25,7 @@ test: setup
 
 clean:
 	rm -rf $(VENV) out build *.egg-info
+
+# What accuracy costs: CSV files and plots for the bundled scenes, in docs/accuracy/.
+accuracy: setup
+	$(PY) -m tracer bench accuracy scenes/lecture.sdl scenes/glass.sdl scenes/shapes.sdl scenes/textures.sdl -o docs/accuracy

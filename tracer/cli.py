@@ -53,6 +53,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print JSON statistics (ray counts, seconds, backend) on stdout")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
+    b = sub.add_parser("bench", help="measurements")
+    bench = b.add_subparsers(dest="bench", required=True)
+    acc = bench.add_parser("accuracy", help="error against a dense reference, and time, for each setting")
+    acc.add_argument("scenes", nargs="+", metavar="SCENE", help="SDL scene files")
+    acc.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the CSV files and plots")
+    acc.add_argument("--width", type=int, default=160)
+    acc.add_argument("--height", type=int, default=120)
+    acc.add_argument("--reference-samples", type=int, default=64)
+    acc.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto")
+    acc.add_argument("--lenient", action="store_true")
+
     i = sub.add_parser("info", help="list a scene's objects, lights and live effects")
     _add_scene_options(i)
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -167,11 +178,26 @@ def _info(args) -> int:
     return 0
 
 
+def _bench(args) -> int:
+    from pathlib import Path
+
+    from .accuracy import measure
+    from .render import check_size
+    from .sdl.parser import load
+
+    check_size(args.width, args.height)
+    for path in args.scenes:
+        scene = load(path, strict=not args.lenient)
+        measure(scene, Path(path).stem, Path(args.output), args.width, args.height, args.reference_samples,
+                args.backend, progress=lambda line: print(line, flush=True))
+    return 0
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         with np.errstate(all="ignore"):
-            return {"render": _render, "info": _info}[args.command](args)
+            return {"render": _render, "info": _info, "bench": _bench}[args.command](args)
     except (SDLError, TracerError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_USAGE

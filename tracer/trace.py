@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .compile import CompiledScene
-from .numerics import RELATIVE_EPSILON
+from . import numerics
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: How many nested transparent objects a ray remembers being inside.
@@ -136,7 +136,7 @@ def _offset_scale(points: np.ndarray, origins: np.ndarray) -> np.ndarray:
     """Distance to move a secondary ray's origin off the surface: relative to the coordinates' size
     (the hit point and the ray it came from), never a fixed number."""
     magnitude = np.maximum(np.max(np.abs(points), axis=1), np.max(np.abs(origins), axis=1))
-    return RELATIVE_EPSILON * (1.0 + magnitude)
+    return numerics.RELATIVE_EPSILON * (1.0 + magnitude)
 
 
 def _dot(a, b):

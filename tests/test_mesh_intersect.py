@@ -421,6 +421,60 @@ def test_rays_through_every_icosphere_vertex(subdivisions):
     np.testing.assert_allclose(first.t[:, 0], 3.0)
 
 
+@pytest.mark.parametrize("offset", [0.0, 1e-15, 1e-13, 1e-11, 1e-9, 1e-7])
+def test_rays_passing_near_vertices_and_edges(offset):
+    """Rays through icosphere vertices and edge midpoints, shifted sideways by tiny amounts: whichever
+    triangles the slack lets them hit, each crosses the surface exactly once going in and once out."""
+    data = icosphere(2)
+    mesh = TriangleMesh(data, leaf_size=4)
+    tri_v, _ = data.triangles()
+    corners = data.vertices[tri_v]
+    targets = np.vstack([data.vertices, (corners[:, 0] + corners[:, 1]) / 2, (corners[:, 1] + corners[:, 2]) / 2])
+    rng = np.random.default_rng(int(offset * 1e15) % 1000)
+    # Into the solid towards points well inside it, so each line crosses the surface at the target.
+    aim = rng.uniform(-0.4, 0.4, size=targets.shape)
+    sideways = rng.normal(size=targets.shape)
+    sideways /= np.linalg.norm(sideways, axis=1, keepdims=True)
+    directions = aim - targets
+    origins = targets - 4 * directions + offset * sideways
+    result = mesh.all_hits(origins, directions)
+    counts = np.isfinite(result.t).sum(axis=1)
+    assert (counts == 2).all()
+    np.testing.assert_array_equal(result.entering, [[True, False]] * len(targets))
+    np.testing.assert_allclose(result.t[:, 0], 4.0, atol=1e-6)
+    first = mesh.closest_hits(origins, directions)
+    np.testing.assert_allclose(first.t[:, 0], result.t[:, 0])
+
+
+@pytest.mark.parametrize("cosine", [0.3, 0.1, 0.03])
+def test_grazing_rays_near_vertices_and_edges(cosine):
+    """Lines meeting the icosphere near its vertices and edge midpoints at grazing angles (cosine to
+    the sphere normal): at most one entering and one exiting hit, entering first.  Steep incidence
+    spreads the times of a shared vertex's hits far beyond 1e-12 relative.  (Lines passing a convex
+    edge from outside within the rounding slack may keep a lone hit, so the count may be 1 here.)"""
+    data = icosphere(3)
+    mesh = TriangleMesh(data)
+    tri_v, _ = data.triangles()
+    corners = data.vertices[tri_v]
+    targets = np.vstack([data.vertices, (corners[:, 0] + corners[:, 1]) / 2])
+    normal = targets / np.linalg.norm(targets, axis=1, keepdims=True)
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        tangent = rng.normal(size=targets.shape)
+        tangent -= np.einsum("ij,ij->i", tangent, normal)[:, None] * normal
+        tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+        directions = math.sqrt(1 - cosine ** 2) * tangent - cosine * normal
+        for offset in (0.0, 1e-15, 1e-13):
+            origins = targets - 3 * directions + offset * rng.normal(size=targets.shape)
+            result = mesh.all_hits(origins, directions)
+            assert result.t.shape[1] <= 2
+            assert (result.entering.sum(axis=1) <= 1).all()
+            two = np.isfinite(result.t).sum(axis=1) == 2
+            assert result.entering[two, 0].all() and not result.entering[two, 1].any()
+            if cosine == 0.3:
+                assert two.all()
+
+
 def test_rays_along_a_quad_diagonal_grid():
     """A grid of axis-aligned rays, many exactly on triangle edges, all hit the cube exactly twice."""
     mesh = TriangleMesh(cube_mesh())

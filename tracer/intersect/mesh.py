@@ -19,8 +19,10 @@ from .hits import HitArrays
 #: every coordinate involved and R is the triangle's largest vertex norm (the errors of s = O - P0 and
 #: of the edge vectors are ~eps L and ~eps R, and the barycentrics divide by det).  Keeping the slack
 #: as small as the rounding keeps the band of doubly-hit rays around an edge tiny, so that the doubles
-#: it does produce lie within the deduplication window below.
-ROUNDING_FACTOR = 1e9
+#: it does produce lie within the deduplication window below.  The price of any slack: a line passing
+#: *outside* a convex edge closer than the slack (~1e-13 of the coordinates) may keep a lone hit on one
+#: of the two faces; a watertight test (Woop et al. 2013) would close that too.
+ROUNDING_FACTOR = 64.0
 #: ... but never more than this (near-parallel rays have a tiny det and ill-conditioned barycentrics).
 BARYCENTRIC_EPSILON_MAX = 1e-10
 #: A ray is parallel to a triangle's plane when |d . (e1 x e2)| <= this * |d| |e1| |e2|: there the hit
@@ -33,7 +35,7 @@ DEDUPE_RELATIVE = 1e-12
 #: The same, for two triangles that share a vertex (by position): rounding in a hit time grows with
 #: the coordinates and with 1/cos of the angle of incidence, so a neighbour's double can stray further
 #: than 1e-12; this is the project's "same place" (tracer.numerics.RELATIVE_EPSILON).
-DEDUPE_RELATIVE_ADJACENT = 1e-12
+DEDUPE_RELATIVE_ADJACENT = 1e-9
 #: Node boxes are grown by this fraction of the mesh's size (plus its distance from the origin), so
 #: that rounding in the slab test can never cull a triangle that Möller–Trumbore, with its slack, hits.
 BOX_PADDING = 1e-9
@@ -53,8 +55,14 @@ class TriangleMesh:
     normal where the triangle has none, where the interpolation is degenerate or where it falls on the
     inner side of the geometric normal.  All reported normals are unit length.
 
-    BVH layout (M nodes, node 0 is the root, each inner node's children are allocated together so
-    ``node_right == node_left + 1``; all arrays are C-contiguous):
+    Shared edges and vertices: the barycentric test is inclusive with a slack the size of the rounding
+    (see ROUNDING_FACTOR), and all-hits merges hits of one ray with the same entering sign at the same
+    time (see DEDUPE_RELATIVE), so a ray through an edge or vertex crosses the surface once.
+
+    BVH: binned surface-area heuristic (``bins`` buckets along the longest axis of the centroids),
+    split until a node holds at most ``leaf_size`` triangles.  Layout (M nodes, node 0 is the root,
+    each inner node's children are allocated together so ``node_right == node_left + 1``; all arrays
+    are C-contiguous):
 
     * ``node_lo``, ``node_hi`` (M, 3) float64: the node's box (padded by a tiny fraction of the mesh size).
     * ``node_left``, ``node_right`` (M,) int64: children of an inner node, -1 for a leaf.
@@ -102,7 +110,6 @@ class TriangleMesh:
         self._geometric_normal = geometric
         self._corner_normals = corner_normals
         self._has_normals = has_normals
-        self._flip = flip
 
         # The mesh's size gives absolute scales for box padding and hit deduplication.
         if len(tri_v):

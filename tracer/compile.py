@@ -21,10 +21,17 @@ from .model import (CSG, POLYHEDRON_KINDS, Camera, Material, Scene, SceneObject,
                     iter_shapes)
 from .transforms import transform_points
 
-#: Radius of a sphere around the origin that holds each bounded generic shape (for culling and framing).
-GENERIC_BOUND = {"sphere": 1.0, "cube": np.sqrt(3.0), "square": np.sqrt(2.0),
-                 "taperedCylinder": np.sqrt(2.0), "cylinder": np.sqrt(2.0), "cone": np.sqrt(2.0),
-                 "torus": 1.0 + TORUS_TUBE_RADIUS}
+
+def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Which lines pass within ``radius`` of ``center`` (all of them for an infinite radius)."""
+    if not np.isfinite(radius):
+        return np.ones(origins.shape[0], dtype=bool)
+    to_center = center - origins
+    dd = np.einsum("ij,ij->i", directions, directions)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = np.einsum("ij,ij->i", to_center, directions) / dd
+    perp = to_center - along[:, None] * directions
+    return np.einsum("ij,ij->i", perp, perp) <= radius * radius
 
 
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
@@ -87,21 +94,20 @@ class Primitive:
             return np.asarray(self.shape.mesh.vertices, dtype=np.float64)
         if self.kind == "plane":
             return None
-        r = GENERIC_BOUND[self.kind]
         if self.kind in ("taperedCylinder", "cylinder", "cone"):
-            ring = np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 9)[:-1]])
             top = max(self.shape.small_radius, 0.0)
-            # Corners of the square that bounds each disc: the frustum lies inside their hull.
+            # Corners of the squares that bound the two discs: the frustum lies inside their hull.
             box = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
-            return np.concatenate([np.c_[box, np.zeros(4)], np.c_[box * top, np.ones(4)], np.c_[ring, np.zeros(8)]])
+            return np.concatenate([np.c_[box, np.zeros(4)], np.c_[box * top, np.ones(4)]])
         corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
         if self.kind == "sphere":
             return corners
         if self.kind == "square":
             return corners * (1, 1, 0)
         if self.kind == "torus":
-            return corners * (r, r, TORUS_TUBE_RADIUS)
-        return corners * (1.0 if self.kind == "cube" else r)
+            ring = 1.0 + TORUS_TUBE_RADIUS
+            return corners * (ring, ring, TORUS_TUBE_RADIUS)
+        return corners  # cube
 
     def _world_bounding_sphere(self):
         pts = self._generic_points()
@@ -190,14 +196,7 @@ class Primitive:
 
     def may_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Rays whose line passes within the bounding sphere (all rays for unbounded shapes)."""
-        if not np.isfinite(self.radius):
-            return np.ones(origins.shape[0], dtype=bool)
-        to_center = self.center - origins
-        dd = np.einsum("ij,ij->i", directions, directions)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            along = np.einsum("ij,ij->i", to_center, directions) / dd
-        perp = to_center - along[:, None] * directions
-        return np.einsum("ij,ij->i", perp, perp) <= self.radius * self.radius
+        return lines_near_sphere(self.center, self.radius, origins, directions)
 
 
 class CSGNode:
@@ -228,9 +227,7 @@ class CSGNode:
                 yield child
 
     def may_hit(self, origins, directions):
-        if not np.isfinite(self.radius):
-            return np.ones(origins.shape[0], dtype=bool)
-        return Primitive.may_hit(self, origins, directions)  # same sphere test
+        return lines_near_sphere(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
         return combine(self.op, self.left.intersect(origins, directions),

@@ -1,0 +1,182 @@
+"""The C core: the per-ray work of tracer.trace.Tracer in C, on all cores, loaded with ctypes.
+
+``load_error`` is None when the library is built and loaded, else a short reason (no compiler, a
+compile error...); then :class:`NativeTracer` cannot be made and tracer.backend uses the NumPy path.
+The library is built on first import when missing or out of date (see :mod:`tracer.native.build`).
+
+:class:`NativeTracer` is a backend (see tracer.backend): ``name``, ``counts``, ``camera_rays``.  It also
+answers the queries the tests compare with the NumPy path: :meth:`NativeTracer.object_hits` (whole-line
+hits of one top-level object, as ``obj.intersect``), :meth:`NativeTracer.first_hits` and
+:meth:`NativeTracer.occluded`.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+from typing import Optional
+
+import numpy as np
+
+from ..compile import CompiledScene
+from ..errors import TracerError
+from ..intersect.hits import HitArrays
+from ..trace import RayCounts
+from . import flatten
+from . import build as _builder
+from .build import BuildError
+
+_lib: Optional[ctypes.CDLL] = None
+load_error: Optional[str] = None
+
+_dp = ctypes.POINTER(ctypes.c_double)
+_i8p = ctypes.POINTER(ctypes.c_int8)
+_i32p = ctypes.POINTER(ctypes.c_int32)
+_i64p = ctypes.POINTER(ctypes.c_int64)
+
+
+def _load() -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(_builder.build()))
+    lib.rt_desc_size.restype = ctypes.c_int64
+    lib.rt_desc_size.argtypes = []
+    lib.rt_create.restype = ctypes.c_void_p
+    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc)]
+    lib.rt_destroy.restype = None
+    lib.rt_destroy.argtypes = [ctypes.c_void_p]
+    lib.rt_trace.restype = ctypes.c_int
+    lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64]
+    lib.rt_first_hits.restype = ctypes.c_int
+    lib.rt_first_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _dp, _i32p, _i32p, _i8p,
+                                  ctypes.c_int64]
+    lib.rt_occluded.restype = ctypes.c_int
+    lib.rt_occluded.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_double, _i8p, ctypes.c_int64]
+    lib.rt_object_hits.restype = ctypes.c_int64
+    lib.rt_object_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_int64, _dp, _i8p, _dp,
+                                   _i32p, _i32p, _dp, _i8p]
+    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
+        raise BuildError("the C core's SceneDesc does not match flatten.py's")
+    return lib
+
+
+try:
+    _lib = _load()
+except (BuildError, OSError) as err:
+    load_error = str(err) or type(err).__name__
+
+
+def default_threads() -> int:
+    """$SDL_TRACER_THREADS if set, else every core this process may run on."""
+    env = os.environ.get("SDL_TRACER_THREADS")
+    if env:
+        try:
+            return max(1, int(env))
+        except ValueError:
+            pass
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
+    o = np.ascontiguousarray(np.asarray(origins, dtype=np.float64).reshape(-1, 3))
+    d = np.ascontiguousarray(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
+    if o.shape != d.shape:
+        raise ValueError("origins and directions must both be (N, 3)")
+    return o, d
+
+
+def _ptr(array: np.ndarray, ctype):
+    return array.ctypes.data_as(ctypes.POINTER(ctype))
+
+
+class NativeTracer:
+    """Shades batches of camera rays in C for one compiled scene, counting every ray it casts."""
+
+    name = "c"
+
+    @staticmethod
+    def unsupported(compiled: CompiledScene) -> Optional[str]:
+        """None if the C core can trace this scene, else the reason it cannot."""
+        if _lib is None:
+            return f"the C core is not available: {load_error}"
+        return flatten.unsupported_reason(compiled)
+
+    def __init__(self, compiled: CompiledScene, threads: Optional[int] = None):
+        reason = self.unsupported(compiled)
+        if reason is not None:
+            raise TracerError(f"the C core cannot trace this scene: {reason}")
+        self.scene = compiled
+        self.counts = RayCounts()
+        self.threads = threads or default_threads()
+        self._flat = flatten.FlatScene(compiled)  # owns the arrays the C side points into
+        self._handle = _lib.rt_create(ctypes.byref(self._flat.desc))
+        if not self._handle:
+            raise TracerError("the C core rejected the scene description (out of memory or inconsistent)")
+
+    def close(self) -> None:
+        handle, self._handle = getattr(self, "_handle", None), None
+        if handle and _lib is not None:
+            _lib.rt_destroy(handle)
+
+    def __del__(self) -> None:
+        self.close()
+
+    def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        o, d = _rays(origins, directions)
+        colors = np.empty_like(o)
+        counts = np.zeros(4, dtype=np.int64)
+        if _lib.rt_trace(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                         _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads) != 0:
+            raise MemoryError("the C core ran out of memory")
+        self.counts.add(RayCounts(*(int(c) for c in counts)))
+        return colors
+
+    def first_hits(self, origins, directions) -> dict[str, np.ndarray]:
+        """The nearest hit with t > 0 per ray: t (inf on a miss), unit world normal, shape, object, entering."""
+        o, d = _rays(origins, directions)
+        n = len(o)
+        out = dict(t=np.empty(n), normal=np.empty((n, 3)), shape=np.empty(n, np.int32),
+                   obj=np.empty(n, np.int32), entering=np.empty(n, np.int8))
+        if _lib.rt_first_hits(self._handle, n, _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                              _ptr(out["t"], ctypes.c_double), _ptr(out["normal"], ctypes.c_double),
+                              _ptr(out["shape"], ctypes.c_int32), _ptr(out["obj"], ctypes.c_int32),
+                              _ptr(out["entering"], ctypes.c_int8), self.threads) != 0:
+            raise MemoryError("the C core ran out of memory")
+        out["entering"] = out["entering"].astype(bool)
+        return out
+
+    def occluded(self, origins, directions, t_max: float = 1.0) -> np.ndarray:
+        """Shadow feelers: is anything on origin + t direction, 0 < t < t_max?"""
+        o, d = _rays(origins, directions)
+        blocked = np.empty(len(o), np.int8)
+        if _lib.rt_occluded(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                            float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) != 0:
+            raise MemoryError("the C core ran out of memory")
+        return blocked.astype(bool)
+
+    def object_hits(self, index: int, origin, direction) -> HitArrays:
+        """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``
+        (world normals, not unit; only finite hits, so K is the number of hits)."""
+        o, d = _rays(origin, direction)
+        capacity = 64
+        while True:
+            t = np.empty(capacity)
+            entering = np.empty(capacity, np.int8)
+            normal = np.empty((capacity, 3))
+            shape = np.empty(capacity, np.int32)
+            part = np.empty(capacity, np.int32)
+            uv = np.empty((capacity, 2))
+            inside = np.zeros(1, np.int8)
+            n = _lib.rt_object_hits(self._handle, int(index), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                                    capacity, _ptr(t, ctypes.c_double), _ptr(entering, ctypes.c_int8),
+                                    _ptr(normal, ctypes.c_double), _ptr(shape, ctypes.c_int32),
+                                    _ptr(part, ctypes.c_int32), _ptr(uv, ctypes.c_double),
+                                    _ptr(inside, ctypes.c_int8))
+            if n < 0:
+                raise MemoryError("the C core ran out of memory (or the object index is out of range)")
+            if n <= capacity:
+                break
+            capacity = int(n)
+        return HitArrays(t=t[None, :n].copy(), entering=entering[None, :n].astype(bool), normal=normal[None, :n].copy(),
+                         part=part[None, :n].copy(), uv=uv[None, :n].copy(), inside_at_start=inside.astype(bool),
+                         shape=shape[None, :n].copy())

@@ -1,0 +1,1017 @@
+/* The C core of the SDL ray tracer (one translation unit: the .h files beside it hold its parts).
+ *
+ * rt_create() takes a SceneDesc (flat arrays owned by Python, see flatten.py), checks it, and builds a
+ * bounding volume hierarchy over the top-level objects; rt_trace() shades a batch of camera rays on all
+ * the threads asked for.  The semantics are those of the NumPy reference, tracer/trace.py and the modules
+ * it uses; see core.h for the conventions.
+ */
+#define _POSIX_C_SOURCE 200809L
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "core.h"
+#include "numeric.h"
+#include "shapes.h"
+#include "mesh.h"
+#include "csg.h"
+
+#ifndef RT_SOURCE_HASH
+#define RT_SOURCE_HASH "unknown"
+#endif
+/* build.py finds this marker in the library file to tell whether it was built from the current sources. */
+const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
+
+const char *rt_build_id(void) { return rt_build_marker; }
+
+int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
+
+/* ------------------------------------------------------------------------------------------------------
+ * The scene at run time */
+
+typedef struct {
+    double lo[3], hi[3];
+    int64_t left;         /* inner: left child (right = left + 1) */
+    int64_t first, count; /* leaf: items[first : first + count]; count = 0 for inner nodes */
+    int64_t axis;
+} TopNode;
+
+typedef struct {
+    SceneDesc d;
+    MeshView *meshes;
+    TopNode *nodes;
+    int64_t n_nodes, tree_depth;
+    int64_t *items;       /* bounded objects in leaf order */
+    int64_t *unbounded;
+    int64_t n_unbounded;
+    int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
+    int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
+} Scene;
+
+#define MEDIA_DEPTH 8
+#define SHADOW_CACHE 16
+
+typedef struct {
+    int64_t obj[MEDIA_DEPTH];
+    double speed[MEDIA_DEPTH];
+    int depth;
+} Media;
+
+typedef struct {
+    HitList *lists;       /* 2 per CSG level, and one more for a top-level object */
+    int64_t n_lists;
+    RawBuffer raw;
+    int64_t *mesh_stack;
+    int64_t *tree_stack;
+    int64_t counts[4];
+    int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
+    int oom;
+} Work;
+
+static int work_init(Work *w, const Scene *S)
+{
+    memset(w, 0, sizeof(*w));
+    for (int i = 0; i < SHADOW_CACHE; i++)
+        w->last_blocker[i] = -1;
+    w->n_lists = 2 * S->csg_depth + 1;
+    w->lists = (HitList *)calloc((size_t)w->n_lists, sizeof(HitList));
+    w->mesh_stack = (int64_t *)malloc((size_t)(S->mesh_depth + 2) * sizeof(int64_t));
+    w->tree_stack = (int64_t *)malloc((size_t)(S->tree_depth + 2) * sizeof(int64_t));
+    if (!w->lists || !w->mesh_stack || !w->tree_stack) {
+        free(w->lists);
+        free(w->mesh_stack);
+        free(w->tree_stack);
+        return 0;
+    }
+    return 1;
+}
+
+static void work_free(Work *w)
+{
+    for (int64_t i = 0; i < w->n_lists; i++)
+        free(w->lists[i].h);
+    free(w->lists);
+    free(w->raw.h);
+    free(w->mesh_stack);
+    free(w->tree_stack);
+}
+
+static int list_reserve(Work *w, HitList *l, int64_t need)
+{
+    if (need <= l->cap)
+        return 1;
+    int64_t cap = l->cap ? l->cap : 16;
+    while (cap < need)
+        cap *= 2;
+    Hit *p = (Hit *)realloc(l->h, (size_t)cap * sizeof(Hit));
+    if (!p) {
+        w->oom = 1;
+        return 0;
+    }
+    l->h = p;
+    l->cap = cap;
+    return 1;
+}
+
+static inline double media_speed(const Media *m) { return m->depth > 0 ? m->speed[m->depth - 1] : 1.0; }
+
+static inline void media_enter(Media *m, int64_t obj, double speed)
+{
+    if (m->depth < MEDIA_DEPTH) {
+        m->obj[m->depth] = obj;
+        m->speed[m->depth] = speed;
+        m->depth++;
+    }
+}
+
+/* Without the innermost entry for obj (unchanged where the ray was not known to be inside it). */
+static inline void media_leave(Media *m, int64_t obj)
+{
+    int last = -1;
+    for (int j = 0; j < m->depth; j++)
+        if (m->obj[j] == obj)
+            last = j;
+    if (last < 0)
+        return;
+    for (int j = last; j < MEDIA_DEPTH - 1; j++) {
+        m->obj[j] = m->obj[j + 1];
+        m->speed[j] = m->speed[j + 1];
+    }
+    m->obj[MEDIA_DEPTH - 1] = -1;
+    m->depth--;
+}
+
+/* ------------------------------------------------------------------------------------------------------
+ * Primitives (tracer.compile.Primitive) */
+
+/* The line passes within the bounding sphere (always, for unbounded shapes). */
+static inline int prim_may_hit(const double *sphere, const double *o, const double *d)
+{
+    if (!isfinite(sphere[3]))
+        return 1;
+    double to_center[3] = {sphere[0] - o[0], sphere[1] - o[1], sphere[2] - o[2]};
+    double dd = dot3(d, d);
+    double along = dot3(to_center, d) / dd;
+    double perp[3] = {to_center[0] - along * d[0], to_center[1] - along * d[1], to_center[2] - along * d[2]};
+    return dot3(perp, perp) <= sphere[3] * sphere[3];
+}
+
+/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out). */
+static int analytic_hits(const Scene *S, int64_t p, const double *o, const double *d, Hit *out, int *inside)
+{
+    const SceneDesc *D = &S->d;
+    *inside = 0;
+    switch (D->prim_kind[p]) {
+    case K_SPHERE: return hits_sphere(o, d, out);
+    case K_CUBE: return hits_cube(o, d, out);
+    case K_SQUARE: {
+        /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
+        int n = hits_z_plane(o, d, out, 1);
+        if (n) {
+            out[1] = out[0];
+            out[0].entering = 1;
+            out[1].entering = 0;
+        }
+        return 2 * n;
+    }
+    case K_PLANE:
+        *inside = plane_inside_at_start(o, d);
+        return hits_z_plane(o, d, out, 0);
+    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
+    case K_TORUS: return hits_torus(o, d, out);
+    case K_POLYHEDRON: {
+        const int64_t *aux = D->prim_aux + 2 * p;
+        return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
+    }
+    }
+    return 0;
+}
+
+/* World ray -> generic origin moved to the line's point nearest the generic centre (returns the shift). */
+static inline double prim_generic_ray(const double *inv, const double *o, const double *d, double *og, double *dg)
+{
+    double raw[3];
+    affine_point(inv, o, raw);
+    affine_vector(inv, d, dg);
+    double shift = -dot3(raw, dg) / dot3(dg, dg);
+    if (!isfinite(shift))
+        shift = 0.0;
+    for (int i = 0; i < 3; i++)
+        og[i] = raw[i] + shift * dg[i];
+    return shift;
+}
+
+/* All hits of primitive p along the whole world line (Primitive.intersect), into out. */
+static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const double *d, HitList *out)
+{
+    const SceneDesc *D = &S->d;
+    out->n = 0;
+    out->inside = 0;
+    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+        return 1;
+    const double *inv = D->prim_inverse + 16 * p;
+    double og[3], dg[3];
+    double shift = prim_generic_ray(inv, o, d, og, dg);
+    int64_t n;
+    if (D->prim_kind[p] == K_MESH) {
+        const MeshView *m = &S->meshes[D->prim_aux[2 * p]];
+        n = mesh_all(m, og, dg, w->mesh_stack, &w->raw, &out->h, &out->cap);
+        if (n < 0) {
+            w->oom = 1;
+            return 0;
+        }
+    } else {
+        if (!list_reserve(w, out, 8))
+            return 0;
+        n = analytic_hits(S, p, og, dg, out->h, &out->inside);
+    }
+    for (int64_t i = 0; i < n; i++) {
+        out->h[i].t += shift;
+        out->h[i].shape = (int32_t)p;
+    }
+    out->n = n;
+    return 1;
+}
+
+/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit). */
+static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
+                      double t_max, Hit *out)
+{
+    const SceneDesc *D = &S->d;
+    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+        return 0;
+    const double *inv = D->prim_inverse + 16 * p;
+    if (D->prim_kind[p] == K_MESH) {
+        double og[3], dg[3];
+        affine_point(inv, o, og);
+        affine_vector(inv, d, dg);
+        if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, out))
+            return 0;
+        out->shape = (int32_t)p;
+        return 1;
+    }
+    double og[3], dg[3];
+    double shift = prim_generic_ray(inv, o, d, og, dg);
+    Hit buf[8];
+    int inside;
+    int n = analytic_hits(S, p, og, dg, buf, &inside);
+    for (int i = 0; i < n; i++) {
+        double t = buf[i].t + shift;
+        if (t > t_min && t < t_max) {
+            *out = buf[i];
+            out->t = t;
+            out->shape = (int32_t)p;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Is anything of primitive p on the ray with t_min < t < t_max? */
+static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
+                         double t_max)
+{
+    const SceneDesc *D = &S->d;
+    if (D->prim_kind[p] == K_MESH) {
+        if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+            return 0;
+        const double *inv = D->prim_inverse + 16 * p;
+        double og[3], dg[3];
+        affine_point(inv, o, og);
+        affine_vector(inv, d, dg);
+        return mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack);
+    }
+    Hit h;
+    return prim_first(S, w, p, o, d, t_min, t_max, &h);
+}
+
+/* ------------------------------------------------------------------------------------------------------
+ * Objects: a primitive or a CSG tree (ref < 0) */
+
+static int object_hits(const Scene *S, Work *w, int64_t ref, const double *o, const double *d, double scale_over_speed,
+                       int64_t level, HitList *out)
+{
+    if (ref >= 0)
+        return prim_hits(S, w, ref, o, d, out);
+    int64_t node = -ref - 1;
+    HitList *left = &w->lists[2 * level], *right = &w->lists[2 * level + 1];
+    if (!object_hits(S, w, S->d.csg_left[node], o, d, scale_over_speed, level + 1, left))
+        return 0;
+    if (!object_hits(S, w, S->d.csg_right[node], o, d, scale_over_speed, level + 1, right))
+        return 0;
+    if (!list_reserve(w, out, 2 * (left->n + right->n) + 1))
+        return 0;
+    out->n = csg_combine(S->d.csg_op[node], left, right, scale_over_speed, out->h, &out->inside);
+    return 1;
+}
+
+static inline double ray_scale_over_speed(const double *o, const double *d)
+{
+    return (1.0 + max_abs3(o)) / sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+}
+
+static int object_first(const Scene *S, Work *w, int64_t ref, const double *o, const double *d, double t_min,
+                        double t_max, Hit *out)
+{
+    if (ref >= 0)
+        return prim_first(S, w, ref, o, d, t_min, t_max, out);
+    HitList *top = &w->lists[w->n_lists - 1];
+    if (!object_hits(S, w, ref, o, d, ray_scale_over_speed(o, d), 0, top))
+        return 0;
+    for (int64_t i = 0; i < top->n; i++) {
+        if (top->h[i].t > t_min && top->h[i].t < t_max) {
+            *out = top->h[i];
+            return 1;
+        }
+    }
+    return 0;
+}
+
+static int object_occludes(const Scene *S, Work *w, int64_t ref, const double *o, const double *d, double t_min,
+                           double t_max)
+{
+    if (ref >= 0)
+        return prim_occludes(S, w, ref, o, d, t_min, t_max);
+    Hit h;
+    return object_first(S, w, ref, o, d, t_min, t_max, &h);
+}
+
+/* ------------------------------------------------------------------------------------------------------
+ * The scene: nearest hit over all objects (ties go to the lower object index, as the reference's loop
+ * over objects does) and shadow feelers. */
+
+static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d,
+                                   Hit *best, int64_t *best_obj)
+{
+    Hit h;
+    double limit = isfinite(best->t) ? nextafter(best->t, INFINITY) : INFINITY;
+    if (object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h) &&
+        (h.t < best->t || (h.t == best->t && obj < *best_obj))) {
+        *best = h;
+        *best_obj = obj;
+    }
+}
+
+/* A conservative slab test for the object hierarchy (its boxes are padded): an axis whose slab gives
+ * NaN (origin on a face plane of a parallel ray) constrains nothing. */
+static inline int box_hit(const double *lo, const double *hi, const double *o, const double *inv, double near,
+                          double far)
+{
+    for (int i = 0; i < 3; i++) {
+        double a = (lo[i] - o[i]) * inv[i], b = (hi[i] - o[i]) * inv[i];
+        if (a != a || b != b)
+            continue;
+        double mn = a < b ? a : b, mx = a < b ? b : a;
+        if (mn > near) near = mn;
+        if (mx < far) far = mx;
+    }
+    return near <= far;
+}
+
+static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+{
+    best->t = INFINITY;
+    *best_obj = -1;
+    for (int64_t i = 0; i < S->n_unbounded; i++)
+        consider_object(S, w, S->unbounded[i], o, d, best, best_obj);
+    if (S->n_nodes) {
+        double inv[3] = {1.0 / d[0], 1.0 / d[1], 1.0 / d[2]};
+        int64_t *stack = w->tree_stack, top = 0;
+        stack[top++] = 0;
+        while (top) {
+            const TopNode *node = &S->nodes[stack[--top]];
+            if (!box_hit(node->lo, node->hi, o, inv, 0.0, best->t))
+                continue;
+            if (node->count) {
+                for (int64_t i = node->first; i < node->first + node->count; i++)
+                    consider_object(S, w, S->items[i], o, d, best, best_obj);
+                continue;
+            }
+            int64_t near = node->left, far = node->left + 1;
+            if (d[node->axis] < 0.0) {
+                near = far;
+                far = node->left;
+            }
+            stack[top++] = far;
+            stack[top++] = near;
+        }
+    }
+    return *best_obj >= 0;
+}
+
+/* Is any object on o + t d, 0 < t < t_max?  `cache` (may be NULL) remembers the last object that blocked a
+ * feeler toward the same light and is tried first: neighbouring feelers are usually blocked by it, and
+ * which object blocks does not change the answer. */
+static int scene_occluded(const Scene *S, Work *w, const double *o, const double *d, double t_max, int64_t *cache)
+{
+    if (cache && *cache >= 0 && object_occludes(S, w, S->d.object_ref[*cache], o, d, 0.0, t_max))
+        return 1;
+    for (int64_t i = 0; i < S->n_unbounded; i++)
+        if (object_occludes(S, w, S->d.object_ref[S->unbounded[i]], o, d, 0.0, t_max)) {
+            if (cache) *cache = S->unbounded[i];
+            return 1;
+        }
+    if (S->n_nodes) {
+        double inv[3] = {1.0 / d[0], 1.0 / d[1], 1.0 / d[2]};
+        int64_t *stack = w->tree_stack, top = 0;
+        stack[top++] = 0;
+        while (top) {
+            const TopNode *node = &S->nodes[stack[--top]];
+            if (!box_hit(node->lo, node->hi, o, inv, 0.0, t_max))
+                continue;
+            if (node->count) {
+                for (int64_t i = node->first; i < node->first + node->count; i++)
+                    if (object_occludes(S, w, S->d.object_ref[S->items[i]], o, d, 0.0, t_max)) {
+                        if (cache) *cache = S->items[i];
+                        return 1;
+                    }
+                continue;
+            }
+            stack[top++] = node->left + 1;
+            stack[top++] = node->left;
+        }
+    }
+    return 0;
+}
+
+/* The hit's unit world normal (zero if degenerate), as first_hits normalises it. */
+static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
+{
+    normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, n);
+    double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (length > 0.0) {
+        n[0] /= length;
+        n[1] /= length;
+        n[2] /= length;
+    } else {
+        n[0] = n[1] = n[2] = 0.0;
+    }
+}
+
+/* ------------------------------------------------------------------------------------------------------
+ * Shading: one function per combination of live effects (see shade.h). */
+
+#define M_PI_VALUE 3.141592653589793 /* np.pi */
+#define fmin_np nan_min                /* np.minimum: NaN wins */
+#include "shade.h"
+
+/* One function per combination of live effects: lighting, shadows, Cook-Torrance, reflection, refraction
+ * (shadows and Cook-Torrance only ever come with lighting, see tracer.compile.live_effects). */
+#define SHADE_VARIANT(NAME, L, SH, CT, RL, RR)                                                              \
+    static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
+                     const Media *media, double *out)                                                      \
+    {                                                                                                      \
+        shade_body(S, w, o, d, level, media, out, L, SH, CT, RL, RR, NAME);                                \
+    }
+SHADE_VARIANT(shade_00000, 0, 0, 0, 0, 0)
+SHADE_VARIANT(shade_00001, 0, 0, 0, 0, 1)
+SHADE_VARIANT(shade_00010, 0, 0, 0, 1, 0)
+SHADE_VARIANT(shade_00011, 0, 0, 0, 1, 1)
+SHADE_VARIANT(shade_10000, 1, 0, 0, 0, 0)
+SHADE_VARIANT(shade_10001, 1, 0, 0, 0, 1)
+SHADE_VARIANT(shade_10010, 1, 0, 0, 1, 0)
+SHADE_VARIANT(shade_10011, 1, 0, 0, 1, 1)
+SHADE_VARIANT(shade_10100, 1, 0, 1, 0, 0)
+SHADE_VARIANT(shade_10101, 1, 0, 1, 0, 1)
+SHADE_VARIANT(shade_10110, 1, 0, 1, 1, 0)
+SHADE_VARIANT(shade_10111, 1, 0, 1, 1, 1)
+SHADE_VARIANT(shade_11000, 1, 1, 0, 0, 0)
+SHADE_VARIANT(shade_11001, 1, 1, 0, 0, 1)
+SHADE_VARIANT(shade_11010, 1, 1, 0, 1, 0)
+SHADE_VARIANT(shade_11011, 1, 1, 0, 1, 1)
+SHADE_VARIANT(shade_11100, 1, 1, 1, 0, 0)
+SHADE_VARIANT(shade_11101, 1, 1, 1, 0, 1)
+SHADE_VARIANT(shade_11110, 1, 1, 1, 1, 0)
+SHADE_VARIANT(shade_11111, 1, 1, 1, 1, 1)
+
+static ShadeFn pick_shade(int64_t effects)
+{
+    int l = (effects & FX_LIGHTING) != 0;
+    int s = l && (effects & FX_SHADOWS) != 0, ct = l && (effects & FX_COOK_TORRANCE) != 0;
+    int rl = (effects & FX_REFLECTION) != 0, rr = (effects & FX_REFRACTION) != 0;
+    static const ShadeFn unlit[2][2] = {{shade_00000, shade_00001}, {shade_00010, shade_00011}};
+    static const ShadeFn lit[2][2][2][2] = {
+        {{{shade_10000, shade_10001}, {shade_10010, shade_10011}}, {{shade_10100, shade_10101}, {shade_10110, shade_10111}}},
+        {{{shade_11000, shade_11001}, {shade_11010, shade_11011}}, {{shade_11100, shade_11101}, {shade_11110, shade_11111}}},
+    };
+    return l ? lit[s][ct][rl][rr] : unlit[rl][rr];
+}
+
+/* ------------------------------------------------------------------------------------------------------
+ * Building the scene: checks, mesh views, the top-level BVH */
+
+static double half_area(const double *lo, const double *hi)
+{
+    double x = hi[0] - lo[0], y = hi[1] - lo[1], z = hi[2] - lo[2];
+    if (!(x >= 0.0 && y >= 0.0 && z >= 0.0))
+        return 0.0;
+    return x * y + y * z + z * x;
+}
+
+static void box_empty(double *lo, double *hi)
+{
+    for (int i = 0; i < 3; i++) {
+        lo[i] = INFINITY;
+        hi[i] = -INFINITY;
+    }
+}
+
+static void box_grow(double *lo, double *hi, const double *blo, const double *bhi)
+{
+    for (int i = 0; i < 3; i++) {
+        if (blo[i] < lo[i]) lo[i] = blo[i];
+        if (bhi[i] > hi[i]) hi[i] = bhi[i];
+    }
+}
+
+#define SAH_BINS 16
+
+typedef struct {
+    int64_t node, start, end, depth;
+} BuildTask;
+
+static int build_tree(Scene *S)
+{
+    const SceneDesc *D = &S->d;
+    int64_t nb = 0;
+    for (int64_t i = 0; i < D->n_objects; i++)
+        nb += D->object_bounded[i] != 0;
+    S->n_unbounded = D->n_objects - nb;
+    S->unbounded = (int64_t *)malloc((size_t)(S->n_unbounded + 1) * sizeof(int64_t));
+    S->items = (int64_t *)malloc((size_t)(nb + 1) * sizeof(int64_t));
+    S->nodes = (TopNode *)malloc((size_t)(2 * nb + 1) * sizeof(TopNode));
+    double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
+    BuildTask *tasks = (BuildTask *)malloc((size_t)(2 * nb + 2) * sizeof(BuildTask));
+    uint8_t *bin_of = (uint8_t *)malloc((size_t)(nb + 1));
+    if (!S->unbounded || !S->items || !S->nodes || !centre || !tasks || !bin_of) {
+        free(centre);
+        free(tasks);
+        free(bin_of);
+        return 0;
+    }
+    int64_t u = 0, b = 0;
+    for (int64_t i = 0; i < D->n_objects; i++) {
+        if (D->object_bounded[i]) {
+            const double *box = D->object_box + 6 * i;
+            for (int k = 0; k < 3; k++)
+                centre[3 * b + k] = 0.5 * (box[k] + box[3 + k]);
+            S->items[b++] = i;
+        } else {
+            S->unbounded[u++] = i;
+        }
+    }
+    /* centre[] is indexed by position in items[]; the partition below permutes them together. */
+    S->n_nodes = 0;
+    S->tree_depth = 0;
+    if (nb == 0) {
+        free(centre);
+        free(tasks);
+        free(bin_of);
+        return 1;
+    }
+    S->n_nodes = 1;
+    int64_t n_tasks = 0;
+    tasks[n_tasks++] = (BuildTask){0, 0, nb, 1};
+    while (n_tasks) {
+        BuildTask task = tasks[--n_tasks];
+        TopNode *node = &S->nodes[task.node];
+        if (task.depth > S->tree_depth)
+            S->tree_depth = task.depth;
+        double clo[3], chi[3];
+        box_empty(node->lo, node->hi);
+        box_empty(clo, chi);
+        for (int64_t i = task.start; i < task.end; i++) {
+            const double *box = D->object_box + 6 * S->items[i];
+            box_grow(node->lo, node->hi, box, box + 3);
+            box_grow(clo, chi, centre + 3 * i, centre + 3 * i);
+        }
+        int64_t n = task.end - task.start;
+        node->count = 0;
+        node->first = -1;
+        node->left = -1;
+        node->axis = 0;
+        if (n <= 2) {
+            node->first = task.start;
+            node->count = n;
+            continue;
+        }
+        int axis = 0;
+        for (int k = 1; k < 3; k++)
+            if (chi[k] - clo[k] > chi[axis] - clo[axis])
+                axis = k;
+        double extent = chi[axis] - clo[axis];
+        int64_t mid = task.start + n / 2;
+        if (extent > 0.0) {
+            int64_t count[SAH_BINS] = {0};
+            double blo[SAH_BINS][3], bhi[SAH_BINS][3];
+            for (int k = 0; k < SAH_BINS; k++)
+                box_empty(blo[k], bhi[k]);
+            for (int64_t i = task.start; i < task.end; i++) {
+                int64_t k = (int64_t)((centre[3 * i + axis] - clo[axis]) * (SAH_BINS / extent));
+                if (k >= SAH_BINS) k = SAH_BINS - 1;
+                if (k < 0) k = 0;
+                bin_of[i] = (uint8_t)k;
+                count[k]++;
+                const double *box = D->object_box + 6 * S->items[i];
+                box_grow(blo[k], bhi[k], box, box + 3);
+            }
+            double right_area[SAH_BINS];
+            int64_t right_count[SAH_BINS];
+            double rlo[3], rhi[3];
+            box_empty(rlo, rhi);
+            int64_t rc = 0;
+            for (int k = SAH_BINS - 1; k > 0; k--) {
+                box_grow(rlo, rhi, blo[k], bhi[k]);
+                rc += count[k];
+                right_area[k] = half_area(rlo, rhi);
+                right_count[k] = rc;
+            }
+            double llo[3], lhi[3];
+            box_empty(llo, lhi);
+            int64_t lc = 0, best_split = -1;
+            double best_cost = INFINITY;
+            for (int k = 0; k < SAH_BINS - 1; k++) {
+                box_grow(llo, lhi, blo[k], bhi[k]);
+                lc += count[k];
+                if (lc == 0 || right_count[k + 1] == 0)
+                    continue;
+                double cost = half_area(llo, lhi) * (double)lc + right_area[k + 1] * (double)right_count[k + 1];
+                if (cost < best_cost) {
+                    best_cost = cost;
+                    best_split = k;
+                }
+            }
+            /* small nodes become leaves when no split beats testing every object */
+            if (best_split < 0 || (n <= 4 && best_cost >= half_area(node->lo, node->hi) * (double)n)) {
+                node->first = task.start;
+                node->count = n;
+                continue;
+            }
+            if (best_split >= 0) {
+                /* partition items (and their centres) so that bins <= best_split come first */
+                int64_t i = task.start, j = task.end - 1;
+                while (i <= j) {
+                    if (bin_of[i] <= best_split) {
+                        i++;
+                    } else {
+                        int64_t x = S->items[i]; S->items[i] = S->items[j]; S->items[j] = x;
+                        uint8_t bx = bin_of[i]; bin_of[i] = bin_of[j]; bin_of[j] = bx;
+                        for (int k = 0; k < 3; k++) {
+                            double c = centre[3 * i + k];
+                            centre[3 * i + k] = centre[3 * j + k];
+                            centre[3 * j + k] = c;
+                        }
+                        j--;
+                    }
+                }
+                if (i > task.start && i < task.end)
+                    mid = i;
+            }
+        } else if (n <= 8) {
+            node->first = task.start;
+            node->count = n;
+            continue;
+        }
+        node->axis = axis;
+        node->left = S->n_nodes;
+        S->n_nodes += 2;
+        tasks[n_tasks++] = (BuildTask){node->left + 1, mid, task.end, task.depth + 1};
+        tasks[n_tasks++] = (BuildTask){node->left, task.start, mid, task.depth + 1};
+    }
+    free(centre);
+    free(tasks);
+    free(bin_of);
+    return 1;
+}
+
+static int64_t csg_depth_of(const SceneDesc *D, int64_t ref, int64_t guard)
+{
+    if (ref >= 0 || guard > D->n_csg)
+        return 0;
+    int64_t node = -ref - 1;
+    int64_t a = csg_depth_of(D, D->csg_left[node], guard + 1), b = csg_depth_of(D, D->csg_right[node], guard + 1);
+    return 1 + (a > b ? a : b);
+}
+
+static int ref_ok(const SceneDesc *D, int64_t ref)
+{
+    return ref >= 0 ? ref < D->n_prims : (-ref - 1) < D->n_csg;
+}
+
+/* Longest root-to-leaf path of a mesh BVH, checking its indices; -1 if they are inconsistent. */
+static int64_t mesh_check_depth(const MeshView *m)
+{
+    if (m->n_nodes == 0)
+        return 0;
+    int64_t *stack = (int64_t *)malloc((size_t)(4 * m->n_nodes + 4) * sizeof(int64_t));
+    if (!stack)
+        return -1;
+    int64_t top = 0, deepest = 0, visited = 0;
+    stack[top++] = 0;
+    stack[top++] = 1;
+    while (top) {
+        int64_t depth = stack[--top], node = stack[--top];
+        if (++visited > m->n_nodes) { free(stack); return -1; }
+        if (depth > deepest) deepest = depth;
+        if (m->count[node]) {
+            if (m->first[node] < 0 || m->first[node] + m->count[node] > m->n_tris) { free(stack); return -1; }
+            continue;
+        }
+        int64_t l = m->left[node], r = m->right[node];
+        if (l <= node || r <= node || l >= m->n_nodes || r >= m->n_nodes || m->axis[node] < 0 || m->axis[node] > 2) {
+            free(stack);
+            return -1;
+        }
+        stack[top++] = r; stack[top++] = depth + 1;
+        stack[top++] = l; stack[top++] = depth + 1;
+    }
+    free(stack);
+    return deepest;
+}
+
+void rt_destroy(void *handle)
+{
+    Scene *S = (Scene *)handle;
+    if (!S)
+        return;
+    free(S->meshes);
+    free(S->nodes);
+    free(S->items);
+    free(S->unbounded);
+    free(S);
+}
+
+void *rt_create(const SceneDesc *desc)
+{
+    Scene *S = (Scene *)calloc(1, sizeof(Scene));
+    if (!S)
+        return NULL;
+    S->d = *desc;
+    const SceneDesc *D = &S->d;
+    /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
+    for (int64_t p = 0; p < D->n_prims; p++) {
+        int kind = D->prim_kind[p];
+        if (kind < K_SPHERE || kind > K_MESH || D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
+            goto fail;
+        if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
+            goto fail;
+    }
+    for (int64_t c = 0; c < D->n_csg; c++)
+        if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
+            !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
+            goto fail;
+    for (int64_t i = 0; i < D->n_objects; i++)
+        if (!ref_ok(D, D->object_ref[i]))
+            goto fail;
+    for (int64_t i = 0; i < D->n_objects; i++) {
+        int64_t depth = csg_depth_of(D, D->object_ref[i], 0);
+        if (depth > S->csg_depth)
+            S->csg_depth = depth;
+    }
+    S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
+    if (!S->meshes)
+        goto fail;
+    for (int64_t k = 0; k < D->n_meshes; k++) {
+        const int64_t *info = D->mesh_info + 4 * k;
+        int64_t nb = info[0], tb = info[2];
+        MeshView *m = &S->meshes[k];
+        m->lo = D->node_lo + 3 * nb;
+        m->hi = D->node_hi + 3 * nb;
+        m->left = D->node_left + nb;
+        m->right = D->node_right + nb;
+        m->first = D->node_first + nb;
+        m->count = D->node_count + nb;
+        m->axis = D->node_axis + nb;
+        m->n_nodes = info[1];
+        m->order = D->tri_order + tb;
+        m->p0 = D->tri_p0 + 3 * tb;
+        m->e1 = D->tri_e1 + 3 * tb;
+        m->e2 = D->tri_e2 + 3 * tb;
+        m->flip = D->tri_flip + tb;
+        m->edge_scale = D->tri_edge_scale + tb;
+        m->radius = D->tri_radius + tb;
+        m->slack1 = D->tri_slack1 + tb;
+        m->slack2 = D->tri_slack2 + tb;
+        m->welded = D->tri_welded + 3 * tb;
+        m->rounding_factor = D->mesh_constants[0];
+        m->barycentric_max = D->mesh_constants[1];
+        m->parallel_eps = D->mesh_constants[2];
+        m->dedupe = D->mesh_constants[3];
+        m->dedupe_adjacent = D->mesh_constants[4];
+        m->geometric = D->tri_geometric + 3 * tb;
+        m->corners = D->tri_corners + 9 * tb;
+        m->has_normals = D->tri_has_normals + tb;
+        m->n_tris = info[3];
+        m->extent = D->mesh_extent[k];
+        for (int64_t i = 0; i < m->n_tris; i++)
+            if (m->order[i] < 0 || m->order[i] >= m->n_tris)
+                goto fail;
+        m->depth = mesh_check_depth(m);
+        if (m->depth < 0)
+            goto fail;
+        if (m->depth > S->mesh_depth)
+            S->mesh_depth = m->depth;
+    }
+    if (!build_tree(S))
+        goto fail;
+    return S;
+fail:
+    rt_destroy(S);
+    return NULL;
+}
+
+/* ------------------------------------------------------------------------------------------------------
+ * Batches over threads */
+
+enum { JOB_TRACE, JOB_FIRST, JOB_OCCLUDED };
+
+typedef struct {
+    const Scene *S;
+    int mode;
+    int64_t n;
+    const double *o, *d;
+    double *colors;
+    double *t, *normal;
+    int32_t *shape, *object;
+    int8_t *flags;
+    double t_max;
+    ShadeFn shade;
+    _Atomic int64_t next;
+} Job;
+
+typedef struct {
+    Job *job;
+    int64_t counts[4];
+    int failed;
+} Worker;
+
+#define CHUNK 16
+
+static void *run_worker(void *arg)
+{
+    Worker *wk = (Worker *)arg;
+    Job *job = wk->job;
+    const Scene *S = job->S;
+    Work w;
+    if (!work_init(&w, S)) {
+        wk->failed = 1;
+        return NULL;
+    }
+    Media air;
+    memset(&air, 0, sizeof(air));
+    for (;;) {
+        int64_t start = atomic_fetch_add(&job->next, CHUNK);
+        if (start >= job->n)
+            break;
+        int64_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
+        for (int64_t i = start; i < end; i++) {
+            const double *o = job->o + 3 * i, *d = job->d + 3 * i;
+            if (job->mode == JOB_TRACE) {
+                job->shade(S, &w, o, d, 0, &air, job->colors + 3 * i);
+            } else if (job->mode == JOB_FIRST) {
+                Hit h;
+                int64_t obj;
+                if (scene_first(S, &w, o, d, &h, &obj)) {
+                    job->t[i] = h.t;
+                    world_unit_normal(S, &h, job->normal + 3 * i);
+                    job->shape[i] = h.shape;
+                    job->object[i] = (int32_t)obj;
+                    job->flags[i] = (int8_t)h.entering;
+                } else {
+                    job->t[i] = INFINITY;
+                    job->normal[3 * i] = job->normal[3 * i + 1] = job->normal[3 * i + 2] = 0.0;
+                    job->shape[i] = -1;
+                    job->object[i] = -1;
+                    job->flags[i] = 0;
+                }
+            } else {
+                job->flags[i] = (int8_t)scene_occluded(S, &w, o, d, job->t_max, NULL);
+            }
+        }
+    }
+    memcpy(wk->counts, w.counts, sizeof(wk->counts));
+    wk->failed = w.oom;
+    work_free(&w);
+    return NULL;
+}
+
+#define MAX_THREADS 256
+
+/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure. */
+static int run_job(Job *job, int64_t threads, int64_t *counts)
+{
+    if (threads < 1)
+        threads = 1;
+    if (threads > MAX_THREADS)
+        threads = MAX_THREADS;
+    int64_t useful = (job->n + CHUNK - 1) / CHUNK;
+    if (threads > useful)
+        threads = useful > 0 ? useful : 1;
+    atomic_store(&job->next, 0);
+    Worker workers[MAX_THREADS];
+    pthread_t ids[MAX_THREADS];
+    int started[MAX_THREADS];
+    for (int64_t k = 0; k < threads; k++) {
+        workers[k].job = job;
+        memset(workers[k].counts, 0, sizeof(workers[k].counts));
+        workers[k].failed = 0;
+        started[k] = 0;
+    }
+    for (int64_t k = 1; k < threads; k++)
+        started[k] = pthread_create(&ids[k], NULL, run_worker, &workers[k]) == 0;
+    run_worker(&workers[0]);
+    int failed = 0;
+    for (int64_t k = 0; k < threads; k++) {
+        if (k > 0 && started[k])
+            pthread_join(ids[k], NULL);
+        failed |= workers[k].failed;
+        if (counts)
+            for (int c = 0; c < 4; c++)
+                counts[c] += workers[k].counts[c];
+    }
+    return failed ? -1 : 0;
+}
+
+int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
+             int64_t *counts, int64_t threads)
+{
+    const Scene *S = (const Scene *)scene;
+    Job job;
+    memset(&job, 0, sizeof(job));
+    job.S = S;
+    job.mode = JOB_TRACE;
+    job.n = n;
+    job.o = origins;
+    job.d = directions;
+    job.colors = colors;
+    job.shade = pick_shade(S->d.effects);
+    counts[RAY_CAMERA] += n;
+    return run_job(&job, threads, counts);
+}
+
+int rt_first_hits(void *scene, int64_t n, const double *origins, const double *directions, double *t,
+                  double *normal, int32_t *shape, int32_t *object, int8_t *entering, int64_t threads)
+{
+    Job job;
+    memset(&job, 0, sizeof(job));
+    job.S = (const Scene *)scene;
+    job.mode = JOB_FIRST;
+    job.n = n;
+    job.o = origins;
+    job.d = directions;
+    job.t = t;
+    job.normal = normal;
+    job.shape = shape;
+    job.object = object;
+    job.flags = entering;
+    return run_job(&job, threads, NULL);
+}
+
+int rt_occluded(void *scene, int64_t n, const double *origins, const double *directions, double t_max,
+                int8_t *blocked, int64_t threads)
+{
+    Job job;
+    memset(&job, 0, sizeof(job));
+    job.S = (const Scene *)scene;
+    job.mode = JOB_OCCLUDED;
+    job.n = n;
+    job.o = origins;
+    job.d = directions;
+    job.flags = blocked;
+    job.t_max = t_max;
+    return run_job(&job, threads, NULL);
+}
+
+/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, as
+ * the reference's obj.intersect(); returns the number of hits (only `capacity` are written) or -1. */
+int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction,
+                       int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
+                       int32_t *part, double *uv, int8_t *inside_at_start)
+{
+    const Scene *S = (const Scene *)scene;
+    if (object < 0 || object >= S->d.n_objects)
+        return -1;
+    Work w;
+    if (!work_init(&w, S))
+        return -1;
+    HitList *top = &w.lists[w.n_lists - 1];
+    int ok = object_hits(S, &w, S->d.object_ref[object], origin, direction, ray_scale_over_speed(origin, direction),
+                         0, top);
+    int64_t n = ok && !w.oom ? top->n : -1;
+    for (int64_t i = 0; i < n && i < capacity; i++) {
+        const Hit *h = &top->h[i];
+        t[i] = h->t;
+        entering[i] = (int8_t)h->entering;
+        normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, normal + 3 * i);
+        shape[i] = h->shape;
+        part[i] = h->part;
+        uv[2 * i] = h->uv[0];
+        uv[2 * i + 1] = h->uv[1];
+    }
+    if (n >= 0)
+        *inside_at_start = (int8_t)top->inside;
+    work_free(&w);
+    return n;
+}

@@ -1,0 +1,321 @@
+"""A CompiledScene as flat, contiguous arrays for the C core, and the ctypes mirror of its SceneDesc.
+
+Nothing is recomputed here that the NumPy path computes: inverse matrices, bounding spheres, polyhedron
+planes, mesh BVHs and material tables are taken from the compiled scene as they are, so both backends
+trace the same numbers.  What is added is a padded world bounding box per top-level object, for the C
+core's BVH over objects.
+
+:func:`unsupported_reason` decides which scenes the C core traces: anything it does not know (an effect it
+has not implemented, such as textures, a node type or a mesh layout it does not understand) is refused
+with a reason, and the NumPy path takes the scene.
+"""
+from __future__ import annotations
+
+import ctypes
+from typing import Optional
+
+import numpy as np
+
+from ..compile import CompiledScene, CSGNode, Primitive
+from ..model import POLYHEDRON_KINDS, SHAPE_KINDS
+
+KIND_CODES = {"sphere": 0, "cube": 1, "square": 2, "plane": 3, "taperedCylinder": 4, "cylinder": 4, "cone": 4,
+              "torus": 5, **{k: 6 for k in POLYHEDRON_KINDS}, "teapot": 7, "mesh": 7}
+OP_CODES = {"union": 0, "intersection": 1, "difference": 2}
+EFFECT_BITS = {"lighting": 1, "shadows": 2, "reflection": 4, "refraction": 8, "cook-torrance": 16}
+#: Effects the C core implements; any other live effect sends the scene to the NumPy path.
+HANDLED_EFFECTS = frozenset(EFFECT_BITS) | {"csg"} | {f"shape:{kind}" for kind in KIND_CODES}
+#: Relative padding of the objects' world boxes: far above the rounding of any hit, and of the shapes'
+#: own edge tolerances (1e-12 of their size), far below anything that costs time.
+BOX_PADDING = 1e-8
+
+#: The TriangleMesh attributes the C core walks (see tracer.intersect.mesh.TriangleMesh).
+MESH_ATTRIBUTES = ("node_lo", "node_hi", "node_left", "node_right", "node_first", "node_count", "node_axis",
+                   "tri_order", "tri_p0", "tri_e1", "tri_e2", "tri_flip", "_edge_scale", "_radius", "_slack1",
+                   "_slack2", "_tri_welded", "_geometric_normal", "_corner_normals", "_has_normals", "extent")
+MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILON", "DEDUPE_RELATIVE",
+                  "DEDUPE_RELATIVE_ADJACENT")
+
+_P = ctypes.POINTER
+_D, _I8, _U8, _I32, _I64 = ctypes.c_double, ctypes.c_int8, ctypes.c_uint8, ctypes.c_int32, ctypes.c_int64
+
+# (name, ctypes type, numpy dtype for pointer fields); the order is core.h's SceneDesc.
+_LAYOUT = [
+    ("n_prims", _I64, None), ("prim_kind", _P(_I32), np.int32), ("prim_inverse", _P(_D), np.float64),
+    ("prim_sphere", _P(_D), np.float64), ("prim_param", _P(_D), np.float64), ("prim_aux", _P(_I64), np.int64),
+    ("prim_material", _P(_I32), np.int32),
+    ("planes", _P(_D), np.float64),
+    ("n_meshes", _I64, None), ("mesh_info", _P(_I64), np.int64), ("mesh_extent", _P(_D), np.float64),
+    ("mesh_constants", _D * 5, None),
+    ("node_lo", _P(_D), np.float64), ("node_hi", _P(_D), np.float64), ("node_left", _P(_I64), np.int64),
+    ("node_right", _P(_I64), np.int64), ("node_first", _P(_I64), np.int64), ("node_count", _P(_I64), np.int64),
+    ("node_axis", _P(_I8), np.int8),
+    ("tri_order", _P(_I64), np.int64), ("tri_p0", _P(_D), np.float64), ("tri_e1", _P(_D), np.float64),
+    ("tri_e2", _P(_D), np.float64), ("tri_flip", _P(_U8), np.uint8), ("tri_edge_scale", _P(_D), np.float64),
+    ("tri_radius", _P(_D), np.float64), ("tri_slack1", _P(_D), np.float64), ("tri_slack2", _P(_D), np.float64),
+    ("tri_welded", _P(_I64), np.int64), ("tri_geometric", _P(_D), np.float64),
+    ("tri_corners", _P(_D), np.float64), ("tri_has_normals", _P(_U8), np.uint8),
+    ("n_csg", _I64, None), ("csg_op", _P(_I32), np.int32), ("csg_left", _P(_I64), np.int64),
+    ("csg_right", _P(_I64), np.int64),
+    ("n_objects", _I64, None), ("object_ref", _P(_I64), np.int64), ("object_box", _P(_D), np.float64),
+    ("object_bounded", _P(_U8), np.uint8),
+    ("n_materials", _I64, None), ("mat_ambient", _P(_D), np.float64), ("mat_diffuse", _P(_D), np.float64),
+    ("mat_specular", _P(_D), np.float64), ("mat_emissive", _P(_D), np.float64),
+    ("mat_exponent", _P(_D), np.float64), ("mat_reflectivity", _P(_D), np.float64),
+    ("mat_transparency", _P(_D), np.float64), ("mat_speed", _P(_D), np.float64),
+    ("mat_specular_fraction", _P(_D), np.float64), ("mat_roughness", _P(_D), np.float64),
+    ("n_lights", _I64, None), ("light_pos", _P(_D), np.float64), ("light_color", _P(_D), np.float64),
+    ("background", _D * 3, None), ("global_ambient", _D * 3, None), ("min_reflectivity", _D, None),
+    ("min_transparency", _D, None), ("max_depth", _I64, None), ("effects", _I64, None),
+]
+
+
+class SceneDesc(ctypes.Structure):
+    _fields_ = [(name, ctype) for name, ctype, _ in _LAYOUT]
+
+
+def _mesh_of(prim: Primitive):
+    return getattr(prim, "_mesh", None)
+
+
+def _planes_of(prim: Primitive):
+    return getattr(prim, "_planes", None)
+
+
+def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
+    """None if the C core traces this scene exactly as the NumPy path does, else why not."""
+    unknown = sorted(e for e in compiled.effects if e not in HANDLED_EFFECTS)
+    if unknown:
+        return f"not implemented in C: {', '.join(unknown)}"
+    for material in compiled.materials.materials:
+        if material.texture != 0:
+            return "not implemented in C: textures"
+    for kind in SHAPE_KINDS:  # a shape kind added to the model but not here
+        if kind not in KIND_CODES:
+            return f"not implemented in C: shape {kind}"
+
+    def check(node) -> Optional[str]:
+        if isinstance(node, CSGNode):
+            if node.op not in OP_CODES:
+                return f"unknown boolean {node.op!r}"
+            return check(node.left) or check(node.right)
+        if not isinstance(node, Primitive):
+            return f"unknown scene node {type(node).__name__}"
+        if node.kind not in KIND_CODES:
+            return f"not implemented in C: shape {node.kind}"
+        if KIND_CODES[node.kind] == 6 and _planes_of(node) is None:
+            return f"{node.kind} has no face planes"
+        if KIND_CODES[node.kind] == 7:
+            mesh = _mesh_of(node)
+            missing = [a for a in MESH_ATTRIBUTES if mesh is None or not hasattr(mesh, a)]
+            if missing:
+                return f"mesh layout not understood by the C core (no {', '.join(missing)})"
+        return None
+
+    for obj in compiled.objects:
+        reason = check(obj)
+        if reason:
+            return reason
+    if any(_mesh_of(p) is not None for p in compiled.primitives):
+        from ..intersect import mesh as mesh_module
+        missing = [c for c in MESH_CONSTANTS if not hasattr(mesh_module, c)]
+        if missing:
+            return f"mesh constants not found: {', '.join(missing)}"
+    return None
+
+
+#: Generic boxes (centre, half extents) that hold each closed-form shape; tapered cylinders get theirs
+#: from their small radius, meshes and polyhedra from their vertices.
+_GENERIC_BOX = {"sphere": ((0, 0, 0), (1, 1, 1)), "cube": ((0, 0, 0), (1, 1, 1)), "square": ((0, 0, 0), (1, 1, 0)),
+                "torus": ((0, 0, 0), (1.2, 1.2, 0.2))}
+
+
+def _generic_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per primitive: generic box centre (P, 3), half extents (P, 3), and whether it is bounded (P,)."""
+    n = len(prims)
+    centre, half = np.zeros((n, 3)), np.zeros((n, 3))
+    bounded = np.ones(n, dtype=bool)
+    mesh_boxes: dict[int, tuple] = {}
+    for i, p in enumerate(prims):
+        kind = p.kind
+        if kind in _GENERIC_BOX:
+            centre[i], half[i] = _GENERIC_BOX[kind]
+        elif kind == "plane":
+            bounded[i] = False
+        elif KIND_CODES[kind] == 4:
+            r = max(1.0, float(p.shape.small_radius))
+            centre[i], half[i] = (0.0, 0.0, 0.5), (r, r, 0.5)
+        else:
+            key = id(p.shape.mesh)
+            if key not in mesh_boxes:
+                v = np.asarray(p.shape.mesh.vertices, dtype=np.float64).reshape(-1, 3)
+                lo, hi = (v.min(axis=0), v.max(axis=0)) if len(v) else (np.zeros(3), np.zeros(3))
+                mesh_boxes[key] = (0.5 * (lo + hi), 0.5 * (hi - lo))
+            centre[i], half[i] = mesh_boxes[key]
+    return centre, half, bounded
+
+
+def _world_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World boxes (lo, hi, bounded) of the primitives: the generic box through each matrix (its exact
+    bounding box is centre A c + t, half extents |A| h), padded relatively."""
+    centre, half, bounded = _generic_boxes(prims)
+    if not prims:
+        return np.zeros((0, 3)), np.zeros((0, 3)), bounded
+    m = np.stack([np.asarray(p.matrix, dtype=np.float64) for p in prims])
+    a = m[:, :3, :3]
+    world_centre = np.einsum("nij,nj->ni", a, centre) + m[:, :3, 3]
+    world_half = np.einsum("nij,nj->ni", np.abs(a), half)
+    lo, hi = world_centre - world_half, world_centre + world_half
+    scale = np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1)) + (hi - lo).max(axis=1)
+    pad = (BOX_PADDING * scale)[:, None]
+    return lo - pad, hi + pad, bounded
+
+
+def _box(node, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
+    """World box (lo, hi) that holds every surface point of the node's solid, or None if unbounded."""
+    if isinstance(node, CSGNode):
+        left, right = _box(node.left, lo, hi, bounded), _box(node.right, lo, hi, bounded)
+        if node.op == "union":
+            return None if left is None or right is None else (np.minimum(left[0], right[0]),
+                                                               np.maximum(left[1], right[1]))
+        if node.op == "intersection":
+            if left is None or right is None:
+                return left if right is None else right
+            return np.maximum(left[0], right[0]), np.minimum(left[1], right[1])
+        return left  # difference: inside the left solid
+    i = node.index
+    return (lo[i], hi[i]) if bounded[i] else None
+
+
+class FlatScene:
+    """The arrays (kept alive here) and the SceneDesc that points into them."""
+
+    def __init__(self, compiled: CompiledScene):
+        self.arrays: dict[str, np.ndarray] = {}
+        prims = compiled.primitives
+        a = self.arrays
+        a["prim_kind"] = [KIND_CODES[p.kind] for p in prims]
+        a["prim_inverse"] = np.array([p.inverse for p in prims], dtype=np.float64).reshape(-1, 16)
+        a["prim_sphere"] = [(*((0.0, 0.0, 0.0) if p.center is None else p.center), p.radius) for p in prims]
+        a["prim_param"] = [float(p.shape.small_radius) if KIND_CODES[p.kind] == 4 else 0.0 for p in prims]
+        a["prim_material"] = [p.material_id for p in prims]
+
+        # Polyhedra planes and meshes (instances share one mesh).
+        planes, aux = [], []
+        meshes, mesh_index = [], {}
+        for p in prims:
+            code = KIND_CODES[p.kind]
+            if code == 6:
+                normals, offsets = _planes_of(p)
+                aux.append((sum(len(x) for x in planes), len(offsets)))
+                planes.append(np.c_[np.asarray(normals, dtype=np.float64), np.asarray(offsets, dtype=np.float64)])
+            elif code == 7:
+                mesh = _mesh_of(p)
+                if id(mesh) not in mesh_index:
+                    mesh_index[id(mesh)] = len(meshes)
+                    meshes.append(mesh)
+                aux.append((mesh_index[id(mesh)], 0))
+            else:
+                aux.append((0, 0))
+        a["prim_aux"] = aux
+        a["planes"] = np.concatenate(planes) if planes else np.zeros((0, 4))
+        self._flatten_meshes(meshes)
+
+        # CSG nodes and top-level objects.
+        csg_op, csg_left, csg_right = [], [], []
+
+        def ref(node) -> int:
+            if isinstance(node, CSGNode):
+                left, right = ref(node.left), ref(node.right)
+                csg_op.append(OP_CODES[node.op])
+                csg_left.append(left)
+                csg_right.append(right)
+                return -len(csg_op)  # node k is ref -k - 1
+            return node.index
+
+        prim_lo, prim_hi, prim_bounded = _world_boxes(prims)
+        object_ref = [ref(obj) for obj in compiled.objects]
+        object_box = np.zeros((len(object_ref), 6))
+        bounded = np.zeros(len(object_ref), dtype=bool)
+        for k, obj in enumerate(compiled.objects):
+            if isinstance(obj, Primitive):  # the common case, without a call
+                if prim_bounded[obj.index]:
+                    bounded[k] = True
+                    object_box[k, :3], object_box[k, 3:] = prim_lo[obj.index], prim_hi[obj.index]
+                continue
+            box = _box(obj, prim_lo, prim_hi, prim_bounded)
+            if box is not None:
+                bounded[k] = True
+                object_box[k, :3], object_box[k, 3:] = box
+        a.update(csg_op=csg_op, csg_left=csg_left, csg_right=csg_right, object_ref=object_ref,
+                 object_box=object_box, object_bounded=bounded)
+
+        mats = compiled.materials
+        a.update(mat_ambient=mats.ambient, mat_diffuse=mats.diffuse, mat_specular=mats.specular,
+                 mat_emissive=mats.emissive, mat_exponent=mats.specular_exponent,
+                 mat_reflectivity=mats.reflectivity, mat_transparency=mats.transparency,
+                 mat_speed=mats.speed_of_light,
+                 mat_specular_fraction=getattr(mats, "specular_fraction", np.zeros(len(mats.materials))),
+                 mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))))
+        a.update(light_pos=compiled.light_positions, light_color=compiled.light_colors)
+
+        settings = compiled.settings
+        counts = dict(n_prims=len(prims), n_meshes=len(meshes), n_csg=len(csg_op), n_objects=len(object_ref),
+                      n_materials=len(mats.materials), n_lights=len(compiled.light_positions))
+        effects = sum(bit for name, bit in EFFECT_BITS.items() if name in compiled.effects)
+        scalars = dict(background=tuple(settings.background), global_ambient=tuple(settings.global_ambient),
+                       min_reflectivity=float(settings.min_reflectivity),
+                       min_transparency=float(settings.min_transparency),
+                       max_depth=int(settings.max_recursion_depth), effects=effects,
+                       mesh_constants=self._mesh_constants(meshes))
+        self.desc = SceneDesc()
+        for name, ctype, dtype in _LAYOUT:
+            if dtype is None:
+                value = counts[name] if name in counts else scalars[name]
+                setattr(self.desc, name, ctype(*value) if isinstance(value, tuple) else value)
+                continue
+            array = np.ascontiguousarray(np.asarray(a.get(name, ()), dtype=dtype).reshape(-1))
+            if array.size == 0:  # a valid pointer even for empty tables
+                array = np.zeros(1, dtype=dtype)
+            a[name] = array
+            setattr(self.desc, name, array.ctypes.data_as(ctype))
+
+    @staticmethod
+    def _mesh_constants(meshes) -> tuple:
+        if not meshes:
+            return (0.0,) * 5
+        from ..intersect import mesh as mesh_module
+        return tuple(float(getattr(mesh_module, name)) for name in MESH_CONSTANTS)
+
+    def _flatten_meshes(self, meshes) -> None:
+        a = self.arrays
+        info, extent = [], []
+        columns: dict[str, list] = {name: [] for name in MESH_ATTRIBUTES if name != "extent"}
+        node_base = tri_base = 0
+        for mesh in meshes:
+            n_nodes, n_tris = len(mesh.node_count), len(mesh.tri_order)
+            info.append((node_base, n_nodes, tri_base, n_tris))
+            extent.append(float(mesh.extent))
+            for name in columns:
+                columns[name].append(np.asarray(getattr(mesh, name)))
+            node_base += n_nodes
+            tri_base += n_tris
+        a["mesh_info"] = info
+        a["mesh_extent"] = extent
+
+        def joined(name, width):
+            parts = [np.asarray(x).reshape(-1, width) if width > 1 else np.asarray(x).reshape(-1)
+                     for x in columns[name]]
+            return np.concatenate(parts) if parts else np.zeros((0, width) if width > 1 else 0)
+
+        for target, name, width in (("node_lo", "node_lo", 3), ("node_hi", "node_hi", 3),
+                                    ("node_left", "node_left", 1), ("node_right", "node_right", 1),
+                                    ("node_first", "node_first", 1), ("node_count", "node_count", 1),
+                                    ("node_axis", "node_axis", 1), ("tri_order", "tri_order", 1),
+                                    ("tri_p0", "tri_p0", 3), ("tri_e1", "tri_e1", 3), ("tri_e2", "tri_e2", 3),
+                                    ("tri_flip", "tri_flip", 1), ("tri_edge_scale", "_edge_scale", 1),
+                                    ("tri_radius", "_radius", 1), ("tri_slack1", "_slack1", 1),
+                                    ("tri_slack2", "_slack2", 1), ("tri_welded", "_tri_welded", 3),
+                                    ("tri_geometric", "_geometric_normal", 3),
+                                    ("tri_corners", "_corner_normals", 9), ("tri_has_normals", "_has_normals", 1)):
+            a[target] = joined(name, width)

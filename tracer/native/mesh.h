@@ -1,0 +1,384 @@
+/* Rays against triangle meshes: the C form of tracer/intersect/mesh.py, walking the very same flat BVH
+ * arrays (one ray at a time instead of packets).  All-hits, closest-hit and any-hit queries; the
+ * tolerances, the deduplication of shared-edge crossings and the ordering of coincident enter/exit pairs
+ * are those of the NumPy code. */
+#ifndef RT_MESH_H
+#define RT_MESH_H
+
+#include <stdlib.h>
+
+#include "core.h"
+#include "numeric.h"
+
+
+typedef struct {
+    const double *lo, *hi;
+    const int64_t *left, *right, *first, *count;
+    const int8_t *axis;
+    int64_t n_nodes;
+    const int64_t *order;
+    const double *p0, *e1, *e2;
+    const uint8_t *flip;
+    const double *edge_scale, *radius, *slack1, *slack2;
+    const int64_t *welded;
+    const double *geometric, *corners;
+    const uint8_t *has_normals;
+    int64_t n_tris;
+    double extent;
+    int64_t depth;  /* longest root-to-leaf path, in nodes */
+    double rounding_factor, barycentric_max, parallel_eps, dedupe, dedupe_adjacent;
+} MeshView;
+
+typedef struct {
+    double o[3], d[3], inv[3], speed, magnitude;
+} MeshRay;
+
+typedef struct {
+    int64_t slot;  /* leaf-order triangle */
+    double t, b1, b2;
+    int entering;
+} RawHit;
+
+static inline void mesh_ray(MeshRay *r, const double *o, const double *d)
+{
+    for (int i = 0; i < 3; i++) {
+        r->o[i] = o[i];
+        r->d[i] = d[i];
+        r->inv[i] = 1.0 / d[i];
+    }
+    r->speed = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    r->magnitude = sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2]);
+}
+
+/* np.minimum / np.maximum: NaN wins. */
+static inline double nan_min(double a, double b) { return (isnan(a) || isnan(b)) ? NAN : (a < b ? a : b); }
+static inline double nan_max(double a, double b) { return (isnan(a) || isnan(b)) ? NAN : (a > b ? a : b); }
+
+/* The box [lo, hi] meets the ray for some t in [lower, upper]; a NaN slab (origin on a face plane of a
+ * parallel ray) constrains nothing, as in TriangleMesh._slab. */
+static inline int slab_hit(const double *lo, const double *hi, const double *o, const double *inv, double lower,
+                           double upper)
+{
+    double near = NAN, far = NAN;
+    for (int i = 0; i < 3; i++) {
+        double a = (lo[i] - o[i]) * inv[i], b = (hi[i] - o[i]) * inv[i];
+        near = fmax_nan(near, nan_min(a, b));
+        far = fmin_nan(far, nan_max(a, b));
+    }
+    near = fmax_nan(near, lower);
+    far = fmin_nan(far, upper);
+    return near <= far;
+}
+
+/* Moller-Trumbore against leaf-order triangle i. */
+static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, double *t, double *b1, double *b2)
+{
+    const double *p0 = m->p0 + 3 * i, *e1 = m->e1 + 3 * i, *e2 = m->e2 + 3 * i;
+    double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
+    double pvec[3], qvec[3];
+    cross3(r->d, e2, pvec);
+    double det = dot3(e1, pvec);
+    cross3(s, e1, qvec);
+    double inv_det = 1.0 / det;
+    double u = dot3(s, pvec) * inv_det;
+    double v = dot3(r->d, qvec) * inv_det;
+    double tt = dot3(e2, qvec) * inv_det;
+    /* The barycentric slack bounds the rounding of this ray and triangle (see ROUNDING_FACTOR in
+     * mesh.py), capped for near-parallel rays. */
+    double abs_det = fabs(det);
+    double s1 = m->slack1[i], s2 = m->slack2[i];
+    double rounding = m->rounding_factor * DBL_EPSILON * r->speed * (r->magnitude + m->radius[i]) / abs_det;
+    double cap = m->barycentric_max / (s1 > s2 ? s1 : s2);
+    rounding = nan_min(rounding, cap);
+    double slack1 = rounding * s1, slack2 = rounding * s2;
+    if (abs_det > m->parallel_eps * r->speed * m->edge_scale[i] && u >= -slack1 && v >= -slack2 &&
+        u + v <= 1.0 + slack1 + slack2 && isfinite(tt)) {
+        *t = tt;
+        *b1 = u;
+        *b2 = v;
+        return 1;
+    }
+    return 0;
+}
+
+static inline int mesh_entering(const MeshView *m, int64_t slot, const double *d)
+{
+    double w[3];
+    cross3(m->e1 + 3 * slot, m->e2 + 3 * slot, w);
+    double facing = dot3(d, w);
+    return m->flip[slot] ? facing > 0.0 : facing < 0.0;
+}
+
+/* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
+static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+{
+    const double *g = m->geometric + 3 * tri, *c = m->corners + 9 * tri;
+    double w0 = 1.0 - b1 - b2;
+    double s[3];
+    for (int k = 0; k < 3; k++)
+        s[k] = w0 * c[k] + b1 * c[3 + k] + b2 * c[6 + k];
+    double length = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+    if (m->has_normals[tri] && length > 1e-12 && dot3(s, g) > 0.0) {
+        n[0] = s[0] / length;
+        n[1] = s[1] / length;
+        n[2] = s[2] / length;
+    } else {
+        n[0] = g[0];
+        n[1] = g[1];
+        n[2] = g[2];
+    }
+}
+
+static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, double b1, double b2, int entering, Hit *h)
+{
+    int64_t tri = m->order[slot];
+    h->t = t;
+    mesh_normal(m, tri, b1, b2, h->n);
+    h->uv[0] = b1;
+    h->uv[1] = b2;
+    h->part = (int32_t)tri;
+    h->shape = -1;
+    h->entering = entering;
+}
+
+/* The first hit with lower < t < upper (nearer child first, by the ray's own direction). */
+static int mesh_closest(const MeshView *m, const double *o, const double *d, double lower, double upper,
+                        int64_t *stack, Hit *out)
+{
+    if (m->n_nodes == 0)
+        return 0;
+    MeshRay r;
+    mesh_ray(&r, o, d);
+    double best_t = upper, best_b1 = 0.0, best_b2 = 0.0;
+    int64_t best_slot = -1, top = 0;
+    stack[top++] = 0;
+    while (top) {
+        int64_t node = stack[--top];
+        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, r.o, r.inv, lower, best_t))
+            continue;
+        if (m->count[node]) {
+            int64_t first = m->first[node], last = first + m->count[node];
+            for (int64_t i = first; i < last; i++) {
+                double t, b1, b2;
+                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < best_t) {
+                    best_t = t;
+                    best_b1 = b1;
+                    best_b2 = b2;
+                    best_slot = i;
+                }
+            }
+            continue;
+        }
+        int64_t near = m->left[node], far = m->right[node];
+        if (r.d[m->axis[node]] < 0.0) {
+            int64_t x = near; near = far; far = x;
+        }
+        stack[top++] = far;
+        stack[top++] = near;
+    }
+    if (best_slot < 0)
+        return 0;
+    mesh_fill_hit(m, best_slot, best_t, best_b1, best_b2, mesh_entering(m, best_slot, d), out);
+    return 1;
+}
+
+/* Any hit with lower < t < upper (shadow feelers). */
+static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack)
+{
+    if (m->n_nodes == 0)
+        return 0;
+    MeshRay r;
+    mesh_ray(&r, o, d);
+    int64_t top = 0;
+    stack[top++] = 0;
+    while (top) {
+        int64_t node = stack[--top];
+        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, r.o, r.inv, lower, upper))
+            continue;
+        if (m->count[node]) {
+            int64_t first = m->first[node], last = first + m->count[node];
+            for (int64_t i = first; i < last; i++) {
+                double t, b1, b2;
+                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < upper)
+                    return 1;
+            }
+            continue;
+        }
+        stack[top++] = m->right[node];
+        stack[top++] = m->left[node];
+    }
+    return 0;
+}
+
+/* Growable buffer of raw hits (per thread). */
+typedef struct {
+    RawHit *h;
+    int64_t n, cap;
+} RawBuffer;
+
+static int raw_push(RawBuffer *b, int64_t slot, double t, double b1, double b2)
+{
+    if (b->n == b->cap) {
+        int64_t cap = b->cap ? 2 * b->cap : 64;
+        RawHit *p = (RawHit *)realloc(b->h, (size_t)cap * sizeof(RawHit));
+        if (!p)
+            return 0;
+        b->h = p;
+        b->cap = cap;
+    }
+    RawHit *h = &b->h[b->n++];
+    h->slot = slot;
+    h->t = t;
+    h->b1 = b1;
+    h->b2 = b2;
+    h->entering = 0;
+    return 1;
+}
+
+/* Stable insertion sorts of raw hits (hit lists of one line are short). */
+static void raw_sort_by_sign_then_t(RawHit *h, int64_t n)
+{
+    for (int64_t i = 1; i < n; i++) {
+        RawHit x = h[i];
+        int64_t j = i;
+        while (j > 0 && (h[j - 1].entering > x.entering || (h[j - 1].entering == x.entering && h[j - 1].t > x.t))) {
+            h[j] = h[j - 1];
+            j--;
+        }
+        h[j] = x;
+    }
+}
+
+static void raw_sort_by_t(RawHit *h, int64_t n)
+{
+    for (int64_t i = 1; i < n; i++) {
+        RawHit x = h[i];
+        int64_t j = i;
+        while (j > 0 && h[j - 1].t > x.t) {
+            h[j] = h[j - 1];
+            j--;
+        }
+        h[j] = x;
+    }
+}
+
+/* How far apart hits a and b may be and still be one place (mesh.py's _dedupe_window): wider when the two
+ * triangles share a vertex. */
+static inline double dedupe_window(const MeshView *m, const RawHit *a, const RawHit *b, double tol_scale)
+{
+    double scale = fmax_nan(fabs(b->t), fabs(a->t)) + tol_scale;
+    const int64_t *wa = m->welded + 3 * a->slot, *wb = m->welded + 3 * b->slot;
+    int touching = 0;
+    for (int x = 0; x < 3 && !touching; x++)
+        for (int y = 0; y < 3; y++)
+            if (wa[x] == wb[y]) {
+                touching = 1;
+                break;
+            }
+    return (touching ? m->dedupe_adjacent : m->dedupe) * scale;
+}
+
+/* Every crossing of the whole line, deduplicated and ordered as TriangleMesh.all_hits.  Grows
+ * *out_buffer as needed and returns the count, or -1 when memory ran out. */
+static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int64_t *stack, RawBuffer *raw,
+                        Hit **out_buffer, int64_t *out_capacity)
+{
+    raw->n = 0;
+    if (m->n_nodes == 0)
+        return 0;
+    MeshRay r;
+    mesh_ray(&r, o, d);
+    int64_t top = 0;
+    stack[top++] = 0;
+    while (top) {
+        int64_t node = stack[--top];
+        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, r.o, r.inv, -INFINITY, INFINITY))
+            continue;
+        if (m->count[node]) {
+            int64_t first = m->first[node], last = first + m->count[node];
+            for (int64_t i = first; i < last; i++) {
+                double t, b1, b2;
+                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
+                    return -1;
+            }
+            continue;
+        }
+        stack[top++] = m->right[node];
+        stack[top++] = m->left[node];
+    }
+    int64_t n = raw->n;
+    if (n == 0)
+        return 0;
+    RawHit *h = raw->h;
+    for (int64_t i = 0; i < n; i++)
+        h[i].entering = mesh_entering(m, h[i].slot, d);
+    double tol_scale = m->extent / (r.speed > 0.0 ? r.speed : 1.0);
+
+    /* Drop repeated crossings (a shared edge or vertex hit twice, coincident faces): same sign, within
+     * the window of the hit before in (sign, t) order.  Compacting in place never overwrites h[i - 1]
+     * before it is read. */
+    raw_sort_by_sign_then_t(h, n);
+    int64_t kept = 0;
+    for (int64_t i = 0; i < n; i++) {
+        int repeat = i > 0 && h[i].entering == h[i - 1].entering &&
+                     h[i].t - h[i - 1].t <= dedupe_window(m, &h[i - 1], &h[i], tol_scale);
+        if (!repeat)
+            h[kept++] = h[i];
+    }
+    n = kept;
+
+    /* Sort by time (stable: on equal times exits, which came first, stay first).  An enter and an exit
+     * at (nearly) the same time go in the order that alternates with what came before: outside (net
+     * enters <= 0) -> enter first, inside -> exit first. */
+    raw_sort_by_t(h, n);
+    if (n > 1) {
+        uint8_t small[64];
+        uint8_t *tie = n <= 64 ? small : (uint8_t *)malloc((size_t)n);
+        if (!tie)
+            return -1;
+        for (int64_t i = 0; i + 1 < n; i++)
+            tie[i] = h[i + 1].entering != h[i].entering &&
+                     h[i + 1].t - h[i].t <= dedupe_window(m, &h[i], &h[i + 1], tol_scale);
+        tie[n - 1] = 0;
+        for (int64_t i = n - 1; i > 0; i--)  /* pairs do not overlap: tie[i] &= !tie[i - 1] (old values) */
+            tie[i] = tie[i] && !tie[i - 1];
+        int64_t net = 0;  /* enters minus exits before hit i */
+        for (int64_t i = 0; i < n; i++) {
+            int64_t before = net;
+            net += h[i].entering ? 1 : -1;
+            if (i + 1 < n && tie[i]) {  /* a pair: its net count does not depend on its order */
+                net += h[i + 1].entering ? 1 : -1;
+                if (h[i].entering == (before > 0)) {
+                    RawHit a = h[i];
+                    h[i].slot = h[i + 1].slot;
+                    h[i].b1 = h[i + 1].b1;
+                    h[i].b2 = h[i + 1].b2;
+                    h[i].entering = h[i + 1].entering;
+                    h[i + 1].slot = a.slot;
+                    h[i + 1].b1 = a.b1;
+                    h[i + 1].b2 = a.b2;
+                    h[i + 1].entering = a.entering;
+                }
+                i++;
+            }
+        }
+        if (tie != small)
+            free(tie);
+    }
+
+    if (n > *out_capacity) {
+        int64_t cap = *out_capacity ? *out_capacity : 16;
+        while (cap < n)
+            cap *= 2;
+        Hit *p = (Hit *)realloc(*out_buffer, (size_t)cap * sizeof(Hit));
+        if (!p)
+            return -1;
+        *out_buffer = p;
+        *out_capacity = cap;
+    }
+    for (int64_t i = 0; i < n; i++)
+        mesh_fill_hit(m, h[i].slot, h[i].t, h[i].b1, h[i].b2, h[i].entering, &(*out_buffer)[i]);
+    return n;
+}
+
+#endif

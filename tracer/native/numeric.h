@@ -1,0 +1,238 @@
+/* Small numerical building blocks: 3-vectors, affine maps, the stable quadratic and the eigenvalues of a
+ * small real Hessenberg matrix (for the torus quartic's companion matrix).
+ *
+ * Sums are written in the order NumPy evaluates them (left to right), so that results agree with the
+ * reference to the last bit wherever NumPy itself does not use BLAS.
+ */
+#ifndef RT_NUMERIC_H
+#define RT_NUMERIC_H
+
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+
+/* tracer.numerics.RELATIVE_EPSILON */
+#define REL_EPS 1e-9
+
+/* fmin/fmax with their NaN rule (a NaN argument loses; np.fmin/np.fmax too), inlined: the libm calls are
+ * slow in the inner loops. */
+static inline double fmin_nan(double a, double b) { return (a < b || b != b) ? a : b; }
+static inline double fmax_nan(double a, double b) { return (a > b || b != b) ? a : b; }
+
+static inline double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+static inline void cross3(const double *a, const double *b, double *out)
+{
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static inline double max_abs3(const double *a)
+{
+    double m = fabs(a[0]);
+    if (fabs(a[1]) > m) m = fabs(a[1]);
+    if (fabs(a[2]) > m) m = fabs(a[2]);
+    return m;
+}
+
+/* p' = M p for an affine row-major 4x4 */
+static inline void affine_point(const double *m, const double *p, double *out)
+{
+    for (int i = 0; i < 3; i++)
+        out[i] = p[0] * m[4 * i] + p[1] * m[4 * i + 1] + p[2] * m[4 * i + 2] + m[4 * i + 3];
+}
+
+/* v' = M[:3, :3] v */
+static inline void affine_vector(const double *m, const double *v, double *out)
+{
+    for (int i = 0; i < 3; i++)
+        out[i] = v[0] * m[4 * i] + v[1] * m[4 * i + 1] + v[2] * m[4 * i + 2];
+}
+
+/* n' = n @ M[:3, :3] (a generic normal through the inverse matrix: the inverse-transpose rule) */
+static inline void normal_to_world(const double *inv, const double *n, double *out)
+{
+    for (int j = 0; j < 3; j++)
+        out[j] = n[0] * inv[j] + n[1] * inv[4 + j] + n[2] * inv[8 + j];
+}
+
+/* Roots of a t^2 + 2 b t + c = 0 given disc = b^2 - a c, as tracer.intersect.quadratic.solve_quadratic:
+ * returns 0 where there are none (then lo, hi are untouched). */
+static inline int solve_quadratic(double a, double b, double c, double disc, double *lo, double *hi)
+{
+    if (!(disc >= 0.0))
+        return 0;
+    double root = sqrt(disc);
+    double q = -(b + (b >= 0.0 ? root : -root));
+    double t1, t2;
+    if (q == 0.0) {
+        t1 = (c == 0.0) ? 0.0 : NAN;
+        t2 = t1;
+    } else {
+        t1 = q / a;
+        t2 = c / q;
+    }
+    double l = fmin_nan(t1, t2), h = fmax_nan(t1, t2);
+    if (isnan(l) && isnan(h))
+        return 0;
+    *lo = l;
+    *hi = h;
+    return 1;
+}
+
+/* ---------------------------------------------------------------------------------------------------
+ * Eigenvalues of a real n x n upper Hessenberg matrix (n <= 4) by the implicitly shifted double-shift QR
+ * iteration (Francis steps with 3x3 Householder reflectors), after diagonal balancing by powers of two.
+ * Only the eigenvalues are wanted, so transformations are applied to the active block only.
+ * Returns 0 on success, -1 if the iteration did not converge.
+ */
+
+static void balance_small(double h[4][4], int n)
+{
+    int changed = 1;
+    for (int sweep = 0; changed && sweep < 64; sweep++) {
+        changed = 0;
+        for (int i = 0; i < n; i++) {
+            double col = 0.0, row = 0.0;
+            for (int j = 0; j < n; j++) {
+                if (j == i) continue;
+                col += fabs(h[j][i]);
+                row += fabs(h[i][j]);
+            }
+            if (col == 0.0 || row == 0.0)
+                continue;
+            /* Find the power of two f that brings the column norm (times f) and the row norm (over f)
+             * closest together; apply it only if that shrinks their sum noticeably. */
+            double total = col + row, f = 1.0, c = col;
+            while (c < row / 2.0) { f *= 2.0; c *= 4.0; }
+            while (c >= row * 2.0) { f /= 2.0; c /= 4.0; }
+            if ((c + row) / f < 0.95 * total) {
+                for (int j = 0; j < n; j++) {
+                    h[i][j] /= f;
+                    h[j][i] *= f;
+                }
+                changed = 1;
+            }
+        }
+    }
+}
+
+/* Eigenvalues of [[a, b], [c, d]] without needless cancellation. */
+static void eig2(double a, double b, double c, double d, double *r1, double *i1, double *r2, double *i2)
+{
+    double p = 0.5 * (a - d);
+    double bc = b * c;
+    double q = p * p + bc;
+    if (q >= 0.0) {
+        double z = p + copysign(sqrt(q), p);
+        *r1 = d + z;
+        *r2 = (z != 0.0) ? d - bc / z : d;
+        *i1 = *i2 = 0.0;
+    } else {
+        double s = sqrt(-q);
+        *r1 = *r2 = d + p;
+        *i1 = s;
+        *i2 = -s;
+    }
+}
+
+static int hessenberg_eigenvalues(double h[4][4], int n, double *wr, double *wi)
+{
+    balance_small(h, n);
+    double norm = 0.0;
+    for (int i = 0; i < n; i++)
+        for (int j = (i > 0 ? i - 1 : 0); j < n; j++)
+            norm += fabs(h[i][j]);
+    int hi = n - 1, iterations = 0;
+    while (hi >= 0) {
+        /* Deflate: find the start `lo` of the unreduced block ending at `hi`. */
+        int lo = hi;
+        while (lo > 0) {
+            double s = fabs(h[lo - 1][lo - 1]) + fabs(h[lo][lo]);
+            if (s == 0.0) s = norm;
+            if (fabs(h[lo][lo - 1]) <= DBL_EPSILON * s) {
+                h[lo][lo - 1] = 0.0;
+                break;
+            }
+            lo--;
+        }
+        if (lo == hi) {
+            wr[hi] = h[hi][hi];
+            wi[hi] = 0.0;
+            hi--;
+            iterations = 0;
+            continue;
+        }
+        if (lo == hi - 1) {
+            eig2(h[hi - 1][hi - 1], h[hi - 1][hi], h[hi][hi - 1], h[hi][hi], &wr[hi - 1], &wi[hi - 1], &wr[hi], &wi[hi]);
+            hi -= 2;
+            iterations = 0;
+            continue;
+        }
+        if (++iterations > 60)
+            return -1;
+        /* Shifts: the eigenvalues of the trailing 2x2 (as trace and determinant), or an exceptional pair
+         * now and then to break a cycle. */
+        double tr, det;
+        if (iterations % 11 == 10) {
+            double s = fabs(h[hi][hi - 1]) + fabs(h[hi - 1][hi - 2]);
+            double a = 0.75 * s + h[hi][hi];
+            tr = 2.0 * a;
+            det = a * a + 0.4375 * s * s;
+        } else {
+            double a = h[hi - 1][hi - 1], b = h[hi - 1][hi], c = h[hi][hi - 1], d = h[hi][hi];
+            tr = a + d;
+            det = a * d - b * c;
+        }
+        /* First column of (H - s1 I)(H - s2 I) = H^2 - tr H + det I, restricted to the block. */
+        double x = h[lo][lo] * h[lo][lo] + h[lo][lo + 1] * h[lo + 1][lo] - tr * h[lo][lo] + det;
+        double y = h[lo + 1][lo] * (h[lo][lo] + h[lo + 1][lo + 1] - tr);
+        double z = h[lo + 1][lo] * h[lo + 2][lo + 1];
+        for (int k = lo; k <= hi - 1; k++) {
+            int m = (k <= hi - 2) ? 3 : 2;  /* reflector size: 3, and 2 for the last step */
+            double v[3] = {x, y, m == 3 ? z : 0.0};
+            double scale = fabs(v[0]) + fabs(v[1]) + fabs(v[2]);
+            if (scale != 0.0) {
+                v[0] /= scale; v[1] /= scale; v[2] /= scale;
+                double alpha = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+                if (v[0] > 0.0) alpha = -alpha;
+                v[0] -= alpha;  /* v = x - alpha e1, the reflector maps x to alpha e1 */
+                double vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                if (vv != 0.0) {
+                    double beta = 2.0 / vv;
+                    int col0 = (k > lo) ? k - 1 : lo;
+                    for (int j = col0; j <= hi; j++) {
+                        double s = v[0] * h[k][j] + v[1] * h[k + 1][j];
+                        if (m == 3) s += v[2] * h[k + 2][j];
+                        s *= beta;
+                        h[k][j] -= s * v[0];
+                        h[k + 1][j] -= s * v[1];
+                        if (m == 3) h[k + 2][j] -= s * v[2];
+                    }
+                    int row1 = (k + 3 < hi) ? k + 3 : hi;
+                    for (int i = lo; i <= row1; i++) {
+                        double s = h[i][k] * v[0] + h[i][k + 1] * v[1];
+                        if (m == 3) s += h[i][k + 2] * v[2];
+                        s *= beta;
+                        h[i][k] -= s * v[0];
+                        h[i][k + 1] -= s * v[1];
+                        if (m == 3) h[i][k + 2] -= s * v[2];
+                    }
+                    if (k > lo) {  /* the bulge below the subdiagonal is gone */
+                        h[k + 1][k - 1] = 0.0;
+                        if (m == 3) h[k + 2][k - 1] = 0.0;
+                    }
+                }
+            }
+            if (k < hi - 1) {
+                x = h[k + 1][k];
+                y = h[k + 2][k];
+                z = (k < hi - 2) ? h[k + 3][k] : 0.0;
+            }
+        }
+    }
+    return 0;
+}
+
+#endif

@@ -1,0 +1,178 @@
+/* Whitted shading of one ray: the C form of tracer.trace.Tracer.shade (with cook_torrance and refract).
+ *
+ * shade_body is always inlined into one small function per combination of live effects (see the
+ * SHADE_VARIANT list in core.c) with the effect flags as constants, so the choice is made once per batch
+ * and dead effects cost nothing per ray; `self` is that function, for the recursion.
+ * Included by core.c after the scene queries it uses. */
+
+typedef void (*ShadeFn)(const Scene *, Work *, const double *, const double *, int64_t, const Media *, double *);
+
+static inline double clip(double x, double lo, double hi)  /* np.clip: NaN stays NaN */
+{
+    return x < lo ? lo : (x > hi ? hi : x);
+}
+
+/* Cook-Torrance specular per unit light colour, times cos(theta_light), for one colour channel set. */
+static inline void cook_torrance(const double *normal, const double *to_light, const double *to_eye,
+                                 const double *specular, double roughness, double *out)
+{
+    double half[3] = {to_light[0] + to_eye[0], to_light[1] + to_eye[1], to_light[2] + to_eye[2]};
+    double hl = sqrt(half[0] * half[0] + half[1] * half[1] + half[2] * half[2]);
+    if (hl < 1e-300)
+        hl = 1e-300;
+    half[0] /= hl;
+    half[1] /= hl;
+    half[2] /= hl;
+    double n_h = clip(dot3(normal, half), 1e-12, 1.0);
+    double n_v = clip(dot3(normal, to_eye), 1e-12, 1.0);
+    double n_l = clip(dot3(normal, to_light), 0.0, 1.0);
+    double v_h = clip(dot3(to_eye, half), 1e-12, 1.0);
+    double m = roughness < 1e-6 ? 1e-6 : roughness;
+    double m2 = m * m;
+    double cos2 = n_h * n_h;
+    double distribution = exp((cos2 - 1.0) / (cos2 * m2)) / (M_PI_VALUE * m2 * cos2 * cos2);
+    double a = 2.0 * n_h * n_v / v_h, b = 2.0 * n_h * n_l / v_h;
+    double shadowing = fmin_np(1.0, fmin_np(a, b));
+    double common = distribution * shadowing / (4.0 * n_v);
+    double lit = n_l > 0.0 ? 1.0 : 0.0;
+    double schlick = pow(1.0 - v_h, 5.0);
+    for (int c = 0; c < 3; c++)
+        out[c] = (specular[c] + (1.0 - specular[c]) * schlick) * common * lit;
+}
+
+static inline __attribute__((always_inline)) void
+shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t level, const Media *media, double *out,
+           const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
+           const int use_refraction, ShadeFn self)
+{
+    const SceneDesc *D = &S->d;
+    out[0] = D->background[0];
+    out[1] = D->background[1];
+    out[2] = D->background[2];
+    Hit h;
+    int64_t obj;
+    if (!scene_first(S, w, o, d, &h, &obj))
+        return;
+    double point[3], facing[3];
+    for (int i = 0; i < 3; i++)
+        point[i] = o[i] + h.t * d[i];
+    world_unit_normal(S, &h, facing);
+    if (dot3(facing, d) > 0.0) {  /* shade the side the ray arrives on */
+        facing[0] = -facing[0];
+        facing[1] = -facing[1];
+        facing[2] = -facing[2];
+    }
+    int64_t mat = D->prim_material[h.shape];
+    double mp = max_abs3(point), mo = max_abs3(o);
+    double offset = REL_EPS * (1.0 + (mp > mo ? mp : mo));
+    const double *ambient = D->mat_ambient + 3 * mat, *emissive = D->mat_emissive + 3 * mat;
+    double color[3];
+    for (int c = 0; c < 3; c++)
+        color[c] = emissive[c] + D->global_ambient[c] * ambient[c];
+    if (use_lighting) {
+        const double *diffuse = D->mat_diffuse + 3 * mat, *specular = D->mat_specular + 3 * mat;
+        double exponent = D->mat_exponent[mat];
+        double total[3] = {0.0, 0.0, 0.0};
+        double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        double to_eye[3] = {-d[0] / length, -d[1] / length, -d[2] / length};
+        double feeler[3];
+        for (int i = 0; i < 3; i++)
+            feeler[i] = point[i] + offset * facing[i];
+        for (int64_t l = 0; l < D->n_lights; l++) {
+            const double *lp = D->light_pos + 3 * l, *lc = D->light_color + 3 * l;
+            double s[3] = {lp[0] - point[0], lp[1] - point[1], lp[2] - point[2]};
+            double sl = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+            s[0] /= sl;
+            s[1] /= sl;
+            s[2] /= sl;
+            double lambert = dot3(s, facing);
+            if (!(lambert > 0.0))  /* a light behind the surface does not reach it */
+                continue;
+            if (use_shadows) {
+                w->counts[RAY_SHADOW]++;
+                double to_light[3] = {lp[0] - feeler[0], lp[1] - feeler[1], lp[2] - feeler[2]};
+                if (scene_occluded(S, w, feeler, to_light, 1.0, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
+                    continue;
+            }
+            double half[3] = {s[0] + to_eye[0], s[1] + to_eye[1], s[2] + to_eye[2]};
+            double hl = sqrt(half[0] * half[0] + half[1] * half[1] + half[2] * half[2]);
+            if (hl < 1e-300)  /* np.maximum(|half|, 1e-300) */
+                hl = 1e-300;
+            half[0] /= hl;
+            half[1] /= hl;
+            half[2] /= hl;
+            double hm = dot3(half, facing);
+            double phong = hm > 0.0 ? pow(hm, exponent) : 0.0;
+            double spec[3];
+            for (int c = 0; c < 3; c++)
+                spec[c] = phong * specular[c];
+            if (use_cook_torrance) {
+                double fraction = D->mat_specular_fraction[mat], rough[3];
+                cook_torrance(facing, s, to_eye, specular, D->mat_roughness[mat], rough);
+                for (int c = 0; c < 3; c++)
+                    spec[c] = (1.0 - fraction) * spec[c] + fraction * rough[c];
+            }
+            for (int c = 0; c < 3; c++)
+                total[c] += (lambert * diffuse[c] + spec[c]) * lc[c];
+        }
+        for (int c = 0; c < 3; c++)
+            color[c] += total[c];
+    }
+    if ((use_reflection || use_refraction) && level < D->max_depth) {
+        if (use_reflection) {
+            double k = D->mat_reflectivity[mat];
+            if (k >= D->min_reflectivity && k > 0.0) {
+                double r[3], start[3], c[3];
+                double dn = 2.0 * dot3(d, facing);
+                for (int i = 0; i < 3; i++) {
+                    r[i] = d[i] - dn * facing[i];
+                    start[i] = point[i] + offset * facing[i];
+                }
+                w->counts[RAY_REFLECTION]++;
+                self(S, w, start, r, level + 1, media, c);
+                for (int i = 0; i < 3; i++)
+                    color[i] += k * c[i];
+            }
+        }
+        if (use_refraction) {
+            double k = D->mat_transparency[mat];
+            if (k >= D->min_transparency && k > 0.0) {
+                double c1 = media_speed(media), speed = D->mat_speed[mat];
+                Media after = *media;
+                if (h.entering)
+                    media_enter(&after, obj, speed);
+                else
+                    media_leave(&after, obj);
+                double c2 = h.entering ? speed : media_speed(&after);
+                double ratio = c2 / c1;
+                double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+                double unit[3] = {d[0] / length, d[1] / length, d[2] / length};
+                double cos1 = -dot3(unit, facing);
+                double cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1);
+                double next[3], start[3], c[3];
+                if (cos2_squared < 0.0) {  /* total internal reflection: stays in the medium it came from */
+                    double dn = 2.0 * dot3(d, facing);
+                    for (int i = 0; i < 3; i++) {
+                        next[i] = d[i] - dn * facing[i];
+                        start[i] = point[i] + offset * facing[i];
+                    }
+                    w->counts[RAY_REFLECTION]++;
+                    self(S, w, start, next, level + 1, media, c);
+                } else {
+                    double along = ratio * cos1 - sqrt(cos2_squared);
+                    for (int i = 0; i < 3; i++) {
+                        next[i] = ratio * unit[i] + along * facing[i];
+                        start[i] = point[i] - offset * facing[i];
+                    }
+                    w->counts[RAY_REFRACTION]++;
+                    self(S, w, start, next, level + 1, &after, c);
+                }
+                for (int i = 0; i < 3; i++)
+                    color[i] += k * c[i];
+            }
+        }
+    }
+    out[0] = color[0];
+    out[1] = color[1];
+    out[2] = color[2];
+}

@@ -19,7 +19,8 @@ def _scene():
 
 
 def test_accuracy_bench_writes_csv_and_plot(tmp_path):
-    rows = measure(_scene(), "tiny", tmp_path, width=32, height=24, reference_samples=16, progress=lambda _: None)
+    rows = measure(_scene(), "tiny", tmp_path, width=32, height=24, reference_samples=16, repeats=1,
+                   progress=lambda _: None)
     with open(tmp_path / "tiny.csv") as handle:
         table = list(csv.DictReader(handle))
     assert [r["setting"] for r in table] == [r["setting"] for r in rows]

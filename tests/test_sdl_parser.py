@@ -197,9 +197,7 @@ def test_polyhedra_and_teapot_get_built_in_meshes(fake_builtins):
         assert shape.mesh_file is None
 
 
-def test_real_built_in_meshes_if_available():
-    pytest.importorskip("tracer.geometry.polyhedra")
-    pytest.importorskip("tracer.geometry.teapot")
+def test_real_built_in_meshes():
     scene = parse(" ".join(POLYHEDRON_KINDS) + " teapot")
     for shape in scene.objects:
         assert isinstance(shape.mesh, MeshData) and len(shape.mesh.faces) > 0

@@ -10,9 +10,19 @@ import numpy as np
 from .errors import TracerError
 
 
+ROWS_PER_CHUNK = 256  # converted a band at a time, so a 4K frame needs no full-size temporaries
+
+
 def to_8bit(image: np.ndarray) -> np.ndarray:
     """Linear colour in [0, 1] (clipped) to uint8, rounding to nearest; NaN becomes 0."""
-    return np.round(np.clip(np.nan_to_num(image, nan=0.0), 0.0, 1.0) * 255.0).astype(np.uint8)
+    out = np.empty(image.shape, dtype=np.uint8)
+    for top in range(0, image.shape[0], ROWS_PER_CHUNK):
+        band = np.nan_to_num(image[top:top + ROWS_PER_CHUNK], nan=0.0)  # a copy: the film stays untouched
+        np.clip(band, 0.0, 1.0, out=band)
+        band *= 255.0
+        np.rint(band, out=band)
+        out[top:top + ROWS_PER_CHUNK] = band
+    return out
 
 
 def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:

@@ -32,7 +32,9 @@ accuracy: setup
 
 # Benchmarks (bench/run.py): whole-process time against POV-Ray 3.7 at 1280x960 on 2 threads, scaling from
 # 10 to 10,000 spheres, and the C core against the NumPy path. Needs povray (apt-get install -y povray) and,
-# for the plot in docs/performance.png, matplotlib; results go to bench/results/results.json.
+# for the plot in docs/performance.png, matplotlib; results go to bench/results/results.json. bench/memory.py:
+# peak memory of 960x540 to 4K renders in full-frame buffers (bench/results/memory.json).
 .PHONY: bench
 bench: setup
 	$(PY) bench/run.py
+	$(PY) bench/memory.py

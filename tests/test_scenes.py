@@ -1,6 +1,7 @@
 """Every bundled scene reads cleanly, renders, and shows its objects where they are."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,16 @@ def test_there_are_scenes_for_every_feature():
     assert {"sphere", "cube", "square", "plane", "taperedCylinder", "cylinder", "cone", "torus", "teapot",
             "mesh", "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond"} <= kinds
     assert {"shadows", "reflection", "refraction", "csg", "def/use"} <= effects
+
+
+def test_scenes_use_every_sdl_keyword():
+    from tracer.sdl.parser import KEYWORDS
+
+    words = set()
+    for path in SCENES:
+        text = "\n".join(line.split("!")[0] for line in path.read_text().splitlines())  # without comments
+        words |= set(re.findall(r"[A-Za-z][A-Za-z0-9]*", text))
+    assert sorted(KEYWORDS - words) == []
 
 
 def _project(frame: CameraFrame, point):

@@ -36,7 +36,7 @@ from tracer.compile import compile_scene  # noqa: E402
 sys.path.insert(0, str(ROOT / "bench"))
 from sdl_to_pov import scene_to_pov  # noqa: E402
 
-SCENES = ["lecture", "shapes", "csg", "glass", "jack", "polyhedra"]
+SCENES = ["lecture", "shapes", "csg", "glass", "jack", "polyhedra", "textures"]
 SPHERE_COUNTS = [10, 30, 100, 300, 1000, 3000, 10000]
 
 
@@ -107,7 +107,8 @@ def compare_with_povray(name: str, sdl: Path, work: Path, width: int, height: in
         theirs.append(timed(pov_cmd, env))
     o, p = statistics.median(ours), statistics.median(theirs)
     print(f"  {name:12s} ours {o:6.3f} s   povray {p:6.3f} s   ratio {o / p:5.2f}", flush=True)
-    return {"scene": name, "ours": o, "povray": p, "ratio": o / p, "ours_runs": ours, "povray_runs": theirs}
+    return {"scene": name, "ours": o, "povray": p, "ratio": o / p, "ours_runs": ours, "povray_runs": theirs,
+            "load_average_1min": os.getloadavg()[0]}
 
 
 def c_versus_numpy(name: str, sdl: Path, width: int, height: int) -> dict:
@@ -139,7 +140,7 @@ def plot(results: dict, path: Path) -> bool:
         x = np.arange(len(rows))
         ax.bar(x - 0.2, [r["ours"] for r in rows], 0.4, label="this tracer (C core)")
         ax.bar(x + 0.2, [r["povray"] for r in rows], 0.4, label="POV-Ray 3.7")
-        ax.set_xticks(x, [r["scene"] for r in rows])
+        ax.set_xticks(x, [r["scene"] for r in rows], rotation=30)
         ax.set_ylabel("whole-process wall time (s)")
         ax.set_title(f"Bundled scenes, {results['width']}x{results['height']}, {results['threads']} threads")
         ax.legend()
@@ -160,7 +161,7 @@ def plot(results: dict, path: Path) -> bool:
         ax.bar(x - 0.2, [r["c"] for r in rows], 0.4, label="C core")
         ax.bar(x + 0.2, [r["numpy"] for r in rows], 0.4, label="NumPy path")
         ax.set_yscale("log")
-        ax.set_xticks(x, [r["scene"] for r in rows])
+        ax.set_xticks(x, [r["scene"] for r in rows], rotation=30)
         ax.set_ylabel("render time (s), log scale")
         ax.set_title(f"C core vs NumPy, {results['numpy_size']}")
         ax.legend()
@@ -182,7 +183,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "width": width, "height": height, "threads": args.threads,
-               "repeat": args.repeat, "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+               "repeat": args.repeat, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+               "load_average": {"start": os.getloadavg()}}  # the machine may be shared: say how busy it was
     print(json.dumps(results["machine"], indent=1))
     with tempfile.TemporaryDirectory(prefix="sdl-bench-") as tmp:
         work = Path(tmp)
@@ -204,6 +206,9 @@ def main(argv=None) -> int:
     results["numpy_size"] = f"{size[0]}x{size[1]}"
     print(f"(c) C core against the NumPy path, in process, {size[0]}x{size[1]}")
     results["numpy"] = [c_versus_numpy(name, ROOT / "scenes" / f"{name}.sdl", *size) for name in SCENES]
+    results["load_average"]["end"] = os.getloadavg()
+    load = results["load_average"]
+    print(f"load average (1, 5, 15 min): start {load['start']}, end {load['end']}")
     (out / "results.json").write_text(json.dumps(results, indent=1))
     if plot(results, Path(args.plot)):
         print(f"plot: {args.plot}")

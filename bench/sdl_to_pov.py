@@ -8,7 +8,11 @@ without attenuation, with shadows) and recursion depth are the scene's.
 Shading is matched as far as POV-Ray's model allows (its highlight takes the light's colour, its ambient
 and reflection terms are scaled differently), which is close enough for a timing comparison: both tracers
 shoot one ray per pixel, a shadow feeler per light and hit, and reflected and refracted rays to the same
-depth.  Textures are not written.
+depth.  Textures become POV-Ray's nearest equivalents, in the shape's generic coordinates as ours are:
+``checker`` for the checkerboard (the same cells), ``wood`` and ``marble`` with turbulence for wood grain
+and marble (alike, not equal: POV-Ray's turbulence is its own noise), and ``image_map`` with bilinear
+interpolation for pictures (spherical, cylindrical or planar projection, POV-Ray's closest to our per-shape
+(u, v)).
 
     python3 bench/sdl_to_pov.py scene.sdl scene.pov [--width 1280 --height 960]
 """
@@ -18,6 +22,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -60,10 +65,54 @@ def _finish(mat: Material, settings) -> str:
     return "finish { " + " ".join(parts) + " }"
 
 
-def _material(mat: Material, settings) -> str:
+_IMAGE_FORMATS = {".png": "png", ".bmp": "bmp", ".jpg": "jpeg", ".jpeg": "jpeg", ".tga": "tga", ".ppm": "ppm"}
+
+
+def _textured_pigment(mat: Material, kind: str, pixmaps: dict) -> str:
+    """POV-Ray's nearest pigment to an SDL texture, in generic coordinates (written before the matrix).
+
+    The texture colour multiplies the diffuse colour in SDL; with the usual ``diffuse 1 1 1`` of textured
+    shapes the pigment alone is the same thing.
+    """
+    from tracer.textures.solid import CHECKER_DEFAULTS, MARBLE_DEFAULTS, WOOD_DEFAULTS, with_defaults
+
+    t = mat.texture
+    if t == -1:
+        size, *c = with_defaults(mat.parameters, CHECKER_DEFAULTS)
+        # POV-Ray's cells are unit cubes with faces on integers; SDL's are centred on the lattice.
+        return (f"pigment {{ checker rgb {_vec(c[3:6])} rgb {_vec(c[0:3])} "
+                f"translate <0.5, 0.5, 0.5> scale {_num(size)} }}")
+    if t == -2:
+        spacing, wobble, *c = with_defaults(mat.parameters, WOOD_DEFAULTS)
+        return (f"pigment {{ wood ramp_wave turbulence {_num(wobble)} "
+                f"color_map {{ [0 rgb {_vec(c[0:3])}] [0.65 rgb {_vec(c[0:3])}] [1 rgb {_vec(c[3:6])}] }} "
+                f"scale {_num(spacing)} }}")
+    if t == -3:
+        stripes, strength, octaves, *c = with_defaults(mat.parameters, MARBLE_DEFAULTS)
+        return (f"pigment {{ marble turbulence {_num(strength / 4.0)} octaves {max(1, int(octaves))} "
+                f"color_map {{ [0 rgb {_vec(c[3:6])}] [0.3 rgb {_vec(c[0:3])}] [1 rgb {_vec(c[0:3])}] }} "
+                f"scale {_num(2.0 / max(stripes, 1e-6))} }}")
+    path = Path(pixmaps[t]).resolve()
+    repeat_u, repeat_v = (tuple(mat.parameters) + (1.0, 1.0))[:2]
+    # gamma 1.0: texel values are used as they are, as ours are (POV-Ray would decode them as sRGB).
+    image = f'image_map {{ {_IMAGE_FORMATS.get(path.suffix.lower(), "png")} "{path}" gamma 1.0 interpolate 2'
+    if kind == "sphere":  # POV-Ray's spherical map has its poles on y, SDL's on z
+        return f"pigment {{ {image} map_type 1 }} rotate 90*x }}"
+    if kind in ("cylinder", "cone", "taperedCylinder"):  # cylindrical about y over 0 <= y <= 1; SDL's about z
+        return f"pigment {{ {image} map_type 2 }} rotate 90*x }}"
+    # Planar: the picture spans x, y in [0, 1]; SDL's squares, planes and cube faces span [-1, 1].
+    once = "" if kind == "plane" or (repeat_u, repeat_v) != (1.0, 1.0) else " once"
+    return (f"pigment {{ {image} map_type 0{once} }} "
+            f"scale <{_num(2 / repeat_u)}, {_num(2 / repeat_v)}, 1> translate <-1, -1, 0> }}")
+
+
+def _material(mat: Material, settings, kind: str = "", pixmaps: Optional[dict] = None) -> str:
     """texture { pigment finish }, and an interior with the index of refraction for glass."""
     transmit = mat.transparency if mat.transparency > 0 and mat.transparency >= settings.min_transparency else 0.0
-    pigment = f"pigment {{ rgbt <{', '.join(_num(c) for c in mat.diffuse)}, {_num(transmit)}> }}"
+    if mat.texture != 0 and pixmaps is not None and (mat.texture < 0 or mat.texture in pixmaps):
+        pigment = _textured_pigment(mat, kind, pixmaps)
+    else:
+        pigment = f"pigment {{ rgbt <{', '.join(_num(c) for c in mat.diffuse)}, {_num(transmit)}> }}"
     interior = f" interior {{ ior {_num(1.0 / mat.speed_of_light)} }}" if transmit > 0 else ""
     return f"texture {{ {pigment} {_finish(mat, settings)} }}{interior}"
 
@@ -103,11 +152,14 @@ def _primitive(shape: Shape) -> str:
     return body
 
 
-def _object(obj, settings, indent: str = "") -> str:
+def _object(obj, settings, indent: str = "", pixmaps: Optional[dict] = None) -> str:
     if isinstance(obj, CSG):
-        inner = "\n".join(_object(child, settings, indent + "  ") for child in (obj.left, obj.right))
+        inner = "\n".join(_object(child, settings, indent + "  ", pixmaps) for child in (obj.left, obj.right))
         return f"{indent}{obj.op} {{\n{inner}\n{indent}}}"
-    return f"{indent}{_primitive(obj)}\n{indent}  {_matrix(obj.matrix)}\n{indent}  {_material(obj.material, settings)}\n{indent}}}"
+    material = _material(obj.material, settings, obj.kind, pixmaps)
+    if obj.material.texture != 0:  # before the matrix: the texture moves, turns and scales with the shape
+        return f"{indent}{_primitive(obj)}\n{indent}  {material}\n{indent}  {_matrix(obj.matrix)}\n{indent}}}"
+    return f"{indent}{_primitive(obj)}\n{indent}  {_matrix(obj.matrix)}\n{indent}  {material}\n{indent}}}"
 
 
 def scene_to_pov(scene: Scene, width: int, height: int) -> str:
@@ -137,7 +189,7 @@ def scene_to_pov(scene: Scene, width: int, height: int) -> str:
     for light in scene.lights:
         out.append(f"light_source {{ {_vec(light.position)} color rgb {_vec(light.color)} }}")
     for obj in scene.objects:
-        out.append(_object(obj, settings))
+        out.append(_object(obj, settings, pixmaps=scene.pixmaps))
     return "\n".join(out) + "\n"
 
 

@@ -31,7 +31,7 @@ def bricks(width=128, height=128) -> np.ndarray:
 
 
 def save(image, path):
-    Image.fromarray(np.round(image * 255).astype(np.uint8), "RGB").save(path)
+    Image.fromarray(np.round(image * 255).astype(np.uint8)).save(path)
 
 
 if __name__ == "__main__":

@@ -5,16 +5,20 @@
   the same entering flags, shapes, parts and unit normals.
 * First hits, shadow feelers, images of every bundled scene and of the hard cases (tests/test_hard_cases),
   within 1/255 per channel, and ray counts equal between the backends.
+* Texture colours (solid textures and images on every shape kind, at negative and 10^6 coordinates, on
+  image seams, poles, edges and tile boundaries) point by point, and images of textured scenes.
 
 Tests skip only when the library cannot be built; where a C compiler exists it must build (the first test).
 """
 from __future__ import annotations
 
 import math
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import tracer
 from helpers import Camera, Light, rotation, scaling, scene_of, shape, translation
@@ -28,6 +32,7 @@ from tracer.model import CSG, MeshData, Shape, Material
 from tracer.native.build import find_compiler, is_current, library_path, source_digest
 from tracer.render import render
 from tracer.trace import first_hits, occluded
+from tracer.textures.noise import GRADIENTS, PERM
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = sorted((ROOT / "scenes").glob("*.sdl"))
@@ -285,8 +290,6 @@ def test_hard_case_hits():
 def test_first_hits_and_shadow_feelers(path):
     scene = tracer.load(path)
     compiled = compile_scene(scene)
-    if native.NativeTracer.unsupported(compiled):
-        pytest.skip(native.NativeTracer.unsupported(compiled))
     core = native.NativeTracer(compiled)
     rng = np.random.default_rng(3)
     eye = np.asarray(scene.camera.eye if scene.camera else (0, 5, 15), dtype=float)
@@ -329,23 +332,27 @@ def _assert_same_image(c, n):
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
 def test_bundled_scene_images(path):
     scene = tracer.load(path)
-    reason = native.NativeTracer.unsupported(compile_scene(scene))
-    if reason is not None:
-        # The C core refuses what it has not implemented; the NumPy path takes the scene.
-        assert "textures" in reason
-        with pytest.raises(TracerError):
-            render(scene, 8, 6, backend="c")
-        assert render(scene, 8, 6, backend="auto").backend == "numpy"
-        return
+    assert native.NativeTracer.unsupported(compile_scene(scene)) is None  # the C core traces every one
     c, n = _both(scene)
     _assert_same_image(c, n)
 
 
 @requires_core
-def test_textured_scene_is_refused_and_falls_back():
+def test_textured_scene_takes_the_c_core():
     scene = tracer.parse_sdl("light 1 2 3 1 1 1  texture -1 sphere")
     compiled = compile_scene(scene)
-    assert "textures" in native.NativeTracer.unsupported(compiled)
+    assert native.NativeTracer.unsupported(compiled) is None
+    assert make_tracer(compiled, "auto").name == "c"
+
+
+@requires_core
+def test_a_scene_the_core_cannot_trace_is_refused_and_falls_back():
+    # Refusal still works for whatever the C core does not know (here: an effect it has never heard of).
+    compiled = compile_scene(tracer.parse_sdl("light 1 2 3 1 1 1  sphere"))
+    compiled.effects = compiled.effects | {"something new"}
+    assert "something new" in native.NativeTracer.unsupported(compiled)
+    with pytest.raises(TracerError):
+        native.NativeTracer(compiled)
     assert make_tracer(compiled, "auto").name == "numpy"
 
 
@@ -444,3 +451,198 @@ def test_many_objects_use_the_object_hierarchy_correctly():
                      camera=Camera((0, 8, 14), (0, 0, 0), (0, 1, 0), 50))
     c, n = _both(scene, 80, 60)
     _assert_same_image(c, n)
+
+
+# ------------------------------------------------------------------------------------------------ textures
+
+TEXTURED_KINDS = ANALYTIC + ["taperedCylinder", "icosahedron", "teapot", "mesh"]
+# name: (texture number, parameters); makePixmap 1 is a small picture of distinct texels (the picture fixture).
+TEXTURES = {"checkerboard": (-1, (0.3,)), "wood": (-2, ()), "marble": (-3, (3.0, 5.0, 4.0)),
+            "image": (1, ()), "tiled image": (1, (2.0, 3.0))}
+# Texture colours: near the origin the backends differ only in the last bits of sin, asin and atan2 (NumPy
+# has its own SIMD versions).  Far from it the generic point itself differs in its last bits (NumPy's matrix
+# product may use fused multiply-adds, the C core does not), about 1e-16 of the world coordinates' size,
+# which the steepest texture (marble's veins) amplifies a few hundred times: hence the second term.
+COLOR_TOLERANCE = 1e-9
+COLOR_TOLERANCE_PER_UNIT = 1e-12
+
+
+@pytest.fixture(scope="module")
+def picture(tmp_path_factory):
+    """A 7 x 5 picture of random texels: every seam, clamp and wrap shows in the colours."""
+    pixels = np.random.default_rng(4).integers(0, 256, (5, 7, 3), dtype=np.uint8)
+    path = tmp_path_factory.mktemp("pictures") / "texels.png"
+    Image.fromarray(pixels).save(path)
+    return path
+
+
+def _textured_shape(kind, matrix, texture, parameters=(), **material) -> Shape:
+    if kind in ("icosahedron", "teapot"):
+        s = tracer.parse_sdl(kind).shapes()[0]
+        s.matrix = matrix
+    elif kind == "mesh":
+        s = _mesh_shape(read_3vn(PAWN), matrix)
+    else:
+        s = shape(kind, matrix)
+    if kind == "taperedCylinder":
+        s.tapered_radius = 0.4
+    s.material = Material(texture=texture, parameters=tuple(parameters), **material)
+    return s
+
+
+def _textured_scene(objects, picture, **settings):
+    scene = scene_of(*objects, **settings)
+    scene.pixmaps = {1: str(picture)}
+    return scene
+
+
+def _assert_same_texture_colors(compiled, core, shape_index, points, parts):
+    ref = compiled.textures.colors(shape_index, points, parts)
+    got = core.texture_colors(shape_index, points, parts)
+    tolerance = COLOR_TOLERANCE + COLOR_TOLERANCE_PER_UNIT * np.abs(points).max(axis=1)
+    excess = np.abs(got - ref).max(axis=1) - tolerance
+    k = excess.argmax()
+    assert excess[k] <= 0.0, f"C {got[k]} vs NumPy {ref[k]} at {points[k]}, part {parts[k]}"
+    return ref
+
+
+def test_noise_tables_are_passed_from_python():
+    # The C core reads the permutation and gradients that tracer.textures.noise defines, not copies of its own.
+    compiled = compile_scene(scene_of(shape("sphere", texture=-2)))
+    flat = native.flatten.FlatScene(compiled)
+    assert np.array_equal(flat.arrays["noise_perm"], PERM.reshape(-1))
+    assert np.array_equal(flat.arrays["noise_gradients"], GRADIENTS.reshape(-1))
+
+
+@requires_core
+@pytest.mark.parametrize("offset", [(0.0, 0.0, 0.0), (-40.3, -17.9, -75.1), (1e6, -1e6, 1e6)],
+                         ids=["origin", "negative", "1e6"])
+@pytest.mark.parametrize("texture", list(TEXTURES))
+@pytest.mark.parametrize("kind", TEXTURED_KINDS)
+def test_texture_colors_at_hits(kind, texture, offset, picture):
+    # Hits found by the reference, their colours by each backend: every shape's (u, v) with its parts,
+    # every solid texture, under a turned and stretched matrix far from and near the origin.
+    number, parameters = TEXTURES[texture]
+    rng = np.random.default_rng(zlib.crc32(f"{kind} {texture}".encode()))
+    matrix = translation(*offset) @ _random_matrix(rng)
+    compiled, core = _core(_textured_scene([_textured_shape(kind, matrix, number, parameters)], picture))
+    starts, dirs = _rays_at(matrix[:3, 3], 1.0, 1000, seed=1)
+    hits = first_hits(compiled, starts, dirs)
+    rows = np.nonzero(hits.hit)[0]
+    assert rows.size > 50
+    points = starts[rows] + hits.t[rows, None] * dirs[rows]
+    colors = _assert_same_texture_colors(compiled, core, hits.shape[rows], points, hits.part[rows])
+    assert np.ptp(colors, axis=0).max() > 0.05  # the texture varies over what was hit: not a vacuous test
+
+
+@requires_core
+@pytest.mark.parametrize("texture", list(TEXTURES))
+def test_textures_far_along_a_plane(texture, picture):
+    # An unbounded plane hit at generic coordinates of +-10^6: noise and checker cells stay exact there,
+    # and the plane's image tiles repeat.
+    number, parameters = TEXTURES[texture]
+    compiled, core = _core(_textured_scene([_textured_shape("plane", np.eye(4), number, parameters)], picture))
+    rng = np.random.default_rng(8)
+    for corner in ((1e6, 1e6), (-1e6, 1e6), (-1e6, -1e6), (1e6 + 0.5, -1e6 - 0.25)):
+        targets = np.c_[np.asarray(corner) + rng.uniform(-3, 3, (400, 2)), np.zeros(400)]
+        starts = targets + rng.normal(size=(400, 3)) * (1, 1, 0) + (0, 0, 2.0)
+        hits = first_hits(compiled, starts, targets - starts)
+        assert hits.hit.all()
+        points = starts + hits.t[:, None] * (targets - starts)
+        colors = _assert_same_texture_colors(compiled, core, hits.shape, points, hits.part)
+        assert np.ptp(colors, axis=0).max() > 0.05
+
+
+def _seam_points():
+    """(kind, generic points, parts) exactly on image seams, poles, rims, edges, corners and tile bounds."""
+    a = np.linspace(-np.pi / 2, np.pi / 2, 9)
+    tiny = [0.0, -0.0, 1e-300, -1e-300, 1e-12, -1e-12]
+    sphere = [(np.cos(x), y, np.sin(x)) for x in a for y in tiny] + [(0, 0, 1), (0, 0, -1), (1e-300, 0, 1),
+                                                                    (0, -1e-300, -1), (-1, 0, 0), (-1, -0.0, 0)]
+    wall = [(1, y, z) for y in tiny for z in (0.0, 0.3, 1.0)] + [(-1, y, 0.5) for y in tiny]
+    discs = [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (0.0, 1.0)]
+    cylinder = [(p, 0) for p in wall] + [(p, 1 if p[2] == 0 else 2) for p in discs]
+    cone = [((1 - z) * x, (1 - z) * y, z) for (x, y, z) in wall] + [(0, 0, 1)]
+    cube = [((x, y, z), face) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1) for face in range(6)]
+    cube += [((1, 0, 0), 1), ((-1, 0.5, -0.5), 0), ((0, 1, 0), 3), ((0, -1, 0), 2), ((0, 0, -1), 4)]
+    square = [(x, y, 0) for x in (-1, -0.5, 0, 1) for y in (-1, 0.25, 1)]
+    bounds = [-1e6 - 1, -7.0, -1.0, 1.0, 3.0, 1e6 + 1, 2e6 + 1]
+    plane = [(x, y, 0) for x in bounds for y in bounds] + [(np.nextafter(1.0, 0), np.nextafter(-1.0, 0), 0)]
+    torus = [(1 + 0.2 * np.cos(b), y, 0.2 * np.sin(b)) for b in np.linspace(-np.pi, np.pi, 9) for y in tiny]
+    torus += [(0.8, 0, 0), (0.8, -0.0, -0.0), (1.2, 0, 0), (-1.2, 0, 0), (-1.2, -0.0, 0)]
+    globe = sphere + [(0, 0, 0), (0, 0, 2.5), (3, 0, 0), (-3, -0.0, 0)]
+    return {
+        "sphere": (sphere, None), "cylinder": (cylinder, "parts"), "cone": ([(p, 0) for p in cone], "parts"),
+        "cube": (cube, "parts"), "square": (square, None), "plane": (plane, None), "torus": (torus, None),
+        "icosahedron": (globe, None), "mesh": (globe, None),
+    }
+
+
+@requires_core
+@pytest.mark.parametrize("matrix", ["identity", "moved"])
+@pytest.mark.parametrize("texture", list(TEXTURES))
+@pytest.mark.parametrize("kind", list(_seam_points()))
+def test_texture_colors_on_seams_poles_and_edges(kind, texture, matrix, picture):
+    # Points given exactly (no ray could land on them): generic coordinates where the image wraps (u = 0 / 1,
+    # signed zeros), the poles, disc rims, cube edges and corners on each face, plane tile and checker
+    # boundaries.  "moved" doubles and shifts the shape by 10^6 (tiny coordinates are lost on the way, but
+    # both backends see the same generic points: checked below).
+    number, parameters = TEXTURES[texture]
+    m = np.eye(4) if matrix == "identity" else translation(1e6, -1e6, 1e6) @ scaling(2, 2, 2)
+    compiled, core = _core(_textured_scene([_textured_shape(kind, m, number, parameters)], picture))
+    entries, with_parts = _seam_points()[kind]
+    generic = np.array([e[0] for e in entries] if with_parts else entries, dtype=float)
+    parts = np.array([e[1] for e in entries] if with_parts else [0] * len(entries), dtype=np.int32)
+    points = generic @ m[:3, :3].T + m[:3, 3]
+    inv = compiled.primitives[0].inverse
+    numpy_generic = points @ inv[:3, :3].T + inv[:3, 3]  # what TextureSet computes
+    c_generic = np.stack([((points[:, 0] * inv[i, 0] + points[:, 1] * inv[i, 1]) + points[:, 2] * inv[i, 2])
+                          + inv[i, 3] for i in range(3)], axis=1)  # what texture.h computes
+    assert np.array_equal(numpy_generic, c_generic)
+    if matrix == "identity":
+        assert np.array_equal(numpy_generic, generic)
+    index = np.zeros(len(points), dtype=np.int32)
+    ref = _assert_same_texture_colors(compiled, core, index, points, parts)
+    if number == -1:  # on a checker boundary both must pick the same cell, exactly
+        assert np.array_equal(core.texture_colors(index, points, parts), ref)
+
+
+@requires_core
+def test_untextured_shapes_get_white():
+    compiled, core = _core(scene_of(shape("sphere", texture=-1), shape("cube", translation(3, 0, 0))))
+    points = np.array([[0.2, 0.3, 0.9], [3.0, 0.1, 0.2]])
+    got = core.texture_colors([0, 1], points, [0, 1])
+    assert np.array_equal(got[1], [1.0, 1.0, 1.0])
+    assert np.array_equal(got, compiled.textures.colors(np.array([0, 1]), points, np.array([0, 1])))
+    with pytest.raises(IndexError):
+        core.texture_colors([2], points[:1], [0])
+
+
+@requires_core
+@pytest.mark.parametrize("offset", [(0, 0, 0), (1e6, -1e6, 1e6)], ids=["origin", "1e6"])
+def test_textured_shapes_images(offset, picture):
+    # Every shape kind under every texture, a textured CSG and a mirror that shows textured hits again:
+    # the whole shading path with textures, lights, shadows and reflection, near and far from the origin.
+    objects = [_textured_shape("plane", translation(*offset) @ rotation(-90, 1, 0, 0), -1, (1.0,),
+                               ambient=(0.3, 0.3, 0.3), diffuse=(0.8, 0.8, 0.8))]
+    names = list(TEXTURES)
+    for i, kind in enumerate(k for k in TEXTURED_KINDS if k != "plane"):
+        number, parameters = TEXTURES[names[i % len(names)]]
+        scale = 0.05 if kind == "teapot" else 0.6 if kind == "mesh" else 0.7
+        matrix = (translation(*offset) @ translation(-7.2 + 1.6 * i, 1.2, 0) @ rotation(25 * i, 1, 1, 0)
+                  @ scaling(scale, scale, scale))
+        objects.append(_textured_shape(kind, matrix, number, parameters, ambient=(0.4, 0.4, 0.4),
+                                       diffuse=(0.9, 0.9, 0.9), specular=(0.3, 0.3, 0.3), specular_exponent=20))
+    objects.append(CSG("difference",
+                       _textured_shape("cube", translation(*offset) @ translation(3, 3.4, -1.5), 1, (2.0, 2.0)),
+                       _textured_shape("sphere", translation(*offset) @ translation(3.6, 4.0, -0.9), -3)))
+    objects.append(shape("sphere", translation(*offset) @ translation(-2.5, 3.6, -2) @ scaling(1.2, 1.2, 1.2),
+                         reflectivity=0.6, diffuse=(0.1, 0.1, 0.1)))
+    eye = np.add(offset, (0, 4, 13))
+    scene = _textured_scene(objects, picture, lights=[Light(tuple(np.add(offset, (4, 9, 8))), (1, 1, 1))],
+                            camera=Camera(tuple(eye), tuple(np.add(offset, (0, 1.5, 0))), (0, 1, 0), 55),
+                            global_ambient=(0.4, 0.4, 0.4))
+    assert "textures" in compile_scene(scene).effects
+    c, n = _both(scene, 120, 80)
+    _assert_same_image(c, n)
+    assert c.rays.reflection > 0 and c.rays.shadow > 0

@@ -60,16 +60,98 @@ def _checked_inverse(shape: Shape) -> np.ndarray:
     return inverse
 
 
-class Primitive:
-    """One shape, ready to intersect world rays."""
+#: The eight corners of the generic cube, for the bounding spheres of the closed-form shapes.
+#: (Shared by every primitive, so read-only.)
+_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+_SQUARE_CORNERS = _CORNERS * (1, 1, 0)
+_TORUS_CORNERS = _CORNERS * (1.0 + TORUS_TUBE_RADIUS, 1.0 + TORUS_TUBE_RADIUS, TORUS_TUBE_RADIUS)
+_DISC_BOX = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
+for _constant in (_CORNERS, _SQUARE_CORNERS, _TORUS_CORNERS, _DISC_BOX):
+    _constant.setflags(write=False)
 
-    def __init__(self, shape: Shape, index: int, material_id: int, mesh_cache: Optional[dict] = None):
+
+def _analytic_generic_points(shape: Shape) -> Optional[np.ndarray]:
+    """Points whose hull holds a closed-form shape's generic solid (8 of them), or None for the plane,
+    polyhedra and meshes."""
+    kind = shape.kind
+    if kind == "sphere" or kind == "cube":
+        return _CORNERS
+    if kind == "square":
+        return _SQUARE_CORNERS
+    if kind == "torus":
+        return _TORUS_CORNERS
+    if kind in ("taperedCylinder", "cylinder", "cone"):
+        top = max(shape.small_radius, 0.0)
+        # Corners of the squares that bound the two discs: the frustum lies inside their hull.
+        return np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX * top, np.ones(4)]])
+    return None
+
+
+def _sphere_around(world: np.ndarray):
+    """Bounding sphere (centre, radius) of the (K, 3) world points' box, padded by 1e-9 relatively."""
+    lo, hi = world.min(axis=0), world.max(axis=0)
+    center = 0.5 * (lo + hi)
+    return center, float(np.linalg.norm(hi - lo) * 0.5) * (1 + 1e-9)
+
+
+def _batched_inverses(shapes: list[Shape]) -> Optional[np.ndarray]:
+    """The inverses of all the shapes' matrices from one (N, 4, 4) np.linalg.inv call, which gives each
+    matrix the same LAPACK solve as a call of its own.  None if any matrix would
+    fail _checked_inverse's checks (or is not a float64 4x4): then each shape is checked on its own, in
+    order, so that the error names the first bad shape exactly as before."""
+    if not shapes:
+        return np.zeros((0, 4, 4))
+    matrices = [s.matrix for s in shapes]
+    if not all(isinstance(m, np.ndarray) and m.dtype == np.float64 and m.shape == (4, 4) for m in matrices):
+        return None
+    stack = np.stack(matrices)
+    if not (np.isfinite(stack).all() and (stack[:, 3] == (0, 0, 0, 1)).all()):
+        return None
+    try:
+        inverses = np.linalg.inv(stack)
+    except np.linalg.LinAlgError:
+        return None
+    return inverses if np.isfinite(inverses).all() else None
+
+
+def _batched_bounds(shapes: list[Shape]) -> list[Optional[tuple]]:
+    """Bounding spheres of the closed-form shapes (None for the others), their corners carried to the world
+    by one stacked matrix product: what transform_points computes, to rounding in the last place (which
+    the radius's 1e-9 padding covers)."""
+    out: list[Optional[tuple]] = [None] * len(shapes)
+    rows, points = [], []
+    for i, s in enumerate(shapes):
+        pts = _analytic_generic_points(s)
+        if pts is not None and isinstance(s.matrix, np.ndarray) and s.matrix.dtype == np.float64:
+            rows.append(i)
+            points.append(pts)
+    if not rows:
+        return out
+    m = np.stack([shapes[i].matrix for i in rows])
+    world = np.stack(points) @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
+    lo, hi = world.min(axis=1), world.max(axis=1)
+    center = 0.5 * (lo + hi)
+    extent = hi - lo
+    for k, i in enumerate(rows):
+        # np.linalg.norm row by row: a vectorised norm may sum in another order.
+        out[i] = (center[k], float(np.linalg.norm(extent[k]) * 0.5) * (1 + 1e-9))
+    return out
+
+
+class Primitive:
+    """One shape, ready to intersect world rays.
+
+    ``inverse`` and ``bounds`` (centre, radius), when given, are what _checked_inverse and the bounding
+    sphere would compute: compile_scene computes them for all shapes at once."""
+
+    def __init__(self, shape: Shape, index: int, material_id: int, mesh_cache: Optional[dict] = None,
+                 inverse: Optional[np.ndarray] = None, bounds: Optional[tuple] = None):
         self.shape = shape
         self.index = index
         self.kind = shape.kind
         self.material_id = material_id
         self.matrix = shape.matrix
-        self.inverse = _checked_inverse(shape)
+        self.inverse = _checked_inverse(shape) if inverse is None else inverse
         # World normal = generic normal through the inverse-transpose; as row vectors: n_g @ inverse[:3,:3].
         self.normal_matrix = self.inverse[:3, :3]
         self.thin = shape.kind == "square"
@@ -87,36 +169,18 @@ class Primitive:
             if key not in cache:
                 cache[key] = (shape.mesh, TriangleMesh(shape.mesh))
             self._mesh = cache[key][1]
-        self.center, self.radius = self._world_bounding_sphere()
+        self.center, self.radius = self._world_bounding_sphere() if bounds is None else bounds
 
     def _generic_points(self) -> Optional[np.ndarray]:
         if self._mesh is not None or self._planes is not None:
             return np.asarray(self.shape.mesh.vertices, dtype=np.float64)
-        if self.kind == "plane":
-            return None
-        if self.kind in ("taperedCylinder", "cylinder", "cone"):
-            top = max(self.shape.small_radius, 0.0)
-            # Corners of the squares that bound the two discs: the frustum lies inside their hull.
-            box = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
-            return np.concatenate([np.c_[box, np.zeros(4)], np.c_[box * top, np.ones(4)]])
-        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-        if self.kind == "sphere":
-            return corners
-        if self.kind == "square":
-            return corners * (1, 1, 0)
-        if self.kind == "torus":
-            ring = 1.0 + TORUS_TUBE_RADIUS
-            return corners * (ring, ring, TORUS_TUBE_RADIUS)
-        return corners  # cube
+        return _analytic_generic_points(self.shape)  # None for the plane
 
     def _world_bounding_sphere(self):
         pts = self._generic_points()
         if pts is None:
             return None, np.inf
-        world = transform_points(self.matrix, pts)
-        lo, hi = world.min(axis=0), world.max(axis=0)
-        center = 0.5 * (lo + hi)
-        return center, float(np.linalg.norm(hi - lo) * 0.5) * (1 + 1e-9)
+        return _sphere_around(transform_points(self.matrix, pts))
 
     def world_corners(self) -> Optional[np.ndarray]:
         pts = self._generic_points()
@@ -290,12 +354,15 @@ class CompiledScene:
         return self.scene.settings
 
 
-def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict) -> Node:
+def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict,
+                    inverses: Optional[np.ndarray] = None, bounds: Optional[list] = None) -> Node:
     if isinstance(obj, CSG):
-        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids, mesh_cache),
-                       _compile_object(obj.right, primitives, material_ids, mesh_cache))
+        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids, mesh_cache, inverses, bounds),
+                       _compile_object(obj.right, primitives, material_ids, mesh_cache, inverses, bounds))
     mat_id = material_ids.setdefault(obj.material, len(material_ids))
-    prim = Primitive(obj, len(primitives), mat_id, mesh_cache)
+    index = len(primitives)
+    prim = Primitive(obj, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
+                     bounds=None if bounds is None else bounds[index])
     primitives.append(prim)
     return prim
 
@@ -328,7 +395,15 @@ def compile_scene(scene: Scene) -> CompiledScene:
     primitives: list[Primitive] = []
     material_ids: dict[Material, int] = {}
     mesh_cache: dict = {}
-    objects = [_compile_object(obj, primitives, material_ids, mesh_cache) for obj in scene.objects]
+    # Inverses and bounding spheres for all shapes at once (iter_shapes visits them in the order
+    # _compile_object numbers them): a scene of 10,000 spheres would otherwise spend most of its compile time
+    # in 10,000 small NumPy calls of each kind.
+    shapes = [s for obj in scene.objects for s in iter_shapes(obj)]
+    inverses = _batched_inverses(shapes)
+    # Only with every matrix checked (finite, affine, invertible): otherwise the shapes are compiled one by
+    # one as before, and the first bad one raises.
+    bounds = _batched_bounds(shapes) if inverses is not None else None
+    objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
     effects = live_effects(scene)

@@ -42,7 +42,7 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as handle:
-            Image.fromarray(to_8bit(image), "RGB").save(handle, format=known[ext])
+            Image.fromarray(to_8bit(image)).save(handle, format=known[ext])  # (H, W, 3) uint8: RGB
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -6,8 +6,8 @@ The library is built on first import when missing or out of date (see :mod:`trac
 
 :class:`NativeTracer` is a backend (see tracer.backend): ``name``, ``counts``, ``camera_rays``.  It also
 answers the queries the tests compare with the NumPy path: :meth:`NativeTracer.object_hits` (whole-line
-hits of one top-level object, as ``obj.intersect``), :meth:`NativeTracer.first_hits` and
-:meth:`NativeTracer.occluded`.
+hits of one top-level object, as ``obj.intersect``), :meth:`NativeTracer.first_hits`,
+:meth:`NativeTracer.occluded` and :meth:`NativeTracer.texture_colors`.
 """
 from __future__ import annotations
 
@@ -52,6 +52,8 @@ def _load() -> ctypes.CDLL:
     lib.rt_object_hits.restype = ctypes.c_int64
     lib.rt_object_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_int64, _dp, _i8p, _dp,
                                    _i32p, _i32p, _dp, _i8p]
+    lib.rt_texture_colors.restype = ctypes.c_int
+    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
     if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
         raise BuildError("the C core's SceneDesc does not match flatten.py's")
     return lib
@@ -153,6 +155,20 @@ class NativeTracer:
                             float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) != 0:
             raise MemoryError("the C core ran out of memory")
         return blocked.astype(bool)
+
+    def texture_colors(self, shape, points, parts) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts``, as
+        ``compiled.textures.colors`` (1 where untextured)."""
+        p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        s = np.ascontiguousarray(np.asarray(shape, dtype=np.int32).reshape(-1))
+        q = np.ascontiguousarray(np.asarray(parts, dtype=np.int32).reshape(-1))
+        if not len(p) == len(s) == len(q):
+            raise ValueError("shape, points and parts must have the same length")
+        out = np.empty_like(p)
+        if _lib.rt_texture_colors(self._handle, len(p), _ptr(s, ctypes.c_int32), _ptr(p, ctypes.c_double),
+                                  _ptr(q, ctypes.c_int32), _ptr(out, ctypes.c_double)) != 0:
+            raise IndexError("primitive index out of range")
+        return out
 
     def object_hits(self, index: int, origin, direction) -> HitArrays:
         """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``

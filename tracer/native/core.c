@@ -455,48 +455,61 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
 
 #define M_PI_VALUE 3.141592653589793 /* np.pi */
 #define fmin_np nan_min                /* np.minimum: NaN wins */
+#include "texture.h"
 #include "shade.h"
 
-/* One function per combination of live effects: lighting, shadows, Cook-Torrance, reflection, refraction
- * (shadows and Cook-Torrance only ever come with lighting, see tracer.compile.live_effects). */
-#define SHADE_VARIANT(NAME, L, SH, CT, RL, RR)                                                              \
+/* One function per combination of live effects: lighting, shadows, Cook-Torrance, reflection, refraction,
+ * textures (shadows and Cook-Torrance only ever come with lighting, see tracer.compile.live_effects). */
+#define SHADE_VARIANT(NAME, L, SH, CT, RL, RR, TX)                                                          \
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double *out)                                                      \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, out, L, SH, CT, RL, RR, NAME);                                \
+        shade_body(S, w, o, d, level, media, out, L, SH, CT, RL, RR, TX, NAME);                            \
     }
-SHADE_VARIANT(shade_00000, 0, 0, 0, 0, 0)
-SHADE_VARIANT(shade_00001, 0, 0, 0, 0, 1)
-SHADE_VARIANT(shade_00010, 0, 0, 0, 1, 0)
-SHADE_VARIANT(shade_00011, 0, 0, 0, 1, 1)
-SHADE_VARIANT(shade_10000, 1, 0, 0, 0, 0)
-SHADE_VARIANT(shade_10001, 1, 0, 0, 0, 1)
-SHADE_VARIANT(shade_10010, 1, 0, 0, 1, 0)
-SHADE_VARIANT(shade_10011, 1, 0, 0, 1, 1)
-SHADE_VARIANT(shade_10100, 1, 0, 1, 0, 0)
-SHADE_VARIANT(shade_10101, 1, 0, 1, 0, 1)
-SHADE_VARIANT(shade_10110, 1, 0, 1, 1, 0)
-SHADE_VARIANT(shade_10111, 1, 0, 1, 1, 1)
-SHADE_VARIANT(shade_11000, 1, 1, 0, 0, 0)
-SHADE_VARIANT(shade_11001, 1, 1, 0, 0, 1)
-SHADE_VARIANT(shade_11010, 1, 1, 0, 1, 0)
-SHADE_VARIANT(shade_11011, 1, 1, 0, 1, 1)
-SHADE_VARIANT(shade_11100, 1, 1, 1, 0, 0)
-SHADE_VARIANT(shade_11101, 1, 1, 1, 0, 1)
-SHADE_VARIANT(shade_11110, 1, 1, 1, 1, 0)
-SHADE_VARIANT(shade_11111, 1, 1, 1, 1, 1)
+/* Each combination without textures (suffix 0) and with them (suffix 1). */
+#define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
+    SHADE_VARIANT(shade_##BITS##0, L, SH, CT, RL, RR, 0)                                                    \
+    SHADE_VARIANT(shade_##BITS##1, L, SH, CT, RL, RR, 1)
+SHADE_PAIR(00000, 0, 0, 0, 0, 0)
+SHADE_PAIR(00001, 0, 0, 0, 0, 1)
+SHADE_PAIR(00010, 0, 0, 0, 1, 0)
+SHADE_PAIR(00011, 0, 0, 0, 1, 1)
+SHADE_PAIR(10000, 1, 0, 0, 0, 0)
+SHADE_PAIR(10001, 1, 0, 0, 0, 1)
+SHADE_PAIR(10010, 1, 0, 0, 1, 0)
+SHADE_PAIR(10011, 1, 0, 0, 1, 1)
+SHADE_PAIR(10100, 1, 0, 1, 0, 0)
+SHADE_PAIR(10101, 1, 0, 1, 0, 1)
+SHADE_PAIR(10110, 1, 0, 1, 1, 0)
+SHADE_PAIR(10111, 1, 0, 1, 1, 1)
+SHADE_PAIR(11000, 1, 1, 0, 0, 0)
+SHADE_PAIR(11001, 1, 1, 0, 0, 1)
+SHADE_PAIR(11010, 1, 1, 0, 1, 0)
+SHADE_PAIR(11011, 1, 1, 0, 1, 1)
+SHADE_PAIR(11100, 1, 1, 1, 0, 0)
+SHADE_PAIR(11101, 1, 1, 1, 0, 1)
+SHADE_PAIR(11110, 1, 1, 1, 1, 0)
+SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
 static ShadeFn pick_shade(int64_t effects)
 {
     int l = (effects & FX_LIGHTING) != 0;
     int s = l && (effects & FX_SHADOWS) != 0, ct = l && (effects & FX_COOK_TORRANCE) != 0;
     int rl = (effects & FX_REFLECTION) != 0, rr = (effects & FX_REFRACTION) != 0;
-    static const ShadeFn unlit[2][2] = {{shade_00000, shade_00001}, {shade_00010, shade_00011}};
-    static const ShadeFn lit[2][2][2][2] = {
-        {{{shade_10000, shade_10001}, {shade_10010, shade_10011}}, {{shade_10100, shade_10101}, {shade_10110, shade_10111}}},
-        {{{shade_11000, shade_11001}, {shade_11010, shade_11011}}, {{shade_11100, shade_11101}, {shade_11110, shade_11111}}},
+    int tx = (effects & FX_TEXTURES) != 0;
+    static const ShadeFn unlit[2][2][2] = {{{shade_000000, shade_000001}, {shade_000010, shade_000011}},
+                                           {{shade_000100, shade_000101}, {shade_000110, shade_000111}}};
+    static const ShadeFn lit[2][2][2][2][2] = {
+        {{{{shade_100000, shade_100001}, {shade_100010, shade_100011}},
+          {{shade_100100, shade_100101}, {shade_100110, shade_100111}}},
+         {{{shade_101000, shade_101001}, {shade_101010, shade_101011}},
+          {{shade_101100, shade_101101}, {shade_101110, shade_101111}}}},
+        {{{{shade_110000, shade_110001}, {shade_110010, shade_110011}},
+          {{shade_110100, shade_110101}, {shade_110110, shade_110111}}},
+         {{{shade_111000, shade_111001}, {shade_111010, shade_111011}},
+          {{shade_111100, shade_111101}, {shade_111110, shade_111111}}}},
     };
-    return l ? lit[s][ct][rl][rr] : unlit[rl][rr];
+    return l ? lit[s][ct][rl][rr][tx] : unlit[rl][rr][tx];
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -758,6 +771,17 @@ void *rt_create(const SceneDesc *desc)
         if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
             goto fail;
     }
+    if (D->effects & FX_TEXTURES) {
+        for (int64_t m = 0; m < D->n_materials; m++) {
+            int32_t texture = D->mat_texture[m];
+            int64_t image = D->mat_tex_image[m];
+            if (texture < -3 || (texture > 0 && (image < 0 || image >= D->n_images)))
+                goto fail;
+        }
+        for (int64_t i = 0; i < D->n_images; i++)
+            if (D->image_info[2 * i] < 1 || D->image_info[2 * i + 1] < 1 || !D->image_data[i])
+                goto fail;
+    }
     for (int64_t c = 0; c < D->n_csg; c++)
         if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
             !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
@@ -1014,4 +1038,23 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
         *inside_at_start = (int8_t)top->inside;
     work_free(&w);
     return n;
+}
+
+/* TextureSet.colors: texture colours at world points on primitives `shape`, hit on `part` (1 where
+ * untextured); for the tests, which compare it with the NumPy reference point by point.  -1 on a bad
+ * primitive index. */
+int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
+                      double *out)
+{
+    const Scene *S = (const Scene *)scene;
+    for (int64_t i = 0; i < n; i++)
+        if (shape[i] < 0 || shape[i] >= S->d.n_prims)
+            return -1;
+    for (int64_t i = 0; i < n; i++) {
+        if (S->d.effects & FX_TEXTURES)
+            texture_color(S, shape[i], points + 3 * i, part[i], out + 3 * i);
+        else
+            out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = 1.0;
+    }
+    return 0;
 }

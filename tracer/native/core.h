@@ -21,7 +21,8 @@
 enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TORUS = 5,
        K_POLYHEDRON = 6, K_MESH = 7 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
-enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16 };
+enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
+       FX_TEXTURES = 32 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 
 /* Keep in step with flatten.py's _SceneDesc (same order, same types). */
@@ -96,6 +97,15 @@ typedef struct {
     double min_transparency;
     int64_t max_depth;
     int64_t effects;                 /* FX_* bits */
+    /* textures (tracer.textures; see texture.h) */
+    const int32_t *mat_texture;      /* per material: 0 none, -1/-2/-3 solid, i > 0 the image makePixmap i */
+    const double *mat_tex_param;     /* 9 per material: the texture's parameters, defaults filled in */
+    const int64_t *mat_tex_image;    /* per material: index into image_data, -1 for none */
+    int64_t n_images;
+    const int64_t *image_info;       /* 2 per image: width, height */
+    const double *const *image_data; /* per image: height x width x 3 floats in [0, 1], row 0 at the bottom */
+    const int64_t *noise_perm;       /* 512: tracer.textures.noise.PERM */
+    const double *noise_gradients;   /* 12 x 3: tracer.textures.noise.GRADIENTS */
 } SceneDesc;
 
 /* One crossing of a line with a surface. */
@@ -121,5 +131,7 @@ int rt_occluded(void *scene, int64_t n, const double *origins, const double *dir
 int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction,
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
                        int32_t *part, double *uv, int8_t *inside_at_start);
+int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
+                      double *out);
 
 #endif

@@ -6,7 +6,7 @@ trace the same numbers.  What is added is a padded world bounding box per top-le
 core's BVH over objects.
 
 :func:`unsupported_reason` decides which scenes the C core traces: anything it does not know (an effect it
-has not implemented, such as textures, a node type or a mesh layout it does not understand) is refused
+has not implemented, a node type or a mesh layout it does not understand) is refused
 with a reason, and the NumPy path takes the scene.
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from ..model import POLYHEDRON_KINDS, SHAPE_KINDS
 KIND_CODES = {"sphere": 0, "cube": 1, "square": 2, "plane": 3, "taperedCylinder": 4, "cylinder": 4, "cone": 4,
               "torus": 5, **{k: 6 for k in POLYHEDRON_KINDS}, "teapot": 7, "mesh": 7}
 OP_CODES = {"union": 0, "intersection": 1, "difference": 2}
-EFFECT_BITS = {"lighting": 1, "shadows": 2, "reflection": 4, "refraction": 8, "cook-torrance": 16}
+EFFECT_BITS = {"lighting": 1, "shadows": 2, "reflection": 4, "refraction": 8, "cook-torrance": 16, "textures": 32}
 #: Effects the C core implements; any other live effect sends the scene to the NumPy path.
 HANDLED_EFFECTS = frozenset(EFFECT_BITS) | {"csg"} | {f"shape:{kind}" for kind in KIND_CODES}
 #: Relative padding of the objects' world boxes: far above the rounding of any hit, and of the shapes'
@@ -67,7 +67,12 @@ _LAYOUT = [
     ("n_lights", _I64, None), ("light_pos", _P(_D), np.float64), ("light_color", _P(_D), np.float64),
     ("background", _D * 3, None), ("global_ambient", _D * 3, None), ("min_reflectivity", _D, None),
     ("min_transparency", _D, None), ("max_depth", _I64, None), ("effects", _I64, None),
+    ("mat_texture", _P(_I32), np.int32), ("mat_tex_param", _P(_D), np.float64), ("mat_tex_image", _P(_I64), np.int64),
+    ("n_images", _I64, None), ("image_info", _P(_I64), np.int64), ("image_data", _P(_P(_D)), np.uintp),
+    ("noise_perm", _P(_I64), np.int64), ("noise_gradients", _P(_D), np.float64),
 ]
+#: Parameter slots per material in mat_tex_param (texture.h's TEX_PARAMS): the longest defaults (marble).
+TEX_PARAMS = 9
 
 
 class SceneDesc(ctypes.Structure):
@@ -87,9 +92,6 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     unknown = sorted(e for e in compiled.effects if e not in HANDLED_EFFECTS)
     if unknown:
         return f"not implemented in C: {', '.join(unknown)}"
-    for material in compiled.materials.materials:
-        if material.texture != 0:
-            return "not implemented in C: textures"
     for kind in SHAPE_KINDS:  # a shape kind added to the model but not here
         if kind not in KIND_CODES:
             return f"not implemented in C: shape {kind}"
@@ -258,10 +260,11 @@ class FlatScene:
                  mat_specular_fraction=getattr(mats, "specular_fraction", np.zeros(len(mats.materials))),
                  mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))))
         a.update(light_pos=compiled.light_positions, light_color=compiled.light_colors)
+        n_images = self._flatten_textures(compiled)
 
         settings = compiled.settings
         counts = dict(n_prims=len(prims), n_meshes=len(meshes), n_csg=len(csg_op), n_objects=len(object_ref),
-                      n_materials=len(mats.materials), n_lights=len(compiled.light_positions))
+                      n_materials=len(mats.materials), n_lights=len(compiled.light_positions), n_images=n_images)
         effects = sum(bit for name, bit in EFFECT_BITS.items() if name in compiled.effects)
         scalars = dict(background=tuple(settings.background), global_ambient=tuple(settings.global_ambient),
                        min_reflectivity=float(settings.min_reflectivity),
@@ -279,6 +282,42 @@ class FlatScene:
                 array = np.zeros(1, dtype=dtype)
             a[name] = array
             setattr(self.desc, name, array.ctypes.data_as(ctype))
+
+    def _flatten_textures(self, compiled: CompiledScene) -> int:
+        """Per-material texture numbers, parameters (defaults filled in as tracer.textures does) and image
+        indices; the pictures (by address: each is already one contiguous array, no copy); the noise
+        tables.  Nothing for a scene without textures.  Returns the number of pictures."""
+        from ..textures.noise import GRADIENTS, PERM
+        from ..textures.solid import CHECKER_DEFAULTS, MARBLE_DEFAULTS, WOOD_DEFAULTS, with_defaults
+
+        a = self.arrays
+        if "textures" not in compiled.effects:  # the C core never reads these tables then
+            return 0
+        defaults = {-1: CHECKER_DEFAULTS, -2: WOOD_DEFAULTS, -3: MARBLE_DEFAULTS}
+        images = getattr(compiled.textures, "images", None) or {}
+        numbers = sorted(images)
+        pictures = [np.ascontiguousarray(images[k], dtype=np.float64) for k in numbers]
+        materials = compiled.materials.materials
+        texture = np.zeros(len(materials), dtype=np.int32)
+        params = np.zeros((len(materials), TEX_PARAMS))
+        image_index = np.full(len(materials), -1, dtype=np.int64)
+        for m, material in enumerate(materials):
+            number = int(material.texture)
+            texture[m] = number
+            if number < 0 and number in defaults:
+                values = with_defaults(tuple(material.parameters), defaults[number])
+            elif number > 0:
+                values = (tuple(material.parameters) + (1.0, 1.0))[:2]  # repeat_u, repeat_v
+                image_index[m] = numbers.index(number) if number in images else -1
+            else:
+                values = ()
+            params[m, :len(values)] = values
+        self._pictures = pictures  # the C side points into these
+        a.update(mat_texture=texture, mat_tex_param=params, mat_tex_image=image_index,
+                 image_info=[(p.shape[1], p.shape[0]) for p in pictures],
+                 image_data=np.array([p.ctypes.data for p in pictures], dtype=np.uintp),
+                 noise_perm=PERM, noise_gradients=GRADIENTS)
+        return len(pictures)
 
     @staticmethod
     def _mesh_constants(meshes) -> tuple:

@@ -19,6 +19,11 @@
 static inline double fmin_nan(double a, double b) { return (a < b || b != b) ? a : b; }
 static inline double fmax_nan(double a, double b) { return (a > b || b != b) ? a : b; }
 
+static inline double clip(double x, double lo, double hi)  /* np.clip: NaN stays NaN */
+{
+    return x < lo ? lo : (x > hi ? hi : x);
+}
+
 static inline double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 static inline void cross3(const double *a, const double *b, double *out)

@@ -1,4 +1,5 @@
-/* Whitted shading of one ray: the C form of tracer.trace.Tracer.shade (with cook_torrance and refract).
+/* Whitted shading of one ray: the C form of tracer.trace.Tracer.shade (with cook_torrance, refract and
+ * the texture colours of TextureSet.colors, see texture.h).
  *
  * shade_body is always inlined into one small function per combination of live effects (see the
  * SHADE_VARIANT list in core.c) with the effect flags as constants, so the choice is made once per batch
@@ -6,11 +7,6 @@
  * Included by core.c after the scene queries it uses. */
 
 typedef void (*ShadeFn)(const Scene *, Work *, const double *, const double *, int64_t, const Media *, double *);
-
-static inline double clip(double x, double lo, double hi)  /* np.clip: NaN stays NaN */
-{
-    return x < lo ? lo : (x > hi ? hi : x);
-}
 
 /* Cook-Torrance specular per unit light colour, times cos(theta_light), for one colour channel set. */
 static inline void cook_torrance(const double *normal, const double *to_light, const double *to_eye,
@@ -43,7 +39,7 @@ static inline void cook_torrance(const double *normal, const double *to_light, c
 static inline __attribute__((always_inline)) void
 shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t level, const Media *media, double *out,
            const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
-           const int use_refraction, ShadeFn self)
+           const int use_refraction, const int use_textures, ShadeFn self)
 {
     const SceneDesc *D = &S->d;
     out[0] = D->background[0];
@@ -66,11 +62,23 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     double mp = max_abs3(point), mo = max_abs3(o);
     double offset = REL_EPS * (1.0 + (mp > mo ? mp : mo));
     const double *ambient = D->mat_ambient + 3 * mat, *emissive = D->mat_emissive + 3 * mat;
+    const double *diffuse = D->mat_diffuse + 3 * mat;
+    double textured_ambient[3], textured_diffuse[3];
+    if (use_textures) {  /* the texture colour multiplies ambient and diffuse (1 where untextured) */
+        double texture[3];
+        texture_color(S, h.shape, point, h.part, texture);
+        for (int c = 0; c < 3; c++) {
+            textured_ambient[c] = ambient[c] * texture[c];
+            textured_diffuse[c] = diffuse[c] * texture[c];
+        }
+        ambient = textured_ambient;
+        diffuse = textured_diffuse;
+    }
     double color[3];
     for (int c = 0; c < 3; c++)
         color[c] = emissive[c] + D->global_ambient[c] * ambient[c];
     if (use_lighting) {
-        const double *diffuse = D->mat_diffuse + 3 * mat, *specular = D->mat_specular + 3 * mat;
+        const double *specular = D->mat_specular + 3 * mat;
         double exponent = D->mat_exponent[mat];
         double total[3] = {0.0, 0.0, 0.0};
         double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);

@@ -97,3 +97,56 @@ def test_info_lists_objects_lights_and_effects():
     assert data["camera"]["viewAngle"] == 40
     assert "reflection" not in data["effects"] and "shadows" in data["effects"]
     assert sum(1 for o in data["objects"] if "jack" in o.get("groups", [])) == 20
+
+
+# --- convert (SDL <-> USD; docs/usd.md) -------------------------------------------------------------------
+
+def test_convert_sdl_to_usd_and_back_keeps_what_info_shows(tmp_path):
+    for name in ("jack.usda", "jack.usdc", "jack.usd"):
+        proc = run("convert", ROOT / "scenes" / "jack.sdl", tmp_path / name)
+        assert proc.returncode == 0 and proc.stdout == "" and proc.stderr == "", proc.stderr
+    proc = run("convert", tmp_path / "jack.usdc", tmp_path / "back.sdl")
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    before = json.loads(run("info", ROOT / "scenes" / "jack.sdl", "--json").stdout)
+    for path in (tmp_path / "jack.usda", tmp_path / "back.sdl"):
+        after = json.loads(run("info", path, "--json").stdout)
+        assert after["camera"] == before["camera"] and after["effects"] == before["effects"]
+        assert after["lights"] == before["lights"] and len(after["objects"]) == len(before["objects"])
+    assert (tmp_path / "jack.usda").read_text().startswith("#usda 1.0")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["back.sdl", "jack.usd", "jack.usda", "jack.usdc"]
+
+
+UNSUPPORTED = '#usda 1.0\ndef Capsule "Pill"\n{\n}\ndef Sphere "Ball"\n{\n}\n'
+FLAT = ('#usda 1.0\ndef Sphere "Flat"\n{\n    double3 xformOp:scale = (1, 0, 1)\n'
+        '    uniform token[] xformOpOrder = ["xformOp:scale"]\n}\n')
+
+
+@pytest.mark.parametrize("source, destination, fragments", [
+    ("scenes/csg.sdl", "out.obj", ["out.obj", ".usda"]),  # a destination format we cannot tell
+    ("no-such.usda", "out.sdl", ["no-such.usda", "no such file"]),
+    ("bad.usda", "out.sdl", ["bad.usda:2:1"]),  # USD's parse error, with line and column
+    ("pill.usda", "out.sdl", ["pill.usda", "</Pill>", "Capsule is not supported"]),
+    ("flat.usda", "out.usdc", ["flat.usda", "</Flat>", "singular transform"]),
+    ("scenes/csg.sdl", "no/such/folder/out.usda", ["no/such/folder"]),
+])
+def test_convert_errors_are_one_line_and_write_nothing(tmp_path, source, destination, fragments):
+    (tmp_path / "bad.usda").write_text("#usda 1.0\nthis is not usd\n")
+    (tmp_path / "pill.usda").write_text(UNSUPPORTED)
+    (tmp_path / "flat.usda").write_text(FLAT)
+    source = ROOT / source if source.startswith("scenes/") else tmp_path / source
+    _assert_one_line_error(run("convert", source, tmp_path / destination), *fragments)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.usda", "flat.usda", "pill.usda"]
+
+
+def test_convert_and_render_usd_leniently(tmp_path):
+    (tmp_path / "pill.usda").write_text(UNSUPPORTED)
+    proc = run("convert", tmp_path / "pill.usda", tmp_path / "ball.sdl", "--lenient")
+    assert proc.returncode == 0
+    assert proc.stderr.splitlines() == [f"warning: {tmp_path / 'pill.usda'}: </Pill>: Capsule is not supported: "
+                                        "left out"]
+    assert "sphere" in (tmp_path / "ball.sdl").read_text()
+    _assert_one_line_error(run("render", tmp_path / "pill.usda", "-o", tmp_path / "x.png"), "</Pill>")
+    proc = run("render", tmp_path / "pill.usda", "-o", tmp_path / "x.png", "--lenient", "--width", 8,
+               "--height", 6, "-q")
+    assert proc.returncode == 0 and len(proc.stderr.splitlines()) == 1
+    assert (tmp_path / "x.png").exists()

@@ -19,7 +19,7 @@ EXIT_INTERRUPTED = 130
 
 
 def _add_scene_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="SDL scene file")
+    p.add_argument("scene", help="scene file: SDL, or USD (.usda, .usd, .usdc)")
     p.add_argument("--lenient", action="store_true",
                    help="read what can be read: print one warning per problem in the file and go on")
 
@@ -67,16 +67,61 @@ def build_parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="list a scene's objects, lights and live effects")
     _add_scene_options(i)
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
+
+    c = sub.add_parser("convert", help="convert a scene between SDL (.sdl, .dat) and USD (.usda, .usd, .usdc)")
+    c.add_argument("source", metavar="SRC", help="scene to read (.sdl, .dat, .usda, .usd, .usdc)")
+    c.add_argument("destination", metavar="DST", help="file to write; its extension picks the format")
+    c.add_argument("--lenient", action="store_true",
+                   help="read what can be read: print one warning per problem in the file and go on")
     return parser
 
 
-def _load(args):
-    from .sdl.parser import load
+SDL_EXTENSIONS = (".sdl", ".dat")
 
-    scene = load(args.scene, strict=not args.lenient)
+
+def _scene_format(path: str, role: str) -> str:
+    """'sdl' or 'usd' from a file name's extension (a scene to read may have any other extension: SDL)."""
+    from .usd.common import USD_EXTENSIONS
+
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix in USD_EXTENSIONS:
+        return "usd"
+    if suffix in SDL_EXTENSIONS or role != "destination":
+        return "sdl"
+    raise TracerError(f"{path}: cannot tell the format of the {role} from its extension "
+                      f"(use {', '.join(SDL_EXTENSIONS + USD_EXTENSIONS)})")
+
+
+def _read_scene(path: str, lenient: bool, role: str = "scene"):
+    if _scene_format(path, role) == "usd":
+        from .usd import load_usd
+        return load_usd(path, strict=not lenient)
+    from .sdl.parser import load
+    return load(path, strict=not lenient)
+
+
+def _load(args):
+    scene = _read_scene(args.scene, args.lenient)
     for message in scene.warnings:
         print(f"warning: {message}", file=sys.stderr)
     return scene
+
+
+def _convert(args) -> int:
+    target = _scene_format(args.destination, "destination")
+    scene = _read_scene(args.source, args.lenient, "source")
+    for message in scene.warnings:
+        print(f"warning: {message}", file=sys.stderr)
+    try:
+        if target == "usd":
+            from .usd import save_usd
+            save_usd(scene, args.destination)
+        else:
+            from .sdl.writer import save_sdl
+            save_sdl(scene, args.destination)
+    except ValueError as err:  # something SDL (or USD) cannot express
+        raise TracerError(f"{args.destination}: {err}") from None
+    return 0
 
 
 class _Progress:
@@ -197,7 +242,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         with np.errstate(all="ignore"):
-            return {"render": _render, "info": _info, "bench": _bench}[args.command](args)
+            return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except (SDLError, TracerError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_USAGE

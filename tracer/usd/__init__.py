@@ -1,0 +1,22 @@
+"""OpenUSD interchange: SDL scenes to and from USD stages (``.usda``, ``.usd``, ``.usdc``).
+
+Needs the ``usd-core`` package (``pxr``); everything else in the tracer works without it.  See docs/usd.md.
+"""
+from __future__ import annotations
+
+from .common import USD_EXTENSIONS, is_usd_path
+
+
+def save_usd(scene, path) -> None:
+    """Write ``scene`` to a USD file, atomically (see :func:`tracer.usd.writer.save_usd`)."""
+    from .writer import save_usd as save
+    save(scene, path)
+
+
+def load_usd(path, strict: bool = True):
+    """Read a USD file into a :class:`tracer.model.Scene` (see :func:`tracer.usd.reader.load_usd`)."""
+    from .reader import load_usd as load
+    return load(path, strict=strict)
+
+
+__all__ = ["USD_EXTENSIONS", "is_usd_path", "load_usd", "save_usd"]

@@ -1,0 +1,513 @@
+"""Read an OpenUSD stage into a :class:`tracer.model.Scene`.
+
+Stages we wrote come back exactly: the ``sdl:*`` attributes are read first (shape keyword, material,
+settings, camera, exact matrices).  Stages from other tools are read from their schemas: implicit prims
+(Sphere, Cube, Cylinder, Cylinder_1, Cone, Plane), Mesh prims, world transforms composed by
+UsdGeom.XformCache, UsdPreviewSurface materials, SphereLight/DistantLight (and the other lights as points),
+and the first Camera.  Invisible prims and guide/proxy purposes are skipped.  A z-up stage is turned into
+SDL's y-up world.  Strict (the default), what cannot be read is a TracerError naming the file and prim;
+lenient, a warning.  See docs/usd.md.
+
+The traversal is one loop over ``Usd.PrimRange.PreAndPostVisit`` with an explicit stack for CSG groups,
+so deep nesting cannot overflow Python's stack.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence, Union
+
+import numpy as np
+
+from ..errors import TracerError
+from ..model import (CSG, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene, SceneObject,
+                     Shape, SourceLocation)
+from ..transforms import scaling, translation
+from . import common as C
+from ..sdl.parser import is_singular
+from .common import iter_shapes
+from .meshes import sdl_mesh, usd_mesh
+from .opening import open_stage
+from .preview import material_from_preview
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+#: A distant light becomes a point light this many scene radii away, against its direction.
+DISTANT_LIGHT_DISTANCE = 1.0e5
+#: Our sdl:matrix is used instead of the prim's transform only while the two agree to this (relative).
+MATRIX_AGREEMENT = 1e-12
+#: Lights read as point lights at their centre.
+POINT_LIKE_LIGHTS = ("SphereLight", "RectLight", "DiskLight", "CylinderLight")
+
+@dataclass
+class _Group:
+    """A CSG group whose operands are being collected."""
+
+    op: str
+    path: str
+    groups: tuple[str, ...]
+    children: list[SceneObject] = field(default_factory=list)
+
+
+class _Reader:
+    def __init__(self, stage, file: str, strict: bool = True):
+        pxr = C.pxr()
+        self.Gf, self.Sdf, self.Usd, self.UsdGeom = pxr.Gf, pxr.Sdf, pxr.Usd, pxr.UsdGeom
+        self.UsdLux, self.UsdShade = pxr.UsdLux, pxr.UsdShade
+        self.stage = stage
+        self.file = file
+        self.strict = strict
+        self.time = _time_code(pxr.Usd, stage)
+        self.xforms = self.UsdGeom.XformCache(self.time)
+        # SDL's world is y-up: a z-up stage is turned so that its up becomes +y (see common.to_y_up).
+        self.up = C.to_y_up(str(self.UsdGeom.GetStageUpAxis(stage)))
+        self.scene = Scene()
+        self.distant: list[tuple[np.ndarray, tuple[float, float, float]]] = []
+
+    # -- messages and attributes ------------------------------------------------------------------------
+
+    def _where(self, prim) -> str:
+        return f"{self.file}: <{prim.GetPath()}>" if prim else self.file
+
+    def note(self, prim, message: str) -> None:
+        """Something read approximately (a rect light as a point, say): a warning whether strict or not."""
+        text = f"{self._where(prim)}: {message}"
+        if text not in self.scene.warnings:
+            self.scene.warnings.append(text)
+
+    def problem(self, prim, message: str, lenient: str = "left out") -> None:
+        """Something that cannot be read: an error when strict; otherwise a warning saying what was done
+        instead (``lenient``)."""
+        if self.strict:
+            raise TracerError(f"{self._where(prim)}: {message}")
+        self.note(prim, f"{message}: {lenient}")
+
+    def get(self, prim, name: str, default=None):
+        attr = prim.GetAttribute(name)
+        if not attr or not attr.HasAuthoredValue():
+            return default
+        value = attr.Get(self.time)
+        return default if value is None else value
+
+    def triple(self, prim, name: str, default=None):
+        value = self.get(prim, name)
+        return default if value is None else tuple(float(x) for x in value)
+
+    def world(self, prim) -> np.ndarray:
+        """The prim's local-to-world matrix in SDL's y-up world."""
+        return self.up @ C.from_gf(self.xforms.GetLocalToWorldTransform(prim))
+
+    # -- the whole stage --------------------------------------------------------------------------------
+
+    def read(self, composition_errors: Sequence[str] = ()) -> Scene:
+        for message in composition_errors:  # a missing reference: what it would have brought is not there
+            self.problem(None, message.rstrip("."), "read without it")
+        self._settings()
+        Usd = self.Usd
+        stack: list[_Group] = []
+        predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+        walk = iter(Usd.PrimRange.PreAndPostVisit(self.stage.GetPseudoRoot(), predicate))
+        for prim in walk:
+            if walk.IsPostVisit():
+                if stack and stack[-1].path == str(prim.GetPath()):
+                    self._finish_group(stack.pop(), stack)
+                continue
+            if prim.IsPseudoRoot():
+                continue
+            if not self._shown(prim):
+                walk.PruneChildren()
+                continue
+            if self.get(prim, C.A_CSG) is not None:
+                op = str(self.get(prim, C.A_CSG))
+                if op not in CSG.OPS:
+                    self.problem(prim, f"unknown sdl:csg {op!r}", "its children read as separate objects")
+                else:
+                    stack.append(_Group(op, str(prim.GetPath()), self._groups(prim)))
+                continue
+            obj = self._prim(prim)
+            if obj is not _DESCEND:
+                walk.PruneChildren()
+                if obj is not None:
+                    self._place(obj, stack)
+        self._finish_distant_lights()
+        return self.scene
+
+    def _shown(self, prim) -> bool:
+        """False for invisible prims and guide or proxy purposes (and their children)."""
+        imageable = self.UsdGeom.Imageable(prim)
+        if not imageable:
+            return True
+        if imageable.ComputeVisibility(self.time) == self.UsdGeom.Tokens.invisible:
+            return False
+        return imageable.ComputePurpose() not in (self.UsdGeom.Tokens.guide, self.UsdGeom.Tokens.proxy)
+
+    def _place(self, obj: SceneObject, stack: list[_Group]) -> None:
+        if stack:
+            stack[-1].children.append(obj)
+        else:
+            self.scene.objects.append(obj)
+
+    def _finish_group(self, group: _Group, stack: list[_Group]) -> None:
+        prim = self.stage.GetPrimAtPath(group.path)
+        children = group.children
+        if not children:
+            self.problem(prim, f"{group.op} has no operands")
+            return
+        if len(children) == 1:
+            self.problem(prim, f"{group.op} has one operand", "read as that object alone")
+            self._place(children[0], stack)
+            return
+        if len(children) > 2:
+            self.problem(prim, f"{group.op} has {len(children)} operands", "combined left to right")
+        obj = children[0]
+        for child in children[1:]:
+            obj = CSG(group.op, obj, child, groups=group.groups)
+        self._place(obj, stack)
+
+    # -- settings ---------------------------------------------------------------------------------------
+
+    def _settings(self) -> None:
+        root = self.stage.GetPrimAtPath(C.ROOT)
+        if not root or self.get(root, C.A_VERSION) is None:
+            return
+        s = self.scene.settings
+        for field_name, name in C.SETTING_COLORS.items():
+            setattr(s, field_name, self.triple(root, name, getattr(s, field_name)))
+        for field_name, name in C.SETTING_FLOATS.items():
+            setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
+        s.max_recursion_depth = int(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth))
+        numbers = list(self.get(root, C.A_PIXMAP_NUMBERS, []))
+        files = list(self.get(root, C.A_PIXMAP_FILES, []))
+        if len(numbers) != len(files):
+            self.problem(root, "sdl:pixmapNumbers and sdl:pixmapFiles differ in length", "pixmaps left out")
+            return
+        attr = root.GetAttribute(C.A_PIXMAP_FILES)
+        for number, asset in zip(numbers, files):
+            self.scene.pixmaps[int(number)] = self._asset_file(attr, asset)
+
+    def _asset_file(self, attr, asset) -> str:
+        """An asset path's file: as USD resolved it, else anchored to the layer that wrote it."""
+        if asset.resolvedPath:
+            return asset.resolvedPath
+        path = asset.path
+        if os.path.isabs(path):
+            return path
+        stack = attr.GetPropertyStack(self.time)
+        layer = stack[0].layer if stack else self.stage.GetRootLayer()
+        return layer.ComputeAbsolutePath(path) if not layer.anonymous else path
+
+    # -- one prim ---------------------------------------------------------------------------------------
+
+    def _prim(self, prim):
+        """The object a prim stands for; None if it is something else handled here (light, camera, or
+        unsupported); _DESCEND to look at its children."""
+        type_name = prim.GetTypeName()
+        if prim.IsA(self.UsdGeom.Camera):
+            self._camera(prim)
+            return None
+        if type_name in POINT_LIKE_LIGHTS or type_name == "DistantLight":
+            self._light(prim, type_name)
+            return None
+        if prim.HasAPI(self.UsdLux.LightAPI) or type_name.endswith("Light") or type_name.startswith("DomeLight"):
+            what = type_name if "Light" in type_name else f"a light on a {type_name or 'typeless'} prim"
+            self.problem(prim, f"{what} is not supported")
+            return None
+        if prim.IsA(self.UsdShade.Material) or prim.IsA(self.UsdShade.Shader) or prim.IsA(self.UsdShade.NodeGraph):
+            return None
+        if prim.IsA(self.UsdGeom.Gprim):
+            try:
+                return self._shape(prim)
+            except (ValueError, IndexError, TypeError) as exc:
+                self.problem(prim, f"cannot read it ({exc})")
+                return None
+        if prim.IsA(self.UsdGeom.PointInstancer):
+            self.problem(prim, "PointInstancer is not supported")
+            return None
+        return _DESCEND
+
+    def _shape(self, prim) -> Optional[Shape]:
+        UsdGeom = self.UsdGeom
+        kind = self.get(prim, C.A_SHAPE)
+        kind = str(kind) if kind is not None else None
+        if kind is not None and kind not in SHAPE_KINDS:
+            self.note(prim, f"unknown sdl:shape {kind!r}: read from its USD type")
+            kind = None
+        world = self.world(prim)
+        shape: Optional[Shape] = None
+        if prim.IsA(UsdGeom.Sphere):
+            r = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time))
+            shape = Shape("sphere", world @ scaling(r, r, r))
+        elif prim.IsA(UsdGeom.Cube):
+            h = 0.5 * float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time))
+            shape = Shape("cube", world @ scaling(h, h, h))
+        elif prim.IsA(UsdGeom.Cylinder) or prim.IsA(UsdGeom.Cone) or prim.GetTypeName() == "Cylinder_1":
+            shape = self._round(prim, world)
+        elif prim.IsA(UsdGeom.Plane):
+            shape = self._plane(prim, world, kind)
+        elif prim.IsA(UsdGeom.Mesh):
+            shape = self._mesh(prim, world, kind)
+        else:
+            self.problem(prim, f"{prim.GetTypeName()} is not supported")
+            return None
+        if shape is None:
+            return None
+        if kind == "taperedCylinder" and shape.kind == "mesh":
+            shape = Shape("taperedCylinder", shape.matrix,
+                          tapered_radius=float(self.get(prim, C.A_SMALL_RADIUS, 1.0)))
+        elif kind in ("torus", "square") and shape.kind == "mesh":
+            shape = Shape(kind, shape.matrix)
+        elif kind is not None and kind != shape.kind:
+            self.note(prim, f"sdl:shape {kind!r} does not match its USD type: read as {shape.kind}")
+        exact = self.get(prim, C.A_MATRIX)
+        if exact is not None:
+            exact = C.from_gf(exact)
+            scale = max(1.0, float(np.max(np.abs(exact))))
+            if np.max(np.abs(exact - shape.matrix)) <= MATRIX_AGREEMENT * scale:
+                shape.matrix = exact
+        if is_singular(shape.matrix):  # as SDL refuses it: no inverse to carry rays into generic space
+            self.problem(prim, f"its {shape.kind} has a singular transform (a scale or size of 0?)")
+            return None
+        shape.material = self._material(prim)
+        shape.groups = self._groups(prim)
+        shape.source = SourceLocation(f"{self.file}<{prim.GetPath()}>", 0)
+        return shape
+
+    def _groups(self, prim) -> tuple[str, ...]:
+        return tuple(str(g) for g in self.get(prim, C.A_GROUPS, []))
+
+    def _round(self, prim, world: np.ndarray) -> Shape:
+        """Cylinder, Cylinder_1 or Cone: centred on the origin along ``axis``, from -height/2 to height/2
+        (the cone's apex at +height/2); ours run from z = 0 (radius 1) to z = 1."""
+        get = lambda name, default: float(self.get(prim, name, default))  # noqa: E731
+        axis = str(self.get(prim, "axis", "Z"))
+        height = get("height", 2.0)
+        if prim.IsA(self.UsdGeom.Cone):
+            bottom, top, kind = get("radius", 1.0), 0.0, "cone"
+        elif prim.GetTypeName() == "Cylinder_1":
+            bottom, top, kind = get("radiusBottom", 1.0), get("radiusTop", 1.0), "taperedCylinder"
+        else:
+            bottom, top, kind = get("radius", 1.0), get("radius", 1.0), "cylinder"
+        place = world @ C.axis_frame(axis)
+        if bottom == 0.0 and top != 0.0:  # the apex at the bottom: turn it over (a half turn about x)
+            place = place @ np.diag([1.0, -1.0, -1.0, 1.0])
+            bottom, top = top, bottom
+        matrix = place @ translation(0.0, 0.0, -0.5 * height) @ scaling(bottom, bottom, height)
+        if kind == "taperedCylinder":
+            ratio = top / bottom if bottom else 0.0
+            if ratio == 1.0:
+                return Shape("cylinder", matrix)
+            if ratio == 0.0:
+                return Shape("cone", matrix)
+            return Shape(kind, matrix, tapered_radius=ratio)
+        return Shape(kind, matrix)
+
+    def _plane(self, prim, world: np.ndarray, kind: Optional[str]) -> Shape:
+        axis = str(self.get(prim, "axis", "Z"))
+        place = world @ C.plane_frame(axis)
+        if kind == "plane":  # ours: the infinite plane, whatever size its stand-in has
+            return Shape("plane", place)
+        width, length = float(self.get(prim, "width", 2.0)), float(self.get(prim, "length", 2.0))
+        return Shape("square", place @ scaling(0.5 * width, 0.5 * length, 1.0))
+
+    # -- meshes -----------------------------------------------------------------------------------------
+
+    def _mesh(self, prim, world: np.ndarray, kind: Optional[str]) -> Optional[Shape]:
+        if kind in POLYHEDRON_KINDS or kind == "teapot":
+            from ..sdl.parser import builtin_mesh
+            return Shape(kind, world, mesh=builtin_mesh(kind))
+        if kind in ("torus", "square", "taperedCylinder"):
+            return Shape("mesh", world)  # the caller makes the exact shape
+        if kind == "mesh" and self.get(prim, C.A_MESH_POINTS) is not None:
+            data = sdl_mesh(self, prim)
+        else:
+            data = usd_mesh(self, prim)
+        if data is None:
+            return None
+        shape = Shape("mesh", world, mesh=data)
+        mesh_file = self.get(prim, C.A_MESH_FILE)
+        if kind == "mesh" and mesh_file:
+            shape.mesh_file = str(mesh_file)
+        return shape
+
+    # -- materials --------------------------------------------------------------------------------------
+
+    def _material(self, prim) -> Material:
+        if self.get(prim, C.A_SHAPE) is not None and self.get(prim, C.NS + "diffuse") is not None:
+            return self._sdl_material(prim)
+        return self._preview_material(prim)
+
+    def _sdl_material(self, prim) -> Material:
+        default = Material()
+        values = {}
+        for field_name, keyword in C.MATERIAL_COLORS.items():
+            values[field_name] = self.triple(prim, C.NS + keyword, getattr(default, field_name))
+        for field_name, keyword in C.MATERIAL_FLOATS.items():
+            values[field_name] = float(self.get(prim, C.NS + keyword, getattr(default, field_name)))
+        values["texture"] = int(self.get(prim, C.A_TEXTURE, 0))
+        values["parameters"] = tuple(float(p) for p in self.get(prim, C.A_PARAMETERS, []))
+        return Material(**values)
+
+    def _preview_material(self, prim) -> Material:
+        """SDL material from the bound UsdPreviewSurface, else from displayColor, else SDL's default."""
+        UsdShade = self.UsdShade
+        bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        shader = None
+        if bound:
+            source = bound.ComputeSurfaceSource()
+            candidate = source[0] if source else None
+            if candidate and str(candidate.GetIdAttr().Get() or "") == "UsdPreviewSurface":
+                shader = candidate
+            elif candidate:
+                self.note(prim, f"its material's surface {candidate.GetIdAttr().Get()!r} is not a "
+                                "UsdPreviewSurface: display colour used")
+        if shader is None:
+            color = self.UsdGeom.Gprim(prim).GetDisplayColorAttr().Get(self.time)
+            if color is None or len(color) == 0:
+                return Material()
+            if len(color) > 1:
+                self.note(prim, "displayColor varies over the surface: its first value used")
+            diffuse = tuple(float(x) for x in color[0])
+            return Material(ambient=diffuse, diffuse=diffuse)
+
+        def value(name):
+            inp = shader.GetInput(name)
+            if inp and inp.HasConnectedSource():
+                self.note(prim, f"its {name} comes from a shader network (a texture?): its own value used")
+            return inp.Get(self.time) if inp else None
+
+        return material_from_preview(value)
+
+    # -- lights and camera ------------------------------------------------------------------------------
+
+    def _light(self, prim, type_name: str) -> None:
+        light = self.UsdLux.LightAPI(prim)
+        base = light.GetColorAttr().Get(self.time)
+        base = (1.0, 1.0, 1.0) if base is None else tuple(float(x) for x in base)
+        # Only an authored intensity counts: the schema's fallbacks are physical units (a DistantLight's is
+        # 50000 lux), which mean nothing to SDL's unitless light colours.
+        intensity = float(self.get(prim, "inputs:intensity", 1.0))
+        exposure = float(self.get(prim, "inputs:exposure", 0.0))
+        if light.GetEnableColorTemperatureAttr().Get(self.time):
+            self.note(prim, "colour temperature is not supported: the light's colour used")
+        color = tuple(c * intensity * 2.0 ** exposure for c in base)
+        exact = self.triple(prim, C.A_LIGHT_COLOR)
+        # Our exact colour, unless the light was changed in another tool since (its float colour differs).
+        if exact is not None and tuple(float(np.float32(c)) for c in exact) == color:
+            color = exact
+        world = self.world(prim)
+        if type_name == "DistantLight":
+            direction = -world[:3, 2]  # it shines down its -z axis
+            norm = float(np.linalg.norm(direction))
+            if not norm > 0:
+                self.problem(prim, "distant light with a degenerate transform")
+                return
+            self.distant.append((direction / norm, color))
+            self.scene.lights.append(None)  # placeholder, in stage order
+            return
+        if type_name != "SphereLight":
+            self.note(prim, f"{type_name} read as a point light at its centre")
+        self.scene.lights.append(Light(tuple(float(x) for x in world[:3, 3]), color))
+
+    def _finish_distant_lights(self) -> None:
+        """Distant lights become point lights far away against their direction (SDL has no attenuation, so
+        only the direction matters): DISTANT_LIGHT_DISTANCE times the scene's radius from its centre."""
+        if not self.distant:
+            return
+        points = [s.matrix[:3, 3] for s in iter_shapes(self.scene.objects) if s.kind != "plane"]
+        points += [np.asarray(light.position) for light in self.scene.lights if light is not None]
+        if self.scene.camera is not None:
+            points.append(np.asarray(self.scene.camera.eye, dtype=np.float64))
+        points = np.array(points, dtype=np.float64).reshape(-1, 3)
+        centre = 0.5 * (points.min(axis=0) + points.max(axis=0)) if len(points) else np.zeros(3)
+        radius = float(np.max(np.linalg.norm(points - centre, axis=1))) if len(points) else 0.0
+        far = DISTANT_LIGHT_DISTANCE * (radius + 1.0)
+        distant = iter(self.distant)
+        lights = []
+        for light in self.scene.lights:
+            if light is None:
+                direction, color = next(distant)
+                light = Light(tuple(float(x) for x in centre - far * direction), color)
+            lights.append(light)
+        self.scene.lights = lights
+
+    def _camera(self, prim) -> None:
+        if self.scene.camera is not None:
+            self.note(prim, "a second camera: the first one is used")
+            return
+        camera = self.UsdGeom.Camera(prim)
+        world = self.world(prim)
+        ours = self._sdl_camera(prim, camera, world)
+        if ours is not None:
+            self.scene.camera = ours
+            return
+        if str(camera.GetProjectionAttr().Get(self.time)) != self.UsdGeom.Tokens.perspective:
+            self.note(prim, "orthographic camera read as a perspective one")
+        focal = float(camera.GetFocalLengthAttr().Get(self.time))
+        aperture = float(camera.GetVerticalApertureAttr().Get(self.time))
+        if not (focal > 0 and aperture > 0):
+            self.problem(prim, "camera without a usable focal length and aperture")
+            return
+        back, up_axis = world[:3, 2], world[:3, 1]
+        if not (np.linalg.norm(back) > 0 and np.linalg.norm(np.cross(back, up_axis)) > 0):
+            self.problem(prim, "camera with a degenerate transform")
+            return
+        eye = world[:3, 3]
+        angle = math.degrees(2.0 * math.atan(0.5 * aperture / focal))
+        self.scene.camera = Camera(tuple(float(x) for x in eye),
+                                   tuple(float(x) for x in eye - back / np.linalg.norm(back)),
+                                   tuple(float(x) for x in up_axis / np.linalg.norm(up_axis)), angle)
+
+
+    def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
+        """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
+        in another tool since)."""
+        from .writer import camera_frame, focal_length
+
+        eye, look, up = (self.triple(prim, name) for name in (C.A_EYE, C.A_LOOK, C.A_UP))
+        angle = self.get(prim, C.A_VIEW_ANGLE)
+        if None in (eye, look, up, angle):
+            return None
+        try:
+            ours = Camera(eye, look, up, float(angle))
+            frame = camera_frame(ours)
+            aperture = float(camera.GetVerticalApertureAttr().Get(self.time))
+            focal = float(camera.GetFocalLengthAttr().Get(self.time))
+            wanted = focal_length(ours.view_angle, aperture)
+        except (ValueError, ZeroDivisionError, TypeError):
+            return None
+        scale = max(1.0, float(np.max(np.abs(frame))))
+        if np.max(np.abs(frame - world)) > 1e-9 * scale or abs(focal - wanted) > 1e-5 * wanted:
+            self.note(prim, "the camera was changed after it was written: read from the USD camera")
+            return None
+        return ours
+
+
+_DESCEND = object()
+
+
+def _time_code(Usd, stage):
+    """The time to read an animated stage at: its start frame, else each value's earliest sample (a plain
+    default value where there are no samples)."""
+    if stage.HasAuthoredTimeCodeRange():
+        return Usd.TimeCode(stage.GetStartTimeCode())
+    return Usd.TimeCode.EarliestTime()
+
+
+def load_usd(path: PathLike, strict: bool = True) -> Scene:
+    """Read a USD file into a Scene.
+
+    Strict (the default), anything that cannot be read -- an unsupported prim or light, a broken mesh, a
+    reference to a missing file -- raises a TracerError naming the file and prim.  With ``strict=False``
+    each becomes one message in ``scene.warnings`` and the rest is read.  Approximations (a rect light read
+    as a point light, a material that is not a UsdPreviewSurface) are warnings either way."""
+    stage, composition_errors = open_stage(path)
+    scene = _Reader(stage, os.fspath(path), strict).read(composition_errors)
+    scene.source = Path(path)
+    return scene
+
+
+def stage_to_scene(stage, name: str = "<stage>", strict: bool = True) -> Scene:
+    """Read an already open Usd.Stage."""
+    return _Reader(stage, name, strict).read()

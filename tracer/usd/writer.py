@@ -1,0 +1,382 @@
+"""Write a :class:`tracer.model.Scene` as an OpenUSD stage (``.usda``, ``.usd``, ``.usdc``).
+
+See docs/usd.md for the mapping.  In short: every object is one prim under ``/SDLScene/Objects`` with its
+exact 4x4 matrix as its only xform op (``xformOp:transform``); sphere, cube, cylinder, cone and plane are
+UsdGeom implicit prims, everything else a UsdGeom.Mesh; every SDL value is kept in ``sdl:*`` attributes so
+that :func:`tracer.usd.reader.load_usd` gives back the same scene, and materials are also UsdPreviewSurface
+shaders so that other tools show them.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Optional, Union
+
+import numpy as np
+
+from ..errors import TracerError
+from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
+from ..transforms import translation
+from . import common as C
+from .preview import preview_inputs
+from .tessellate import square_mesh, tapered_cylinder_mesh, torus_mesh
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+#: USD's generic cylinder and cone are centred on the origin; ours run from z = 0 to 1.  We write them with
+#: height 1 (radius 1, axis Z), so that the USD prim spans z in [-0.5, 0.5], and move them up by half.
+CENTRED = translation(0.0, 0.0, 0.5)
+
+#: The SDL plane is infinite; its UsdGeom.Plane (finite, for other tools) reaches this many times past the
+#: farthest thing in the scene.
+PLANE_REACH = 10.0
+
+#: USD's default vertical film aperture (mm); the focal length is chosen to give the SDL view angle.
+VERTICAL_APERTURE = 15.2908
+#: Our default image is 640 x 480.
+ASPECT = 4.0 / 3.0
+
+
+def camera_frame(camera: Camera) -> np.ndarray:
+    """The camera-to-world matrix USD expects (the camera looks down its -z, +y up): columns u, v, n, eye,
+    built as tracer.camera does."""
+    eye = np.asarray(camera.eye, dtype=np.float64)
+    n = eye - np.asarray(camera.look, dtype=np.float64)
+    n /= np.linalg.norm(n)
+    u = np.cross(np.asarray(camera.up, dtype=np.float64), n)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    frame = np.eye(4)
+    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = u, v, n, eye
+    return frame
+
+
+def focal_length(view_angle: float, aperture: float = VERTICAL_APERTURE) -> float:
+    """The focal length that gives a vertical view angle (degrees) on a film ``aperture`` high."""
+    return aperture / (2.0 * math.tan(math.radians(view_angle) / 2.0))
+
+
+class _Writer:
+    def __init__(self, scene: Scene, folder: Path):
+        pxr = C.pxr()
+        self.Gf, self.Sdf, self.Usd, self.UsdGeom = pxr.Gf, pxr.Sdf, pxr.Usd, pxr.UsdGeom
+        self.UsdLux, self.UsdShade, self.Vt = pxr.UsdLux, pxr.UsdShade, pxr.Vt
+        self.scene = scene
+        self.folder = folder
+        self.stage = self.Usd.Stage.CreateInMemory()
+        self.materials: dict[Material, object] = {}
+        self.names: dict[str, int] = {}
+        self.reach = self._scene_reach()
+
+    # -- small helpers ----------------------------------------------------------------------------------
+
+    def _attr(self, prim, name: str, type_name, value) -> None:
+        prim.CreateAttribute(name, type_name, custom=True).Set(value)
+
+    def _color(self, prim, name: str, value) -> None:
+        self._attr(prim, name, self.Sdf.ValueTypeNames.Color3d, self.Gf.Vec3d(*map(float, value)))
+
+    def _vec(self, prim, name: str, value) -> None:
+        self._attr(prim, name, self.Sdf.ValueTypeNames.Double3, self.Gf.Vec3d(*map(float, value)))
+
+    def _double(self, prim, name: str, value) -> None:
+        self._attr(prim, name, self.Sdf.ValueTypeNames.Double, float(value))
+
+    def _name(self, base: str) -> str:
+        count = self.names.get(base, 0)
+        self.names[base] = count + 1
+        return f"{base}_{count}"
+
+    def _set_transform(self, xformable, matrix: np.ndarray) -> None:
+        """The matrix as the prim's one xform op, ``xformOp:transform`` (matrix4d, USD's transpose)."""
+        xformable.MakeMatrixXform().Set(C.to_gf(matrix))
+
+    def _scene_reach(self) -> float:
+        """How far from the origin things in the scene are (for sizing the finite stand-in of a plane)."""
+        points = [s.matrix[:3, 3] for s in C.iter_shapes(self.scene.objects) if s.kind != "plane"]
+        points += [np.asarray(light.position, dtype=np.float64) for light in self.scene.lights]
+        if self.scene.camera is not None:
+            points.append(np.asarray(self.scene.camera.eye, dtype=np.float64))
+        reach = max((float(np.linalg.norm(p)) for p in points), default=0.0)
+        return reach + 10.0
+
+    # -- the stage --------------------------------------------------------------------------------------
+
+    def build(self):
+        stage, UsdGeom = self.stage, self.UsdGeom
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+        root = UsdGeom.Xform.Define(stage, C.ROOT).GetPrim()
+        stage.SetDefaultPrim(root)
+        stage.GetRootLayer().customLayerData = {"sdl:writer": "tracer (python -m tracer convert)",
+                                                "sdl:version": C.FORMAT_VERSION}
+        self._settings(root)
+        self.UsdGeom.Scope.Define(stage, C.MATERIALS)
+        self.UsdGeom.Scope.Define(stage, C.LIGHTS)
+        for light in self.scene.lights:
+            self._light(light)
+        if self.scene.camera is not None:
+            self._camera(self.scene.camera)
+        UsdGeom.Xform.Define(stage, C.OBJECTS)
+        self._objects()
+        return stage
+
+    def _settings(self, root) -> None:
+        s = self.scene.settings
+        self._attr(root, C.A_VERSION, self.Sdf.ValueTypeNames.Int, C.FORMAT_VERSION)
+        for field, name in C.SETTING_COLORS.items():
+            self._color(root, name, getattr(s, field))
+        for field, name in C.SETTING_FLOATS.items():
+            self._double(root, name, getattr(s, field))
+        self._attr(root, C.A_MAX_DEPTH, self.Sdf.ValueTypeNames.Int, int(s.max_recursion_depth))
+        numbers = sorted(self.scene.pixmaps)
+        self._attr(root, C.A_PIXMAP_NUMBERS, self.Sdf.ValueTypeNames.IntArray, self.Vt.IntArray(numbers))
+        files = [self._relative(self.scene.pixmaps[i]) for i in numbers]
+        self._attr(root, C.A_PIXMAP_FILES, self.Sdf.ValueTypeNames.AssetArray,
+                   self.Sdf.AssetPathArray([self.Sdf.AssetPath(f) for f in files]))
+
+    def _relpath(self, name: str) -> str:
+        """A file name (relative to the current folder, or absolute) relative to the USD file's folder, with
+        forward slashes (absolute if there is no relative path, e.g. another drive on Windows)."""
+        try:
+            return Path(os.path.relpath(os.path.abspath(name), os.path.abspath(self.folder))).as_posix()
+        except ValueError:
+            return Path(os.path.abspath(name)).as_posix()
+
+    def _relative(self, name: str) -> str:
+        """The same as an asset path: ``./...`` or ``../...``, so that USD anchors it to the file."""
+        rel = self._relpath(name)
+        return rel if rel.startswith("../") or os.path.isabs(rel) else "./" + rel
+
+    def _light(self, light: Light) -> None:
+        path = f"{C.LIGHTS}/{self._name('light')}"
+        lux = self.UsdLux.SphereLight.Define(self.stage, path)
+        lux.CreateRadiusAttr(0.0)
+        lux.CreateTreatAsPointAttr(True)
+        lux.CreateColorAttr(self.Gf.Vec3f(*map(float, light.color)))
+        lux.CreateIntensityAttr(1.0)
+        self._set_transform(lux, translation(*light.position))
+        self._color(lux.GetPrim(), C.A_LIGHT_COLOR, light.color)
+
+    def _camera(self, camera: Camera) -> None:
+        cam = self.UsdGeom.Camera.Define(self.stage, C.CAMERA)
+        cam.CreateProjectionAttr(self.UsdGeom.Tokens.perspective)
+        cam.CreateVerticalApertureAttr(VERTICAL_APERTURE)
+        cam.CreateHorizontalApertureAttr(VERTICAL_APERTURE * ASPECT)
+        cam.CreateFocalLengthAttr(focal_length(camera.view_angle))
+        self._set_transform(cam, camera_frame(camera))
+        prim = cam.GetPrim()
+        self._vec(prim, C.A_EYE, camera.eye)
+        self._vec(prim, C.A_LOOK, camera.look)
+        self._vec(prim, C.A_UP, camera.up)
+        self._double(prim, C.A_VIEW_ANGLE, camera.view_angle)
+
+    # -- objects ----------------------------------------------------------------------------------------
+
+    def _objects(self) -> None:
+        # An explicit stack, so that deeply nested booleans cannot overflow Python's.
+        todo: list[tuple[SceneObject, str, Optional[str]]] = [
+            (o, C.OBJECTS, None) for o in reversed(self.scene.objects)]
+        while todo:
+            obj, parent, operand = todo.pop()
+            if isinstance(obj, CSG):
+                path = f"{parent}/{self._name(obj.op)}"
+                prim = self.UsdGeom.Xform.Define(self.stage, path).GetPrim()
+                self._attr(prim, C.A_CSG, self.Sdf.ValueTypeNames.Token, obj.op)
+                todo += [(obj.right, path, "right"), (obj.left, path, "left")]
+            else:
+                prim = self._shape(obj, parent)
+            if operand is not None:
+                self._attr(prim, C.A_OPERAND, self.Sdf.ValueTypeNames.Token, operand)
+            if obj.groups:
+                self._attr(prim, C.A_GROUPS, self.Sdf.ValueTypeNames.StringArray, self.Vt.StringArray(list(obj.groups)))
+
+    def _shape(self, shape: Shape, parent: str):
+        UsdGeom, stage = self.UsdGeom, self.stage
+        path = f"{parent}/{self._name(shape.kind)}"
+        kind = shape.kind
+        exact_matrix = None
+        if kind == "sphere":
+            gprim = UsdGeom.Sphere.Define(stage, path)
+            gprim.CreateRadiusAttr(1.0)
+            matrix = shape.matrix
+        elif kind == "cube":
+            gprim = UsdGeom.Cube.Define(stage, path)
+            gprim.CreateSizeAttr(2.0)
+            matrix = shape.matrix
+        elif kind in ("cylinder", "cone"):
+            gprim = (UsdGeom.Cylinder if kind == "cylinder" else UsdGeom.Cone).Define(stage, path)
+            gprim.CreateRadiusAttr(1.0)
+            gprim.CreateHeightAttr(1.0)
+            gprim.CreateAxisAttr(UsdGeom.Tokens.z)
+            matrix = shape.matrix @ CENTRED
+            exact_matrix = shape.matrix  # M @ CENTRED @ CENTRED⁻¹ may be off by an ulp
+        elif kind == "plane":
+            gprim = UsdGeom.Plane.Define(stage, path)
+            half = self._plane_half_size(shape.matrix)
+            gprim.CreateWidthAttr(2.0 * half)
+            gprim.CreateLengthAttr(2.0 * half)
+            gprim.CreateAxisAttr(UsdGeom.Tokens.z)
+            gprim.CreateDoubleSidedAttr(True)
+            matrix = shape.matrix
+        else:
+            gprim = UsdGeom.Mesh.Define(stage, path)
+            self._mesh(gprim, self._generic_mesh(shape))
+            matrix = shape.matrix
+        self._set_transform(gprim, matrix)
+        prim = gprim.GetPrim()
+        self._attr(prim, C.A_SHAPE, self.Sdf.ValueTypeNames.Token, kind)
+        if exact_matrix is not None:
+            self._attr(prim, C.A_MATRIX, self.Sdf.ValueTypeNames.Matrix4d, C.to_gf(exact_matrix))
+        if kind == "taperedCylinder":
+            self._double(prim, C.A_SMALL_RADIUS, shape.tapered_radius)
+        if kind == "mesh":
+            self._mesh_data(prim, shape)
+        extent = UsdGeom.Boundable.ComputeExtentFromPlugins(gprim, self.Usd.TimeCode.Default())
+        if extent is not None:
+            gprim.CreateExtentAttr(extent)
+        gprim.CreateDisplayColorAttr(self.Vt.Vec3fArray([self.Gf.Vec3f(*map(float, shape.material.diffuse))]))
+        self._material(prim, shape.material)
+        return prim
+
+    def _plane_half_size(self, matrix: np.ndarray) -> float:
+        """Half the side of the square that stands in for an infinite plane: it reaches ``PLANE_REACH`` times
+        past everything else in the scene (in the plane's generic units)."""
+        smallest = float(np.min(np.linalg.norm(matrix[:3, :2], axis=0)))
+        distance = self.reach + float(np.linalg.norm(matrix[:3, 3]))
+        return PLANE_REACH * distance / max(smallest, 1e-300)
+
+    @staticmethod
+    def _generic_mesh(shape: Shape) -> MeshData:
+        if shape.kind == "square":
+            return square_mesh()
+        if shape.kind == "torus":
+            return torus_mesh()
+        if shape.kind == "taperedCylinder":
+            return tapered_cylinder_mesh(shape.tapered_radius)
+        if shape.mesh is None:
+            if shape.kind in POLYHEDRON_KINDS or shape.kind == "teapot":
+                from ..sdl.parser import builtin_mesh
+                return builtin_mesh(shape.kind)
+            raise TracerError(f"cannot write the {shape.kind}: it has no mesh data")
+        return shape.mesh
+
+    def _mesh(self, mesh, data: MeshData) -> None:
+        """Points, faces and per-corner (faceVarying) normals; faces without normals get their flat one."""
+        from ..meshio import _face_normal
+
+        vertices = np.asarray(data.vertices, dtype=np.float64).reshape(-1, 3)
+        normals = np.asarray(data.normals, dtype=np.float64).reshape(-1, 3)
+        counts, indices, corner_normals = [], [], []
+        for verts, norms in data.faces:
+            counts.append(len(verts))
+            indices.extend(int(v) for v in verts)
+            if len(norms) == len(verts):
+                corner_normals.extend(normals[list(norms)])
+            else:
+                flat = _face_normal(vertices[list(verts)])
+                corner_normals.extend([flat] * len(verts))
+        Vt = self.Vt
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(vertices.astype(np.float32)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray(counts))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(indices))
+        corner = np.asarray(corner_normals, dtype=np.float64).reshape(-1, 3)
+        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(corner.astype(np.float32)))
+        mesh.SetNormalsInterpolation(self.UsdGeom.Tokens.faceVarying)
+        mesh.CreateSubdivisionSchemeAttr(self.UsdGeom.Tokens.none)
+        mesh.CreateOrientationAttr(self.UsdGeom.Tokens.rightHanded)
+
+    def _mesh_data(self, prim, shape: Shape) -> None:
+        """A ``mesh`` statement's data exactly (doubles, and the separate normal list of .3vn), and its file."""
+        data = shape.mesh
+        Sdf, Vt = self.Sdf, self.Vt
+        if shape.mesh_file is not None:
+            name = shape.mesh_file
+            if self.scene.source is not None and not os.path.isabs(name):
+                name = str(Path(self.scene.source).parent / name)
+            self._attr(prim, C.A_MESH_FILE, Sdf.ValueTypeNames.String, self._relpath(name))
+        if data is None:
+            return
+        self._attr(prim, C.A_MESH_POINTS, Sdf.ValueTypeNames.Double3Array,
+                   Vt.Vec3dArray.FromNumpy(np.asarray(data.vertices, dtype=np.float64).reshape(-1, 3)))
+        self._attr(prim, C.A_MESH_NORMALS, Sdf.ValueTypeNames.Double3Array,
+                   Vt.Vec3dArray.FromNumpy(np.asarray(data.normals, dtype=np.float64).reshape(-1, 3)))
+        corners = []
+        for verts, norms in data.faces:
+            corners.extend(int(n) for n in norms) if len(norms) == len(verts) else corners.extend([-1] * len(verts))
+        self._attr(prim, C.A_MESH_NORMAL_INDICES, Sdf.ValueTypeNames.IntArray, Vt.IntArray(corners))
+
+    # -- materials --------------------------------------------------------------------------------------
+
+    def _material(self, prim, material: Material) -> None:
+        Sdf = self.Sdf
+        for field, keyword in C.MATERIAL_COLORS.items():
+            self._color(prim, C.NS + keyword, getattr(material, field))
+        for field, keyword in C.MATERIAL_FLOATS.items():
+            self._double(prim, C.NS + keyword, getattr(material, field))
+        self._attr(prim, C.A_TEXTURE, Sdf.ValueTypeNames.Int, int(material.texture))
+        self._attr(prim, C.A_PARAMETERS, Sdf.ValueTypeNames.DoubleArray,
+                   self.Vt.DoubleArray([float(p) for p in material.parameters]))
+        usd_material = self.materials.get(material)
+        if usd_material is None:
+            usd_material = self._preview_surface(material)
+            self.materials[material] = usd_material
+        binding = self.UsdShade.MaterialBindingAPI.Apply(prim)
+        binding.Bind(usd_material)
+
+    def _preview_surface(self, material: Material):
+        UsdShade, Sdf, Gf = self.UsdShade, self.Sdf, self.Gf
+        path = f"{C.MATERIALS}/{self._name('material')}"
+        usd_material = UsdShade.Material.Define(self.stage, path)
+        shader = UsdShade.Shader.Define(self.stage, path + "/PreviewSurface")
+        shader.CreateIdAttr("UsdPreviewSurface")
+        for name, value in preview_inputs(material).items():
+            if isinstance(value, tuple):
+                shader.CreateInput(name, Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*map(float, value)))
+            elif isinstance(value, int):
+                shader.CreateInput(name, Sdf.ValueTypeNames.Int).Set(value)
+            else:
+                shader.CreateInput(name, Sdf.ValueTypeNames.Float).Set(float(value))
+        usd_material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+        return usd_material
+
+
+def build_stage(scene: Scene, folder: PathLike = "."):
+    """The scene as an in-memory Usd.Stage; file names in it are relative to ``folder``."""
+    return _Writer(scene, Path(folder)).build()
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def save_usd(scene: Scene, path: PathLike) -> None:
+    """Write the scene to ``path`` (.usda text, .usdc or .usd binary), atomically: a temporary file in the
+    same folder, then renamed over ``path``."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in C.USD_EXTENSIONS:
+        raise TracerError(f"{path}: not a USD file name (use {', '.join(C.USD_EXTENSIONS)})")
+    stage = build_stage(scene, path.parent)
+    handle, temp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)
+    os.close(handle)
+    try:
+        os.chmod(temp_name, 0o666 & ~_umask())  # mkstemp makes it private; a scene file is not
+        if not stage.GetRootLayer().Export(temp_name):
+            raise TracerError(f"{path}: USD could not write the file")
+        os.replace(temp_name, path)
+    except BaseException:
+        try:
+            os.unlink(temp_name)
+        except OSError:
+            pass
+        raise
+    # A layer of this name that USD still holds in memory would otherwise hide the new file from Open().
+    from pxr import Sdf
+    layer = Sdf.Layer.Find(str(path))
+    if layer is not None:
+        layer.Reload()

@@ -38,3 +38,9 @@ accuracy: setup
 bench: setup
 	$(PY) bench/run.py
 	$(PY) bench/memory.py
+
+# The Blender extension zip (Blender 4.2+) and the legacy add-on zip (Blender 3.x/4.1), in dist/.
+.PHONY: extension
+extension: setup
+	$(PY) scripts/build_extension.py
+	$(PY) scripts/build_extension.py --legacy

@@ -44,7 +44,7 @@ from itertools import combinations
 
 import numpy as np
 
-from tracer.model import POLYHEDRON_KINDS, MeshData
+from ..model import POLYHEDRON_KINDS, MeshData
 
 _PHI = (1.0 + 5.0 ** 0.5) / 2.0
 

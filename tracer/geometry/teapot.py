@@ -41,7 +41,7 @@ from itertools import product
 
 import numpy as np
 
-from tracer.model import MeshData
+from ..model import MeshData
 
 #: GLUT's teapot control points (x, y, z), data frame (z up).
 CONTROL_POINTS: tuple[tuple[float, float, float], ...] = (

@@ -1,0 +1,250 @@
+"""The ``SDL_RAYTRACER`` render engine: final renders in blocks, and the viewport's Rendered mode.
+
+Final render: the depsgraph becomes a tracer scene (scene_build), rays come from Blender's camera exactly
+(raycam: lens, sensor size and fit, shift, pixel aspect, resolution %, border, orthographic), and the
+image is traced coarse to fine (blocks); after each finished tile the film goes to the render result
+(``update_result``), so the Image Editor shows it sharpening.  Esc is checked between chunks of rays, so
+it stops the render within a block.  Colours are the tracer's linear values, written as they are.
+
+Viewport: each redraw traces for a short time slice with the viewport's own view and projection
+matrices, draws the film so far as a texture over the region, and asks for another redraw until the
+image is finished; any change to the scene or the view starts again.
+"""
+from __future__ import annotations
+
+import time
+import traceback
+from typing import Optional
+
+import bpy
+import numpy as np
+
+from . import blocks, deps, raycam
+from .scene_build import SceneBuilder, matrix_np
+
+ENGINE_ID = "SDL_RAYTRACER"
+#: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled.
+LAST_RENDER: dict = {}
+#: Seconds of tracing per viewport redraw.
+VIEWPORT_SLICE = 0.08
+#: Longest pause between two updates of the render result during a final render.
+UPDATE_INTERVAL = 0.25
+
+
+def render_size(render) -> tuple[int, int]:
+    """Blender's pixel size of the frame: resolution times percentage, rounded down as Blender does."""
+    return (max(1, render.resolution_x * render.resolution_percentage // 100),
+            max(1, render.resolution_y * render.resolution_percentage // 100))
+
+
+def camera_params(cam_obj, matrix: Optional[np.ndarray] = None) -> raycam.CameraParams:
+    data = cam_obj.data
+    if data.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"{cam_obj.name}: panoramic cameras are not supported")
+    return raycam.CameraParams(
+        matrix=matrix_np(cam_obj.matrix_world) if matrix is None else matrix,
+        ortho=data.type == "ORTHO", lens=float(data.lens), sensor_width=float(data.sensor_width),
+        sensor_height=float(data.sensor_height), sensor_fit=data.sensor_fit, ortho_scale=float(data.ortho_scale),
+        shift_x=float(data.shift_x), shift_y=float(data.shift_y), clip_start=float(data.clip_start))
+
+
+def build_scene(depsgraph, mode: str):
+    builder = SceneBuilder(depsgraph, mode=mode)
+    scene = builder.build(depsgraph.scene)
+    return scene, builder.warnings
+
+
+def render_settings(scene) -> dict:
+    """BlockRenderer keyword arguments from the scene's SDL render settings."""
+    s = getattr(scene, "sdl_render", None)
+    if s is None:
+        return dict(block_size=8, progressive=True, threads=0)
+    return dict(block_size=s.block_size, progressive=s.progressive, threads=s.threads, samples=s.samples,
+                sampling=s.sampling.lower(), threshold=s.threshold)
+
+
+def _write_rect(render_pass, rgba: np.ndarray) -> None:
+    flat_rgba = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+    try:
+        render_pass.rect.foreach_set(flat_rgba)
+    except (AttributeError, TypeError):
+        render_pass.rect = flat_rgba.reshape(-1, 4).tolist()
+
+
+class SDLRenderEngine(bpy.types.RenderEngine):
+    bl_idname = ENGINE_ID
+    bl_label = "SDL Ray Tracer"
+    bl_use_preview = False
+    bl_use_postprocess = True
+    bl_use_eevee_viewport = True  # Material Preview mode draws with EEVEE
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._view = None  # viewport state
+        self._view_dirty = True
+        self._view_scene = None
+        self._texture = None
+
+    # -- final render ---------------------------------------------------------------------------------
+
+    def cancelled(self) -> bool:
+        """Esc pressed (asked between chunks of rays, so a render stops within a block)."""
+        return bool(self.test_break())
+
+    def render(self, depsgraph):
+        scene = depsgraph.scene
+        render = scene.render
+        winx, winy = render_size(render)
+        x0, y0, x1, y1 = raycam.border_rect(winx, winy, render.use_border,
+                                            (render.border_min_x, render.border_max_x,
+                                             render.border_min_y, render.border_max_y))
+        width, height = x1 - x0, y1 - y0
+        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False}
+        LAST_RENDER.clear()
+        LAST_RENDER.update(stats)
+        result = self.begin_result(0, 0, width, height)
+        try:
+            layer = result.layers[0].passes["Combined"]
+            cam_obj = self.camera_override or scene.camera
+            if cam_obj is None:
+                raise ValueError("the scene has no camera")
+            cam_obj = cam_obj.evaluated_get(depsgraph)
+            try:
+                matrix = matrix_np(self.camera_model_matrix(cam_obj))
+            except (AttributeError, TypeError):
+                matrix = None
+            params = camera_params(cam_obj, matrix)
+            self.update_stats("", "SDL Ray Tracer | building the scene")
+            tracer_scene, warnings = build_scene(depsgraph, "RENDER")
+            for message in warnings:
+                self.report({"WARNING"}, message)
+            compiled = deps.module("compile").compile_scene(tracer_scene)
+            aspx, aspy = render.pixel_aspect_x, render.pixel_aspect_y
+
+            def rays_for(rows, cols, dy=0.5, dx=0.5):
+                return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
+
+            tracer = blocks.BlockRenderer(compiled, rays_for, width, height, alpha=render.film_transparent,
+                                          seed=scene.frame_current, **render_settings(scene))
+            last = [0.0]
+
+            def on_item(item):
+                now = time.perf_counter()
+                pass_done = tracer.done == len(tracer.items) or \
+                    tracer.items[min(tracer.done, len(tracer.items) - 1)].pass_index != item.pass_index
+                if pass_done or now - last[0] >= UPDATE_INTERVAL:
+                    last[0] = now
+                    _write_rect(layer, tracer.rgba())
+                    self.update_result(result)
+                self.update_progress(tracer.fraction)
+                self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
+                                      f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
+
+            try:
+                tracer.run(cancel=self.cancelled, on_item=on_item)
+            except blocks.Cancelled:
+                LAST_RENDER["cancelled"] = True
+            _write_rect(layer, tracer.rgba())
+            counts = tracer.counts().as_dict()
+            LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
+                                "tiles_done": tracer.done, "tiles_total": len(tracer.items),
+                                "backend": tracer.backend_name, "objects": len(tracer_scene.objects),
+                                "lights": len(tracer_scene.lights), "warnings": list(warnings)})
+            total = sum(counts.values())
+            self.update_stats("", f"SDL Ray Tracer | {total} rays in {tracer.seconds:.2f} s"
+                                  + (" | cancelled" if LAST_RENDER["cancelled"] else ""))
+        except Exception as exc:  # noqa: BLE001 - a render must end with a message, not a traceback
+            LAST_RENDER["error"] = str(exc)
+            self.report({"ERROR"}, f"SDL Ray Tracer: {exc}")
+            traceback.print_exc()
+        finally:
+            self.end_result(result)
+
+    # -- viewport -------------------------------------------------------------------------------------
+
+    def view_update(self, context, depsgraph):
+        self._view_dirty = True
+        self._view = None
+
+    def view_draw(self, context, depsgraph):
+        region = context.region
+        rv3d = context.region_data
+        width, height = region.width, region.height
+        if width < 1 or height < 1:
+            return
+        persp = matrix_np(rv3d.perspective_matrix)
+        key = (width, height, persp.tobytes())
+        try:
+            if self._view_dirty or self._view_scene is None:
+                tracer_scene, _ = build_scene(depsgraph, "VIEWPORT")
+                self._view_scene = deps.module("compile").compile_scene(tracer_scene)
+                self._view_dirty = False
+                self._view = None
+            if self._view is None or self._view[0] != key:
+                settings = render_settings(depsgraph.scene)
+                settings["progressive"] = True  # the viewport always refines while the user waits
+
+                def rays_for(rows, cols, dy=0.5, dx=0.5, persp=persp, width=width, height=height):
+                    return raycam.projection_rays(persp, width, height, rows, cols, dy, dx)
+
+                renderer = blocks.BlockRenderer(self._view_scene, rays_for, width, height, **settings)
+                self._view = (key, renderer)
+            renderer = self._view[1]
+            if not renderer.finished:
+                renderer.run_for(VIEWPORT_SLICE)
+        except Exception as exc:  # noqa: BLE001
+            self.update_stats("", f"SDL Ray Tracer: {exc}")
+            return
+        self._draw(depsgraph.scene, renderer.rgba(), width, height)
+        self.update_stats("", "SDL Ray Tracer | " + ("done" if renderer.finished else
+                                                     f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
+        if not renderer.finished:
+            self.tag_redraw()
+
+    def _draw(self, scene, rgba: np.ndarray, width: int, height: int) -> None:
+        import gpu
+        from gpu_extras.presets import draw_texture_2d
+
+        data = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+        buffer = gpu.types.Buffer("FLOAT", data.size, data)
+        texture = gpu.types.GPUTexture((width, height), format="RGBA16F", data=buffer)
+        gpu.state.blend_set("ALPHA_PREMULT")
+        self.bind_display_space_shader(scene)
+        draw_texture_2d(texture, (0, 0), width, height)
+        self.unbind_display_space_shader()
+        gpu.state.blend_set("NONE")
+
+
+def compatible_panels():
+    """Blender's own panels that work with this engine (they list the engines they support)."""
+    wanted = {"RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output", "RENDER_PT_dimensions",
+              "RENDER_PT_stamp", "RENDER_PT_post_processing", "DATA_PT_lens", "DATA_PT_camera",
+              "DATA_PT_camera_display", "DATA_PT_context_light", "DATA_PT_light", "DATA_PT_context_camera",
+              "MATERIAL_PT_preview", "MATERIAL_PT_context_material", "WORLD_PT_context_world",
+              "RENDER_PT_format_presets", "RENDER_PT_film", "OBJECT_PT_visibility",
+              "VIEWLAYER_PT_layer", "DATA_PT_camera_dof"}
+    found = []
+    for name in dir(bpy.types):
+        cls = getattr(bpy.types, name, None)
+        engines = getattr(cls, "COMPAT_ENGINES", None)
+        if isinstance(engines, set) and ("BLENDER_RENDER" in engines or name in wanted):
+            found.append(cls)
+    return found
+
+
+_added_to: list = []
+
+
+def register() -> None:
+    bpy.utils.register_class(SDLRenderEngine)
+    for cls in compatible_panels():
+        if ENGINE_ID not in cls.COMPAT_ENGINES:
+            cls.COMPAT_ENGINES.add(ENGINE_ID)
+            _added_to.append(cls)
+
+
+def unregister() -> None:
+    for cls in _added_to:
+        cls.COMPAT_ENGINES.discard(ENGINE_ID)
+    _added_to.clear()
+    bpy.utils.unregister_class(SDLRenderEngine)

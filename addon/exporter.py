@@ -1,0 +1,96 @@
+"""Blender scene -> SDL file (and .3vn meshes beside it), through tracer.sdl.writer.save_sdl.
+
+Generic shapes are written as their keyword with the transform statements that rebuild their exact
+matrix (the writer decomposes any affine matrix); every other object with geometry as a ``mesh`` whose
+polygons go to a ``.3vn`` file beside the scene; an unedited imported ``mesh`` keeps naming its file.
+The writer replaces the files atomically.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from typing import Optional
+
+import numpy as np
+
+from . import convert, deps, raycam
+from .importer import CAM_EXACT, CAM_SHOWN
+from .scene_build import SceneBuilder, flat, matrix_np, matrix_unchanged
+
+_UNWRITABLE = re.compile(r"[\s{}!]")
+
+
+def _to_target(conversion: np.ndarray) -> np.ndarray:
+    return convert.from_blender(np.eye(4), conversion)
+
+
+def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
+    """The SDL camera for a Blender camera (None for cameras SDL cannot express)."""
+    Camera = deps.module("model").Camera
+    data = cam_obj.data
+    if data.type != "PERSP":
+        return None
+    # Custom properties from the original: the evaluated copy holds them as of its last evaluation.
+    original = getattr(cam_obj, "original", cam_obj)
+    exact, shown = original.get(CAM_EXACT), original.get(CAM_SHOWN)
+    now = flat(cam_obj.matrix_world) + [float(data.lens), float(data.sensor_height)]
+    if exact is not None and shown is not None and data.sensor_fit == "VERTICAL" and matrix_unchanged(now, list(shown)):
+        values = [float(v) for v in exact]
+        eye, look, up = (np.array(values[i:i + 3]) for i in (0, 3, 6))
+        angle = values[9]
+    else:
+        m = matrix_np(cam_obj.matrix_world)
+        axes = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+        eye = m[:3, 3]
+        look = eye - axes[:, 2]
+        up = axes[:, 1]
+        width = render.resolution_x * render.resolution_percentage // 100
+        height = render.resolution_y * render.resolution_percentage // 100
+        params = raycam.CameraParams(matrix=m, lens=data.lens, sensor_width=data.sensor_width,
+                                     sensor_height=data.sensor_height, sensor_fit=data.sensor_fit)
+        _, _, ymin, ymax = raycam.viewplane(params, max(width, 1), max(height, 1),
+                                            render.pixel_aspect_x, render.pixel_aspect_y)
+        angle = convert.shortest32(math.degrees(2.0 * math.atan(0.5 * (ymax - ymin))))
+    rot = to_target[:3, :3]
+    return Camera(tuple(float(v) for v in rot @ eye), tuple(float(v) for v in rot @ look),
+                  tuple(float(v) for v in rot @ up), float(angle))
+
+
+def build_export_scene(context, conversion: Optional[np.ndarray] = None, use_selection: bool = False):
+    """(tracer Scene in SDL axes, warnings) for what the scene renders."""
+    conversion = convert.axis_matrix() if conversion is None else np.asarray(conversion, dtype=np.float64)
+    to_target = _to_target(conversion)
+    depsgraph = context.evaluated_depsgraph_get()
+    builder = SceneBuilder(depsgraph, mode="EXPORT", to_target=to_target)
+    scene = builder.build(context.scene, skip_hidden_render=True, selected_only=use_selection)
+    cam_obj = context.scene.camera
+    if cam_obj is not None and cam_obj.type == "CAMERA":
+        scene.camera = camera_to_sdl(cam_obj.evaluated_get(depsgraph), context.scene.render, to_target)
+        if scene.camera is None:
+            builder.warnings.append(f"{cam_obj.name}: only perspective cameras can be written to SDL")
+    return scene, builder.warnings
+
+
+def _fix_mesh_files(scene, folder: str) -> None:
+    """Unedited imported meshes name their .3vn relative to the new file; where SDL cannot spell that
+    name (spaces, braces), the mesh data is written beside the file instead."""
+    for shape in scene.shapes():
+        if shape.kind != "mesh" or shape.mesh_file is None:
+            continue
+        try:
+            rel = os.path.relpath(shape.mesh_file, folder)
+        except ValueError:
+            rel = shape.mesh_file
+        rel = rel.replace(os.sep, "/")
+        shape.mesh_file = None if (_UNWRITABLE.search(rel) or not os.path.isfile(shape.mesh_file)) else rel
+
+
+def export_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None,
+               use_selection: bool = False) -> list[str]:
+    """Write the scene; returns warnings.  Nothing is left half-written if it fails."""
+    scene, warnings = build_export_scene(context, conversion, use_selection)
+    _fix_mesh_files(scene, os.path.dirname(os.path.abspath(filepath)))
+    scene.source = None
+    deps.module("sdl.writer").save_sdl(scene, filepath)
+    return warnings

@@ -1,0 +1,278 @@
+"""SDL file -> Blender objects.
+
+The whole file is read (and every mesh it names) before anything is created, so a file that cannot be
+read leaves the Blender scene as it was; if creating fails half way, what was created is removed again.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Optional
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from . import convert, deps, meshes, primitives, props
+from .scene_build import (OBJ_FILE, OBJ_KIND, OBJ_MATRIX, OBJ_ORDER, OBJ_PARAM, OBJ_SHOWN, SDL_TO_BOOLEAN, flat)
+
+#: Custom properties on an imported camera object: eye, look-at point, up (Blender axes) and view angle.
+CAM_EXACT, CAM_SHOWN = "sdl_camera", "sdl_camera_shown"
+SENSOR_HEIGHT = 24.0
+
+
+@dataclass
+class ImportResult:
+    objects: list = field(default_factory=list)  # shape objects, in file order
+    lights: list = field(default_factory=list)
+    camera: Optional[object] = None
+    collection: Optional[object] = None
+    warnings: list[str] = field(default_factory=list)
+
+
+def read_scene(filepath: str, strict: bool = False):
+    """Parse the file (raises tracer's SDLError if it cannot be read)."""
+    return deps.module("sdl.parser").load(filepath, strict=strict)
+
+
+def lens_for_view_angle(view_angle: float, sensor_height: float = SENSOR_HEIGHT) -> float:
+    """Focal length giving a vertical view angle (degrees) with a vertically fitted sensor."""
+    return sensor_height / (2.0 * math.tan(math.radians(view_angle) / 2.0))
+
+
+def camera_matrix(eye, look, up) -> np.ndarray:
+    """The lecture's camera frame (u right, v up, n backwards) as a Blender camera's world matrix."""
+    eye = np.asarray(eye, dtype=np.float64)
+    n = eye - np.asarray(look, dtype=np.float64)
+    n /= np.linalg.norm(n)
+    u = np.cross(np.asarray(up, dtype=np.float64), n)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = u, v, n, eye
+    return m
+
+
+class _Created:
+    """Everything made so far, to remove again if the import fails."""
+
+    def __init__(self):
+        self.items: list[tuple[str, object]] = []
+
+    def add(self, collection_name: str, datablock):
+        self.items.append((collection_name, datablock))
+        return datablock
+
+    def remove_all(self) -> None:
+        for collection_name, datablock in reversed(self.items):
+            try:
+                getattr(bpy.data, collection_name).remove(datablock)
+            except (ReferenceError, RuntimeError):
+                pass
+
+
+class Importer:
+    def __init__(self, context, conversion: np.ndarray, *, name: str = "SDL"):
+        self.context = context
+        self.conversion = np.asarray(conversion, dtype=np.float64)
+        self.name = name
+        self.created = _Created()
+        self.mesh_cache: dict = {}
+        self.material_cache: dict = {}
+        self.collections: dict[str, object] = {}
+        self.result = ImportResult()
+        self.order = 0
+
+    # -- collections ------------------------------------------------------------------------------------
+
+    def _collection_for(self, groups: tuple[str, ...]):
+        parent = self.result.collection
+        for group in groups:
+            coll = self.collections.get(group)
+            if coll is None:
+                coll = self.created.add("collections", bpy.data.collections.new(group))
+                coll["sdl_macro"] = group
+                self.collections[group] = coll
+            if coll.name not in parent.children:
+                parent.children.link(coll)
+            parent = coll
+        return parent
+
+    # -- materials and meshes ---------------------------------------------------------------------------
+
+    def _material(self, sdl_material):
+        mat = self.material_cache.get(sdl_material)
+        if mat is None:
+            d = sdl_material.diffuse
+            mat = self.created.add("materials", bpy.data.materials.new(f"SDL {d[0]:g} {d[1]:g} {d[2]:g}"))
+            mat.use_nodes = True
+            props.set_material(mat, sdl_material)
+            self.material_cache[sdl_material] = mat
+        return mat
+
+    def _mesh(self, shape, mesh_part: np.ndarray):
+        kind = shape.kind
+        param = shape.tapered_radius if kind == "taperedCylinder" else 1.0
+        mesh_file = None
+        if kind == "mesh":
+            mesh_file = os.path.abspath(shape.mesh.origin or shape.mesh_file or "")
+        sheared = not np.array_equal(mesh_part, np.eye(4))
+        key = (kind, param, mesh_file)
+        if not sheared and key in self.mesh_cache:
+            return self.mesh_cache[key]
+        gm = primitives.generic_mesh(kind, param, shape.mesh)
+        if sheared:
+            gm = gm.transformed(mesh_part[:3, :3])
+        name = primitives.mesh_name(kind, param, mesh_file) + (" (sheared)" if sheared else "")
+        mesh = None if sheared else meshes.find_shared(kind, param, mesh_file, gm.hash())
+        if mesh is None:
+            mesh = self.created.add("meshes", meshes.build_mesh(name, gm))
+            mesh.materials.append(None)  # one slot, linked to each object's own material
+            meshes.mark_generic(mesh, kind, param, mesh_file, mesh_part)
+        if not sheared:
+            self.mesh_cache[key] = mesh
+        return mesh
+
+    # -- objects ----------------------------------------------------------------------------------------
+
+    def _shape_object(self, shape):
+        world = convert.to_blender(shape.matrix, self.conversion)
+        object_part, mesh_part = convert.split_shear(world)
+        mesh = self._mesh(shape, mesh_part)
+        obj = self.created.add("objects", bpy.data.objects.new(shape.kind, mesh))
+        self._collection_for(shape.groups).objects.link(obj)
+        obj.matrix_world = Matrix(object_part.tolist())
+        if len(obj.material_slots) == 0:
+            obj.data.materials.append(None)
+        slot = obj.material_slots[0]
+        slot.link = "OBJECT"
+        slot.material = self._material(shape.material)
+        obj[OBJ_KIND] = shape.kind
+        if shape.kind == "taperedCylinder":
+            obj[OBJ_PARAM] = float(shape.tapered_radius)
+        if shape.kind == "mesh":
+            obj[OBJ_FILE] = mesh.get(meshes.FILE, "")
+        obj[OBJ_MATRIX] = [float(v) for v in world.ravel()]
+        obj[OBJ_ORDER] = self.order
+        if shape.source is not None:
+            obj["sdl_source"] = str(shape.source)
+        self.order += 1
+        self.result.objects.append(obj)
+        return obj
+
+    def _hide_cutter(self, obj) -> None:
+        obj.hide_render = True
+        obj.display_type = "WIRE"
+        obj["sdl_cutter"] = True
+
+    def _object(self, node):
+        """Blender object for a shape or a CSG tree; a tree's object is its leftmost shape's, carrying one
+        Boolean modifier per operation, innermost first."""
+        model = deps.module("model")
+        if not isinstance(node, model.CSG):
+            return self._shape_object(node)
+        left = self._object(node.left)
+        right = self._object(node.right)
+        modifier = left.modifiers.new(name=f"SDL {node.op}", type="BOOLEAN")
+        modifier.operation = SDL_TO_BOOLEAN[node.op]
+        if hasattr(modifier, "operand_type"):
+            modifier.operand_type = "OBJECT"
+        modifier.object = right
+        if hasattr(modifier, "solver"):
+            modifier.solver = "EXACT"
+        self._hide_cutter(right)
+        return left
+
+    def _light(self, light, index: int):
+        data = self.created.add("lights", bpy.data.lights.new(f"SDL light {index + 1}", "POINT"))
+        props.set_light(data, light.color)
+        obj = self.created.add("objects", bpy.data.objects.new(f"SDL light {index + 1}", data))
+        self.result.collection.objects.link(obj)
+        obj.location = tuple(convert.points_to_blender(light.position, self.conversion))
+        obj["sdl_position"] = [float(v) for v in convert.points_to_blender(light.position, self.conversion)]
+        obj[OBJ_ORDER] = self.order
+        self.order += 1
+        self.result.lights.append(obj)
+        return obj
+
+    def _camera(self, camera, framed: bool, far: float):
+        data = self.created.add("cameras", bpy.data.cameras.new("SDL camera"))
+        data.sensor_fit = "VERTICAL"
+        data.sensor_height = SENSOR_HEIGHT
+        data.lens = lens_for_view_angle(camera.view_angle)
+        data.clip_start = 0.05
+        data.clip_end = far
+        obj = self.created.add("objects", bpy.data.objects.new("SDL camera", data))
+        self.result.collection.objects.link(obj)
+        eye, look, up = (convert.points_to_blender(p, self.conversion) for p in (camera.eye, camera.look, camera.up))
+        obj.matrix_world = Matrix(camera_matrix(eye, look, up).tolist())
+        obj[CAM_EXACT] = [float(v) for v in (*eye, *look, *up, camera.view_angle)]
+        obj["sdl_framed"] = bool(framed)
+        self.result.camera = obj
+        return obj
+
+    # -- the whole scene --------------------------------------------------------------------------------
+
+    def run(self, scene, filepath: str, set_camera: bool = True) -> ImportResult:
+        ctx = self.context
+        bl_scene = ctx.scene
+        old_world, old_camera = bl_scene.world, bl_scene.camera
+        try:
+            parent = ctx.view_layer.active_layer_collection.collection if ctx.view_layer else bl_scene.collection
+            root = self.created.add("collections",
+                                    bpy.data.collections.new(f"SDL {os.path.basename(filepath) or self.name}"))
+            parent.children.link(root)
+            root["sdl_file"] = os.path.abspath(filepath) if filepath else ""
+            self.result.collection = root
+            for node in scene.objects:
+                self._object(node)
+            for index, light in enumerate(scene.lights):
+                self._light(light, index)
+            has_plane = any(s.kind == "plane" for s in scene.shapes())
+            far = 3.0 * primitives.PLANE_HALF_SIZE if has_plane else 1000.0
+            camera, framed = scene.camera, False
+            if camera is None:
+                render = bl_scene.render
+                aspect = (render.resolution_x * render.pixel_aspect_x) / max(1e-9, render.resolution_y * render.pixel_aspect_y)
+                compiled = deps.module("compile").compile_scene(scene)
+                camera, framed = deps.module("camera").framing_camera(compiled, aspect), True
+            cam_obj = self._camera(camera, framed, far)
+            if set_camera:
+                bl_scene.camera = cam_obj
+            world = self.created.add("worlds", bpy.data.worlds.new(f"SDL world {os.path.basename(filepath)}"))
+            world.use_nodes = True
+            props.set_world(world, scene.settings)
+            bl_scene.world = world
+            if hasattr(bl_scene, "sdl_render"):
+                bl_scene.sdl_render.max_recursion_depth = int(scene.settings.max_recursion_depth)
+            if scene.pixmaps:
+                bl_scene["sdl_pixmaps"] = {str(k): str(v) for k, v in scene.pixmaps.items()}
+            # Hide the cutters in the viewport too, and remember what Blender shows of every transform.
+            ctx.view_layer.update()
+            for obj in self.result.objects:
+                if obj.get("sdl_cutter"):
+                    try:
+                        obj.hide_set(True)
+                    except RuntimeError:
+                        obj.hide_viewport = True
+                obj[OBJ_SHOWN] = flat(obj.matrix_world)
+            cam_obj[CAM_SHOWN] = flat(cam_obj.matrix_world) + [float(cam_obj.data.lens),
+                                                               float(cam_obj.data.sensor_height)]
+            for obj in self.result.lights:
+                obj["sdl_position_shown"] = [float(v) for v in obj.matrix_world.translation]
+        except BaseException:
+            bl_scene.world, bl_scene.camera = old_world, old_camera
+            self.created.remove_all()
+            raise
+        self.result.warnings = list(scene.warnings)
+        return self.result
+
+
+def import_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None, strict: bool = False,
+               set_camera: bool = True) -> ImportResult:
+    """Read ``filepath`` and build it in ``context.scene``.  Raises the tracer's SDLError (nothing created)
+    if the file cannot be read."""
+    scene = read_scene(filepath, strict=strict)
+    conversion = convert.axis_matrix() if conversion is None else conversion
+    return Importer(context, conversion).run(scene, filepath, set_camera=set_camera)

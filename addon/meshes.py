@@ -1,0 +1,171 @@
+"""Blender meshes: building them from generic shapes, recognising them again, reading them as tracer meshes."""
+from __future__ import annotations
+
+import os
+from typing import Optional
+
+import bpy
+import numpy as np
+
+from . import deps, primitives
+
+#: Custom properties on a mesh that stands for a generic shape.
+KIND, PARAM, FILE, MATRIX, HASH = "sdl_kind", "sdl_param", "sdl_mesh_file", "sdl_mesh_matrix", "sdl_hash"
+
+
+def build_mesh(name: str, gm: primitives.GenericMesh) -> bpy.types.Mesh:
+    mesh = bpy.data.meshes.new(name)
+    loop_vertices = gm.loop_vertices
+    totals = gm.loop_totals
+    starts = np.concatenate([[0], np.cumsum(totals)[:-1]]).astype(np.int32) if len(totals) else totals
+    mesh.vertices.add(len(gm.vertices))
+    mesh.vertices.foreach_set("co", np.ascontiguousarray(gm.vertices, dtype=np.float32).ravel())
+    mesh.loops.add(len(loop_vertices))
+    mesh.loops.foreach_set("vertex_index", loop_vertices)
+    mesh.polygons.add(len(totals))
+    mesh.polygons.foreach_set("loop_start", starts)
+    mesh.polygons.foreach_set("loop_total", totals)
+    mesh.polygons.foreach_set("use_smooth", np.asarray(gm.smooth, dtype=bool))
+    mesh.update(calc_edges=True)
+    if gm.sharp_edges:
+        edge_verts = np.empty(len(mesh.edges) * 2, dtype=np.int32)
+        mesh.edges.foreach_get("vertices", edge_verts)
+        wanted = {tuple(sorted(e)) for e in gm.sharp_edges}
+        sharp = np.array([tuple(sorted(p)) in wanted for p in edge_verts.reshape(-1, 2).tolist()], dtype=bool)
+        mesh.edges.foreach_set("use_edge_sharp", sharp)
+    if hasattr(mesh, "use_auto_smooth"):  # Blender < 4.1: sharp edges and custom normals need it
+        mesh.use_auto_smooth = True
+        mesh.auto_smooth_angle = np.pi
+    if gm.corner_normals is not None:
+        try:
+            mesh.normals_split_custom_set([tuple(n) for n in gm.corner_normals.tolist()])
+        except (RuntimeError, TypeError, ValueError):
+            pass  # shading only
+    mesh.update()
+    return mesh
+
+
+def mesh_hash(mesh) -> str:
+    co = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    loops = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loops)
+    totals = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("loop_total", totals)
+    return primitives.geometry_hash(co, loops, totals)
+
+
+def mark_generic(mesh, kind: str, param: float, mesh_file: Optional[str], mesh_matrix: np.ndarray) -> None:
+    mesh[KIND] = kind
+    mesh[PARAM] = float(param)
+    if mesh_file is not None:
+        mesh[FILE] = mesh_file
+    mesh[MATRIX] = [float(v) for v in np.asarray(mesh_matrix, dtype=np.float64).ravel()]
+    mesh[HASH] = mesh_hash(mesh)
+
+
+class GenericInfo:
+    """What a mesh stands for, if it is an unedited generic shape."""
+
+    def __init__(self, kind: str, param: float, mesh_file: Optional[str], mesh_matrix: np.ndarray):
+        self.kind = kind
+        self.param = param
+        self.mesh_file = mesh_file
+        self.mesh_matrix = mesh_matrix
+
+
+def generic_info(mesh, cache: Optional[dict] = None) -> Optional[GenericInfo]:
+    """The generic shape ``mesh`` stands for, or None if it is not one or has been edited since."""
+    if mesh is None or not isinstance(mesh, bpy.types.Mesh) or KIND not in mesh:
+        return None
+    key = mesh.as_pointer()
+    if cache is not None and key in cache:
+        return cache[key]
+    info = None
+    kind = str(mesh[KIND])
+    if kind in deps.module("model").SHAPE_KINDS and mesh.get(HASH) == mesh_hash(mesh):
+        matrix = np.array(list(mesh.get(MATRIX, np.eye(4).ravel())), dtype=np.float64).reshape(4, 4)
+        info = GenericInfo(kind, float(mesh.get(PARAM, 1.0)), mesh.get(FILE), matrix)
+    if cache is not None:
+        cache[key] = info
+    return info
+
+
+def find_shared(kind: str, param: float, mesh_file: Optional[str], digest: str):
+    """An existing unedited mesh for this generic shape (so that imports share mesh data)."""
+    for mesh in bpy.data.meshes:
+        if (mesh.get(KIND) == kind and mesh.get(HASH) == digest and float(mesh.get(PARAM, 1.0)) == float(param)
+                and mesh.get(FILE) == mesh_file and mesh.library is None
+                and np.allclose(list(mesh.get(MATRIX, [])), np.eye(4).ravel(), rtol=0, atol=0)
+                and mesh_hash(mesh) == digest):
+            return mesh
+    return None
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Blender meshes as tracer meshes
+
+def _corner_normals(mesh) -> np.ndarray:
+    count = len(mesh.loops)
+    out = np.empty(count * 3, dtype=np.float32)
+    if hasattr(mesh, "corner_normals"):  # Blender 4.1+
+        mesh.corner_normals.foreach_get("vector", out)
+    else:
+        mesh.calc_normals_split()
+        mesh.loops.foreach_get("normal", out)
+    return out.reshape(-1, 3).astype(np.float64)
+
+
+def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
+    """The mesh's triangles (as Blender splits its polygons) with its corner normals, as one tracer MeshData
+    per material index."""
+    MeshData = deps.module("model").MeshData
+    mesh.calc_loop_triangles()
+    tris = mesh.loop_triangles
+    count = len(tris)
+    if count == 0:
+        return {}
+    co = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    vertices = co.reshape(-1, 3).astype(np.float64)
+    tri_verts = np.empty(count * 3, dtype=np.int32)
+    tris.foreach_get("vertices", tri_verts)
+    tri_loops = np.empty(count * 3, dtype=np.int32)
+    tris.foreach_get("loops", tri_loops)
+    mat_index = np.empty(count, dtype=np.int32)
+    tris.foreach_get("material_index", mat_index)
+    normals = _corner_normals(mesh)
+    tri_verts = tri_verts.reshape(-1, 3)
+    tri_loops = tri_loops.reshape(-1, 3)
+    out = {}
+    for index in np.unique(mat_index):
+        rows = np.nonzero(mat_index == index)[0]
+        used_loops = np.unique(tri_loops[rows])
+        remap = np.full(len(normals), -1, dtype=np.int64)
+        remap[used_loops] = np.arange(len(used_loops))
+        faces = list(zip(map(tuple, tri_verts[rows].tolist()), map(tuple, remap[tri_loops[rows]].tolist())))
+        out[int(index)] = MeshData(vertices=vertices, normals=normals[used_loops], faces=faces, origin=origin)
+    return out
+
+
+_exact_files: dict[tuple[str, float], object] = {}
+
+
+def exact_mesh_data(info: GenericInfo, mesh):
+    """The float64 mesh behind an unedited generic polyhedron, teapot or ``mesh`` file (None: use Blender's)."""
+    kind = info.kind
+    if kind in deps.module("model").POLYHEDRON_KINDS or kind == "teapot":
+        return deps.module("sdl.parser").builtin_mesh(kind)
+    if kind == "mesh" and info.mesh_file and os.path.isfile(info.mesh_file):
+        key = (info.mesh_file, os.path.getmtime(info.mesh_file))
+        data = _exact_files.get(key)
+        if data is None:
+            try:
+                data = deps.module("meshio").read_3vn(info.mesh_file)
+            except Exception:  # noqa: BLE001 - a changed or broken file: fall back to Blender's copy
+                return None
+            _exact_files[key] = data
+        gm = primitives.generic_mesh("mesh", mesh_data=data).transformed(info.mesh_matrix[:3, :3])
+        if gm.hash() == mesh.get(HASH):
+            return data
+    return None

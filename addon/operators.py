@@ -1,0 +1,210 @@
+"""File > Import/Export > SDL, drag and drop of .sdl files, and adding generic shapes."""
+from __future__ import annotations
+
+import os
+import traceback
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper, ImportHelper, orientation_helper
+
+from . import convert, deps
+
+#: How many of a file's warnings are shown one by one (the rest are counted).
+SHOWN_WARNINGS = 8
+
+
+def _report_warnings(op, warnings) -> None:
+    for message in warnings[:SHOWN_WARNINGS]:
+        op.report({"WARNING"}, message)
+    if len(warnings) > SHOWN_WARNINGS:
+        op.report({"WARNING"}, f"... and {len(warnings) - SHOWN_WARNINGS} more problems")
+
+
+@orientation_helper(axis_forward="-Z", axis_up="Y")
+class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
+    """Import an SDL scene (F. S. Hill's Scene Description Language)"""
+
+    bl_idname = "import_scene.sdl"
+    bl_label = "Import SDL"
+    bl_options = {"REGISTER", "UNDO", "PRESET"}
+
+    filename_ext = ".sdl"
+    filter_glob: StringProperty(default="*.sdl;*.dat", options={"HIDDEN"})
+    files: CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
+    directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
+    strict: BoolProperty(name="Strict", default=False,
+                         description="Refuse files with any problem (otherwise import what can be read "
+                                     "and report the problems)")
+    set_camera: BoolProperty(name="Set Scene Camera", default=True,
+                             description="Make the file's camera (or a camera framing the scene) the scene camera")
+
+    def invoke(self, context, event):
+        if self.properties.is_property_set("filepath") and hasattr(ImportHelper, "invoke_popup"):
+            return self.invoke_popup(context)  # a dropped file
+        return ImportHelper.invoke(self, context, event)
+
+    def _paths(self) -> list[str]:
+        if self.directory and len(self.files) and any(f.name for f in self.files):
+            return [os.path.join(self.directory, f.name) for f in self.files if f.name]
+        return [self.filepath]
+
+    def execute(self, context):
+        from . import importer
+
+        errors = deps.module("errors")
+        conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
+        parsed = []
+        for path in self._paths():  # read every file before creating anything
+            try:
+                parsed.append((path, importer.read_scene(path, strict=self.strict)))
+            except errors.SDLError as exc:
+                self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
+                return {"CANCELLED"}
+        total = 0
+        for path, scene in parsed:
+            try:
+                result = importer.Importer(context, conversion).run(scene, path, set_camera=self.set_camera)
+            except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
+                if not isinstance(exc, (ValueError, RuntimeError, errors.TracerError)):
+                    traceback.print_exc()
+                self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
+                return {"CANCELLED"}
+            _report_warnings(self, result.warnings)
+            total += len(result.objects)
+        self.report({"INFO"}, f"Imported {total} shapes from {len(parsed)} SDL file(s)")
+        return {"FINISHED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(self, "strict")
+        layout.prop(self, "set_camera")
+        layout.prop(self, "axis_forward")
+        layout.prop(self, "axis_up")
+
+
+@orientation_helper(axis_forward="-Z", axis_up="Y")
+class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
+    """Export the scene as SDL (generic shapes exactly, other objects as .3vn meshes beside the file)"""
+
+    bl_idname = "export_scene.sdl"
+    bl_label = "Export SDL"
+    bl_options = {"REGISTER", "PRESET"}
+
+    filename_ext = ".sdl"
+    filter_glob: StringProperty(default="*.sdl;*.dat", options={"HIDDEN"})
+    use_selection: BoolProperty(name="Selected Only", default=False)
+
+    def execute(self, context):
+        from . import exporter
+
+        conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
+        try:
+            warnings = exporter.export_sdl(context, self.filepath, conversion, use_selection=self.use_selection)
+        except Exception as exc:  # noqa: BLE001 - reported in Blender's UI, never a traceback
+            if not isinstance(exc, (OSError, ValueError)):
+                traceback.print_exc()
+            self.report({"ERROR"}, f"Cannot export {os.path.basename(self.filepath)}: {exc}")
+            return {"CANCELLED"}
+        _report_warnings(self, warnings)
+        self.report({"INFO"}, f"Exported {os.path.basename(self.filepath)}")
+        return {"FINISHED"}
+
+
+SHAPE_ITEMS = [(k, k, f"The generic {k}") for k in
+               ("sphere", "cube", "square", "plane", "cylinder", "cone", "taperedCylinder", "torus",
+                "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond", "teapot")]
+
+
+class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
+    """Add an SDL generic shape (ray traced exactly by the SDL Ray Tracer)"""
+
+    bl_idname = "object.sdl_add_shape"
+    bl_label = "SDL Shape"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: EnumProperty(name="Shape", items=SHAPE_ITEMS, default="sphere")
+    small_radius: FloatProperty(name="Top Radius", default=0.5, description="Top radius of a tapered cylinder")
+
+    def execute(self, context):
+        from . import importer
+
+        model = deps.module("model")
+        shape = model.Shape(self.kind)
+        if self.kind == "taperedCylinder":
+            shape.tapered_radius = self.small_radius
+        if self.kind in model.POLYHEDRON_KINDS or self.kind == "teapot":
+            shape.mesh = deps.module("sdl.parser").builtin_mesh(self.kind)
+        matrix = np.eye(4)
+        matrix[:3, 3] = tuple(context.scene.cursor.location)
+        shape.matrix = matrix
+        imp = importer.Importer(context, np.eye(4))
+        imp.result.collection = context.collection or context.scene.collection
+        obj = imp._shape_object(shape)
+        for other in context.selected_objects:
+            other.select_set(False)
+        context.view_layer.update()
+        obj[importer.OBJ_SHOWN] = [float(v) for row in obj.matrix_world for v in row]
+        obj.select_set(True)
+        context.view_layer.objects.active = obj
+        return {"FINISHED"}
+
+
+class VIEW3D_MT_sdl_add(bpy.types.Menu):
+    bl_idname = "VIEW3D_MT_sdl_add"
+    bl_label = "SDL Shape"
+
+    def draw(self, context):
+        for kind, label, _ in SHAPE_ITEMS:
+            self.layout.operator(OBJECT_OT_sdl_add_shape.bl_idname, text=label).kind = kind
+
+
+def menu_import(self, context):
+    self.layout.operator(IMPORT_SCENE_OT_sdl.bl_idname, text="SDL (.sdl, .dat)")
+
+
+def menu_export(self, context):
+    self.layout.operator(EXPORT_SCENE_OT_sdl.bl_idname, text="SDL (.sdl)")
+
+
+def menu_add(self, context):
+    self.layout.menu(VIEW3D_MT_sdl_add.bl_idname, icon="SHADING_RENDERED")
+
+
+CLASSES = [IMPORT_SCENE_OT_sdl, EXPORT_SCENE_OT_sdl, OBJECT_OT_sdl_add_shape, VIEW3D_MT_sdl_add]
+
+if hasattr(bpy.types, "FileHandler"):  # Blender 4.1+: drag and drop
+    class IO_FH_sdl(bpy.types.FileHandler):
+        bl_idname = "IO_FH_sdl"
+        bl_label = "SDL scene"
+        bl_import_operator = "import_scene.sdl"
+        bl_file_extensions = ".sdl;.dat"
+
+        @classmethod
+        def poll_drop(cls, context):
+            try:
+                from bpy_extras.io_utils import poll_file_object_drop
+            except ImportError:
+                return context.area is not None and context.area.type == "VIEW_3D"
+            return poll_file_object_drop(context)
+
+    CLASSES.append(IO_FH_sdl)
+
+_MENUS = (("TOPBAR_MT_file_import", menu_import), ("TOPBAR_MT_file_export", menu_export),
+          ("VIEW3D_MT_add", menu_add))
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    for menu, func in _MENUS:
+        getattr(bpy.types, menu).append(func)
+
+
+def unregister() -> None:
+    for menu, func in reversed(_MENUS):
+        getattr(bpy.types, menu).remove(func)
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

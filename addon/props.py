@@ -1,0 +1,297 @@
+"""Properties the add-on adds to Blender data, and reading/writing them as tracer values.
+
+* ``Material.sdl``: the SDL material (the exact values live beside it, see convert.recall), kept in step
+  with a Principled BSDF and the viewport colour that look close to it.
+* ``World.sdl``: background, global ambient light and the reflection/transparency thresholds.
+* ``Scene.sdl_render``: the render engine's settings (block size, progressive refinement, recursion
+  depth, threads).
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty
+
+from . import convert, deps
+
+COLOR_FIELDS = ("ambient", "diffuse", "specular", "emissive")
+FLOAT_FIELDS = ("specular_exponent", "reflectivity", "transparency", "speed_of_light", "specular_fraction",
+                "surface_roughness")
+MAX_PARAMETERS = 10
+#: Blender light power (W) standing for an SDL light of colour 1 1 1 (SDL lights do not fade with distance,
+#: Blender's do, so this only sets a plausible look for Blender's own engines).
+LIGHT_WATTS = 1000.0
+
+
+def _sync_material(self, context) -> None:
+    material = self.id_data
+    if isinstance(material, bpy.types.Material):
+        apply_principled(material)
+
+
+def _sync_world(self, context) -> None:
+    world = self.id_data
+    if isinstance(world, bpy.types.World):
+        apply_world_colors(world)
+
+
+def _color(name: str, default, description: str):
+    return FloatVectorProperty(name=name, subtype="COLOR", size=3, default=default, min=0.0, soft_max=1.0,
+                               description=description, update=_sync_material)
+
+
+class SDLMaterialSettings(bpy.types.PropertyGroup):
+    use_sdl: BoolProperty(name="SDL Material", default=False, update=_sync_material,
+                          description="Use these SDL values when ray tracing (otherwise they are derived "
+                                      "from the Principled BSDF)")
+    ambient: _color("Ambient", (0.1, 0.1, 0.1), "Reflects the global ambient light")
+    diffuse: _color("Diffuse", (0.8, 0.8, 0.8), "Lambertian reflection of the lights")
+    specular: _color("Specular", (0.0, 0.0, 0.0), "Phong highlight colour")
+    emissive: _color("Emissive", (0.0, 0.0, 0.0), "Light the surface gives off")
+    specular_exponent: FloatProperty(name="Specular Exponent", default=1.0, min=0.0, soft_max=500.0,
+                                     update=_sync_material)
+    reflectivity: FloatProperty(name="Reflectivity", default=0.0, min=0.0, max=1.0, update=_sync_material)
+    transparency: FloatProperty(name="Transparency", default=0.0, min=0.0, max=1.0, update=_sync_material)
+    speed_of_light: FloatProperty(name="Speed of Light", default=1.0, min=1e-6, soft_max=2.0,
+                                  update=_sync_material,
+                                  description="Relative speed of light inside the object (1 = air)")
+    specular_fraction: FloatProperty(name="Specular Fraction", default=0.0, min=0.0, max=1.0)
+    surface_roughness: FloatProperty(name="Surface Roughness", default=1.0, min=0.0)
+    texture: IntProperty(name="Texture", default=0, description="Texture number (0 = none)")
+    parameter_count: IntProperty(name="Parameters", default=0, min=0, max=MAX_PARAMETERS)
+    parameters: FloatVectorProperty(name="Texture Parameters", size=MAX_PARAMETERS, default=(0.0,) * MAX_PARAMETERS)
+
+
+class SDLWorldSettings(bpy.types.PropertyGroup):
+    background: FloatVectorProperty(name="Background", subtype="COLOR", size=3, default=(0.0, 0.0, 0.6),
+                                    min=0.0, soft_max=1.0, update=_sync_world,
+                                    description="Colour of rays that hit nothing")
+    global_ambient: FloatVectorProperty(name="Global Ambient", subtype="COLOR", size=3, default=(0.1, 0.1, 0.1),
+                                        min=0.0, soft_max=1.0)
+    min_reflectivity: FloatProperty(name="Min Reflectivity", default=0.5, min=0.0, max=1.0,
+                                    description="Objects at least this reflective get a reflected ray")
+    min_transparency: FloatProperty(name="Min Transparency", default=0.5, min=0.0, max=1.0,
+                                    description="Objects at least this transparent get a transmitted ray")
+
+
+class SDLRenderSettings(bpy.types.PropertyGroup):
+    block_size: IntProperty(name="Block Size", default=8, min=1, max=256,
+                            description="Trace one ray per block of this many pixels square")
+    progressive: BoolProperty(name="Progressive Refinement", default=True,
+                              description="Refine coarse to fine: block size, half of it, ..., 1")
+    max_recursion_depth: IntProperty(name="Max Recursion Depth", default=3, min=0, max=64,
+                                     description="Reflection and refraction bounces (SDL maxRecursionDepth)")
+    threads: IntProperty(name="Threads", default=0, min=0, max=1024,
+                         description="Threads tracing at once (0: one per CPU)")
+    samples: IntProperty(name="Samples", default=1, min=1, max=1024,
+                         description="Rays per pixel (anti-aliasing); 1 traces the pixel centre")
+    sampling: EnumProperty(name="Sampling", default="JITTERED", items=[
+        ("REGULAR", "Regular", "A grid of sub-pixel centres"),
+        ("JITTERED", "Jittered", "One random point in each cell of the grid (repeatable)"),
+        ("ADAPTIVE", "Adaptive", "One ray per pixel, then all samples only where neighbours differ by more "
+                                 "than the threshold")])
+    threshold: FloatProperty(name="Threshold", default=0.05, min=0.0, soft_max=1.0,
+                             description="Adaptive sampling: colour difference that makes a pixel refined")
+
+
+CLASSES = (SDLMaterialSettings, SDLWorldSettings, SDLRenderSettings)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Material.sdl = PointerProperty(type=SDLMaterialSettings)
+    bpy.types.World.sdl = PointerProperty(type=SDLWorldSettings)
+    bpy.types.Scene.sdl_render = PointerProperty(type=SDLRenderSettings)
+
+
+def unregister() -> None:
+    for owner, name in ((bpy.types.Scene, "sdl_render"), (bpy.types.World, "sdl"), (bpy.types.Material, "sdl")):
+        if hasattr(owner, name):
+            delattr(owner, name)
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Exact values beside float32 properties
+
+def _shown(group, name: str) -> list[float]:
+    value = getattr(group, name)
+    return [float(v) for v in value] if hasattr(value, "__len__") else [float(value)]
+
+
+def store_exact(idblock, group, values: dict) -> None:
+    """Remember exact values (name -> float or tuple) for ``group``'s fields, with what Blender shows now."""
+    idblock["sdl_exact"] = {k: [float(x) for x in (v if isinstance(v, (tuple, list)) else (v,))]
+                            for k, v in values.items()}
+    idblock["sdl_shown"] = {k: _shown(group, k) for k in values}
+
+
+def exact_field(idblock, group, name: str) -> list[float]:
+    exact = idblock.get("sdl_exact")
+    shown = idblock.get("sdl_shown")
+    e = list(exact[name]) if exact is not None and name in exact else None
+    s = list(shown[name]) if shown is not None and name in shown else None
+    return convert.recall(e, s, _shown(group, name))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Materials
+
+def _principled(material):
+    if not material.use_nodes or material.node_tree is None:
+        return None
+    for node in material.node_tree.nodes:
+        if node.type == "BSDF_PRINCIPLED":
+            return node
+    return None
+
+
+def _set_input(node, names, value) -> None:
+    for name in names:
+        socket = node.inputs.get(name)
+        if socket is not None:
+            socket.default_value = value
+            return
+
+
+def _get_input(node, names, default):
+    for name in names:
+        socket = node.inputs.get(name)
+        if socket is not None and hasattr(socket, "default_value"):
+            return socket.default_value
+    return default
+
+
+def roughness_from_exponent(exponent: float) -> float:
+    """A Phong exponent as a GGX-like roughness (the usual sqrt(2 / (n + 2)))."""
+    return min(1.0, math.sqrt(2.0 / (max(exponent, 0.0) + 2.0)))
+
+
+def apply_principled(material) -> None:
+    """Make the Principled BSDF and the viewport colour look like the SDL material."""
+    s = material.sdl
+    diffuse = tuple(s.diffuse)
+    material.diffuse_color = (*[min(c, 1.0) for c in diffuse], 1.0)
+    material.roughness = roughness_from_exponent(s.specular_exponent)
+    material.metallic = s.reflectivity
+    node = _principled(material)
+    if node is None:
+        return
+    _set_input(node, ("Base Color",), (*diffuse, 1.0))
+    _set_input(node, ("Emission Color", "Emission"), (*tuple(s.emissive), 1.0))
+    _set_input(node, ("Emission Strength",), 1.0)
+    _set_input(node, ("Roughness",), roughness_from_exponent(s.specular_exponent))
+    _set_input(node, ("Specular IOR Level", "Specular"), min(1.0, sum(s.specular) / 3.0))
+    _set_input(node, ("Metallic",), s.reflectivity)
+    _set_input(node, ("Transmission Weight", "Transmission"), s.transparency)
+    _set_input(node, ("IOR",), min(100.0, 1.0 / max(s.speed_of_light, 1e-6)))
+
+
+def set_material(material, sdl_material) -> None:
+    """Fill ``material.sdl`` from a tracer Material, keeping the exact values."""
+    s = material.sdl
+    for name in COLOR_FIELDS:
+        setattr(s, name, getattr(sdl_material, name))
+    for name in FLOAT_FIELDS:
+        setattr(s, name, getattr(sdl_material, name))
+    s.texture = int(sdl_material.texture)
+    params = tuple(sdl_material.parameters)[:MAX_PARAMETERS]
+    s.parameter_count = len(params)
+    s.parameters = params + (0.0,) * (MAX_PARAMETERS - len(params))
+    s.use_sdl = True
+    values = {name: getattr(sdl_material, name) for name in COLOR_FIELDS + FLOAT_FIELDS}
+    values["parameters"] = tuple(params) + (0.0,) * (MAX_PARAMETERS - len(params))
+    store_exact(material, s, values)
+    apply_principled(material)
+
+
+def material_to_sdl(material):
+    """The tracer Material for a Blender material (None: SDL's default material)."""
+    Material = deps.module("model").Material
+    if material is None:
+        return Material()
+    s = material.sdl
+    if s.use_sdl:
+        values = {name: tuple(exact_field(material, s, name)) for name in COLOR_FIELDS}
+        values.update({name: exact_field(material, s, name)[0] for name in FLOAT_FIELDS})
+        params = exact_field(material, s, "parameters")[: s.parameter_count]
+        return Material(texture=int(s.texture), parameters=tuple(params), **values)
+    # A Blender material: its base colour as the diffuse colour, its emission as emissive.
+    node = _principled(material)
+    if node is not None:
+        base = tuple(_get_input(node, ("Base Color",), (0.8, 0.8, 0.8, 1.0)))[:3]
+        emission = tuple(_get_input(node, ("Emission Color", "Emission"), (0.0, 0.0, 0.0, 1.0)))[:3]
+        strength = float(_get_input(node, ("Emission Strength",), 1.0))
+        emissive = tuple(convert.shortest32(c * strength) for c in emission)
+    else:
+        base = tuple(material.diffuse_color)[:3]
+        emissive = (0.0, 0.0, 0.0)
+    return Material(diffuse=tuple(convert.shortest32(c) for c in base), emissive=emissive)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# World
+
+WORLD_FIELDS = ("background", "global_ambient", "min_reflectivity", "min_transparency")
+
+
+def apply_world_colors(world) -> None:
+    background = tuple(world.sdl.background)
+    world.color = background
+    if world.use_nodes and world.node_tree is not None:
+        for node in world.node_tree.nodes:
+            if node.type == "BACKGROUND":
+                node.inputs["Color"].default_value = (*background, 1.0)
+                node.inputs["Strength"].default_value = 1.0
+
+
+def set_world(world, settings) -> None:
+    s = world.sdl
+    s.background = settings.background
+    s.global_ambient = settings.global_ambient
+    s.min_reflectivity = settings.min_reflectivity
+    s.min_transparency = settings.min_transparency
+    store_exact(world, s, {name: getattr(settings, name) for name in WORLD_FIELDS})
+    apply_world_colors(world)
+
+
+def world_settings(world, max_recursion_depth: int):
+    """Tracer Settings from a world (None: SDL's defaults) and the render settings' recursion depth."""
+    Settings = deps.module("model").Settings
+    if world is None:
+        return Settings(max_recursion_depth=max_recursion_depth)
+    s = world.sdl
+    return Settings(global_ambient=tuple(exact_field(world, s, "global_ambient")),
+                    background=tuple(exact_field(world, s, "background")),
+                    min_reflectivity=exact_field(world, s, "min_reflectivity")[0],
+                    min_transparency=exact_field(world, s, "min_transparency")[0],
+                    max_recursion_depth=int(max_recursion_depth))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Lights
+
+def _light_shown(light) -> list[float]:
+    return [float(c) for c in light.color] + [float(light.energy)]
+
+
+def set_light(light, color) -> None:
+    """A Blender point light for an SDL light colour: colour scaled to 1 at most, power for the rest."""
+    color = tuple(float(c) for c in color)
+    peak = max(color)
+    light.color = tuple(c / peak for c in color) if peak > 0 else (1.0, 1.0, 1.0)
+    light.energy = peak * LIGHT_WATTS
+    light.shadow_soft_size = 0.0
+    light["sdl_color"] = list(color)
+    light["sdl_shown"] = _light_shown(light)
+
+
+def light_color(light) -> tuple[float, float, float]:
+    exact, shown = light.get("sdl_color"), light.get("sdl_shown")
+    now = _light_shown(light)
+    if exact is not None and shown is not None and list(shown) == now:
+        return tuple(float(c) for c in exact)
+    return tuple(convert.shortest32(c * light.energy / LIGHT_WATTS) for c in light.color)

@@ -1,0 +1,299 @@
+"""Blender's evaluated scene as a tracer Scene, for rendering (Blender's axes) and for export (SDL's axes).
+
+* An object whose mesh is an unedited generic shape (see meshes.generic_info), with no enabled modifiers
+  but Booleans, is that exact shape: its transform is the exact one kept at import while Blender still
+  shows it, else its world matrix (times the rotation baked into a sheared shape's mesh).
+* Its Boolean modifiers become CSG, in modifier order: ``left op operand`` where the operand is whatever
+  object (or collection of objects, folded with the same operation) the modifier names, itself a shape,
+  a CSG or a mesh.
+* Anything else that has geometry is traced as the triangles Blender makes of its evaluated mesh, one
+  tracer mesh per material slot.
+* Lights become point lights at their position (sun lights far away against their direction).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from . import convert, deps, meshes, props
+
+BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
+SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+#: A sun light is put this far from the scene's origin, against its direction.
+SUN_DISTANCE = 1.0e6
+
+#: Custom properties on an imported object.
+OBJ_KIND, OBJ_PARAM, OBJ_FILE = "sdl_kind", "sdl_param", "sdl_mesh_file"
+OBJ_MATRIX, OBJ_SHOWN, OBJ_ORDER = "sdl_matrix", "sdl_matrix_shown", "sdl_order"
+
+
+def matrix_np(matrix) -> np.ndarray:
+    return np.array([list(row) for row in matrix], dtype=np.float64)
+
+
+def flat(matrix) -> list[float]:
+    return [float(v) for row in matrix for v in row]
+
+
+def matrix_unchanged(now: list[float], shown: list[float]) -> bool:
+    a, b = np.asarray(now, dtype=np.float64), np.asarray(shown, dtype=np.float64)
+    return a.shape == b.shape and bool(np.all(np.abs(a - b) <= 1e-6 * np.maximum(1.0, np.abs(b))))
+
+
+@dataclass
+class BuildResult:
+    scene: object  # tracer Scene
+    warnings: list[str] = field(default_factory=list)
+    #: For export: Shape id -> Blender object name (for messages).
+    names: dict = field(default_factory=dict)
+
+
+class SceneBuilder:
+    """Builds tracer objects from evaluated Blender objects.
+
+    ``mode`` is ``RENDER`` (final render: render visibility and modifiers), ``VIEWPORT`` or ``EXPORT``
+    (render visibility, polygons kept as polygons, ``mesh`` files referenced); ``to_target`` maps
+    Blender's world to the output frame (identity for rendering, Blender -> SDL axes for export).
+    """
+
+    def __init__(self, depsgraph, mode: str = "RENDER", to_target: Optional[np.ndarray] = None):
+        self.depsgraph = depsgraph
+        self.mode = mode
+        self.to_target = np.eye(4) if to_target is None else np.asarray(to_target, dtype=np.float64)
+        self.model = deps.module("model")
+        self.warnings: list[str] = []
+        self._generic_cache: dict = {}
+        self._mesh_cache: dict = {}
+        self._materials: dict = {}
+        self.operands: set[str] = set()
+
+    # -- helpers --------------------------------------------------------------------------------------
+
+    def _modifier_enabled(self, modifier) -> bool:
+        return modifier.show_viewport if self.mode == "VIEWPORT" else modifier.show_render
+
+    def _material(self, material):
+        key = material.as_pointer() if material is not None else 0
+        if key not in self._materials:
+            self._materials[key] = props.material_to_sdl(material)
+        return self._materials[key]
+
+    def _slot_material(self, obj, index: int = 0):
+        slots = obj.material_slots
+        if 0 <= index < len(slots):
+            return self._material(slots[index].material)
+        return self._material(None)
+
+    def _target(self, world_matrix: np.ndarray) -> np.ndarray:
+        return self.to_target @ world_matrix
+
+    def _evaluated(self, obj):
+        try:
+            return obj.evaluated_get(self.depsgraph)
+        except (RuntimeError, ReferenceError):
+            return obj
+
+    def _usable(self, matrix: np.ndarray, name: str) -> bool:
+        linear = matrix[:3, :3]
+        if not np.all(np.isfinite(matrix)):
+            self.warnings.append(f"{name}: skipped, its transform is not finite")
+            return False
+        det = np.linalg.det(linear)
+        if det == 0.0 or not np.isfinite(det) or np.linalg.cond(linear) > 1e12:
+            self.warnings.append(f"{name}: skipped, its transform is singular (a scale of 0?)")
+            return False
+        return True
+
+    # -- objects --------------------------------------------------------------------------------------
+
+    def generic(self, obj):
+        """Generic-shape info of an object's own mesh (None if not an unedited generic shape)."""
+        original = obj.original if hasattr(obj, "original") else obj
+        if original.type != "MESH":
+            return None
+        return meshes.generic_info(original.data, self._generic_cache)
+
+    def shape_matrix(self, obj, matrix_world: np.ndarray, info) -> np.ndarray:
+        """World matrix of the generic shape (Blender axes), exact while the object is where import put it."""
+        original = obj.original if hasattr(obj, "original") else obj
+        exact, shown = original.get(OBJ_MATRIX), original.get(OBJ_SHOWN)
+        if exact is not None and shown is not None and matrix_unchanged(
+                [float(v) for v in matrix_world.ravel()], list(shown)):
+            return np.array(list(exact), dtype=np.float64).reshape(4, 4)
+        return matrix_world @ info.mesh_matrix
+
+    def object_node(self, obj, matrix_world: Optional[np.ndarray] = None, top_level: bool = True,
+                    visiting: Optional[set] = None):
+        """Tracer object(s) for one evaluated object: a list (a mesh may give one per material)."""
+        obj_eval = self._evaluated(obj)
+        if matrix_world is None:
+            matrix_world = matrix_np(obj_eval.matrix_world)
+        original = obj_eval.original
+        visiting = set() if visiting is None else visiting
+        if original.name in visiting:
+            self.warnings.append(f"{original.name}: Boolean operands form a loop; traced as a mesh")
+            return self.mesh_nodes(obj_eval, matrix_world, top_level)
+        info = self.generic(obj_eval)
+        enabled = [m for m in original.modifiers if self._modifier_enabled(m)] if info is not None else []
+        if info is None or any(m.type != "BOOLEAN" for m in enabled):
+            return self.mesh_nodes(obj_eval, matrix_world, top_level)
+        matrix = self.shape_matrix(original, matrix_world, info)
+        if not self._usable(matrix, original.name):
+            return []
+        node = self.leaf_shape(original, obj_eval, matrix, info)
+        visiting = visiting | {original.name}
+        for modifier in enabled:
+            operands = []
+            if getattr(modifier, "operand_type", "OBJECT") == "COLLECTION":
+                if modifier.collection is not None:
+                    operands = [o for o in modifier.collection.all_objects if o.type in GEOMETRY_TYPES]
+            elif modifier.object is not None:
+                operands = [modifier.object]
+            for operand in operands:
+                self.operands.add(operand.name)
+                right = self.object_node(operand, None, top_level=False, visiting=visiting)
+                if not right:
+                    continue
+                node = self.model.CSG(BOOLEAN_OPS[modifier.operation], node, right[0])
+        return [node]
+
+    def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info):
+        kind = info.kind
+        shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval))
+        if kind == "taperedCylinder":
+            shape.tapered_radius = info.param
+        if kind in self.model.POLYHEDRON_KINDS or kind in ("teapot", "mesh"):
+            data = meshes.exact_mesh_data(info, original.data)
+            if data is None:  # a mesh file that is gone: Blender's copy, in the mesh's own frame
+                data = self._blender_mesh(original.data, polygons=self.mode == "EXPORT")[0]
+                shape.matrix = self._target(matrix @ np.linalg.inv(info.mesh_matrix))
+            elif kind == "mesh" and self.mode == "EXPORT":
+                shape.mesh_file = info.mesh_file
+            shape.mesh = data
+        return shape
+
+    def _blender_mesh(self, mesh, polygons: bool) -> dict:
+        key = (mesh.as_pointer(), polygons)
+        if key not in self._mesh_cache:
+            self._mesh_cache[key] = (polygon_meshes(mesh) if polygons else meshes.triangle_meshes(mesh, mesh.name))
+        return self._mesh_cache[key]
+
+    def mesh_nodes(self, obj_eval, matrix_world: np.ndarray, top_level: bool) -> list:
+        if obj_eval.type not in GEOMETRY_TYPES:
+            return []
+        if not self._usable(matrix_world, obj_eval.name):
+            return []
+        try:
+            mesh = obj_eval.to_mesh()
+        except RuntimeError:
+            mesh = None
+        if mesh is None:
+            return []
+        try:
+            parts = polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, obj_eval.name)
+        finally:
+            obj_eval.to_mesh_clear()
+        shapes = []
+        for index, data in sorted(parts.items()):
+            shapes.append(self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=data,
+                                           material=self._slot_material(obj_eval, index)))
+        if not top_level and len(shapes) > 1:
+            # A Boolean operand is one solid: keep it whole, with its first material.
+            merged = merge_mesh_data([s.mesh for s in shapes], self.model.MeshData)
+            shapes = [self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=merged,
+                                       material=shapes[0].material)]
+        return shapes
+
+    # -- the scene ------------------------------------------------------------------------------------
+
+    def light(self, obj_eval, matrix_world: np.ndarray):
+        data = obj_eval.data
+        position = matrix_world[:3, 3].copy()
+        exact, shown = obj_eval.original.get("sdl_position"), obj_eval.original.get("sdl_position_shown")
+        if exact is not None and shown is not None and [float(v) for v in position] == list(shown):
+            position = np.array(list(exact), dtype=np.float64)
+        if data.type == "SUN":
+            direction = -matrix_world[:3, 2]
+            direction /= max(np.linalg.norm(direction), 1e-300)
+            position = -SUN_DISTANCE * direction
+        position = (self.to_target @ np.append(position, 1.0))[:3]
+        return self.model.Light(tuple(float(v) for v in position), props.light_color(data))
+
+    def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
+        """The tracer Scene of everything the depsgraph shows (its object instances)."""
+        model = self.model
+        objects, lights = [], []
+        entries = []
+        for inst in (instances if instances is not None else self.depsgraph.object_instances):
+            obj = inst.instance_object if inst.is_instance else inst.object
+            original = obj.original
+            if skip_hidden_render and original.hide_render:
+                continue
+            if selected_only and not (inst.is_instance and inst.parent and inst.parent.original.select_get()) \
+                    and not original.select_get():
+                continue
+            entries.append((obj, matrix_np(inst.matrix_world), inst.is_instance))
+        # Import order first (so that files round-trip in their own order), then by name.
+        entries.sort(key=lambda e: (e[0].original.get(OBJ_ORDER, math.inf), e[0].original.name))
+        shape_entries = []
+        for obj, matrix, is_instance in entries:
+            if obj.type == "LIGHT":
+                lights.append(self.light(obj, matrix))
+            elif obj.type in GEOMETRY_TYPES:
+                shape_entries.append((obj, matrix, is_instance))
+        for obj, matrix, is_instance in shape_entries:
+            objects.extend(self.object_node(obj, matrix))
+        world = scene.world
+        settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
+                                        if hasattr(scene, "sdl_render") else 3)
+        tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
+        pixmaps = scene.get("sdl_pixmaps")
+        if pixmaps:
+            tracer_scene.pixmaps = {int(k): str(v) for k, v in pixmaps.items()}
+        return tracer_scene
+
+
+def polygon_meshes(mesh) -> dict:
+    """The mesh's polygons with corner normals, one tracer MeshData per material index (for export)."""
+    MeshData = deps.module("model").MeshData
+    count = len(mesh.polygons)
+    if count == 0:
+        return {}
+    co = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    vertices = np.array([convert.shortest32(v) for v in co], dtype=np.float64).reshape(-1, 3)
+    loops = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loops)
+    starts = np.empty(count, dtype=np.int32)
+    totals = np.empty(count, dtype=np.int32)
+    mats = np.empty(count, dtype=np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    mesh.polygons.foreach_get("loop_total", totals)
+    mesh.polygons.foreach_get("material_index", mats)
+    normals = meshes._corner_normals(mesh)
+    out = {}
+    for index in np.unique(mats):
+        polys = np.nonzero(mats == index)[0]
+        corner = np.concatenate([np.arange(starts[p], starts[p] + totals[p]) for p in polys])
+        faces, offset = [], 0
+        for p in polys:
+            s, t = int(starts[p]), int(totals[p])
+            faces.append((tuple(int(v) for v in loops[s:s + t]), tuple(range(offset, offset + t))))
+            offset += t
+        out[int(index)] = MeshData(vertices=vertices, normals=normals[corner], faces=faces, origin=mesh.name)
+    return out
+
+
+def merge_mesh_data(parts, MeshData):
+    """One MeshData from parts that share their vertex array (the pieces of one mesh)."""
+    vertices = parts[0].vertices
+    normals, faces, offset = [], [], 0
+    for part in parts:
+        normals.append(np.asarray(part.normals).reshape(-1, 3))
+        faces += [(v, tuple(i + offset for i in n)) for v, n in part.faces]
+        offset += len(normals[-1])
+    return MeshData(vertices=vertices, normals=np.concatenate(normals), faces=faces, origin=parts[0].origin)

@@ -1,0 +1,129 @@
+"""Panels: the engine's render settings, and the SDL material, world and shape of the active data."""
+from __future__ import annotations
+
+import bpy
+
+from .engine import ENGINE_ID
+
+
+class SDL_PT_render(bpy.types.Panel):
+    bl_idname = "SDL_PT_render"
+    bl_label = "SDL Ray Tracer"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        settings = context.scene.sdl_render
+        col = layout.column()
+        col.prop(settings, "block_size")
+        col.prop(settings, "progressive")
+        col.prop(settings, "max_recursion_depth")
+        col.prop(settings, "threads")
+        col = layout.column()
+        col.prop(settings, "samples")
+        sub = col.column()
+        sub.active = settings.samples > 1
+        sub.prop(settings, "sampling")
+        row = sub.row()
+        row.active = settings.sampling == "ADAPTIVE"
+        row.prop(settings, "threshold")
+
+
+class SDL_PT_material(bpy.types.Panel):
+    bl_idname = "SDL_PT_material"
+    bl_label = "SDL Material"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "material", None) is not None
+
+    def draw_header(self, context):
+        self.layout.prop(context.material.sdl, "use_sdl", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        s = context.material.sdl
+        col = layout.column()
+        col.active = s.use_sdl
+        for name in ("ambient", "diffuse", "specular", "emissive", "specular_exponent", "reflectivity",
+                     "transparency", "speed_of_light", "specular_fraction", "surface_roughness", "texture",
+                     "parameter_count"):
+            col.prop(s, name)
+        if s.parameter_count:
+            row = col.row(align=True)
+            for i in range(s.parameter_count):
+                row.prop(s, "parameters", index=i, text="")
+
+
+class SDL_PT_world(bpy.types.Panel):
+    bl_idname = "SDL_PT_world"
+    bl_label = "SDL World"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return context.world is not None
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        s = context.world.sdl
+        for name in ("background", "global_ambient", "min_reflectivity", "min_transparency"):
+            layout.prop(s, name)
+
+
+class SDL_PT_object(bpy.types.Panel):
+    bl_idname = "SDL_PT_object"
+    bl_label = "SDL Shape"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return obj is not None and obj.type == "MESH"
+
+    def draw(self, context):
+        from . import meshes
+
+        obj = context.object
+        info = meshes.generic_info(obj.data)
+        layout = self.layout
+        if info is None:
+            text = "Edited generic shape: traced as a mesh" if "sdl_kind" in obj.data else "Traced as a mesh"
+            layout.label(text=text, icon="MESH_DATA")
+            return
+        label = info.kind + (f" {info.param:g}" if info.kind == "taperedCylinder" else "")
+        layout.label(text=f"Generic {label}: traced exactly", icon="SHADING_RENDERED")
+        if info.mesh_file:
+            layout.label(text=info.mesh_file)
+        if "sdl_source" in obj:
+            layout.label(text=f"From {obj['sdl_source']}")
+
+
+CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_world, SDL_PT_object)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,275 @@
+"""The SDL_RAYTRACER render engine: rays exactly as Blender's camera projects (lens, sensor size and fit,
+shift, pixel aspect, resolution %, border, orthographic), the same pixels as tracer.render, blocks coarse to
+fine, samples, cancel, hide_render, animation, and the viewport's rays from its projection matrix."""
+from __future__ import annotations
+
+import itertools
+
+import bpy
+import numpy as np
+import pytest
+from bpy_extras.object_utils import world_to_camera_view
+from mathutils import Vector
+
+import tracer
+from addon import blocks, engine, raycam
+from addon.scene_build import matrix_np
+from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
+
+
+@pytest.fixture(autouse=True)
+def _fresh():
+    fresh()
+
+
+def _camera(**data) -> bpy.types.Object:
+    cam_data = bpy.data.cameras.new("cam")
+    for key, value in data.items():
+        setattr(cam_data, key, value)
+    cam = bpy.data.objects.new("cam", cam_data)
+    bpy.context.scene.collection.objects.link(cam)
+    cam.location = (1.0, -7.0, 2.5)
+    cam.rotation_euler = (1.3, 0.05, 0.2)
+    bpy.context.scene.camera = cam
+    bpy.context.view_layer.update()
+    return cam
+
+
+CAMERAS = [
+    dict(),
+    dict(lens=35.0, sensor_fit="VERTICAL", sensor_height=20.0),
+    dict(lens=80.0, sensor_fit="HORIZONTAL", sensor_width=30.0, shift_x=0.2, shift_y=-0.15),
+    dict(lens=24.0, sensor_fit="AUTO", shift_y=0.3),
+    dict(type="ORTHO", ortho_scale=5.0, shift_x=-0.1),
+    dict(type="ORTHO", ortho_scale=3.0, sensor_fit="VERTICAL"),
+]
+FRAMES = [(64, 48, 100, 1.0, 1.0), (40, 90, 50, 1.0, 1.0), (60, 40, 100, 2.0, 1.0), (50, 50, 100, 1.0, 1.5)]
+
+
+@pytest.mark.parametrize("camera, frame", list(itertools.product(CAMERAS, FRAMES)),
+                         ids=lambda v: str(v).replace(" ", ""))
+def test_rays_land_where_blender_projects(camera, frame):
+    """Points along each pixel's ray project (by Blender's own camera view frame) to that pixel's centre."""
+    width, height, percent, aspx, aspy = frame
+    cam = _camera(**camera)
+    render = bpy.context.scene.render
+    set_resolution(width, height, percent)
+    render.pixel_aspect_x, render.pixel_aspect_y = aspx, aspy
+    winx, winy = engine.render_size(render)
+    assert (winx, winy) == (width * percent // 100, height * percent // 100)
+    rows = np.array([0, winy // 3, winy - 1, winy // 2, 0])
+    cols = np.array([0, winx // 2, winx - 1, 3, winx - 1])
+    origins, directions = raycam.pixel_rays(engine.camera_params(cam), winx, winy, rows, cols, aspx, aspy)
+    for o, d, r, c in zip(origins, directions, rows, cols):
+        for t in (1.0, 7.5):
+            p = world_to_camera_view(bpy.context.scene, cam, Vector(o + t * d))
+            assert p.x == pytest.approx((c + 0.5) / winx, abs=1e-5)
+            assert p.y == pytest.approx((r + 0.5) / winy, abs=1e-5)
+
+
+def test_render_equals_the_tracers_own_render():
+    """Imported into Blender and rendered through Blender's camera, the scene gives tracer.render's pixels."""
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(80, 60)
+    image = render_rgba("SDL_RAYTRACER")
+    expected = tracer.render(tracer.load(str(SCENES / "lecture.sdl")), 80, 60).image
+    assert image.shape == (60, 80, 4)
+    np.testing.assert_allclose(image[..., :3], expected, atol=1e-4)
+    assert np.all(image[..., 3] == 1.0)
+
+
+def test_blocks_coarse_to_fine_every_pixel_once():
+    import_sdl(SCENES / "shapes.sdl")
+    set_resolution(96, 72)
+    settings = bpy.context.scene.sdl_render
+    settings.block_size, settings.progressive = 8, True
+    render_rgba("SDL_RAYTRACER")
+    stats = engine.LAST_RENDER
+    assert stats["passes"] == [8, 4, 2, 1] and stats["tiles_done"] == stats["tiles_total"]
+    assert stats["rays"]["camera"] == 96 * 72
+    settings.progressive = False
+    coarse = render_rgba("SDL_RAYTRACER")
+    assert engine.LAST_RENDER["rays"]["camera"] == 12 * 9  # one ray per 8 x 8 block
+    assert np.all(coarse[:8, :8] == coarse[0, 0])
+
+
+def test_samples_and_modes():
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(48, 36)
+    s = bpy.context.scene.sdl_render
+    s.block_size, s.progressive, s.samples, s.sampling = 1, False, 4, "REGULAR"
+    regular = render_rgba("SDL_RAYTRACER")
+    assert engine.LAST_RENDER["rays"]["camera"] == 4 * 48 * 36
+    s.sampling = "ADAPTIVE"
+    s.threshold = 0.1
+    adaptive = render_rgba("SDL_RAYTRACER")
+    rays = engine.LAST_RENDER["rays"]["camera"]
+    assert 48 * 36 < rays < 5 * 48 * 36
+    # adaptive refines exactly where neighbours differ; elsewhere it keeps the centre sample
+    assert np.abs(adaptive - regular).max() < 0.5
+
+
+def test_border_crop_resolution_percentage():
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(100, 80, 50)
+    full = render_rgba("SDL_RAYTRACER")
+    assert full.shape == (40, 50, 4)
+    render = bpy.context.scene.render
+    render.use_border, render.use_crop_to_border = True, True
+    render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y = 0.2, 0.7, 0.25, 0.75
+    part = render_rgba("SDL_RAYTRACER")
+    assert part.shape == (20, 25, 4)
+    # the crop is the same pixels of the full frame (row 0 at the top: border y counts from the bottom)
+    np.testing.assert_allclose(part, full[40 - 30:40 - 10, 10:35], atol=1e-6)
+    render.use_crop_to_border = False  # the full frame, with only the border's pixels rendered
+    framed = render_rgba("SDL_RAYTRACER")
+    assert framed.shape == (40, 50, 4) and framed[..., 3].sum() == 20 * 25
+    np.testing.assert_allclose(framed[10:30, 10:35], part, atol=1e-6)
+
+
+def test_hide_render_respected():
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(40, 30)
+    render_rgba("SDL_RAYTRACER")
+    count = engine.LAST_RENDER["objects"]
+    shape_objects()[4].hide_render = True
+    render_rgba("SDL_RAYTRACER")
+    assert engine.LAST_RENDER["objects"] == count - 1
+
+
+def test_cancel_within_a_block(monkeypatch):
+    """Esc (test_break) stops the render within a work item: the engine asks between chunks of rays."""
+    import_sdl(SCENES / "shapes.sdl")
+    set_resolution(64, 64)
+    s = bpy.context.scene.sdl_render
+    s.block_size, s.progressive = 1, False  # one pass, one 64 x 64 tile: a single work item
+    monkeypatch.setattr(blocks, "DEFAULT_CHUNK", 256)
+    asked = []
+    # (RenderEngine.test_break is Blender's own function, which a Python attribute cannot shadow; the
+    # engine asks it through SDLRenderEngine.cancelled)
+    monkeypatch.setattr(engine.SDLRenderEngine, "cancelled", lambda self: asked.append(1) or len(asked) > 3)
+    render_rgba("SDL_RAYTRACER")
+    stats = engine.LAST_RENDER
+    assert asked, stats
+    assert stats["cancelled"] and stats["tiles_done"] == 0 and stats["tiles_total"] == 1, stats
+    assert stats["rays"]["camera"] == 3 * 256  # stopped inside the only block
+
+
+def test_block_renderer_cancel_and_time_slices():
+    compiled = tracer.compile.compile_scene(tracer.load(str(SCENES / "shapes.sdl")))
+    cam = tracer.camera.CameraFrame.from_camera(compiled.scene.camera, 1.0)
+
+    def rays_for(rows, cols, dy=0.5, dx=0.5):
+        d = cam.directions(rows, cols, 32, 32, dy=dy, dx=dx)
+        return np.broadcast_to(cam.eye, d.shape), d
+
+    r = blocks.BlockRenderer(compiled, rays_for, 32, 32, block_size=4, progressive=True, tile=16)
+    assert len(r.items) == 3 * 4 and r.pass_count == 3
+    r.run_for(0.0)  # one item per slice at least: the viewport refines while the user waits
+    assert r.done >= 1 and not r.finished
+    while not r.finished:
+        r.run_for(0.01)
+    expected = tracer.render(compiled, 32, 32).image[::-1]
+    np.testing.assert_allclose(r.color, expected, atol=1e-9)
+    with pytest.raises(blocks.Cancelled):
+        blocks.BlockRenderer(compiled, rays_for, 32, 32).run(cancel=lambda: True)
+
+
+def test_animation_frame_by_frame(tmp_path):
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(40, 30)
+    scene = bpy.context.scene
+    scene.render.engine = "SDL_RAYTRACER"
+    ball = [o for o in shape_objects() if o["sdl_kind"] == "sphere"][-1]
+    ball.location.z = 1.0
+    ball.keyframe_insert("location", frame=1)
+    ball.location.z = 3.0
+    ball.keyframe_insert("location", frame=2)
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.filepath = str(tmp_path / "frame_")
+    scene.render.use_file_extension = True
+    bpy.ops.render.render(animation=True)
+    files = sorted(p.name for p in tmp_path.iterdir())
+    assert files == ["frame_0001.png", "frame_0002.png"]
+    assert engine.LAST_RENDER["frame"] == 2
+    a, b = (bpy.data.images.load(str(tmp_path / f)) for f in files)
+    assert np.abs(np.array(a.pixels[:]) - np.array(b.pixels[:])).max() > 0.2  # the ball moved
+
+
+def test_viewport_rays_from_the_projection_matrix():
+    """The viewport traces from a region's perspective matrix; for a camera's own matrices its rays are
+    the final render's rays."""
+    cam = _camera(lens=40.0)
+    set_resolution(64, 48)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    window = matrix_np(cam.calc_matrix_camera(depsgraph, x=64, y=48))
+    persp = window @ np.linalg.inv(matrix_np(cam.matrix_world))
+    rows, cols = np.arange(48) % 48, (np.arange(48) * 7) % 64
+    near, d_view = raycam.projection_rays(persp, 64, 48, rows, cols)
+    o_cam, d_cam = raycam.pixel_rays(engine.camera_params(cam), 64, 48, rows, cols)
+    d_cam = d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True)
+    np.testing.assert_allclose(d_view, d_cam, atol=1e-5)
+    np.testing.assert_allclose(near, o_cam, atol=1e-4)
+
+
+def test_render_errors_are_reported_not_raised():
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(20, 20)
+    bpy.context.scene.camera.data.type = "PANO"
+    bpy.context.scene.render.engine = "SDL_RAYTRACER"
+    try:
+        bpy.ops.render.render()
+    except RuntimeError as exc:  # Blender raises the engine's error report for a script; a user sees it
+        assert "panoramic cameras are not supported" in str(exc)
+    assert "panoramic cameras are not supported" in engine.LAST_RENDER["error"]
+
+
+def test_viewport_refines_while_the_user_waits(monkeypatch):
+    """view_draw, driven as Blender drives it (one call per redraw, another redraw asked for until the image
+    is finished), traces the scene from the region's perspective matrix.  GPU drawing is not available in
+    background mode, so the texture upload (_draw) is replaced by a recorder here."""
+    import_sdl(SCENES / "lecture.sdl")
+    width, height = 64, 48
+    cam = bpy.context.scene.camera
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    persp = cam.calc_matrix_camera(depsgraph, x=width, y=height) @ cam.matrix_world.inverted()
+
+    class Context:
+        region = type("Region", (), {"width": width, "height": height})
+        region_data = type("RegionView3D", (), {"perspective_matrix": persp})
+
+    class Engine:
+        _view, _view_dirty, _view_scene = None, True, None
+        view_draw = engine.SDLRenderEngine.__dict__["view_draw"]
+        view_update = engine.SDLRenderEngine.__dict__["view_update"]
+
+        def __init__(self):
+            self.redraws, self.frames = 0, []
+
+        def tag_redraw(self):
+            self.redraws += 1
+
+        def update_stats(self, stats, info):
+            self.info = info
+
+        def _draw(self, scene, rgba, w, h):
+            assert (w, h) == (width, height)
+            self.frames.append(rgba.copy())
+
+    bpy.context.scene.sdl_render.block_size = 8
+    monkeypatch.setattr(engine, "VIEWPORT_SLICE", 0.0)  # one work item per redraw (the C core is quick)
+    eng = Engine()
+    for _ in range(200):
+        eng.view_draw(Context, depsgraph)
+        if eng.info.endswith("done"):
+            break
+    assert eng.info.endswith("done") and eng.redraws == len(eng.frames) - 1 == 3  # passes 8, 4, 2, 1
+    expected = tracer.render(tracer.load(str(SCENES / "lecture.sdl")), width, height).image[::-1]
+    first, last = eng.frames[0][..., :3], eng.frames[-1][..., :3]
+    np.testing.assert_allclose(last, expected, atol=1e-4)  # bottom row first, as a texture wants
+    assert np.abs(first - expected).max() > 0.05  # the first redraw showed a coarse image
+    # a change to the scene starts again
+    eng.view_update(Context, depsgraph)
+    eng.view_draw(Context, depsgraph)
+    assert not eng.info.endswith("done")

@@ -1,0 +1,184 @@
+"""SDL import: every shape an object on a shared generic mesh at its exact SDL transform, materials,
+lights, camera, world, CSG as Boolean modifiers, def/use groups, axis option, errors."""
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from bpy_extras.object_utils import world_to_camera_view
+from mathutils import Vector
+
+import tracer
+from addon import importer, props
+from blender_scripts.addon_env import (SCENE_FILES, SCENES, effective_matrix, fresh, import_sdl, shape_objects,
+                                       to_blender, world)
+
+
+@pytest.fixture(autouse=True)
+def _fresh():
+    fresh()
+
+
+def _counts() -> dict:
+    return {name: len(getattr(bpy.data, name)) for name in
+            ("objects", "meshes", "materials", "collections", "lights", "cameras", "worlds")}
+
+
+@pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)
+def test_every_shape_at_its_sdl_transform(path):
+    scene = tracer.load(str(path), strict=True)
+    import_sdl(path)
+    shapes, objs = scene.shapes(), shape_objects()
+    assert [o["sdl_kind"] for o in objs] == [s.kind for s in shapes]
+    for shape, obj in zip(shapes, objs):
+        expected = to_blender(shape.matrix)
+        # exact in the kept float64 values, and to float32 in what Blender shows
+        np.testing.assert_allclose(np.array(list(obj["sdl_matrix"])).reshape(4, 4), expected, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(effective_matrix(obj), expected, rtol=0, atol=1e-5 * max(1, abs(expected).max()))
+        material = props.material_to_sdl(obj.material_slots[0].material)
+        assert material == shape.material  # every SDL value exactly (float64 kept beside the float32 props)
+
+
+def test_meshes_shared_per_kind_and_parameter():
+    import_sdl(SCENES / "shapes.sdl")
+    import_sdl(SCENES / "lecture.sdl")  # a second file reuses the same mesh data
+    by_kind: dict = {}
+    for obj in shape_objects():
+        key = (obj["sdl_kind"], obj.get("sdl_param"))
+        by_kind.setdefault(key, set()).add(obj.data.name)
+    assert all(len(names) == 1 for names in by_kind.values()), by_kind
+    assert len(by_kind[("cylinder", None)]) == 1 and len(by_kind[("cone", None)]) == 1
+    tapered = [o for o in shape_objects() if o["sdl_kind"] == "taperedCylinder"][0]
+    assert tapered.data.name == "SDL taperedCylinder 0.5"
+    # a generic sphere's mesh lies on the unit sphere, a cube's corners at +-1
+    sphere = [o for o in shape_objects() if o["sdl_kind"] == "sphere"][0].data
+    radii = np.array([v.co.length for v in sphere.vertices])
+    np.testing.assert_allclose(radii, 1.0, atol=1e-6)
+    assert len(sphere.polygons) >= 1024  # fine enough for silhouettes (see test_addon_overlay)
+
+
+def test_materials_lights_camera_world():
+    scene = tracer.load(str(SCENES / "lecture.sdl"))
+    import_sdl(SCENES / "lecture.sdl")
+    # a Principled BSDF close to the SDL material
+    big = [o for o in shape_objects() if o["sdl_kind"] == "sphere"][-1]
+    mat = big.material_slots[0].material
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    np.testing.assert_allclose(tuple(bsdf.inputs["Base Color"].default_value)[:3], (0.85, 0.2, 0.15), atol=1e-6)
+    assert mat.sdl.use_sdl and mat.sdl.specular_exponent == pytest.approx(80)
+    # lights: point lights at the SDL positions, colours exact
+    lights = sorted((o for o in bpy.data.objects if o.type == "LIGHT"), key=lambda o: o["sdl_order"])
+    assert [o.data.type for o in lights] == ["POINT", "POINT"]
+    for light, obj in zip(scene.lights, lights):
+        np.testing.assert_allclose(obj.matrix_world.translation, to_blender(np.eye(4))[:3, :3] @ light.position,
+                                   atol=1e-5)
+        assert props.light_color(obj.data) == light.color
+    # the file's camera is the scene camera: the look-at point projects to the frame's centre, up is up
+    cam = bpy.context.scene.camera
+    assert cam is not None and cam.data.sensor_fit == "VERTICAL"
+    assert math.degrees(cam.data.angle_y) == pytest.approx(38, abs=1e-4)
+    look = Vector(to_blender(np.eye(4))[:3, :3] @ scene.camera.look)
+    centre = world_to_camera_view(bpy.context.scene, cam, look)
+    assert centre.x == pytest.approx(0.5, abs=1e-6) and centre.y == pytest.approx(0.5, abs=1e-6)
+    np.testing.assert_allclose(world(cam)[:3, 3], to_blender(np.eye(4))[:3, :3] @ scene.camera.eye, atol=1e-5)
+    # background and global ambient on the world
+    w = bpy.context.scene.world
+    assert props.world_settings(w, 3).background == scene.settings.background
+    assert props.world_settings(w, 3).global_ambient == scene.settings.global_ambient
+    np.testing.assert_allclose(tuple(w.color), scene.settings.background, atol=1e-6)
+
+
+def test_framing_camera_when_the_file_has_none(tmp_path):
+    path = tmp_path / "nocam.sdl"
+    path.write_text("light 5 5 5 1 1 1\npush translate 10 0 0 sphere pop\npush translate 10 3 0 cube pop\n")
+    import_sdl(path)
+    cam = bpy.context.scene.camera
+    assert cam is not None and cam["sdl_framed"]
+    for obj in shape_objects():  # both objects in the frame
+        p = world_to_camera_view(bpy.context.scene, cam, obj.matrix_world.translation)
+        assert 0.05 < p.x < 0.95 and 0.05 < p.y < 0.95 and p.z > 0
+
+
+def test_default_axes_are_upright_and_the_option_changes_them():
+    import_sdl(SCENES / "lecture.sdl")
+    pillar = [o for o in shape_objects() if o["sdl_kind"] == "cylinder"][0]
+    # SDL's up (y) is Blender's up (z): the pillar, 2.5 units tall along SDL y, stands along Blender z
+    np.testing.assert_allclose(world(pillar)[:3, 2], (0, 0, 2.5), atol=1e-6)
+    fresh()
+    import_sdl(SCENES / "lecture.sdl", axis_forward="Y", axis_up="Z")  # no conversion
+    pillar = [o for o in shape_objects() if o["sdl_kind"] == "cylinder"][0]
+    np.testing.assert_allclose(world(pillar)[:3, 2], (0, 2.5, 0), atol=1e-6)
+
+
+def test_csg_as_boolean_modifiers():
+    import_sdl(SCENES / "csg.sdl")
+    with_booleans = [o for o in shape_objects() if o.modifiers]
+    ops = sorted(m.operation for o in with_booleans for m in o.modifiers)
+    assert ops == ["DIFFERENCE", "DIFFERENCE", "INTERSECT", "UNION"]
+    for obj in with_booleans:
+        for m in obj.modifiers:
+            assert m.type == "BOOLEAN" and m.object is not None and m.object.hide_render
+    # the preview shows the result: the union's evaluated mesh has more faces than the sphere alone
+    union = next(o for o in with_booleans if o.modifiers[0].operation == "UNION")
+    evaluated = union.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    assert len(evaluated.data.polygons) != len(union.data.polygons)
+
+
+def test_def_use_parts_grouped_by_name():
+    import_sdl(SCENES / "jack.sdl")
+    names = {c.name for c in bpy.data.collections}
+    assert {"jack", "arm"} <= names
+    arm = bpy.data.collections["arm"]
+    assert all(o["sdl_kind"] in ("cylinder", "sphere") for o in arm.all_objects)
+    assert len(bpy.data.collections["jack"].all_objects) >= 9
+
+
+def test_sheared_transform_kept(tmp_path):
+    path = tmp_path / "shear.sdl"
+    path.write_text("push translate 1 2 3 rotate 30 0 0 1 scale 1 3 0.5 rotate 40 1 1 0 cube pop\n"
+                    "push rotate 20 0 1 0 scale 2 1 1 rotate 45 0 0 1 taperedCylinder 0.3 pop\n")
+    scene = tracer.load(str(path))
+    import_sdl(path)
+    for shape, obj in zip(scene.shapes(), shape_objects()):
+        np.testing.assert_allclose(effective_matrix(obj), to_blender(shape.matrix), atol=2e-6)
+
+
+def test_one_undo_step_and_ui_reports():
+    op = bpy.types.IMPORT_SCENE_OT_sdl
+    assert "UNDO" in op.bl_options  # one operator call is one undo step (no window here to undo in)
+    assert hasattr(bpy.types, "IO_FH_sdl") and bpy.types.IO_FH_sdl.bl_file_extensions == ".sdl;.dat"
+
+
+def test_unreadable_file_leaves_the_scene_untouched(tmp_path):
+    import_sdl(SCENES / "csg.sdl")
+    before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
+    bad = tmp_path / "bad.sdl"
+    bad.write_text("sphere\nlight 1 2 3 1 1 1\ncube\nmesh missing.3vn\ntranslate 1 2\n")
+    with pytest.raises(RuntimeError, match=r"bad\.sdl.*4"):
+        bpy.ops.import_scene.sdl(filepath=str(bad), strict=True)
+    with pytest.raises(RuntimeError, match="Cannot import"):
+        bpy.ops.import_scene.sdl(filepath=str(tmp_path / "does_not_exist.sdl"))
+    assert _counts() == before
+    assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
+
+
+def test_lenient_import_reports_problems(tmp_path):
+    messy = tmp_path / "messy.sdl"
+    messy.write_text("sphere\nfrobnicate 1 2\npush translate 3 0 0 cube pop\n")
+    result = importer.import_sdl(bpy.context, str(messy))
+    assert [o["sdl_kind"] for o in result.objects] == ["sphere", "cube"]
+    assert len(result.warnings) == 1 and "frobnicate" in result.warnings[0]
+
+
+def test_failure_half_way_removes_what_was_made(monkeypatch):
+    before = _counts()
+
+    def broken(self, light, index):
+        raise RuntimeError("simulated failure")
+
+    monkeypatch.setattr(importer.Importer, "_light", broken)
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        bpy.ops.import_scene.sdl(filepath=str(SCENES / "lecture.sdl"))
+    assert _counts() == before

@@ -28,7 +28,8 @@ clean:
 
 # What accuracy costs: CSV files and plots for the bundled scenes, in docs/accuracy/.
 accuracy: setup
-	$(PY) -m tracer bench accuracy scenes/lecture.sdl scenes/glass.sdl scenes/shapes.sdl scenes/textures.sdl -o docs/accuracy
+	$(PY) -m tracer bench accuracy scenes/lecture.sdl scenes/glass.sdl scenes/shapes.sdl scenes/textures.sdl \
+		--width 320 --height 240 -o docs/accuracy
 
 # Benchmarks (bench/run.py): whole-process time against POV-Ray 3.7 at 1280x960 on 2 threads, scaling from
 # 10 to 10,000 spheres, and the C core against the NumPy path. Needs povray (apt-get install -y povray) and,

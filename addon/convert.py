@@ -17,6 +17,8 @@ from typing import Sequence
 
 import numpy as np
 
+from . import deps
+
 _AXES = {"X": (0, 1.0), "Y": (1, 1.0), "Z": (2, 1.0), "-X": (0, -1.0), "-Y": (1, -1.0), "-Z": (2, -1.0)}
 
 
@@ -111,13 +113,7 @@ def split_shear(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     linear = matrix[:3, :3]
     if not has_shear(linear):
         return matrix.copy(), np.eye(4)
-    u, s, vt = np.linalg.svd(linear)
-    if np.linalg.det(u) < 0:
-        u[:, 2] *= -1
-        s[2] *= -1
-    if np.linalg.det(vt) < 0:
-        vt[2, :] *= -1
-        s[2] *= -1
+    u, s, vt = deps.module("transforms").rotation_scale_rotation(linear)
     obj = np.eye(4)
     obj[:3, :3] = u * s  # U diag(s): orthogonal columns
     obj[:3, 3] = matrix[:3, 3]

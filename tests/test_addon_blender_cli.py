@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -16,33 +15,10 @@ ROOT = Path(__file__).resolve().parent.parent  # (no bpy needed here: these test
 
 sys.path.insert(0, str(ROOT / "scripts"))
 import build_extension  # noqa: E402
+from blender_binary import BLENDER, blender_numpy_path  # noqa: E402
 
-BLENDER = shutil.which("blender")
 pytestmark = pytest.mark.skipif(BLENDER is None, reason="no blender on PATH")
 SMOKE = ROOT / "tests" / "blender_scripts" / "smoke.py"
-
-
-def _blender_python_path(tmp_path) -> str:
-    """A folder to put on Blender's sys.path when its own Python has no NumPy: this interpreter's NumPy,
-    usable only if both are the same Python version."""
-    probe = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-expr",
-                            "import sys\ntry:\n import numpy; print('NUMPY-OK')\nexcept ImportError:\n"
-                            " print('PYVER', sys.version_info[0], sys.version_info[1])"],
-                           capture_output=True, text=True, timeout=120)
-    if "NUMPY-OK" in probe.stdout:
-        return ""
-    import numpy
-
-    version = f"PYVER {sys.version_info[0]} {sys.version_info[1]}"
-    assert version in probe.stdout, f"Blender's Python has no NumPy and is not this Python ({version}): " \
-                                    "install NumPy for it (Debian: apt-get install python3-numpy)"
-    site = tmp_path / "site"
-    site.mkdir()
-    source = os.path.dirname(os.path.dirname(numpy.__file__))
-    for name in os.listdir(source):
-        if name == "numpy" or name.startswith("numpy.libs") or name.startswith("numpy-"):
-            os.symlink(os.path.join(source, name), site / name)
-    return str(site)
 
 
 def _run(tmp_path, mode: str) -> dict:
@@ -50,7 +26,7 @@ def _run(tmp_path, mode: str) -> dict:
     out.mkdir()
     env = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "user_scripts"),
                BLENDER_USER_CONFIG=str(tmp_path / "user_config"))
-    extra = _blender_python_path(tmp_path)
+    extra = blender_numpy_path(BLENDER, tmp_path)
     env["PYTHONPATH"] = extra
     cmd = [BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(SMOKE), "--",
            mode, str(ROOT), str(out)]

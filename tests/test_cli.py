@@ -81,9 +81,22 @@ def test_messy_file_stops_by_default_and_renders_with_lenient(tmp_path):
     (("render", "scenes/lecture.sdl", "-o", "x.png", "--width", "100000"), "width"),
     (("render", "scenes/lecture.sdl", "-o", "x.unknown"), ".unknown"),
     (("render", "scenes/lecture.sdl", "-o", "x.png", "--block-size", "0"), "block size"),
+    (("render", "scenes/lecture.sdl", "-o", "x.png", "--threads", "0"), "threads"),
 ])
 def test_bad_requests_get_one_line(args, fragment):
     _assert_one_line_error(run(*args), fragment)
+
+
+def test_thread_count_does_not_change_the_image(tmp_path):
+    images = []
+    for threads in (1, 2, 3):
+        out = tmp_path / f"t{threads}.png"
+        proc = run("render", ROOT / "scenes" / "glass.sdl", "-o", out, "--width", 40, "--height", 30,
+                   "--threads", threads, "-q")
+        assert proc.returncode == 0, proc.stderr
+        with Image.open(out) as image:
+            images.append(image.tobytes())
+    assert images[0] == images[1] == images[2]
 
 
 def test_info_lists_objects_lights_and_effects():

@@ -46,9 +46,13 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
             for mode in ("regular", "jittered", "adaptive") for n in (4, 16)]
     if effects & {"reflection", "refraction"}:
         out += [Setting("recursion depth", f"depth {d}", depth=d) for d in sorted({0, 1, 2, scene_depth, 6})]
-    out += [Setting("relative epsilon", f"epsilon {e:g}", offset_epsilon=e) for e in (1e-15, 1e-12, 1e-6, 1e-3)]
+    # The tolerances are the NumPy path's module constants (the C core compiles them in), so these rows run
+    # on NumPy, the default value included, to be compared with each other rather than with the rows above.
+    out += [Setting("relative epsilon (NumPy)", f"epsilon {e:g}", offset_epsilon=e)
+            for e in (1e-15, 1e-12, numerics.RELATIVE_EPSILON, 1e-6, 1e-3)]
     if "shape:torus" in effects:
-        out += [Setting("torus Newton steps", f"newton {n}", newton_steps=n) for n in (0, 1)]
+        out += [Setting("torus Newton steps (NumPy)", f"newton {n}", newton_steps=n)
+                for n in (0, 1, torus.NEWTON_STEPS)]
     return out
 
 
@@ -97,7 +101,6 @@ def measure(scene: Scene, name: str, out_dir: Path, width: int = 160, height: in
     from .compile import live_effects
 
     for setting in default_settings(depth, live_effects(scene)):
-        # Tolerances are Python module constants: only the NumPy path reads them.
         tolerance_row = setting.offset_epsilon is not None or setting.newton_steps is not None
         seconds = float("inf")
         with solver_tolerances(setting):

@@ -6,6 +6,7 @@ attribute (:class:`tracer.trace.RayCounts`) and a ``name`` ("c" or "numpy").
 from __future__ import annotations
 
 import warnings
+from typing import Optional
 
 from .compile import CompiledScene
 from .errors import TracerError
@@ -15,7 +16,10 @@ BACKENDS = ("auto", "c", "numpy")
 _warned = False
 
 
-def make_tracer(compiled: CompiledScene, backend: str = "auto"):
+def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optional[int] = None):
+    """``threads``: the C core's worker threads (None: $SDL_TRACER_THREADS, else every core)."""
+    if threads is not None and threads < 1:
+        raise TracerError(f"threads must be 1 or more, not {threads}")
     if backend not in BACKENDS:
         raise TracerError(f"unknown backend {backend!r} (use one of {', '.join(BACKENDS)})")
     if backend in ("auto", "c"):
@@ -29,7 +33,7 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto"):
         elif load_error is None:
             reason = NativeTracer.unsupported(compiled)
             if reason is None:
-                return NativeTracer(compiled)
+                return NativeTracer(compiled, threads)
             if backend == "c":
                 raise TracerError(f"the C core cannot trace this scene: {reason}")
         elif backend == "c":

@@ -47,6 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="adaptive sampling: colour difference between neighbours that triggers refinement")
     r.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto",
                    help="who does the per-ray work (default: the C core when it is built)")
+    r.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="threads of the C core (default: $SDL_TRACER_THREADS, else every core)")
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
     r.add_argument("--stats", action="store_true",
@@ -156,7 +158,8 @@ def _render(args) -> int:
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
                         progressive=args.progressive, on_tile=progress, samples=args.samples,
-                        sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend)
+                        sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
+                        threads=args.threads)
     finally:
         progress.close()
     save_image(result.image, args.output)

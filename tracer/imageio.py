@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .atomic import replacing
 from .errors import TracerError
 
 
@@ -39,13 +39,6 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:
         raise TracerError(f"{path}: unknown image type {path.suffix!r} (use one of .{', .'.join(sorted(known))})")
     if not path.parent.is_dir():
         raise TracerError(f"{path}: folder {str(path.parent)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            Image.fromarray(to_8bit(image)).save(handle, format=known[ext])  # (H, W, 3) uint8: RGB
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with replacing(path) as temp, open(temp, "wb") as handle:
+        Image.fromarray(to_8bit(image)).save(handle, format=known[ext])  # (H, W, 3) uint8: RGB
     return path

@@ -8,12 +8,12 @@ only keeps line numbers for its messages.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Iterator, Union
 
 import numpy as np
 
+from .atomic import replacing
 from .errors import SDLError
 from .model import MeshData
 from .sdl.lexer import to_float
@@ -153,22 +153,9 @@ def write_3vn(mesh: MeshData, path: PathLike) -> None:
 
 
 def write_text_atomic(path: PathLike, text: str) -> None:
-    """Write ``text`` to a temporary file in the same folder, then rename it over ``path``.
-
-    Renaming within one folder is atomic, so readers never see half a file; if anything fails, the
-    temporary file is removed and ``path`` is left as it was.
-    """
-    target = Path(path)
-    handle, temp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8", newline="\n") as out:
-            out.write(text)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(temp_name, target)
-    except BaseException:
-        try:
-            os.unlink(temp_name)
-        except OSError:
-            pass
-        raise
+    """Write ``text`` (UTF-8, LF line ends) so that ``path`` holds either all of it or what it held
+    before (see :func:`tracer.atomic.replacing`)."""
+    with replacing(path) as temp, open(temp, "w", encoding="utf-8", newline="\n") as out:
+        out.write(text)
+        out.flush()
+        os.fsync(out.fileno())

@@ -87,10 +87,12 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            on_tile: Optional[Callable[[TileUpdate], None]] = None,
            cancel: Optional[Callable[[], bool]] = None, backend: str = "auto",
            samples: int = 1, sampling_mode: str = "jittered",
-           threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0) -> RenderResult:
+           threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
+           threads: Optional[int] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
+    ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
     """
     check_size(width, height)
     sampling.check(samples, sampling_mode)
@@ -98,7 +100,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     camera = scene_camera(compiled.scene, compiled, width / height)
     frame = CameraFrame.from_camera(camera, width / height)
-    tracer = make_tracer(compiled, backend)
+    tracer = make_tracer(compiled, backend, threads)
     passes = block_passes(block_size, progressive)
     # The film is stored bottom row first, as the lecture counts rows; the caller sees it flipped.
     film = np.zeros((height, width, 3), dtype=np.float32)

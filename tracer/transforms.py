@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+_EPSILON = np.finfo(np.float64).eps
+
 
 def translation(dx: float, dy: float, dz: float) -> np.ndarray:
     m = np.eye(4)
@@ -49,3 +51,47 @@ def transform_vectors(matrix: np.ndarray, vectors: np.ndarray) -> np.ndarray:
 def normal_matrix(matrix: np.ndarray) -> np.ndarray:
     """The 3x3 that carries generic normals to world normals: the inverse-transpose of the linear part."""
     return np.linalg.inv(matrix[:3, :3]).T
+
+
+def polished_svd(linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A = U diag(s) Vt, accurate to a few units in the last place of the largest s.
+
+    LAPACK's SVD can be off by dozens of units for sheared matrices (1e-12 on entries near 100), so its V
+    is polished with one-sided Jacobi sweeps: rotate pairs of columns of W = A V until they are orthogonal
+    to working precision; then s are the column lengths and U the normalised columns.
+    """
+    _, _, vt = np.linalg.svd(linear)
+    v = vt.T.copy()
+    w = linear @ v
+    for _ in range(30):
+        rotated = False
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            alpha, beta, gamma = w[:, p] @ w[:, p], w[:, q] @ w[:, q], w[:, p] @ w[:, q]
+            if abs(gamma) <= _EPSILON * math.sqrt(alpha * beta):
+                continue
+            rotated = True
+            zeta = (beta - alpha) / (2.0 * gamma)
+            t = math.copysign(1.0, zeta) / (abs(zeta) + math.hypot(1.0, zeta))
+            c = 1.0 / math.hypot(1.0, t)
+            sn = c * t
+            for m in (w, v):
+                mp, mq = m[:, p].copy(), m[:, q].copy()
+                m[:, p], m[:, q] = c * mp - sn * mq, sn * mp + c * mq
+        if not rotated:
+            break
+    s = np.linalg.norm(w, axis=0)
+    return w / s, s, v.T
+
+
+def rotation_scale_rotation(linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``linear`` (3x3) = U diag(s) Vt with U and Vt proper rotations (determinant +1): an SVD whose
+    reflections, if any, are moved into the sign of s[2].  Any affine map's linear part, shears
+    included, is then rotate, scale, rotate."""
+    u, s, vt = polished_svd(linear)
+    if np.linalg.det(u) < 0:
+        u[:, 2] *= -1
+        s[2] *= -1
+    if np.linalg.det(vt) < 0:
+        vt[2, :] *= -1
+        s[2] *= -1
+    return u, s, vt

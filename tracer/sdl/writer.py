@@ -174,36 +174,6 @@ def _rotation_then_scale(linear: np.ndarray) -> list[tuple[np.ndarray, np.ndarra
     return options
 
 
-def _svd(linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A = U diag(s) Vt, accurate to a few units in the last place of the largest s.
-
-    LAPACK's SVD can be off by dozens of units for sheared matrices (1e-12 on entries near 100), so its V
-    is polished with one-sided Jacobi sweeps: rotate pairs of columns of W = A V until they are orthogonal
-    to working precision; then s are the column lengths and U the normalised columns.
-    """
-    _, _, vt = np.linalg.svd(linear)
-    v = vt.T.copy()
-    w = linear @ v
-    for _ in range(30):
-        rotated = False
-        for p, q in ((0, 1), (0, 2), (1, 2)):
-            alpha, beta, gamma = w[:, p] @ w[:, p], w[:, q] @ w[:, q], w[:, p] @ w[:, q]
-            if abs(gamma) <= _EPS * math.sqrt(alpha * beta):
-                continue
-            rotated = True
-            zeta = (beta - alpha) / (2.0 * gamma)
-            t = math.copysign(1.0, zeta) / (abs(zeta) + math.hypot(1.0, zeta))
-            c = 1.0 / math.hypot(1.0, t)
-            sn = c * t
-            for m in (w, v):
-                mp, mq = m[:, p].copy(), m[:, q].copy()
-                m[:, p], m[:, q] = c * mp - sn * mq, sn * mp + c * mq
-        if not rotated:
-            break
-    s = np.linalg.norm(w, axis=0)
-    return w / s, s, v.T
-
-
 def transform_statements(matrix: np.ndarray) -> list[Statement]:
     """SDL transform statements that rebuild an affine ``matrix`` when applied after ``identityAffine``."""
     m = np.asarray(matrix, dtype=np.float64).reshape(4, 4)
@@ -236,13 +206,7 @@ def transform_statements(matrix: np.ndarray) -> list[Statement]:
             return statements
 
     # General case, shears included: A = U diag(s) Vt, with U and Vt turned into proper rotations.
-    u, s, vt = _svd(linear)
-    if np.linalg.det(u) < 0:
-        u[:, 2] *= -1
-        s[2] *= -1
-    if np.linalg.det(vt) < 0:
-        vt[2, :] *= -1
-        s[2] *= -1
+    u, s, vt = transforms.rotation_scale_rotation(linear)
     general = head + _rotate_statement(u) + scale(s) + _rotate_statement(vt)
     for statements in _tidy(general):
         if close(statements):

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Optional, Union
 
 import numpy as np
 
+from ..atomic import replacing
 from ..errors import TracerError
 from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
 from ..transforms import translation
@@ -348,12 +348,6 @@ def build_stage(scene: Scene, folder: PathLike = "."):
     return _Writer(scene, Path(folder)).build()
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def save_usd(scene: Scene, path: PathLike) -> None:
     """Write the scene to ``path`` (.usda text, .usdc or .usd binary), atomically: a temporary file in the
     same folder, then renamed over ``path``."""
@@ -362,19 +356,9 @@ def save_usd(scene: Scene, path: PathLike) -> None:
     if suffix not in C.USD_EXTENSIONS:
         raise TracerError(f"{path}: not a USD file name (use {', '.join(C.USD_EXTENSIONS)})")
     stage = build_stage(scene, path.parent)
-    handle, temp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)
-    os.close(handle)
-    try:
-        os.chmod(temp_name, 0o666 & ~_umask())  # mkstemp makes it private; a scene file is not
-        if not stage.GetRootLayer().Export(temp_name):
+    with replacing(path, suffix) as temp:  # (USD picks the format by the extension)
+        if not stage.GetRootLayer().Export(str(temp)):
             raise TracerError(f"{path}: USD could not write the file")
-        os.replace(temp_name, path)
-    except BaseException:
-        try:
-            os.unlink(temp_name)
-        except OSError:
-            pass
-        raise
     # A layer of this name that USD still holds in memory would otherwise hide the new file from Open().
     from pxr import Sdf
     layer = Sdf.Layer.Find(str(path))

@@ -1,0 +1,36 @@
+"""Files that appear complete or not at all: written beside the target, then renamed over it."""
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from pathlib import Path
+from typing import Iterator, Union
+
+PathLike = Union[str, os.PathLike]
+
+
+@contextlib.contextmanager
+def replacing(target: PathLike, suffix: str = ".tmp") -> Iterator[Path]:
+    """A new, empty temporary file in ``target``'s folder, renamed over ``target`` when the block ends
+    without an error and removed when it does not (a cancelled or failed write leaves ``target`` as it was).
+
+    Renaming within one folder is atomic, so readers never see half a file.  The temporary file is created
+    with the permissions any new file gets (the umask applied), not tempfile.mkstemp's private 0600, since it
+    becomes the user's file.  ``suffix`` matters to writers that choose the format by extension (USD).
+    """
+    target = Path(target)
+    while True:
+        temp = target.with_name(f".{target.name}.{secrets.token_hex(4)}{suffix}")
+        try:
+            os.close(os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            break
+        except FileExistsError:  # another writer's temporary: draw another name
+            continue
+    try:
+        yield temp
+        os.replace(temp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp)
+        raise

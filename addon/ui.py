@@ -6,11 +6,15 @@ import bpy
 from .engine import ENGINE_ID
 
 
-class SDL_PT_render(bpy.types.Panel):
-    bl_idname = "SDL_PT_render"
-    bl_label = "SDL Ray Tracer"
+class _PropertiesPanel:
+    """Where all four panels live: a tab of the Properties editor (bl_context names the tab)."""
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
+
+
+class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
+    bl_idname = "SDL_PT_render"
+    bl_label = "SDL Ray Tracer"
     bl_context = "render"
     COMPAT_ENGINES = {ENGINE_ID}
 
@@ -37,11 +41,9 @@ class SDL_PT_render(bpy.types.Panel):
         row.prop(settings, "threshold")
 
 
-class SDL_PT_material(bpy.types.Panel):
+class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
     bl_idname = "SDL_PT_material"
     bl_label = "SDL Material"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
     bl_context = "material"
 
     @classmethod
@@ -67,11 +69,9 @@ class SDL_PT_material(bpy.types.Panel):
                 row.prop(s, "parameters", index=i, text="")
 
 
-class SDL_PT_world(bpy.types.Panel):
+class SDL_PT_world(_PropertiesPanel, bpy.types.Panel):
     bl_idname = "SDL_PT_world"
     bl_label = "SDL World"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
     bl_context = "world"
 
     @classmethod
@@ -86,11 +86,9 @@ class SDL_PT_world(bpy.types.Panel):
             layout.prop(s, name)
 
 
-class SDL_PT_object(bpy.types.Panel):
+class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
     bl_idname = "SDL_PT_object"
     bl_label = "SDL Shape"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
     bl_context = "object"
 
     @classmethod

@@ -646,3 +646,21 @@ def test_textured_shapes_images(offset, picture):
     c, n = _both(scene, 120, 80)
     _assert_same_image(c, n)
     assert c.rays.reflection > 0 and c.rays.shadow > 0
+
+
+@pytest.mark.parametrize("scene_name", ["glass", "shapes"])
+def test_changed_tolerances_reach_the_c_core(scene_name):
+    """tracer.accuracy varies the relative epsilon and the torus's Newton steps: the C core reads them when
+    the scene is flattened, so it renders what the NumPy path renders with the same values, and a coarse
+    epsilon changes what is traced (glass: rays through near-coincident surfaces; shapes: shadow edges)."""
+    from tracer.accuracy import Setting, solver_tolerances
+
+    scene = tracer.load(ROOT / "scenes" / f"{scene_name}.sdl")
+    default_c = render(scene, 64, 48, backend="c")
+    coarse = Setting("tolerances", "coarse", offset_epsilon=1e-2, newton_steps=0)
+    with solver_tolerances(coarse):
+        c = render(scene, 64, 48, backend="c")
+        reference = render(scene, 64, 48, backend="numpy")
+    assert c.rays.as_dict() == reference.rays.as_dict()
+    assert np.abs(c.image - reference.image).max() <= IMAGE_TOLERANCE
+    assert c.rays.as_dict() != default_c.rays.as_dict() or np.abs(c.image - default_c.image).max() > 0.1

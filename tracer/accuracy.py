@@ -46,19 +46,16 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
             for mode in ("regular", "jittered", "adaptive") for n in (4, 16)]
     if effects & {"reflection", "refraction"}:
         out += [Setting("recursion depth", f"depth {d}", depth=d) for d in sorted({0, 1, 2, scene_depth, 6})]
-    # The tolerances are the NumPy path's module constants (the C core compiles them in), so these rows run
-    # on NumPy, the default value included, to be compared with each other rather than with the rows above.
-    out += [Setting("relative epsilon (NumPy)", f"epsilon {e:g}", offset_epsilon=e)
-            for e in (1e-15, 1e-12, numerics.RELATIVE_EPSILON, 1e-6, 1e-3)]
+    out += [Setting("relative epsilon", f"epsilon {e:g}", offset_epsilon=e) for e in (1e-15, 1e-12, 1e-6, 1e-3)]
     if "shape:torus" in effects:
-        out += [Setting("torus Newton steps (NumPy)", f"newton {n}", newton_steps=n)
-                for n in (0, 1, torus.NEWTON_STEPS)]
+        out += [Setting("torus Newton steps", f"newton {n}", newton_steps=n) for n in (0, 1)]
     return out
 
 
 @contextlib.contextmanager
 def solver_tolerances(setting: Setting) -> Iterator[None]:
-    """Temporarily use a setting's tolerances (module-level constants the tracer reads at call time)."""
+    """Temporarily use a setting's tolerances: module-level constants that the NumPy path reads at call time
+    and the C core when a render flattens the scene."""
     saved = numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS
     try:
         if setting.offset_epsilon is not None:
@@ -101,14 +98,12 @@ def measure(scene: Scene, name: str, out_dir: Path, width: int = 160, height: in
     from .compile import live_effects
 
     for setting in default_settings(depth, live_effects(scene)):
-        tolerance_row = setting.offset_epsilon is not None or setting.newton_steps is not None
         seconds = float("inf")
         with solver_tolerances(setting):
             for _ in range(max(1, repeats)):
                 started = time.perf_counter()
                 result = render(_with_depth(scene, setting.depth), width, height, block_size=setting.block_size,
-                                samples=setting.samples, sampling_mode=setting.mode,
-                                backend="numpy" if tolerance_row else backend)
+                                samples=setting.samples, sampling_mode=setting.mode, backend=backend)
                 seconds = min(seconds, time.perf_counter() - started)
         row = {"group": setting.group, "setting": setting.label, "backend": result.backend,
                "seconds": round(seconds, 4),

@@ -180,7 +180,7 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
         *inside = plane_inside_at_start(o, d);
         return hits_z_plane(o, d, out, 0);
     case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS: return hits_torus(o, d, out);
+    case K_TORUS: return hits_torus(o, d, D->torus_newton_steps, out);
     case K_POLYHEDRON: {
         const int64_t *aux = D->prim_aux + 2 * p;
         return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
@@ -303,7 +303,8 @@ static int object_hits(const Scene *S, Work *w, int64_t ref, const double *o, co
         return 0;
     if (!list_reserve(w, out, 2 * (left->n + right->n) + 1))
         return 0;
-    out->n = csg_combine(S->d.csg_op[node], left, right, scale_over_speed, out->h, &out->inside);
+    out->n = csg_combine(S->d.csg_op[node], left, right, scale_over_speed, S->d.relative_epsilon, out->h,
+                         &out->inside);
     return 1;
 }
 

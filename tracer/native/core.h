@@ -106,6 +106,10 @@ typedef struct {
     const double *const *image_data; /* per image: height x width x 3 floats in [0, 1], row 0 at the bottom */
     const int64_t *noise_perm;       /* 512: tracer.textures.noise.PERM */
     const double *noise_gradients;   /* 12 x 3: tracer.textures.noise.GRADIENTS */
+    /* Tolerances, read from the Python modules when the scene is flattened (so that a measurement can
+     * change them): tracer.numerics.RELATIVE_EPSILON and tracer.intersect.torus.NEWTON_STEPS. */
+    double relative_epsilon;
+    int64_t torus_newton_steps;
 } SceneDesc;
 
 /* One crossing of a line with a surface. */

@@ -25,17 +25,18 @@ static inline int csg_state(int op, int left, int right)
     }
 }
 
-/* tracer.numerics.time_tolerance for one ray: scale_over_speed = (1 + max|o|) / |d|. */
+/* tracer.numerics.time_tolerance for one ray: scale_over_speed = (1 + max|o|) / |d|, eps the relative epsilon. */
 /* np.maximum (NaN wins) */
 static inline double nan_max2(double a, double b) { return (a != a || b != b) ? NAN : (a > b ? a : b); }
 
-static inline double time_tol(double scale_over_speed, double t)
+static inline double time_tol(double eps, double scale_over_speed, double t)
 {
-    return REL_EPS * (scale_over_speed + fabs(t));
+    return eps * (scale_over_speed + fabs(t));
 }
 
 /* `out` needs room for 2 (left->n + right->n) hits.  Returns the number written; sets *inside. */
-static int64_t csg_combine(int op, const HitList *left, const HitList *right, double scale_over_speed, Hit *out,
+static int64_t csg_combine(int op, const HitList *left, const HitList *right, double scale_over_speed, double eps,
+                           Hit *out,
                            int *inside)
 {
     int state[2] = {left->inside, right->inside};
@@ -56,7 +57,7 @@ static int64_t csg_combine(int op, const HitList *left, const HitList *right, do
         int ends_group = 1;
         if (i < nl || j < nr) {
             double next = (i < nl && (j >= nr || left->h[i].t <= right->h[j].t)) ? left->h[i].t : right->h[j].t;
-            ends_group = !(next - cur.t <= nan_max2(time_tol(scale_over_speed, cur.t), time_tol(scale_over_speed, next)));
+            ends_group = !(next - cur.t <= nan_max2(time_tol(eps, scale_over_speed, cur.t), time_tol(eps, scale_over_speed, next)));
         }
         int c = from_right;
         if (cur.entering) {

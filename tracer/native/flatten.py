@@ -16,7 +16,9 @@ from typing import Optional
 
 import numpy as np
 
+from .. import numerics
 from ..compile import CompiledScene, CSGNode, Primitive
+from ..intersect import torus
 from ..model import POLYHEDRON_KINDS, SHAPE_KINDS
 
 KIND_CODES = {"sphere": 0, "cube": 1, "square": 2, "plane": 3, "taperedCylinder": 4, "cylinder": 4, "cone": 4,
@@ -70,6 +72,7 @@ _LAYOUT = [
     ("mat_texture", _P(_I32), np.int32), ("mat_tex_param", _P(_D), np.float64), ("mat_tex_image", _P(_I64), np.int64),
     ("n_images", _I64, None), ("image_info", _P(_I64), np.int64), ("image_data", _P(_P(_D)), np.uintp),
     ("noise_perm", _P(_I64), np.int64), ("noise_gradients", _P(_D), np.float64),
+    ("relative_epsilon", _D, None), ("torus_newton_steps", _I64, None),
 ]
 #: Parameter slots per material in mat_tex_param (texture.h's TEX_PARAMS): the longest defaults (marble).
 TEX_PARAMS = 9
@@ -270,7 +273,10 @@ class FlatScene:
                        min_reflectivity=float(settings.min_reflectivity),
                        min_transparency=float(settings.min_transparency),
                        max_depth=int(settings.max_recursion_depth), effects=effects,
-                       mesh_constants=self._mesh_constants(meshes))
+                       mesh_constants=self._mesh_constants(meshes),
+                       # read now, not compiled in: tracer.accuracy varies them
+                       relative_epsilon=float(numerics.RELATIVE_EPSILON),
+                       torus_newton_steps=int(torus.NEWTON_STEPS))
         self.desc = SceneDesc()
         for name, ctype, dtype in _LAYOUT:
             if dtype is None:

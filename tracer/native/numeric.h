@@ -11,9 +11,6 @@
 #include <math.h>
 #include <stdint.h>
 
-/* tracer.numerics.RELATIVE_EPSILON */
-#define REL_EPS 1e-9
-
 /* fmin/fmax with their NaN rule (a NaN argument loses; np.fmin/np.fmax too), inlined: the libm calls are
  * slow in the inner loops. */
 static inline double fmin_nan(double a, double b) { return (a < b || b != b) ? a : b; }

@@ -60,7 +60,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     }
     int64_t mat = D->prim_material[h.shape];
     double mp = max_abs3(point), mo = max_abs3(o);
-    double offset = REL_EPS * (1.0 + (mp > mo ? mp : mo));
+    double offset = D->relative_epsilon * (1.0 + (mp > mo ? mp : mo));
     const double *ambient = D->mat_ambient + 3 * mat, *emissive = D->mat_emissive + 3 * mat;
     const double *diffuse = D->mat_diffuse + 3 * mat;
     double textured_ambient[3], textured_diffuse[3];

@@ -14,7 +14,6 @@
 #define TORUS_RING 1.0
 #define TORUS_TUBE 0.2
 #define TORUS_IMAG_TOLERANCE 1e-6
-#define TORUS_NEWTON_STEPS 4
 
 static inline void set_hit(Hit *h, double t, int entering, double nx, double ny, double nz, int part)
 {
@@ -199,9 +198,9 @@ static inline double quartic_at(double s, const double *c)
     return (((s + c[0]) * s + c[1]) * s + c[2]) * s + c[3];
 }
 
-static double torus_polish(double s, const double *c)
+static double torus_polish(double s, const double *c, int64_t steps)
 {
-    for (int step = 0; step < TORUS_NEWTON_STEPS; step++) {
+    for (int64_t step = 0; step < steps; step++) {
         double p = quartic_at(s, c);
         double dp = ((4.0 * s + 3.0 * c[0]) * s + 2.0 * c[1]) * s + c[2];
         double candidate = s - p / dp;
@@ -212,7 +211,7 @@ static double torus_polish(double s, const double *c)
     return s;
 }
 
-static int hits_torus(const double *o, const double *d, Hit *out)
+static int hits_torus(const double *o, const double *d, int64_t newton_steps, Hit *out)
 {
     double speed = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     if (!(speed > 0.0))
@@ -240,7 +239,7 @@ static int hits_torus(const double *o, const double *d, Hit *out)
     int m = 0;
     for (int i = 0; i < 4; i++)
         if (fabs(wi[i]) <= TORUS_IMAG_TOLERANCE * (1.0 + fabs(wr[i])))
-            s[m++] = torus_polish(wr[i], c);
+            s[m++] = torus_polish(wr[i], c, newton_steps);
     for (int i = 1; i < m; i++)  /* insertion sort */
         for (int j = i; j > 0 && s[j] < s[j - 1]; j--) {
             double x = s[j]; s[j] = s[j - 1]; s[j - 1] = x;

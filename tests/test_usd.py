@@ -631,6 +631,66 @@ def test_a_stage_we_wrote_and_someone_edited_follows_the_edits(tmp_path):
     assert any("camera was changed" in w for w in back.warnings)
 
 
+def test_a_degenerate_sdl_camera_falls_back_to_the_usd_camera(tmp_path):
+    """sdl:look edited onto sdl:eye: no camera from those values (its frame would be NaN, which compared
+    as 'unchanged'), the USD camera instead, with a warning."""
+    path = tmp_path / "camera.usda"
+    save_usd(tracer.parse_sdl("camera 0 0 10  0 0 0  0 1 0  30  sphere"), path)
+    stage = Usd.Stage.Open(str(path))
+    stage.GetPrimAtPath("/SDLScene/Camera").GetAttribute("sdl:look").Set(Gf.Vec3d(0, 0, 10))
+    stage.GetRootLayer().Save()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no NaN arithmetic on the way
+        back = load_usd(path)
+    assert back.camera.eye == (0.0, 0.0, 10.0) and back.camera.look == (0.0, 0.0, 9.0)
+    assert back.camera.view_angle == pytest.approx(30.0)
+    assert any("camera values are unusable" in w for w in back.warnings)
+
+
+@pytest.mark.parametrize("prim, name, type_name, value", [
+    ("/SDLScene", "sdl:background", Sdf.ValueTypeNames.String, "blue"),
+    ("/SDLScene", "sdl:maxRecursionDepth", Sdf.ValueTypeNames.String, "x"),
+    ("/SDLScene/Lights/light_0", "sdl:color", Sdf.ValueTypeNames.Double, 0.5),
+    ("/SDLScene/Lights/light_0", "inputs:intensity", Sdf.ValueTypeNames.String, "x"),
+    ("/SDLScene/Camera", "sdl:eye", Sdf.ValueTypeNames.Double, 10.0),
+    ("/SDLScene/Objects/union_0", "sdl:groups", Sdf.ValueTypeNames.Double, 1.0),
+])
+def test_values_of_the_wrong_type_are_one_line_errors(tmp_path, prim, name, type_name, value):
+    path = tmp_path / "typed.usda"
+    save_usd(tracer.parse_sdl("light 1 2 3  1 1 1  camera 0 0 10  0 0 0  0 1 0  30  union sphere cube  cone"),
+             path)
+    layer = Sdf.Layer.FindOrOpen(str(path))  # (Sdf, not Usd: Usd refuses a schema attribute's wrong type)
+    spec = layer.GetPrimAtPath(prim)
+    if name in spec.properties:
+        spec.RemoveProperty(spec.properties[name])
+    Sdf.AttributeSpec(spec, name, type_name).default = value
+    layer.Save()
+    with pytest.raises(TracerError, match=rf"typed\.usda: <{prim}>: cannot read") as caught:
+        load_usd(path)
+    assert "\n" not in str(caught.value)
+    scene = load_usd(path, strict=False)  # lenient: that prim (or the settings) left out, the rest read
+    assert len(scene.warnings) == 1 and prim in scene.warnings[0]
+    assert [s.kind for s in scene.shapes()][-1] == "cone"
+
+
+def test_a_material_without_a_universal_surface_gives_a_warning(tmp_path):
+    """A MaterialX-only material (outputs:mtlx:surface) has no UsdPreviewSurface: display colour, warned."""
+    stage = Usd.Stage.CreateInMemory()
+    ball = UsdGeom.Sphere.Define(stage, "/Ball")
+    ball.CreateDisplayColorAttr([(1.0, 0.0, 0.0)])
+    material = UsdShade.Material.Define(stage, "/Looks/Red")
+    shader = UsdShade.Shader.Define(stage, "/Looks/Red/Surface")
+    shader.CreateIdAttr("ND_standard_surface_surfaceshader")
+    shader.CreateInput("base_color", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.0, 1.0, 0.0))
+    material.CreateSurfaceOutput("mtlx").ConnectToSource(shader.ConnectableAPI(), "out")
+    UsdShade.MaterialBindingAPI.Apply(ball.GetPrim()).Bind(material)
+    path = tmp_path / "mtlx.usda"
+    stage.GetRootLayer().Export(str(path))
+    scene = load_usd(path)
+    assert scene.shapes()[0].material.diffuse == (1.0, 0.0, 0.0)
+    assert len(scene.warnings) == 1 and "no universal surface" in scene.warnings[0]
+
+
 # --- errors and the command line ----------------------------------------------------------------------------
 
 def test_unreadable_usd_files_raise_tracer_errors(tmp_path):
@@ -693,6 +753,14 @@ def test_cli_converts_both_ways_and_renders_usd(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["csg.sdl", "csg.sdl.png", "csg.usdc", "csg.usdc.png"]
 
 
+def test_dot_usd_is_crate_whatever_usd_default_format_says(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "USD_DEFAULT_FILE_FORMAT": "usda"}
+    proc = subprocess.run([sys.executable, "-m", "tracer", "convert", ROOT / "scenes" / "csg.sdl",
+                           tmp_path / "csg.usd"], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "csg.usd").read_bytes().startswith(b"PXR-USDC")  # as docs/usd.md promises
+
+
 def test_cli_errors_are_one_line(tmp_path):
     (tmp_path / "bad.usda").write_text("not usd at all")
     cases = [("info", tmp_path / "bad.usda"), ("render", tmp_path / "missing.usd", "-o", tmp_path / "x.png"),
@@ -705,3 +773,17 @@ def test_cli_errors_are_one_line(tmp_path):
         assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
     assert "bad.usda" in run(*cases[0]).stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.usda"]
+
+
+def test_one_group_name_written_as_a_string_is_one_name(tmp_path):
+    """Another tool may write sdl:groups as a plain string: that is one def name, not one per letter."""
+    path = tmp_path / "groups.usda"
+    save_usd(tracer.parse_sdl("def leg { sphere }  use leg"), path)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    sphere = [p for p in Usd.Stage.Open(layer).Traverse() if p.HasAttribute("sdl:shape")][0]
+    spec = layer.GetPrimAtPath(sphere.GetPath())
+    if "sdl:groups" in spec.properties:
+        spec.RemoveProperty(spec.properties["sdl:groups"])
+    Sdf.AttributeSpec(spec, "sdl:groups", Sdf.ValueTypeNames.String).default = "table_leg"
+    layer.Save()
+    assert load_usd(path).shapes()[0].groups == ("table_leg",)

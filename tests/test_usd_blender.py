@@ -25,7 +25,6 @@ import tracer
 from tracer.model import CSG
 from tracer.transforms import translation
 from tracer.usd import save_usd
-from tracer.usd.common import iter_shapes
 from tracer.usd.writer import CENTRED, camera_frame
 
 ROOT = Path(__file__).parent.parent
@@ -82,7 +81,7 @@ def test_blender_usd_import_places_every_object_light_and_camera(path, tmp_path)
     """Needs no add-on: Blender's USD importer against the matrices the scene itself holds."""
     scene = tracer.load(path)
     objects = usd_import(scene, tmp_path)
-    for name, shape in zip(prim_names(scene), iter_shapes(scene.objects)):
+    for name, shape in zip(prim_names(scene), scene.shapes()):
         obj = objects[name]
         assert obj.type == "MESH", name
         assert close(world(obj), expected_usd_world(shape)), (name, world(obj), expected_usd_world(shape))
@@ -148,7 +147,7 @@ def test_blender_usd_import_matches_the_sdl_importer(path, tmp_path, sdl_importe
     sdl_cameras = [(world(o), math.degrees(o.data.angle_y)) for o in bpy.data.objects if o.type == "CAMERA"]
 
     objects = usd_import(scene, tmp_path)
-    shapes = list(iter_shapes(scene.objects))
+    shapes = list(scene.shapes())
     assert [kind for kind, _ in sdl_worlds] == [s.kind for s in shapes]
     for (kind, sdl_world), name, shape in zip(sdl_worlds, prim_names(scene), shapes):
         offset = CENTRED if kind in ("cylinder", "cone") else np.eye(4)

@@ -144,12 +144,15 @@ SceneObject = Union[Shape, CSG]
 
 
 def iter_shapes(obj: SceneObject):
-    """Every primitive shape in an object, left to right."""
-    if isinstance(obj, CSG):
-        yield from iter_shapes(obj.left)
-        yield from iter_shapes(obj.right)
-    else:
-        yield obj
+    """Every primitive shape in an object, left to right.  Without recursion: booleans read from a file
+    may nest deeper than Python's stack."""
+    todo = [obj]
+    while todo:
+        node = todo.pop()
+        if isinstance(node, CSG):
+            todo += (node.right, node.left)
+        else:
+            yield node
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ Needs the ``usd-core`` package (``pxr``); everything else in the tracer works wi
 """
 from __future__ import annotations
 
-from .common import USD_EXTENSIONS, is_usd_path
+from .common import USD_EXTENSIONS
 
 
 def save_usd(scene, path) -> None:
@@ -19,4 +19,4 @@ def load_usd(path, strict: bool = True):
     return load(path, strict=strict)
 
 
-__all__ = ["USD_EXTENSIONS", "is_usd_path", "load_usd", "save_usd"]
+__all__ = ["USD_EXTENSIONS", "load_usd", "save_usd"]

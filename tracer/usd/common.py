@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import TracerError
+from ..model import iter_shapes
 
 #: File extensions USD reads and writes (the format of ``.usd`` is binary crate).
 USD_EXTENSIONS = (".usda", ".usd", ".usdc")
@@ -65,22 +66,14 @@ def pxr():
     return module
 
 
-def iter_shapes(objects):
-    """Every primitive shape in a list of objects, left to right, without recursion (booleans may nest
-    deeper than Python's stack)."""
-    from ..model import CSG
-
-    todo = list(reversed(objects))
-    while todo:
-        obj = todo.pop()
-        if isinstance(obj, CSG):
-            todo += [obj.right, obj.left]
-        else:
-            yield obj
-
-
-def is_usd_path(path) -> bool:
-    return str(path).lower().endswith(USD_EXTENSIONS)
+def scene_points(objects, lights, camera) -> np.ndarray:
+    """Where the things in a scene are, (N, 3): each shape's origin (planes left out: they reach
+    everywhere), each light and the camera's eye."""
+    points = [s.matrix[:3, 3] for obj in objects for s in iter_shapes(obj) if s.kind != "plane"]
+    points += [np.asarray(light.position, dtype=np.float64) for light in lights]
+    if camera is not None:
+        points.append(np.asarray(camera.eye, dtype=np.float64))
+    return np.array(points, dtype=np.float64).reshape(-1, 3)
 
 
 def to_gf(matrix: np.ndarray):

@@ -23,11 +23,10 @@ import numpy as np
 
 from ..errors import TracerError
 from ..model import (CSG, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene, SceneObject,
-                     Shape, SourceLocation)
+                     Settings, Shape, SourceLocation)
+from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
-from ..sdl.parser import is_singular
-from .common import iter_shapes
 from .meshes import sdl_mesh, usd_mesh
 from .opening import open_stage
 from .preview import material_from_preview
@@ -40,6 +39,10 @@ DISTANT_LIGHT_DISTANCE = 1.0e5
 MATRIX_AGREEMENT = 1e-12
 #: Lights read as point lights at their centre.
 POINT_LIKE_LIGHTS = ("SphereLight", "RectLight", "DiskLight", "CylinderLight")
+#: What a value of the wrong type or shape raises while a prim is read (float("x"), a float where a triple
+#: belongs, an index out of range): the prim cannot be read.
+_BAD_VALUE = (ValueError, IndexError, TypeError)
+
 
 @dataclass
 class _Group:
@@ -119,14 +122,11 @@ class _Reader:
             if not self._shown(prim):
                 walk.PruneChildren()
                 continue
-            if self.get(prim, C.A_CSG) is not None:
-                op = str(self.get(prim, C.A_CSG))
-                if op not in CSG.OPS:
-                    self.problem(prim, f"unknown sdl:csg {op!r}", "its children read as separate objects")
-                else:
-                    stack.append(_Group(op, str(prim.GetPath()), self._groups(prim)))
-                continue
-            obj = self._prim(prim)
+            try:
+                obj = self._prim(prim, stack)
+            except _BAD_VALUE as exc:
+                self.problem(prim, f"cannot read it ({exc})")
+                obj = None
             if obj is not _DESCEND:
                 walk.PruneChildren()
                 if obj is not None:
@@ -172,14 +172,19 @@ class _Reader:
         root = self.stage.GetPrimAtPath(C.ROOT)
         if not root or self.get(root, C.A_VERSION) is None:
             return
-        s = self.scene.settings
-        for field_name, name in C.SETTING_COLORS.items():
-            setattr(s, field_name, self.triple(root, name, getattr(s, field_name)))
-        for field_name, name in C.SETTING_FLOATS.items():
-            setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
-        s.max_recursion_depth = int(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth))
-        numbers = list(self.get(root, C.A_PIXMAP_NUMBERS, []))
-        files = list(self.get(root, C.A_PIXMAP_FILES, []))
+        try:
+            s = Settings()
+            for field_name, name in C.SETTING_COLORS.items():
+                setattr(s, field_name, self.triple(root, name, getattr(s, field_name)))
+            for field_name, name in C.SETTING_FLOATS.items():
+                setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
+            s.max_recursion_depth = int(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth))
+            numbers = list(self.get(root, C.A_PIXMAP_NUMBERS, []))
+            files = list(self.get(root, C.A_PIXMAP_FILES, []))
+        except _BAD_VALUE as exc:
+            self.problem(root, f"cannot read the scene settings ({exc})", "SDL's defaults used")
+            return
+        self.scene.settings = s
         if len(numbers) != len(files):
             self.problem(root, "sdl:pixmapNumbers and sdl:pixmapFiles differ in length", "pixmaps left out")
             return
@@ -200,9 +205,16 @@ class _Reader:
 
     # -- one prim ---------------------------------------------------------------------------------------
 
-    def _prim(self, prim):
+    def _prim(self, prim, stack: list[_Group]):
         """The object a prim stands for; None if it is something else handled here (light, camera, or
-        unsupported); _DESCEND to look at its children."""
+        unsupported); _DESCEND to look at its children (a CSG group is pushed on ``stack`` first)."""
+        op = self.get(prim, C.A_CSG)
+        if op is not None:
+            if str(op) not in CSG.OPS:
+                self.problem(prim, f"unknown sdl:csg {str(op)!r}", "its children read as separate objects")
+            else:
+                stack.append(_Group(str(op), str(prim.GetPath()), self._groups(prim)))
+            return _DESCEND
         type_name = prim.GetTypeName()
         if prim.IsA(self.UsdGeom.Camera):
             self._camera(prim)
@@ -217,11 +229,7 @@ class _Reader:
         if prim.IsA(self.UsdShade.Material) or prim.IsA(self.UsdShade.Shader) or prim.IsA(self.UsdShade.NodeGraph):
             return None
         if prim.IsA(self.UsdGeom.Gprim):
-            try:
-                return self._shape(prim)
-            except (ValueError, IndexError, TypeError) as exc:
-                self.problem(prim, f"cannot read it ({exc})")
-                return None
+            return self._shape(prim)
         if prim.IsA(self.UsdGeom.PointInstancer):
             self.problem(prim, "PointInstancer is not supported")
             return None
@@ -275,7 +283,10 @@ class _Reader:
         return shape
 
     def _groups(self, prim) -> tuple[str, ...]:
-        return tuple(str(g) for g in self.get(prim, C.A_GROUPS, []))
+        groups = self.get(prim, C.A_GROUPS, [])
+        if isinstance(groups, str):  # one name written as a string rather than a string array
+            groups = [groups]
+        return tuple(str(g) for g in groups)
 
     def _round(self, prim, world: np.ndarray) -> Shape:
         """Cylinder, Cylinder_1 or Cone: centred on the origin along ``axis``, from -height/2 to height/2
@@ -362,6 +373,9 @@ class _Reader:
             elif candidate:
                 self.note(prim, f"its material's surface {candidate.GetIdAttr().Get()!r} is not a "
                                 "UsdPreviewSurface: display colour used")
+            else:  # only render-context outputs (outputs:mtlx:surface, a renderer's own), or none
+                self.note(prim, "its material has no universal surface output (a UsdPreviewSurface): "
+                                "display colour used")
         if shader is None:
             color = self.UsdGeom.Gprim(prim).GetDisplayColorAttr().Get(self.time)
             if color is None or len(color) == 0:
@@ -415,11 +429,8 @@ class _Reader:
         only the direction matters): DISTANT_LIGHT_DISTANCE times the scene's radius from its centre."""
         if not self.distant:
             return
-        points = [s.matrix[:3, 3] for s in iter_shapes(self.scene.objects) if s.kind != "plane"]
-        points += [np.asarray(light.position) for light in self.scene.lights if light is not None]
-        if self.scene.camera is not None:
-            points.append(np.asarray(self.scene.camera.eye, dtype=np.float64))
-        points = np.array(points, dtype=np.float64).reshape(-1, 3)
+        points = C.scene_points(self.scene.objects, [light for light in self.scene.lights if light is not None],
+                                self.scene.camera)
         centre = 0.5 * (points.min(axis=0) + points.max(axis=0)) if len(points) else np.zeros(3)
         radius = float(np.max(np.linalg.norm(points - centre, axis=1))) if len(points) else 0.0
         far = DISTANT_LIGHT_DISTANCE * (radius + 1.0)
@@ -459,7 +470,6 @@ class _Reader:
                                    tuple(float(x) for x in eye - back / np.linalg.norm(back)),
                                    tuple(float(x) for x in up_axis / np.linalg.norm(up_axis)), angle)
 
-
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
         """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
         in another tool since)."""
@@ -476,6 +486,7 @@ class _Reader:
             focal = float(camera.GetFocalLengthAttr().Get(self.time))
             wanted = focal_length(ours.view_angle, aperture)
         except (ValueError, ZeroDivisionError, TypeError):
+            self.note(prim, "its sdl: camera values are unusable: read from the USD camera")
             return None
         scale = max(1.0, float(np.max(np.abs(frame))))
         if np.max(np.abs(frame - world)) > 1e-9 * scale or abs(focal - wanted) > 1e-5 * wanted:
@@ -506,8 +517,3 @@ def load_usd(path: PathLike, strict: bool = True) -> Scene:
     scene = _Reader(stage, os.fspath(path), strict).read(composition_errors)
     scene.source = Path(path)
     return scene
-
-
-def stage_to_scene(stage, name: str = "<stage>", strict: bool = True) -> Scene:
-    """Read an already open Usd.Stage."""
-    return _Reader(stage, name, strict).read()

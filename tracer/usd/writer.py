@@ -16,6 +16,7 @@ from typing import Optional, Union
 import numpy as np
 
 from ..atomic import replacing
+from ..camera import CameraFrame
 from ..errors import TracerError
 from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
 from ..transforms import translation
@@ -41,15 +42,10 @@ ASPECT = 4.0 / 3.0
 
 def camera_frame(camera: Camera) -> np.ndarray:
     """The camera-to-world matrix USD expects (the camera looks down its -z, +y up): columns u, v, n, eye,
-    built as tracer.camera does."""
-    eye = np.asarray(camera.eye, dtype=np.float64)
-    n = eye - np.asarray(camera.look, dtype=np.float64)
-    n /= np.linalg.norm(n)
-    u = np.cross(np.asarray(camera.up, dtype=np.float64), n)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
+    the tracer's own camera axes (:class:`tracer.camera.CameraFrame`; ValueError for a degenerate camera)."""
+    axes = CameraFrame.from_camera(camera, ASPECT)
     frame = np.eye(4)
-    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = u, v, n, eye
+    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = axes.u, axes.v, axes.n, axes.eye
     return frame
 
 
@@ -95,12 +91,8 @@ class _Writer:
 
     def _scene_reach(self) -> float:
         """How far from the origin things in the scene are (for sizing the finite stand-in of a plane)."""
-        points = [s.matrix[:3, 3] for s in C.iter_shapes(self.scene.objects) if s.kind != "plane"]
-        points += [np.asarray(light.position, dtype=np.float64) for light in self.scene.lights]
-        if self.scene.camera is not None:
-            points.append(np.asarray(self.scene.camera.eye, dtype=np.float64))
-        reach = max((float(np.linalg.norm(p)) for p in points), default=0.0)
-        return reach + 10.0
+        points = C.scene_points(self.scene.objects, self.scene.lights, self.scene.camera)
+        return float(np.max(np.linalg.norm(points, axis=1), initial=0.0)) + 10.0
 
     # -- the stage --------------------------------------------------------------------------------------
 
@@ -303,9 +295,8 @@ class _Writer:
                    Vt.Vec3dArray.FromNumpy(np.asarray(data.vertices, dtype=np.float64).reshape(-1, 3)))
         self._attr(prim, C.A_MESH_NORMALS, Sdf.ValueTypeNames.Double3Array,
                    Vt.Vec3dArray.FromNumpy(np.asarray(data.normals, dtype=np.float64).reshape(-1, 3)))
-        corners = []
-        for verts, norms in data.faces:
-            corners.extend(int(n) for n in norms) if len(norms) == len(verts) else corners.extend([-1] * len(verts))
+        corners = [int(n) for verts, norms in data.faces
+                   for n in (norms if len(norms) == len(verts) else [-1] * len(verts))]
         self._attr(prim, C.A_MESH_NORMAL_INDICES, Sdf.ValueTypeNames.IntArray, Vt.IntArray(corners))
 
     # -- materials --------------------------------------------------------------------------------------
@@ -356,8 +347,10 @@ def save_usd(scene: Scene, path: PathLike) -> None:
     if suffix not in C.USD_EXTENSIONS:
         raise TracerError(f"{path}: not a USD file name (use {', '.join(C.USD_EXTENSIONS)})")
     stage = build_stage(scene, path.parent)
-    with replacing(path, suffix) as temp:  # (USD picks the format by the extension)
-        if not stage.GetRootLayer().Export(str(temp)):
+    # USD picks the format by the extension; for .usd it would follow $USD_DEFAULT_FILE_FORMAT: ask for crate.
+    args = {"format": "usdc"} if suffix == ".usd" else {}
+    with replacing(path, suffix) as temp:
+        if not stage.GetRootLayer().Export(str(temp), args=args):
             raise TracerError(f"{path}: USD could not write the file")
     # A layer of this name that USD still holds in memory would otherwise hide the new file from Open().
     from pxr import Sdf

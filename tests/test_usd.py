@@ -24,7 +24,7 @@ from tracer.model import CSG, Camera, Light, Material, MeshData, Scene, Settings
 from tracer.sdl.writer import save_sdl
 from tracer.transforms import rotation, scaling, translation
 from tracer.usd import load_usd, save_usd
-from tracer.usd.common import from_gf, iter_shapes, to_gf
+from tracer.usd.common import from_gf, to_gf
 
 ROOT = Path(__file__).parent.parent
 SCENES = sorted((ROOT / "scenes").glob("*.sdl"))
@@ -198,7 +198,7 @@ def test_deep_csg_needs_no_recursion(tmp_path):
         obj = CSG("union", obj, Shape("cube", translation(k, 0, 0)))
     save_usd(Scene(objects=[obj]), tmp_path / "deep.usdc")
     back = load_usd(tmp_path / "deep.usdc")
-    assert len(list(iter_shapes(back.objects))) == 1501
+    assert len(back.shapes()) == 1501
     assert back.objects[0].op == "union" and back.objects[0].right.matrix[0, 3] == 1499
 
 
@@ -323,6 +323,11 @@ def test_lights_and_camera_for_other_tools(written):
     view = np.subtract(scene.camera.look, scene.camera.eye)
     assert np.allclose(-frame[:3, 2], view / np.linalg.norm(view))  # USD cameras look down -z
     assert np.dot(frame[:3, 1], scene.camera.up) > 0.9
+    # Other tools clip; the range holds every object and light (USD's default near of 1 would not).
+    near, far = gf_camera.clippingRange.min, gf_camera.clippingRange.max
+    things = [s.matrix[:3, 3] for s in scene.shapes() if s.kind != "plane"] + [l.position for l in scene.lights]
+    distances = np.linalg.norm(np.subtract(things, scene.camera.eye), axis=1)
+    assert near < 0.1 * distances.min() and far > distances.max()
 
 
 def test_matrix_convention_is_usd_row_vectors():
@@ -780,7 +785,8 @@ def test_one_group_name_written_as_a_string_is_one_name(tmp_path):
     path = tmp_path / "groups.usda"
     save_usd(tracer.parse_sdl("def leg { sphere }  use leg"), path)
     layer = Sdf.Layer.FindOrOpen(str(path))
-    sphere = [p for p in Usd.Stage.Open(layer).Traverse() if p.HasAttribute("sdl:shape")][0]
+    stage = Usd.Stage.Open(layer)
+    sphere = [p for p in stage.Traverse() if p.HasAttribute("sdl:shape")][0]
     spec = layer.GetPrimAtPath(sphere.GetPath())
     if "sdl:groups" in spec.properties:
         spec.RemoveProperty(spec.properties["sdl:groups"])

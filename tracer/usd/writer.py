@@ -38,6 +38,9 @@ PLANE_REACH = 10.0
 VERTICAL_APERTURE = 15.2908
 #: Our default image is 640 x 480.
 ASPECT = 4.0 / 3.0
+#: The camera's clipping range for other tools (see Writer._clipping_range): near in scene units, and the
+#: least far (USD's default).
+NEAR_CLIP, DEFAULT_FAR_CLIP = 0.01, 1e6
 
 
 def camera_frame(camera: Camera) -> np.ndarray:
@@ -158,12 +161,22 @@ class _Writer:
         cam.CreateVerticalApertureAttr(VERTICAL_APERTURE)
         cam.CreateHorizontalApertureAttr(VERTICAL_APERTURE * ASPECT)
         cam.CreateFocalLengthAttr(focal_length(camera.view_angle))
+        cam.CreateClippingRangeAttr(self.Gf.Vec2f(*self._clipping_range(camera)))
         self._set_transform(cam, camera_frame(camera))
         prim = cam.GetPrim()
         self._vec(prim, C.A_EYE, camera.eye)
         self._vec(prim, C.A_LOOK, camera.look)
         self._vec(prim, C.A_UP, camera.up)
         self._double(prim, C.A_VIEW_ANGLE, camera.view_angle)
+
+    def _clipping_range(self, camera: Camera) -> tuple[float, float]:
+        """Our rays start at the eye and never end; other tools clip.  USD's default (1, 1e6) would cut
+        away what lies within a unit of the eye, a large part of a small SDL scene: near is 0.01, and far
+        reaches ten times past the farthest object or light."""
+        points = C.scene_points(self.scene.objects, self.scene.lights, None)
+        eye = np.asarray(camera.eye, dtype=np.float64)
+        farthest = float(np.max(np.linalg.norm(points - eye, axis=1))) if len(points) else 0.0
+        return NEAR_CLIP, max(DEFAULT_FAR_CLIP, 10.0 * farthest)
 
     # -- objects ----------------------------------------------------------------------------------------
 

@@ -23,6 +23,7 @@ bl_info = {
 
 _MODULES = ("props", "engine", "operators", "ui")
 _registered: list = []
+_exit_hook = False
 
 
 def _modules():
@@ -44,6 +45,20 @@ def register() -> None:
             module.unregister()
         raise
     _registered.extend(done)
+    _unregister_at_exit()
+
+
+def _unregister_at_exit() -> None:
+    """In the ``bpy`` module (no Blender binary) the process hangs at exit while the add-on's properties are
+    still registered, and nothing else unregisters it there: do it at exit, before bpy's own exit handler."""
+    global _exit_hook
+    import bpy
+
+    if not _exit_hook and not bpy.app.binary_path:
+        import atexit
+
+        atexit.register(unregister)
+        _exit_hook = True
 
 
 def unregister() -> None:

@@ -13,7 +13,6 @@ The film is stored bottom row first, as Blender's render results and textures ar
 from __future__ import annotations
 
 import concurrent.futures
-import os
 import threading
 import time
 from dataclasses import dataclass
@@ -23,7 +22,7 @@ import numpy as np
 
 from . import deps
 
-RaysFor = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]  # (rows, cols, dy, dx) -> (origins, directions)
 
 DEFAULT_TILE = 64
 DEFAULT_CHUNK = 2048
@@ -34,8 +33,8 @@ def block_passes(block_size: int, progressive: bool) -> list[int]:
 
 
 def resolve_threads(threads: int) -> int:
-    """0 means one thread per CPU."""
-    return max(1, int(threads) if threads and threads > 0 else (os.cpu_count() or 1))
+    """0 means the tracer's default: $SDL_TRACER_THREADS, else every core this process may run on."""
+    return int(threads) if threads and threads > 0 else deps.module("native").default_threads()
 
 
 @dataclass(frozen=True)

@@ -73,25 +73,19 @@ def shortest32(value: float) -> float:
 
 
 def unchanged(shown_now: Sequence[float], snapshot: Sequence[float], relative: float = 1e-6) -> bool:
-    """Whether Blender still shows the snapshot (to float32 noise: Blender recomposes matrices from
-    location/rotation/scale, which moves the last bits)."""
+    """Whether Blender still shows the snapshot (to float32 noise, each number relative to its size but at
+    least 1: Blender recomposes matrices from location/rotation/scale, which moves the last bits)."""
     a = np.asarray(shown_now, dtype=np.float64).ravel()
     b = np.asarray(snapshot, dtype=np.float64).ravel()
-    if a.shape != b.shape:
-        return False
-    scale = max(1.0, float(np.max(np.abs(b))) if b.size else 1.0)
-    return bool(np.all(np.abs(a - b) <= relative * scale))
+    return a.shape == b.shape and bool(np.all(np.abs(a - b) <= relative * np.maximum(1.0, np.abs(b))))
 
 
-def recall(exact: Sequence[float] | None, snapshot: Sequence[float] | None, shown_now: Sequence[float],
-           relative: float = 0.0) -> list[float]:
-    """The exact values if Blender still shows the snapshot taken with them, else what it shows now
-    (each number as its shortest float32 decimal).  ``relative`` 0 means bit-for-bit equality."""
-    if exact is not None and snapshot is not None:
-        same = (list(map(float, shown_now)) == list(map(float, snapshot)) if relative == 0.0
-                else unchanged(shown_now, snapshot, relative))
-        if same:
-            return [float(v) for v in exact]
+def recall(exact: Sequence[float] | None, snapshot: Sequence[float] | None,
+           shown_now: Sequence[float]) -> list[float]:
+    """The exact values if Blender still shows, bit for bit, the snapshot taken with them, else what it shows
+    now (each number as its shortest float32 decimal)."""
+    if exact is not None and snapshot is not None and list(map(float, shown_now)) == list(map(float, snapshot)):
+        return [float(v) for v in exact]
     return [shortest32(v) for v in shown_now]
 
 

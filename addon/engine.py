@@ -12,6 +12,7 @@ image is finished; any change to the scene or the view starts again.
 """
 from __future__ import annotations
 
+import math
 import time
 import traceback
 from typing import Optional
@@ -38,12 +39,20 @@ def render_size(render) -> tuple[int, int]:
 
 
 def camera_params(cam_obj, matrix: Optional[np.ndarray] = None) -> raycam.CameraParams:
+    """The camera of an object.  Blender renders through any object made the scene camera: one that is not
+    a camera has its defaults with a 35 mm lens, a light a lens from its spot size
+    (``BKE_camera_params_from_object``)."""
+    matrix = matrix_np(cam_obj.matrix_world) if matrix is None else matrix
     data = cam_obj.data
+    if cam_obj.type != "CAMERA":
+        lens = 35.0
+        if cam_obj.type == "LIGHT":  # Blender's spot size, 45 degrees by default, on every light
+            lens = 16.0 / math.tan(0.5 * float(getattr(data, "spot_size", math.radians(45.0)))) or 35.0
+        return raycam.CameraParams(matrix=matrix, lens=lens)
     if data.type not in ("PERSP", "ORTHO"):
         raise ValueError(f"{cam_obj.name}: panoramic cameras are not supported")
     return raycam.CameraParams(
-        matrix=matrix_np(cam_obj.matrix_world) if matrix is None else matrix,
-        ortho=data.type == "ORTHO", lens=float(data.lens), sensor_width=float(data.sensor_width),
+        matrix=matrix, ortho=data.type == "ORTHO", lens=float(data.lens), sensor_width=float(data.sensor_width),
         sensor_height=float(data.sensor_height), sensor_fit=data.sensor_fit, ortho_scale=float(data.ortho_scale),
         shift_x=float(data.shift_x), shift_y=float(data.shift_y), clip_start=float(data.clip_start))
 
@@ -83,7 +92,6 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         self._view = None  # viewport state
         self._view_dirty = True
         self._view_scene = None
-        self._texture = None
 
     # -- final render ---------------------------------------------------------------------------------
 

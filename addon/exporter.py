@@ -16,7 +16,8 @@ import numpy as np
 
 from . import convert, deps, raycam
 from .importer import CAM_EXACT, CAM_SHOWN
-from .scene_build import SceneBuilder, flat, matrix_np, matrix_unchanged
+from .engine import camera_params, render_size
+from .scene_build import SceneBuilder, flat
 
 _UNWRITABLE = re.compile(r"[\s{}!]")
 
@@ -35,22 +36,17 @@ def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
     original = getattr(cam_obj, "original", cam_obj)
     exact, shown = original.get(CAM_EXACT), original.get(CAM_SHOWN)
     now = flat(cam_obj.matrix_world) + [float(data.lens), float(data.sensor_height)]
-    if exact is not None and shown is not None and data.sensor_fit == "VERTICAL" and matrix_unchanged(now, list(shown)):
+    if exact is not None and shown is not None and data.sensor_fit == "VERTICAL" and convert.unchanged(now, list(shown)):
         values = [float(v) for v in exact]
         eye, look, up = (np.array(values[i:i + 3]) for i in (0, 3, 6))
         angle = values[9]
     else:
-        m = matrix_np(cam_obj.matrix_world)
-        axes = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
-        eye = m[:3, 3]
+        params = camera_params(cam_obj)
+        eye, axes = params.frame()
         look = eye - axes[:, 2]
         up = axes[:, 1]
-        width = render.resolution_x * render.resolution_percentage // 100
-        height = render.resolution_y * render.resolution_percentage // 100
-        params = raycam.CameraParams(matrix=m, lens=data.lens, sensor_width=data.sensor_width,
-                                     sensor_height=data.sensor_height, sensor_fit=data.sensor_fit)
-        _, _, ymin, ymax = raycam.viewplane(params, max(width, 1), max(height, 1),
-                                            render.pixel_aspect_x, render.pixel_aspect_y)
+        _, _, ymin, ymax = raycam.viewplane(params, *render_size(render), render.pixel_aspect_x,
+                                            render.pixel_aspect_y)
         angle = convert.shortest32(math.degrees(2.0 * math.atan(0.5 * (ymax - ymin))))
     rot = to_target[:3, :3]
     return Camera(tuple(float(v) for v in rot @ eye), tuple(float(v) for v in rot @ look),
@@ -58,7 +54,8 @@ def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
 
 
 def build_export_scene(context, conversion: Optional[np.ndarray] = None, use_selection: bool = False):
-    """(tracer Scene in SDL axes, warnings) for what the scene renders."""
+    """(tracer Scene in SDL axes, warnings) for the objects of the view layer's (viewport) depsgraph that
+    render: objects hidden in the viewport are left out as well as those hidden for rendering."""
     conversion = convert.axis_matrix() if conversion is None else np.asarray(conversion, dtype=np.float64)
     to_target = _to_target(conversion)
     depsgraph = context.evaluated_depsgraph_get()

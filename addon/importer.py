@@ -41,16 +41,12 @@ def lens_for_view_angle(view_angle: float, sensor_height: float = SENSOR_HEIGHT)
     return sensor_height / (2.0 * math.tan(math.radians(view_angle) / 2.0))
 
 
-def camera_matrix(eye, look, up) -> np.ndarray:
-    """The lecture's camera frame (u right, v up, n backwards) as a Blender camera's world matrix."""
-    eye = np.asarray(eye, dtype=np.float64)
-    n = eye - np.asarray(look, dtype=np.float64)
-    n /= np.linalg.norm(n)
-    u = np.cross(np.asarray(up, dtype=np.float64), n)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
+def camera_matrix(camera) -> np.ndarray:
+    """The lecture's camera frame (u right, v up, n backwards: tracer.camera) as a Blender camera's world
+    matrix; ``camera`` is in Blender's axes."""
+    frame = deps.module("camera").CameraFrame.from_camera(camera, 1.0)
     m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = u, v, n, eye
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = frame.u, frame.v, frame.n, frame.eye
     return m
 
 
@@ -205,8 +201,9 @@ class Importer:
         data.clip_end = far
         obj = self.created.add("objects", bpy.data.objects.new("SDL camera", data))
         self.result.collection.objects.link(obj)
-        eye, look, up = (convert.points_to_blender(p, self.conversion) for p in (camera.eye, camera.look, camera.up))
-        obj.matrix_world = Matrix(camera_matrix(eye, look, up).tolist())
+        eye, look, up = (tuple(float(v) for v in convert.points_to_blender(p, self.conversion))
+                         for p in (camera.eye, camera.look, camera.up))
+        obj.matrix_world = Matrix(camera_matrix(deps.module("model").Camera(eye, look, up, camera.view_angle)).tolist())
         obj[CAM_EXACT] = [float(v) for v in (*eye, *look, *up, camera.view_angle)]
         obj["sdl_framed"] = bool(framed)
         self.result.camera = obj

@@ -63,14 +63,21 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                 self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
                 return {"CANCELLED"}
         total = 0
+        old_world, old_camera = context.scene.world, context.scene.camera
+        done = []
         for path, scene in parsed:
+            imp = importer.Importer(context, conversion)
             try:
-                result = importer.Importer(context, conversion).run(scene, path, set_camera=self.set_camera)
+                result = imp.run(scene, path, set_camera=self.set_camera)
             except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
+                for earlier in reversed(done):  # and the files before it: all of them or nothing
+                    earlier.created.remove_all()
+                context.scene.world, context.scene.camera = old_world, old_camera
                 if not isinstance(exc, (ValueError, RuntimeError, errors.TracerError)):
                     traceback.print_exc()
                 self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
                 return {"CANCELLED"}
+            done.append(imp)
             _report_warnings(self, result.warnings)
             total += len(result.objects)
         self.report({"INFO"}, f"Imported {total} shapes from {len(parsed)} SDL file(s)")
@@ -146,7 +153,7 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
         for other in context.selected_objects:
             other.select_set(False)
         context.view_layer.update()
-        obj[importer.OBJ_SHOWN] = [float(v) for row in obj.matrix_world for v in row]
+        obj[importer.OBJ_SHOWN] = importer.flat(obj.matrix_world)
         obj.select_set(True)
         context.view_layer.objects.active = obj
         return {"FINISHED"}

@@ -4,7 +4,7 @@
   with a Principled BSDF and the viewport colour that look close to it.
 * ``World.sdl``: background, global ambient light and the reflection/transparency thresholds.
 * ``Scene.sdl_render``: the render engine's settings (block size, progressive refinement, recursion
-  depth, threads).
+  depth, threads, samples per pixel, sampling mode and adaptive threshold).
 """
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ class SDLRenderSettings(bpy.types.PropertyGroup):
     max_recursion_depth: IntProperty(name="Max Recursion Depth", default=3, min=0, max=64,
                                      description="Reflection and refraction bounces (SDL maxRecursionDepth)")
     threads: IntProperty(name="Threads", default=0, min=0, max=1024,
-                         description="Threads tracing at once (0: one per CPU)")
+                         description="Threads tracing at once (0: $SDL_TRACER_THREADS, else one per CPU)")
     samples: IntProperty(name="Samples", default=1, min=1, max=1024,
                          description="Rays per pixel (anti-aliasing); 1 traces the pixel centre")
     sampling: EnumProperty(name="Sampling", default="JITTERED", items=[
@@ -294,4 +294,6 @@ def light_color(light) -> tuple[float, float, float]:
     now = _light_shown(light)
     if exact is not None and shown is not None and list(shown) == now:
         return tuple(float(c) for c in exact)
-    return tuple(convert.shortest32(c * light.energy / LIGHT_WATTS) for c in light.color)
+    # A sun's strength is already an irradiance, not a power: strength 1 is an SDL light of colour 1 1 1.
+    watts = 1.0 if light.type == "SUN" else LIGHT_WATTS
+    return tuple(convert.shortest32(c * light.energy / watts) for c in light.color)

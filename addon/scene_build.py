@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -39,25 +38,13 @@ def flat(matrix) -> list[float]:
     return [float(v) for row in matrix for v in row]
 
 
-def matrix_unchanged(now: list[float], shown: list[float]) -> bool:
-    a, b = np.asarray(now, dtype=np.float64), np.asarray(shown, dtype=np.float64)
-    return a.shape == b.shape and bool(np.all(np.abs(a - b) <= 1e-6 * np.maximum(1.0, np.abs(b))))
-
-
-@dataclass
-class BuildResult:
-    scene: object  # tracer Scene
-    warnings: list[str] = field(default_factory=list)
-    #: For export: Shape id -> Blender object name (for messages).
-    names: dict = field(default_factory=dict)
-
-
 class SceneBuilder:
     """Builds tracer objects from evaluated Blender objects.
 
-    ``mode`` is ``RENDER`` (final render: render visibility and modifiers), ``VIEWPORT`` or ``EXPORT``
-    (render visibility, polygons kept as polygons, ``mesh`` files referenced); ``to_target`` maps
-    Blender's world to the output frame (identity for rendering, Blender -> SDL axes for export).
+    ``mode`` is ``RENDER`` (final render: modifiers enabled for rendering), ``VIEWPORT`` (modifiers enabled
+    in the viewport) or ``EXPORT`` (modifiers enabled for rendering, polygons kept as polygons, ``mesh``
+    files referenced); which objects there are is the depsgraph's (and ``build``'s options).  ``to_target``
+    maps Blender's world to the output frame (identity for rendering, Blender -> SDL axes for export).
     """
 
     def __init__(self, depsgraph, mode: str = "RENDER", to_target: Optional[np.ndarray] = None):
@@ -69,7 +56,6 @@ class SceneBuilder:
         self._generic_cache: dict = {}
         self._mesh_cache: dict = {}
         self._materials: dict = {}
-        self.operands: set[str] = set()
 
     # -- helpers --------------------------------------------------------------------------------------
 
@@ -121,8 +107,7 @@ class SceneBuilder:
         """World matrix of the generic shape (Blender axes), exact while the object is where import put it."""
         original = obj.original if hasattr(obj, "original") else obj
         exact, shown = original.get(OBJ_MATRIX), original.get(OBJ_SHOWN)
-        if exact is not None and shown is not None and matrix_unchanged(
-                [float(v) for v in matrix_world.ravel()], list(shown)):
+        if exact is not None and shown is not None and convert.unchanged(matrix_world, list(shown)):
             return np.array(list(exact), dtype=np.float64).reshape(4, 4)
         return matrix_world @ info.mesh_matrix
 
@@ -154,7 +139,6 @@ class SceneBuilder:
             elif modifier.object is not None:
                 operands = [modifier.object]
             for operand in operands:
-                self.operands.add(operand.name)
                 right = self.object_node(operand, None, top_level=False, visiting=visiting)
                 if not right:
                     continue

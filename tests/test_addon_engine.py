@@ -273,3 +273,50 @@ def test_viewport_refines_while_the_user_waits(monkeypatch):
     eng.view_update(Context, depsgraph)
     eng.view_draw(Context, depsgraph)
     assert not eng.info.endswith("done")
+
+
+def test_any_object_as_the_scene_camera():
+    """Blender renders through any object made the scene camera (an empty: a 35 mm lens; a light: a lens
+    from its spot size); so does the engine: the same silhouette as Workbench's, not an error."""
+    import math
+
+    from blender_scripts.addon_env import iou
+
+    bpy.ops.object.sdl_add_shape(kind="cube")
+    bpy.context.object.location = (0.8, 0.0, 0.3)
+    set_resolution(80, 60)
+    scene = bpy.context.scene
+    scene.render.film_transparent = True
+    scene.display.render_aa = "OFF"
+    spot = bpy.data.lights.new("spot", "SPOT")
+    spot.spot_size = math.radians(30.0)
+    for data in (None, spot):
+        viewer = bpy.data.objects.new("viewer", data)
+        scene.collection.objects.link(viewer)
+        viewer.location, viewer.rotation_euler = (0.5, -7.0, 0.8), (math.radians(86.0), 0.0, 0.1)
+        scene.camera = viewer
+        workbench = render_rgba("BLENDER_WORKBENCH")[..., 3] > 0.5
+        traced = render_rgba("SDL_RAYTRACER")[..., 3] > 0.5
+        assert "error" not in engine.LAST_RENDER, engine.LAST_RENDER
+        assert workbench.sum() > 200 and iou(workbench, traced) >= 0.97, (data, workbench.sum(), traced.sum())
+        bpy.data.objects.remove(viewer)
+
+
+def test_a_sun_lights_the_scene_like_an_sdl_light():
+    """A Blender sun's strength is an irradiance: strength 1 is an SDL light of colour 1 1 1 (it was taken
+    as 1 W of a point light's 1000, a nearly black light)."""
+    from addon import props
+
+    bpy.ops.object.light_add(type="SUN")
+    sun = bpy.context.object
+    sun.data.energy, sun.data.color = 2.0, (1.0, 0.5, 0.25)
+    assert props.light_color(sun.data) == (2.0, 1.0, 0.5)
+    scene, _ = engine.build_scene(bpy.context.evaluated_depsgraph_get(), "RENDER")
+    assert [light.color for light in scene.lights] == [(2.0, 1.0, 0.5)]
+
+
+def test_threads_zero_is_the_tracers_default(monkeypatch):
+    compiled = tracer.compile.compile_scene(tracer.load(str(SCENES / "shapes.sdl")))
+    monkeypatch.setenv("SDL_TRACER_THREADS", "3")
+    assert blocks.BlockRenderer(compiled, None, 8, 8, threads=0).threads == 3
+    assert blocks.BlockRenderer(compiled, None, 8, 8, threads=2).threads == 2

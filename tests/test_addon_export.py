@@ -158,3 +158,21 @@ def test_failed_export_writes_nothing(tmp_path):
     obj["sdl_matrix_shown"] = [float(v) for row in obj.matrix_world for v in row]
     scene = export(target)
     assert len(scene.shapes()) == len(shape_objects())  # the NaN one out, the monkey in
+
+
+def test_an_edited_camera_is_written_as_blender_shows_it(tmp_path):
+    import math
+
+    import_sdl(SCENES / "lecture.sdl")
+    cam = bpy.context.scene.camera
+    cam.location = (4.0, -6.0, 3.0)
+    cam.rotation_euler = (math.radians(70.0), 0.0, math.radians(30.0))
+    cam.data.lens = 42.0
+    bpy.context.view_layer.update()
+    exported = export(tmp_path / "cam.sdl").camera
+    to_sdl = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], dtype=float)  # Blender -> SDL
+    m = np.array(cam.matrix_world, dtype=np.float64)
+    np.testing.assert_allclose(exported.eye, to_sdl @ m[:3, 3], atol=1e-6)
+    np.testing.assert_allclose(np.subtract(exported.look, exported.eye), to_sdl @ -m[:3, 2], atol=1e-6)
+    np.testing.assert_allclose(exported.up, to_sdl @ m[:3, 1], atol=1e-6)
+    assert exported.view_angle == pytest.approx(math.degrees(cam.data.angle_y), abs=1e-4)

@@ -182,3 +182,20 @@ def test_failure_half_way_removes_what_was_made(monkeypatch):
     with pytest.raises(RuntimeError, match="simulated failure"):
         bpy.ops.import_scene.sdl(filepath=str(SCENES / "lecture.sdl"))
     assert _counts() == before
+
+
+def test_a_failure_in_a_later_file_removes_the_earlier_ones(monkeypatch, tmp_path):
+    """Several files are one import: when the second cannot be built, the first is removed again too (the
+    operator is cancelled, so there would be no undo step for it)."""
+    (tmp_path / "a.sdl").write_text("sphere\n")
+    (tmp_path / "b.sdl").write_text("light 1 2 3 1 1 1\ncube\n")
+    before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
+
+    def broken(self, light, index):
+        raise RuntimeError("simulated failure")
+
+    monkeypatch.setattr(importer.Importer, "_light", broken)
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        bpy.ops.import_scene.sdl(directory=str(tmp_path), files=[{"name": "a.sdl"}, {"name": "b.sdl"}])
+    assert _counts() == before
+    assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before

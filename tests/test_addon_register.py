@@ -140,3 +140,14 @@ def test_extension_zip_installs_and_renders(tmp_path):
     assert result["stats"]["width"] == 48 and "error" not in result["stats"]
     assert result["stats"]["rays"]["camera"] == 48 * 36
     assert out.is_file() and out.stat().st_size > 0
+
+
+def test_bpy_module_exits_with_the_add_on_registered():
+    """The README's bpy-module usage (register, work, end the script without unregistering) exits: the
+    bpy module hangs at exit while the add-on's properties are registered, so the add-on unregisters then."""
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import bpy, addon; addon.register(); "
+            "bpy.ops.wm.read_factory_settings(use_empty=True); addon.register(); print('RESULT ok')")
+    env = dict(os.environ, PYTHONPATH="")
+    proc = subprocess.run([sys.executable, "-c", code, str(ROOT)], capture_output=True, text=True, env=env,
+                          timeout=60, cwd=ROOT)
+    assert proc.returncode == 0 and "RESULT ok" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]

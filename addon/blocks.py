@@ -76,7 +76,7 @@ class BlockRenderer:
                  progressive: bool = False, threads: int = 1, tile: int = DEFAULT_TILE,
                  chunk: Optional[int] = None, alpha: bool = False, backend: str = "auto", samples: int = 1,
                  sampling: str = "jittered", threshold: float = 0.05, seed: int = 0):
-        deps.module("sampling").check(int(samples), sampling)
+        deps.module("sampling").check(int(samples), sampling, float(threshold))
         self.compiled = compiled
         self.rays_for = rays_for
         self.width, self.height = int(width), int(height)

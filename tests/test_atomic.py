@@ -41,3 +41,11 @@ def test_new_files_get_the_umask_permissions_not_private_ones(tmp_path, umask):
     finally:
         os.umask(previous)
     assert stat.S_IMODE((tmp_path / "x.png").stat().st_mode) == 0o666 & ~umask
+
+
+def test_a_missing_folder_is_named_not_the_temporary(tmp_path):
+    from tracer.errors import TracerError
+
+    with pytest.raises(TracerError, match=r"x\.sdl: folder .*nowhere.* does not exist"):
+        with replacing(tmp_path / "nowhere" / "x.sdl"):
+            pass

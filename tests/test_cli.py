@@ -82,6 +82,8 @@ def test_messy_file_stops_by_default_and_renders_with_lenient(tmp_path):
     (("render", "scenes/lecture.sdl", "-o", "x.unknown"), ".unknown"),
     (("render", "scenes/lecture.sdl", "-o", "x.png", "--block-size", "0"), "block size"),
     (("render", "scenes/lecture.sdl", "-o", "x.png", "--threads", "0"), "threads"),
+    (("render", "scenes/lecture.sdl", "-o", "x.png", "--sampling", "adaptive", "--threshold", "nan"), "threshold"),
+    (("convert", "scenes/lecture.sdl", "/no/such/folder/x.sdl"), "/no/such/folder' does not exist"),
 ])
 def test_bad_requests_get_one_line(args, fragment):
     _assert_one_line_error(run(*args), fragment)

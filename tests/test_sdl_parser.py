@@ -440,6 +440,11 @@ def test_singular_transform_only_matters_for_a_shape():
     assert (err.line, err.column, err.token) == (2, 2, "cube") and "singular" in err.message
 
 
+def test_an_overflowing_transform_is_named_as_such():
+    err = error("scale 1e200 1 1 scale 1e200 1 1\nsphere")  # the product is inf: no inverse
+    assert (err.line, err.token) == (2, "sphere") and "overflows" in err.message and "scale of 0" not in err.message
+
+
 def test_missing_mesh_file(tmp_path):
     err = error("mesh\n  gone.3vn", base_dir=tmp_path)
     assert (err.line, err.column, err.token) == (2, 3, "gone.3vn") and "not found" in err.message

@@ -7,6 +7,8 @@ import secrets
 from pathlib import Path
 from typing import Iterator, Union
 
+from .errors import TracerError
+
 PathLike = Union[str, os.PathLike]
 
 
@@ -20,6 +22,8 @@ def replacing(target: PathLike, suffix: str = ".tmp") -> Iterator[Path]:
     becomes the user's file.  ``suffix`` matters to writers that choose the format by extension (USD).
     """
     target = Path(target)
+    if not target.parent.is_dir():  # (else the error would name the temporary file)
+        raise TracerError(f"{target}: folder {str(target.parent)!r} does not exist")
     while True:
         temp = target.with_name(f".{target.name}.{secrets.token_hex(4)}{suffix}")
         try:

@@ -37,8 +37,6 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:
     known = {"png": "PNG", "bmp": "BMP", "ppm": "PPM", "jpg": "JPEG", "jpeg": "JPEG", "tif": "TIFF", "tiff": "TIFF"}
     if ext not in known:
         raise TracerError(f"{path}: unknown image type {path.suffix!r} (use one of .{', .'.join(sorted(known))})")
-    if not path.parent.is_dir():
-        raise TracerError(f"{path}: folder {str(path.parent)!r} does not exist")
     with replacing(path) as temp, open(temp, "wb") as handle:
         Image.fromarray(to_8bit(image)).save(handle, format=known[ext])  # (H, W, 3) uint8: RGB
     return path

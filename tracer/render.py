@@ -95,7 +95,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
     """
     check_size(width, height)
-    sampling.check(samples, sampling_mode)
+    sampling.check(samples, sampling_mode, threshold)
     started = time.perf_counter()
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     camera = scene_camera(compiled.scene, compiled, width / height)

@@ -21,11 +21,13 @@ DEFAULT_THRESHOLD = 0.05
 MAX_SAMPLES = 1024
 
 
-def check(samples: int, mode: str) -> None:
+def check(samples: int, mode: str, threshold: float = DEFAULT_THRESHOLD) -> None:
     if not 1 <= samples <= MAX_SAMPLES:
         raise TracerError(f"samples must be between 1 and {MAX_SAMPLES}, not {samples}")
     if mode not in MODES:
         raise TracerError(f"unknown sampling mode {mode!r} (use one of {', '.join(MODES)})")
+    if not (math.isfinite(threshold) and threshold >= 0.0):  # NaN would refine nothing, silently
+        raise TracerError(f"the adaptive threshold must be a number 0 or more, not {threshold}")
 
 
 def grid_shape(samples: int) -> tuple[int, int]:

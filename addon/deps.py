@@ -30,7 +30,3 @@ TRACER = _locate()
 def module(name: str = "") -> ModuleType:
     """A tracer module by its name inside the package: ``module("sdl.parser")``; ``module()`` is the package."""
     return importlib.import_module(f"{TRACER}.{name}" if name else TRACER)
-
-
-def is_vendored() -> bool:
-    return TRACER != "tracer"

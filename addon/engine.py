@@ -64,10 +64,9 @@ def build_scene(depsgraph, mode: str):
 
 
 def render_settings(scene) -> dict:
-    """BlockRenderer keyword arguments from the scene's SDL render settings."""
-    s = getattr(scene, "sdl_render", None)
-    if s is None:
-        return dict(block_size=8, progressive=True, threads=0)
+    """BlockRenderer keyword arguments from the scene's SDL render settings (registered before the engine,
+    unregistered after it: see addon._MODULES)."""
+    s = scene.sdl_render
     return dict(block_size=s.block_size, progressive=s.progressive, threads=s.threads, samples=s.samples,
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
@@ -255,4 +254,5 @@ def unregister() -> None:
     for cls in _added_to:
         cls.COMPAT_ENGINES.discard(ENGINE_ID)
     _added_to.clear()
-    bpy.utils.unregister_class(SDLRenderEngine)
+    if SDLRenderEngine.is_registered:
+        bpy.utils.unregister_class(SDLRenderEngine)

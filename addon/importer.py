@@ -79,6 +79,8 @@ class Importer:
         self.collections: dict[str, object] = {}
         self.result = ImportResult()
         self.order = 0
+        self.pixmaps: dict[int, str] = {}  # the file's makePixmap images, by number
+        self._scene_before: tuple = ()  # (world, camera, recursion depth) before run(): see undo()
 
     # -- collections ------------------------------------------------------------------------------------
 
@@ -104,6 +106,8 @@ class Importer:
             mat = self.created.add("materials", bpy.data.materials.new(f"SDL {d[0]:g} {d[1]:g} {d[2]:g}"))
             mat.use_nodes = True
             props.set_material(mat, sdl_material)
+            if sdl_material.texture > 0:  # the material keeps its own file's image
+                mat.sdl.image = self.pixmaps.get(sdl_material.texture, "")
             self.material_cache[sdl_material] = mat
         return mat
 
@@ -132,7 +136,9 @@ class Importer:
 
     # -- objects ----------------------------------------------------------------------------------------
 
-    def _shape_object(self, shape):
+    def shape_object(self, shape, material=None):
+        """A Blender object for a tracer Shape, in the collection of its def/use groups, with ``material``
+        (default: a material made from the shape's own)."""
         world = convert.to_blender(shape.matrix, self.conversion)
         object_part, mesh_part = convert.split_shear(world)
         mesh = self._mesh(shape, mesh_part)
@@ -143,7 +149,7 @@ class Importer:
             obj.data.materials.append(None)
         slot = obj.material_slots[0]
         slot.link = "OBJECT"
-        slot.material = self._material(shape.material)
+        slot.material = material if material is not None else self._material(shape.material)
         obj[OBJ_KIND] = shape.kind
         if shape.kind == "taperedCylinder":
             obj[OBJ_PARAM] = float(shape.tapered_radius)
@@ -167,7 +173,7 @@ class Importer:
         Boolean modifier per operation, innermost first."""
         model = deps.module("model")
         if not isinstance(node, model.CSG):
-            return self._shape_object(node)
+            return self.shape_object(node)
         left = self._object(node.left)
         right = self._object(node.right)
         modifier = left.modifiers.new(name=f"SDL {node.op}", type="BOOLEAN")
@@ -214,7 +220,10 @@ class Importer:
     def run(self, scene, filepath: str, set_camera: bool = True) -> ImportResult:
         ctx = self.context
         bl_scene = ctx.scene
-        old_world, old_camera = bl_scene.world, bl_scene.camera
+        settings = getattr(bl_scene, "sdl_render", None)
+        self._scene_before = (bl_scene.world, bl_scene.camera,
+                              settings.max_recursion_depth if settings is not None else None)
+        self.pixmaps = dict(scene.pixmaps)
         try:
             parent = ctx.view_layer.active_layer_collection.collection if ctx.view_layer else bl_scene.collection
             root = self.created.add("collections",
@@ -241,12 +250,11 @@ class Importer:
             world.use_nodes = True
             props.set_world(world, scene.settings)
             bl_scene.world = world
-            if hasattr(bl_scene, "sdl_render"):
-                bl_scene.sdl_render.max_recursion_depth = int(scene.settings.max_recursion_depth)
-            if scene.pixmaps:
-                bl_scene["sdl_pixmaps"] = {str(k): str(v) for k, v in scene.pixmaps.items()}
+            if settings is not None:
+                settings.max_recursion_depth = int(scene.settings.max_recursion_depth)
             # Hide the cutters in the viewport too, and remember what Blender shows of every transform.
-            ctx.view_layer.update()
+            if ctx.view_layer is not None:
+                ctx.view_layer.update()
             for obj in self.result.objects:
                 if obj.get("sdl_cutter"):
                     try:
@@ -259,11 +267,33 @@ class Importer:
             for obj in self.result.lights:
                 obj["sdl_position_shown"] = [float(v) for v in obj.matrix_world.translation]
         except BaseException:
-            bl_scene.world, bl_scene.camera = old_world, old_camera
-            self.created.remove_all()
+            self.undo()
             raise
         self.result.warnings = list(scene.warnings)
         return self.result
+
+    def undo(self) -> None:
+        """Remove what run() made and give the scene back the world, camera and recursion depth it had."""
+        bl_scene = self.context.scene
+        if self._scene_before:
+            bl_scene.world, bl_scene.camera, depth = self._scene_before
+            if depth is not None:
+                bl_scene.sdl_render.max_recursion_depth = depth
+        self.created.remove_all()
+
+
+def default_material(created: Optional[_Created] = None):
+    """The SDL default material that added shapes share (made, and added to ``created``, if there is none)."""
+    for mat in bpy.data.materials:
+        if mat.get("sdl_default") and mat.library is None:
+            return mat
+    mat = bpy.data.materials.new("SDL default")
+    if created is not None:
+        created.add("materials", mat)
+    mat["sdl_default"] = True
+    mat.use_nodes = True
+    props.set_material(mat, deps.module("model").Material())
+    return mat
 
 
 def import_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None, strict: bool = False,

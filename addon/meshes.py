@@ -91,13 +91,54 @@ def generic_info(mesh, cache: Optional[dict] = None) -> Optional[GenericInfo]:
     return info
 
 
+#: generic_info for the panels: mesh name -> (signature, info); an entry goes when Blender updates the
+#: mesh's geometry (forget_edited), and all of them when a file is loaded or an undo step restored.
+_drawn_info: dict[str, tuple] = {}
+
+
+def _signature(mesh) -> tuple:
+    return (mesh.as_pointer(), len(mesh.vertices), len(mesh.loops), len(mesh.polygons),
+            *(mesh.get(name) for name in (KIND, PARAM, FILE, HASH)))
+
+
+def cached_generic_info(mesh) -> Optional[GenericInfo]:
+    """generic_info, hashing the mesh only when it has changed since the last call (for redraws)."""
+    if mesh is None or not isinstance(mesh, bpy.types.Mesh) or KIND not in mesh:
+        return None
+    signature = _signature(mesh)
+    seen = _drawn_info.get(mesh.name_full)
+    if seen is None or seen[0] != signature:
+        seen = _drawn_info[mesh.name_full] = (signature, generic_info(mesh))
+    return seen[1]
+
+
+@bpy.app.handlers.persistent
+def forget_edited(scene, depsgraph) -> None:
+    """depsgraph_update_post: drop the cached info of meshes whose geometry changed."""
+    if _drawn_info:
+        for update in depsgraph.updates:
+            if update.is_updated_geometry and isinstance(update.id, bpy.types.Mesh):
+                _drawn_info.pop(update.id.original.name_full, None)
+
+
+@bpy.app.handlers.persistent
+def forget_all(*_args) -> None:
+    """load_post, undo_post, redo_post: other mesh data than before."""
+    _drawn_info.clear()
+
+
+#: The handlers above, by the bpy.app.handlers list they go in (see ui.register).
+HANDLERS = (("depsgraph_update_post", forget_edited), ("load_post", forget_all), ("undo_post", forget_all),
+            ("redo_post", forget_all))
+
+
 def find_shared(kind: str, param: float, mesh_file: Optional[str], digest: str):
     """An existing unedited mesh for this generic shape (so that imports share mesh data)."""
+    identity = np.eye(4).ravel()
     for mesh in bpy.data.meshes:
         if (mesh.get(KIND) == kind and mesh.get(HASH) == digest and float(mesh.get(PARAM, 1.0)) == float(param)
-                and mesh.get(FILE) == mesh_file and mesh.library is None
-                and np.allclose(list(mesh.get(MATRIX, [])), np.eye(4).ravel(), rtol=0, atol=0)
-                and mesh_hash(mesh) == digest):
+                and mesh.get(FILE) == mesh_file and mesh.library is None and mesh.get(MATRIX) is not None
+                and np.array_equal(list(mesh[MATRIX]), identity) and mesh_hash(mesh) == digest):
             return mesh
     return None
 
@@ -148,7 +189,8 @@ def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
     return out
 
 
-_exact_files: dict[tuple[str, float], object] = {}
+#: .3vn files read: path -> (modification time, MeshData); one version of each file.
+_exact_files: dict[str, tuple[float, object]] = {}
 
 
 def exact_mesh_data(info: GenericInfo, mesh):
@@ -157,14 +199,14 @@ def exact_mesh_data(info: GenericInfo, mesh):
     if kind in deps.module("model").POLYHEDRON_KINDS or kind == "teapot":
         return deps.module("sdl.parser").builtin_mesh(kind)
     if kind == "mesh" and info.mesh_file and os.path.isfile(info.mesh_file):
-        key = (info.mesh_file, os.path.getmtime(info.mesh_file))
-        data = _exact_files.get(key)
-        if data is None:
+        mtime = os.path.getmtime(info.mesh_file)
+        mtime_read, data = _exact_files.get(info.mesh_file, (None, None))
+        if mtime_read != mtime:
             try:
                 data = deps.module("meshio").read_3vn(info.mesh_file)
             except Exception:  # noqa: BLE001 - a changed or broken file: fall back to Blender's copy
                 return None
-            _exact_files[key] = data
+            _exact_files[info.mesh_file] = (mtime, data)
         gm = primitives.generic_mesh("mesh", mesh_data=data).transformed(info.mesh_matrix[:3, :3])
         if gm.hash() == mesh.get(HASH):
             return data

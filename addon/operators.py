@@ -63,7 +63,6 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                 self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
                 return {"CANCELLED"}
         total = 0
-        old_world, old_camera = context.scene.world, context.scene.camera
         done = []
         for path, scene in parsed:
             imp = importer.Importer(context, conversion)
@@ -71,8 +70,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                 result = imp.run(scene, path, set_camera=self.set_camera)
             except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
                 for earlier in reversed(done):  # and the files before it: all of them or nothing
-                    earlier.created.remove_all()
-                context.scene.world, context.scene.camera = old_world, old_camera
+                    earlier.undo()
                 if not isinstance(exc, (ValueError, RuntimeError, errors.TracerError)):
                     traceback.print_exc()
                 self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
@@ -149,11 +147,17 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
         shape.matrix = matrix
         imp = importer.Importer(context, np.eye(4))
         imp.result.collection = context.collection or context.scene.collection
-        obj = imp._shape_object(shape)
+        try:
+            obj = imp.shape_object(shape, importer.default_material(imp.created))
+            context.view_layer.update()
+            obj[importer.OBJ_SHOWN] = importer.flat(obj.matrix_world)
+        except Exception as exc:  # noqa: BLE001 - reported in Blender's UI, what was made removed again
+            imp.created.remove_all()
+            traceback.print_exc()
+            self.report({"ERROR"}, f"Cannot add {self.kind}: {exc}")
+            return {"CANCELLED"}
         for other in context.selected_objects:
             other.select_set(False)
-        context.view_layer.update()
-        obj[importer.OBJ_SHOWN] = importer.flat(obj.matrix_world)
         obj.select_set(True)
         context.view_layer.objects.active = obj
         return {"FINISHED"}
@@ -212,6 +216,9 @@ def register() -> None:
 
 def unregister() -> None:
     for menu, func in reversed(_MENUS):
-        getattr(bpy.types, menu).remove(func)
+        owner = getattr(bpy.types, menu, None)
+        if owner is not None:
+            owner.remove(func)  # a function not in the menu is ignored
     for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+        if cls.is_registered:
+            bpy.utils.unregister_class(cls)

@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
+                       PointerProperty, StringProperty)
 
 from . import convert, deps
 
@@ -58,7 +59,10 @@ class SDLMaterialSettings(bpy.types.PropertyGroup):
                                   description="Relative speed of light inside the object (1 = air)")
     specular_fraction: FloatProperty(name="Specular Fraction", default=0.0, min=0.0, max=1.0)
     surface_roughness: FloatProperty(name="Surface Roughness", default=1.0, min=0.0)
-    texture: IntProperty(name="Texture", default=0, description="Texture number (0 = none)")
+    texture: IntProperty(name="Texture", default=0,
+                         description="Texture number (0 = none; -1, -2, -3 solid textures; above 0 the image)")
+    image: StringProperty(name="Image", subtype="FILE_PATH",
+                          description="The image of a texture above 0 (what SDL's makePixmap gives the number)")
     parameter_count: IntProperty(name="Parameters", default=0, min=0, max=MAX_PARAMETERS)
     parameters: FloatVectorProperty(name="Texture Parameters", size=MAX_PARAMETERS, default=(0.0,) * MAX_PARAMETERS)
 
@@ -111,7 +115,8 @@ def unregister() -> None:
         if hasattr(owner, name):
             delattr(owner, name)
     for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+        if cls.is_registered:
+            bpy.utils.unregister_class(cls)
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -9,12 +9,17 @@
 * Anything else that has geometry is traced as the triangles Blender makes of its evaluated mesh, one
   tracer mesh per material slot.
 * Lights become point lights at their position (sun lights far away against their direction).
+* A material's texture above 0 is its own image (Material.sdl.image), numbered per image: its own number
+  unless an earlier material's other image has it (two imported files may both use ``makePixmap 1``).
 """
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 from typing import Optional
 
+import bpy
 import numpy as np
 
 from . import convert, deps, meshes, props
@@ -38,6 +43,14 @@ def flat(matrix) -> list[float]:
     return [float(v) for row in matrix for v in row]
 
 
+def enabled_modifiers(obj, mode: str = "RENDER") -> list:
+    """The object's modifiers enabled in ``mode`` (the viewport's switch in VIEWPORT, else the render's).
+    A generic shape with any of them but Booleans is traced as a mesh."""
+    if mode == "VIEWPORT":
+        return [m for m in obj.modifiers if m.show_viewport]
+    return [m for m in obj.modifiers if m.show_render]
+
+
 class SceneBuilder:
     """Builds tracer objects from evaluated Blender objects.
 
@@ -56,17 +69,30 @@ class SceneBuilder:
         self._generic_cache: dict = {}
         self._mesh_cache: dict = {}
         self._materials: dict = {}
+        self._pixmaps: dict[str, int] = {}  # image file -> its texture number in the built scene
 
     # -- helpers --------------------------------------------------------------------------------------
-
-    def _modifier_enabled(self, modifier) -> bool:
-        return modifier.show_viewport if self.mode == "VIEWPORT" else modifier.show_render
 
     def _material(self, material):
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
-            self._materials[key] = props.material_to_sdl(material)
+            sdl_material = props.material_to_sdl(material)
+            if sdl_material.texture > 0 and material.sdl.image:
+                image = bpy.path.abspath(material.sdl.image, library=material.library)
+                number = self._pixmap_number(sdl_material.texture, image)
+                sdl_material = dataclasses.replace(sdl_material, texture=number)
+            self._materials[key] = sdl_material
         return self._materials[key]
+
+    def _pixmap_number(self, wanted: int, image: str) -> int:
+        """The scene's number for a material's image: its own number unless another image has it (materials
+        of different files may use the same number for different images), else the first free one."""
+        if image not in self._pixmaps:
+            used = set(self._pixmaps.values())
+            if wanted in used:
+                wanted = next(n for n in itertools.count(1) if n not in used)
+            self._pixmaps[image] = wanted
+        return self._pixmaps[image]
 
     def _slot_material(self, obj, index: int = 0):
         slots = obj.material_slots
@@ -123,7 +149,7 @@ class SceneBuilder:
             self.warnings.append(f"{original.name}: Boolean operands form a loop; traced as a mesh")
             return self.mesh_nodes(obj_eval, matrix_world, top_level)
         info = self.generic(obj_eval)
-        enabled = [m for m in original.modifiers if self._modifier_enabled(m)] if info is not None else []
+        enabled = enabled_modifiers(original, self.mode) if info is not None else []
         if info is None or any(m.type != "BOOLEAN" for m in enabled):
             return self.mesh_nodes(obj_eval, matrix_world, top_level)
         matrix = self.shape_matrix(original, matrix_world, info)
@@ -235,9 +261,7 @@ class SceneBuilder:
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
                                         if hasattr(scene, "sdl_render") else 3)
         tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
-        pixmaps = scene.get("sdl_pixmaps")
-        if pixmaps:
-            tracer_scene.pixmaps = {int(k): str(v) for k, v in pixmaps.items()}
+        tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
         return tracer_scene
 
 

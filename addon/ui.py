@@ -61,7 +61,7 @@ class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
         col.active = s.use_sdl
         for name in ("ambient", "diffuse", "specular", "emissive", "specular_exponent", "reflectivity",
                      "transparency", "speed_of_light", "specular_fraction", "surface_roughness", "texture",
-                     "parameter_count"):
+                     "image", "parameter_count"):
             col.prop(s, name)
         if s.parameter_count:
             row = col.row(align=True)
@@ -97,16 +97,21 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
         return obj is not None and obj.type == "MESH"
 
     def draw(self, context):
-        from . import meshes
+        from . import meshes, scene_build
 
         obj = context.object
-        info = meshes.generic_info(obj.data)
+        info = meshes.cached_generic_info(obj.data)  # hashes the mesh only after it changed
         layout = self.layout
         if info is None:
             text = "Edited generic shape: traced as a mesh" if "sdl_kind" in obj.data else "Traced as a mesh"
             layout.label(text=text, icon="MESH_DATA")
             return
         label = info.kind + (f" {info.param:g}" if info.kind == "taperedCylinder" else "")
+        # as the final render decides (scene_build.SceneBuilder.object_node)
+        others = [m for m in scene_build.enabled_modifiers(obj) if m.type != "BOOLEAN"]
+        if others:
+            layout.label(text=f"Generic {label} with modifier {others[0].name}: traced as a mesh", icon="MESH_DATA")
+            return
         layout.label(text=f"Generic {label}: traced exactly", icon="SHADING_RENDERED")
         if info.mesh_file:
             layout.label(text=info.mesh_file)
@@ -118,10 +123,22 @@ CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_world, SDL_PT_object)
 
 
 def register() -> None:
+    from . import meshes
+
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    for name, handler in meshes.HANDLERS:
+        getattr(bpy.app.handlers, name).append(handler)
 
 
 def unregister() -> None:
+    from . import meshes
+
+    for name, handler in meshes.HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        while handler in handlers:
+            handlers.remove(handler)
+    meshes.forget_all()
     for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+        if cls.is_registered:
+            bpy.utils.unregister_class(cls)

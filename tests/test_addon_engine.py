@@ -320,3 +320,20 @@ def test_threads_zero_is_the_tracers_default(monkeypatch):
     monkeypatch.setenv("SDL_TRACER_THREADS", "3")
     assert blocks.BlockRenderer(compiled, None, 8, 8, threads=0).threads == 3
     assert blocks.BlockRenderer(compiled, None, 8, 8, threads=2).threads == 2
+
+
+def test_each_imported_file_keeps_its_own_images(tmp_path):
+    """Two files whose ``makePixmap 1`` names different images: each file's cube shows its own."""
+    from blender_scripts.addon_env import two_files_with_their_own_pixmap_1
+
+    for path in two_files_with_their_own_pixmap_1(tmp_path):
+        import_sdl(path)
+    set_resolution(60, 30)
+    scene = bpy.context.scene
+    rgba = render_rgba("SDL_RAYTRACER")
+    assert "error" not in engine.LAST_RENDER, engine.LAST_RENDER
+    colors = []
+    for obj in shape_objects():
+        p = world_to_camera_view(scene, scene.camera, obj.matrix_world.translation)
+        colors.append(rgba[int((1.0 - p.y) * 30), int(p.x * 60), :3])
+    np.testing.assert_allclose(colors, [(1, 0, 0), (0, 1, 0)], atol=0.02)

@@ -176,3 +176,16 @@ def test_an_edited_camera_is_written_as_blender_shows_it(tmp_path):
     np.testing.assert_allclose(np.subtract(exported.look, exported.eye), to_sdl @ -m[:3, 2], atol=1e-6)
     np.testing.assert_allclose(exported.up, to_sdl @ m[:3, 1], atol=1e-6)
     assert exported.view_angle == pytest.approx(math.degrees(cam.data.angle_y), abs=1e-4)
+
+
+def test_each_imported_file_keeps_its_own_images(tmp_path):
+    """Two files whose ``makePixmap 1`` names different images: exported, each cube names its own image."""
+    from blender_scripts.addon_env import two_files_with_their_own_pixmap_1
+
+    paths = two_files_with_their_own_pixmap_1(tmp_path)
+    for path in paths:
+        import_sdl(path)
+    exported = export(tmp_path / "out.sdl")
+    images = [os.path.realpath(exported.pixmaps[s.material.texture]) for s in exported.shapes()]
+    assert images == [os.path.realpath(p.parent / "tex.png") for p in paths]
+    assert tracer.load(str(paths[0])).shapes()[0].material == exported.shapes()[0].material

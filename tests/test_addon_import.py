@@ -3,6 +3,9 @@ lights, camera, world, CSG as Boolean modifiers, def/use groups, axis option, er
 from __future__ import annotations
 
 import math
+import os
+import shutil
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
@@ -11,7 +14,7 @@ from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
 import tracer
-from addon import importer, props
+from addon import convert, importer, meshes, props
 from blender_scripts.addon_env import (SCENE_FILES, SCENES, effective_matrix, fresh, import_sdl, shape_objects,
                                        to_blender, world)
 
@@ -187,8 +190,9 @@ def test_failure_half_way_removes_what_was_made(monkeypatch):
 def test_a_failure_in_a_later_file_removes_the_earlier_ones(monkeypatch, tmp_path):
     """Several files are one import: when the second cannot be built, the first is removed again too (the
     operator is cancelled, so there would be no undo step for it)."""
-    (tmp_path / "a.sdl").write_text("sphere\n")
+    (tmp_path / "a.sdl").write_text("maxRecursionDepth 7\nsphere\n")
     (tmp_path / "b.sdl").write_text("light 1 2 3 1 1 1\ncube\n")
+    bpy.context.scene.sdl_render.max_recursion_depth = 5
     before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
 
     def broken(self, light, index):
@@ -199,3 +203,109 @@ def test_a_failure_in_a_later_file_removes_the_earlier_ones(monkeypatch, tmp_pat
         bpy.ops.import_scene.sdl(directory=str(tmp_path), files=[{"name": "a.sdl"}, {"name": "b.sdl"}])
     assert _counts() == before
     assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
+    assert bpy.context.scene.sdl_render.max_recursion_depth == 5
+
+
+def test_a_failed_import_leaves_the_scene_settings_as_they_were(monkeypatch, tmp_path):
+    path = tmp_path / "deep.sdl"
+    path.write_text("maxRecursionDepth 9\nmakePixmap 1 tex.png\nsphere\n")
+    scene = bpy.context.scene
+    scene.sdl_render.max_recursion_depth = 5
+    keys = set(scene.keys())
+
+    def broken(matrix):
+        raise RuntimeError("simulated failure")
+
+    monkeypatch.setattr(importer, "flat", broken)  # fails after the scene settings were set
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        bpy.ops.import_scene.sdl(filepath=str(path))
+    assert scene.sdl_render.max_recursion_depth == 5
+    assert set(scene.keys()) == keys  # no sdl_pixmaps left behind
+
+
+def test_import_without_a_view_layer(tmp_path):
+    path = tmp_path / "one.sdl"
+    path.write_text("sphere\n")
+    context = SimpleNamespace(scene=bpy.context.scene, view_layer=None)
+    result = importer.Importer(context, convert.axis_matrix()).run(importer.read_scene(str(path)), str(path))
+    assert [o["sdl_kind"] for o in result.objects] == ["sphere"]
+
+
+def test_shared_meshes_need_their_matrix_property(tmp_path):
+    path = tmp_path / "one.sdl"
+    path.write_text("sphere\n")
+    import_sdl(path)
+    first = shape_objects()[0].data
+    del first[meshes.MATRIX]
+    import_sdl(path)  # the mesh without its matrix is not shared (and does not stop the import)
+    assert shape_objects()[1].data != first
+
+
+def test_exact_mesh_files_kept_once_per_path(tmp_path):
+    shutil.copy(SCENES / "meshes" / "pawn.3vn", tmp_path / "pawn.3vn")
+    path = tmp_path / "pawn.sdl"
+    path.write_text("mesh pawn.3vn\n")
+    import_sdl(path)
+    mesh = shape_objects()[0].data
+    info = meshes.generic_info(mesh)
+    mesh_file = str(tmp_path / "pawn.3vn")
+    for step in range(3):  # the file changes (its time does): read again, the older copy dropped
+        os.utime(mesh_file, (1_000_000 + step, 1_000_000 + step))
+        assert meshes.exact_mesh_data(info, mesh) is not None
+    assert sum(mesh_file in str(key) for key in meshes._exact_files) == 1
+
+
+class _Layout:
+    def __init__(self):
+        self.labels = []
+
+    def label(self, text="", icon="NONE"):
+        self.labels.append(text)
+
+
+def _shape_panel_text(obj) -> str:
+    from addon import ui
+
+    layout = _Layout()
+    ui.SDL_PT_object.draw(SimpleNamespace(layout=layout), SimpleNamespace(object=obj))
+    return layout.labels[0]
+
+
+def test_shape_panel_tells_the_truth_without_hashing_every_redraw(monkeypatch):
+    import_sdl(SCENES / "shapes.sdl")
+    sphere = [o for o in shape_objects() if o["sdl_kind"] == "sphere"][0]
+    assert _shape_panel_text(sphere) == "Generic sphere: traced exactly"
+    hashed = []
+    real_hash = meshes.mesh_hash
+    monkeypatch.setattr(meshes, "mesh_hash", lambda mesh: hashed.append(mesh.name) or real_hash(mesh))
+    for _ in range(3):  # redraws of an unchanged mesh hash nothing
+        assert _shape_panel_text(sphere) == "Generic sphere: traced exactly"
+    assert hashed == []
+    # a modifier other than a Boolean makes the engine trace the object as a mesh
+    subsurf = sphere.modifiers.new("smooth", "SUBSURF")
+    assert "traced as a mesh" in _shape_panel_text(sphere)
+    subsurf.show_render = False
+    assert _shape_panel_text(sphere) == "Generic sphere: traced exactly"
+    sphere.modifiers.remove(subsurf)
+    # an edit of the mesh shows at once
+    sphere.data.vertices[0].co.x += 0.1
+    bpy.context.view_layer.update()
+    assert _shape_panel_text(sphere) == "Edited generic shape: traced as a mesh"
+
+
+def test_add_shape_reuses_one_material_and_undoes_a_failure(monkeypatch):
+    bpy.ops.object.sdl_add_shape(kind="sphere")
+    bpy.ops.object.sdl_add_shape(kind="cube")
+    added = shape_objects()
+    assert len(added) == 2 and len(bpy.data.materials) == 1  # one default SDL material, shared
+    assert added[0].material_slots[0].material == added[1].material_slots[0].material
+    bpy.data.materials.remove(added[0].material_slots[0].material)  # so that the next call makes one
+    before = _counts()
+
+    def broken(matrix):
+        raise RuntimeError("simulated failure")
+
+    monkeypatch.setattr(importer, "flat", broken)
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        bpy.ops.object.sdl_add_shape(kind="cone")
+    assert _counts() == before  # neither the object nor the default material it made is left

@@ -20,6 +20,7 @@ OPERATORS = ("IMPORT_SCENE_OT_sdl", "EXPORT_SCENE_OT_sdl", "OBJECT_OT_sdl_add_sh
 PANELS = ("SDL_PT_render", "SDL_PT_material", "SDL_PT_world", "SDL_PT_object")
 PROPERTIES = ((bpy.types.Scene, "sdl_render"), (bpy.types.World, "sdl"), (bpy.types.Material, "sdl"))
 MENUS = ("TOPBAR_MT_file_import", "TOPBAR_MT_file_export", "VIEW3D_MT_add")
+HANDLERS = ("depsgraph_update_post", "load_post", "undo_post", "redo_post")
 
 
 def _menu_funcs(menu: str) -> list:
@@ -49,6 +50,8 @@ def _state() -> dict:
         "compat": sorted(name for name in dir(bpy.types)
                          if "SDL_RAYTRACER" in (getattr(getattr(bpy.types, name), "COMPAT_ENGINES", None) or ())),
         "ops": hasattr(bpy.ops.import_scene, "sdl") and "sdl" in dir(bpy.ops.import_scene),
+        "handlers": sum(getattr(f, "__module__", "").startswith("addon") for name in HANDLERS
+                        for f in getattr(bpy.app.handlers, name)),
     }
 
 
@@ -60,13 +63,14 @@ def test_register_unregister_twice_leaves_nothing_behind():
     assert len(registered["properties"]) == 3 and registered["engine"]
     assert registered["menus"] == {menu: 1 for menu in MENUS}
     assert "RENDER_PT_format" in registered["compat"]  # Blender's own panels show for the engine
+    assert registered["handlers"] == 4  # the SDL Shape panel's cache (meshes.HANDLERS)
     for _ in range(2):
         addon.unregister()
         gone = _state()
         assert gone["operators"] == [] and gone["panels"] == [] and gone["properties"] == []
         assert not gone["engine"]
         assert gone["menus"] == {menu: 0 for menu in MENUS}
-        assert gone["compat"] == []
+        assert gone["compat"] == [] and gone["handlers"] == 0
         addon.unregister()  # a second unregister is harmless
     for _ in range(2):
         addon.register()
@@ -151,3 +155,22 @@ def test_bpy_module_exits_with_the_add_on_registered():
     proc = subprocess.run([sys.executable, "-c", code, str(ROOT)], capture_output=True, text=True, env=env,
                           timeout=60, cwd=ROOT)
     assert proc.returncode == 0 and "RESULT ok" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
+
+
+def test_a_failed_register_leaves_nothing_registered(monkeypatch):
+    """A module's register() that fails half way (here after its classes, at its menus) is undone too."""
+    import pytest
+
+    from addon import operators
+
+    addon.unregister()
+    monkeypatch.setattr(operators, "_MENUS", operators._MENUS + (("NO_SUCH_MENU", operators.menu_add),))
+    with pytest.raises(AttributeError):
+        addon.register()
+    state = _state()
+    assert state["operators"] == [] and state["panels"] == [] and state["properties"] == []
+    assert not state["engine"] and state["compat"] == [] and state["handlers"] == 0
+    assert state["menus"] == {menu: 0 for menu in MENUS}
+    monkeypatch.undo()
+    addon.register()
+    assert _state()["operators"] == list(OPERATORS)

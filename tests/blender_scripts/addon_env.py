@@ -91,3 +91,21 @@ def render_rgba(engine_id: str, path: str | None = None) -> np.ndarray:
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     union = np.logical_or(a, b).sum()
     return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)
+
+
+def two_files_with_their_own_pixmap_1(folder: Path) -> list[Path]:
+    """Two SDL files in folders a/ and b/, each with ``makePixmap 1 tex.png`` (red in a/, green in b/) on a
+    cube lit by the global ambient light only (left in a, right in b), so each cube shows its image's colour."""
+    from tracer.imageio import save_image
+
+    paths = []
+    for name, color, x in (("a", (1.0, 0.0, 0.0), -1.5), ("b", (0.0, 1.0, 0.0), 1.5)):
+        sub = folder / name
+        sub.mkdir()
+        save_image(np.full((4, 4, 3), color), sub / "tex.png")
+        path = sub / f"{name}.sdl"
+        path.write_text("globalAmbient 1 1 1\nbackground 0 0 0\ncamera 0 0 10  0 0 0  0 1 0  40\n"
+                        "makePixmap 1 tex.png\n"
+                        f"push ambient 1 1 1 diffuse 0 0 0 texture 1 translate {x} 0 0 cube pop\n")
+        paths.append(path)
+    return paths

@@ -112,6 +112,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     total = len(tiles) * (len(passes) + adaptive)
     done = 0
     rng = np.random.default_rng(seed)
+    eye_rows: list[np.ndarray] = [np.empty((0, 3))]  # the eye, repeated: every camera ray's origin
 
     def trace_pixels(rows_from_bottom: np.ndarray, cols: np.ndarray, per_pixel: int) -> np.ndarray:
         """Mean colour of ``per_pixel`` rays in each of the given pixels."""
@@ -124,9 +125,10 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
             cc = np.repeat(cols, per_pixel)
             dy, dx = dy.ravel(), dx.ravel()
         directions = frame.directions(rr, cc, height, width, dy=dy, dx=dx)
-        origins = np.ascontiguousarray(np.broadcast_to(frame.eye, directions.shape))
-        colors = tracer.camera_rays(origins, directions)
-        return colors.reshape(-1, per_pixel, 3).mean(axis=1)
+        if len(eye_rows[0]) < len(directions):
+            eye_rows[0] = np.ascontiguousarray(np.broadcast_to(frame.eye, directions.shape))
+        colors = tracer.camera_rays(eye_rows[0][:len(directions)], directions)
+        return colors if per_pixel == 1 else colors.reshape(-1, per_pixel, 3).mean(axis=1)
 
     def report(r0, c0, r1, c1, stride, pass_index):
         if on_tile is not None:
@@ -139,6 +141,13 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
             if cancel is not None and cancel():
                 raise RenderCancelled("render cancelled")
             r1, c1 = min(r0 + tile, height), min(c0 + tile, width)
+            if stride == 1 and first_pass:  # one ray per pixel, all new: no earlier samples to keep
+                rows, cols = np.arange(r0, r1), np.arange(c0, c1)
+                colors = trace_pixels(np.repeat(rows, cols.size), np.tile(cols, rows.size), 1 if adaptive else samples)
+                film[r0:r1, c0:c1] = colors.reshape(rows.size, cols.size, 3)
+                done += 1
+                report(r0, c0, r1, c1, stride, pass_index)
+                continue
             rows = np.arange(r0, r1, stride)
             cols = np.arange(c0, c1, stride)
             grid_r, grid_c = np.meshgrid(rows, cols, indexing="ij")

@@ -793,3 +793,17 @@ def test_one_group_name_written_as_a_string_is_one_name(tmp_path):
     Sdf.AttributeSpec(spec, "sdl:groups", Sdf.ValueTypeNames.String).default = "table_leg"
     layer.Save()
     assert load_usd(path).shapes()[0].groups == ("table_leg",)
+
+
+def test_our_file_referenced_into_another_stage_keeps_its_settings(written, tmp_path):
+    """A layout stage that references our glass scene under /World/Glass: the settings prim moved there."""
+    scene = tracer.load(ROOT / "scenes" / "glass.sdl")
+    stage = Usd.Stage.CreateNew(str(tmp_path / "layout.usda"))
+    UsdGeom.Xform.Define(stage, "/World")
+    stage.DefinePrim("/World/Glass").GetReferences().AddReference(str(written["glass"]), "/SDLScene")
+    stage.GetRootLayer().Save()
+    back = load_usd(tmp_path / "layout.usda")
+    assert back.settings.background == scene.settings.background
+    assert back.settings.max_recursion_depth == scene.settings.max_recursion_depth
+    assert back.settings.min_transparency == scene.settings.min_transparency
+    assert len(back.shapes()) == len(scene.shapes())

@@ -168,9 +168,17 @@ class _Reader:
 
     # -- settings ---------------------------------------------------------------------------------------
 
-    def _settings(self) -> None:
+    def _settings_prim(self):
+        """Where our writer put the scene's settings: /SDLScene, or wherever that prim landed when our file
+        was referenced into another stage (the first prim carrying sdl:version)."""
         root = self.stage.GetPrimAtPath(C.ROOT)
-        if not root or self.get(root, C.A_VERSION) is None:
+        if root and root.HasAttribute(C.A_VERSION):
+            return root
+        return next((prim for prim in self.stage.Traverse() if prim.HasAttribute(C.A_VERSION)), None)
+
+    def _settings(self) -> None:
+        root = self._settings_prim()
+        if root is None or self.get(root, C.A_VERSION) is None:
             return
         try:
             s = Settings()

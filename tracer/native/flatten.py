@@ -314,13 +314,13 @@ class FlatScene:
         """Per-material texture numbers, parameters (defaults filled in as tracer.textures does) and image
         indices; the pictures (by address: each is already one contiguous array, no copy); the noise
         tables.  Nothing for a scene without textures.  Returns the number of pictures."""
+        from ..textures import image_repeats
         from ..textures.noise import GRADIENTS, PERM
-        from ..textures.solid import CHECKER_DEFAULTS, MARBLE_DEFAULTS, WOOD_DEFAULTS, with_defaults
+        from ..textures.solid import SOLID_DEFAULTS, with_defaults
 
         a = self.arrays
         if "textures" not in compiled.effects:  # the C core never reads these tables then
             return 0
-        defaults = {-1: CHECKER_DEFAULTS, -2: WOOD_DEFAULTS, -3: MARBLE_DEFAULTS}
         images = getattr(compiled.textures, "images", None) or {}
         numbers = sorted(images)
         pictures = [np.ascontiguousarray(images[k], dtype=np.float64) for k in numbers]
@@ -331,10 +331,10 @@ class FlatScene:
         for m, material in enumerate(materials):
             number = int(material.texture)
             texture[m] = number
-            if number < 0 and number in defaults:
-                values = with_defaults(tuple(material.parameters), defaults[number])
+            if number < 0 and number in SOLID_DEFAULTS:
+                values = with_defaults(tuple(material.parameters), SOLID_DEFAULTS[number])
             elif number > 0:
-                values = (tuple(material.parameters) + (1.0, 1.0))[:2]  # repeat_u, repeat_v
+                values = image_repeats(material.parameters)
                 image_index[m] = numbers.index(number) if number in images else -1
             else:
                 values = ()

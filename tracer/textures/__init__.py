@@ -14,6 +14,12 @@ from .mapping import surface_uv
 from .solid import SOLID_TEXTURES
 
 
+def image_repeats(parameters) -> tuple[float, float]:
+    """How often an image texture repeats across u and v: the material's first two parameters, 1 if absent."""
+    repeat_u, repeat_v = (tuple(parameters) + (1.0, 1.0))[:2]
+    return repeat_u, repeat_v
+
+
 class TextureSet:
     """The textures a compiled scene uses, with its images loaded once."""
 
@@ -43,7 +49,7 @@ class TextureSet:
                 out[rows] = SOLID_TEXTURES[material.texture](generic, material.parameters)
             else:
                 u, v, wrap_u, wrap_v = surface_uv(prim.kind, generic, parts[rows])
-                repeat_u, repeat_v = (tuple(material.parameters) + (1.0, 1.0))[:2]
+                repeat_u, repeat_v = image_repeats(material.parameters)
                 if (repeat_u, repeat_v) != (1.0, 1.0):
                     u, v, wrap_u, wrap_v = u * repeat_u, v * repeat_v, True, True
                 out[rows] = sample_bilinear(self.images[material.texture], u, v, wrap_u, wrap_v)

@@ -5,7 +5,6 @@ read leaves the Blender scene as it was; if creating fails half way, what was cr
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass, field
 from typing import Optional
@@ -36,18 +35,10 @@ def read_scene(filepath: str, strict: bool = False):
     return deps.module("sdl.parser").load(filepath, strict=strict)
 
 
-def lens_for_view_angle(view_angle: float, sensor_height: float = SENSOR_HEIGHT) -> float:
-    """Focal length giving a vertical view angle (degrees) with a vertically fitted sensor."""
-    return sensor_height / (2.0 * math.tan(math.radians(view_angle) / 2.0))
-
-
 def camera_matrix(camera) -> np.ndarray:
     """The lecture's camera frame (u right, v up, n backwards: tracer.camera) as a Blender camera's world
     matrix; ``camera`` is in Blender's axes."""
-    frame = deps.module("camera").CameraFrame.from_camera(camera, 1.0)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = frame.u, frame.v, frame.n, frame.eye
-    return m
+    return deps.module("camera").CameraFrame.from_camera(camera, 1.0).to_world()
 
 
 class _Created:
@@ -202,7 +193,7 @@ class Importer:
         data = self.created.add("cameras", bpy.data.cameras.new("SDL camera"))
         data.sensor_fit = "VERTICAL"
         data.sensor_height = SENSOR_HEIGHT
-        data.lens = lens_for_view_angle(camera.view_angle)
+        data.lens = deps.module("camera").focal_length(camera.view_angle, SENSOR_HEIGHT)  # sensor fit vertical
         data.clip_start = 0.05
         data.clip_end = far
         obj = self.created.add("objects", bpy.data.objects.new("SDL camera", data))

@@ -171,7 +171,7 @@ def scene_to_pov(scene: Scene, width: int, height: int) -> str:
         "// Written by bench/sdl_to_pov.py from an SDL scene.",
         "#version 3.7;",
         "global_settings {",
-        f"  assumed_gamma 1.0",
+        "  assumed_gamma 1.0",
         f"  max_trace_level {int(settings.max_recursion_depth) + 1}",
         f"  ambient_light rgb {_vec(settings.global_ambient)}",
         "}",

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import tracer
-from helpers import Camera, scene_of, shape, translation
+from helpers import Camera, scene_of, shape
 from tracer import sampling
 from tracer.errors import TracerError
 

@@ -1,14 +1,13 @@
 """Solid textures, noise, image lookups and mappings, Cook–Torrance."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
 from PIL import Image
 
 import tracer
-from helpers import Camera, Light, rotation, scene_of, shape, translation
+from helpers import Light, scene_of, shape, translation
 from tracer.compile import compile_scene
 from tracer.errors import TracerError
 from tracer.textures.images import sample_bilinear

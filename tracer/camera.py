@@ -46,6 +46,13 @@ class CameraFrame:
         h = math.tan(math.radians(camera.view_angle) / 2.0)
         return cls(eye, u, v, n, h, h * aspect)
 
+    def to_world(self) -> np.ndarray:
+        """The camera-to-world matrix, columns u, v, n, eye: a camera that looks down its -z with +y up,
+        as Blender's and USD's cameras do."""
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = self.u, self.v, self.n, self.eye
+        return m
+
     def directions(self, rows: np.ndarray, cols: np.ndarray, n_rows: int, n_cols: int,
                    dy: np.ndarray | float = 0.5, dx: np.ndarray | float = 0.5) -> np.ndarray:
         """Directions of the rays through (row from bottom, column) + (dx, dy) within the pixel: (N, 3).
@@ -55,6 +62,11 @@ class CameraFrame:
         su = self.half_width * (2.0 * (np.asarray(cols, float) + dx) / n_cols - 1.0)
         sv = self.half_height * (2.0 * (np.asarray(rows, float) + dy) / n_rows - 1.0)
         return -self.n[None, :] + su[:, None] * self.u[None, :] + sv[:, None] * self.v[None, :]
+
+
+def focal_length(view_angle: float, film_height: float) -> float:
+    """The focal length giving a vertical view angle (degrees) on a film ``film_height`` high (same unit)."""
+    return film_height / (2.0 * math.tan(math.radians(view_angle) / 2.0))
 
 
 def scene_bounds(compiled) -> tuple[np.ndarray, np.ndarray] | None:

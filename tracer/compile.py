@@ -17,7 +17,7 @@ from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, POLYHEDRON_KINDS, Camera, Material, Scene, SceneObject, Shape, TORUS_TUBE_RADIUS,
+from .model import (CSG, POLYHEDRON_KINDS, Material, Scene, SceneObject, Shape, TORUS_TUBE_RADIUS,
                     iter_shapes)
 from .transforms import transform_points
 

@@ -6,7 +6,7 @@ Each effect runs only if the compiled scene says it is live, and every ray cast 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

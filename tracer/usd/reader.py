@@ -481,7 +481,8 @@ class _Reader:
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
         """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
         in another tool since)."""
-        from .writer import camera_frame, focal_length
+        from ..camera import focal_length
+        from .writer import camera_frame
 
         eye, look, up = (self.triple(prim, name) for name in (C.A_EYE, C.A_LOOK, C.A_UP))
         angle = self.get(prim, C.A_VIEW_ANGLE)

@@ -8,7 +8,6 @@ shaders so that other tools show them.
 """
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import Optional, Union
@@ -16,7 +15,7 @@ from typing import Optional, Union
 import numpy as np
 
 from ..atomic import replacing
-from ..camera import CameraFrame
+from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
 from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
 from ..transforms import translation
@@ -46,15 +45,7 @@ NEAR_CLIP, DEFAULT_FAR_CLIP = 0.01, 1e6
 def camera_frame(camera: Camera) -> np.ndarray:
     """The camera-to-world matrix USD expects (the camera looks down its -z, +y up): columns u, v, n, eye,
     the tracer's own camera axes (:class:`tracer.camera.CameraFrame`; ValueError for a degenerate camera)."""
-    axes = CameraFrame.from_camera(camera, ASPECT)
-    frame = np.eye(4)
-    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = axes.u, axes.v, axes.n, axes.eye
-    return frame
-
-
-def focal_length(view_angle: float, aperture: float = VERTICAL_APERTURE) -> float:
-    """The focal length that gives a vertical view angle (degrees) on a film ``aperture`` high."""
-    return aperture / (2.0 * math.tan(math.radians(view_angle) / 2.0))
+    return CameraFrame.from_camera(camera, ASPECT).to_world()
 
 
 class _Writer:
@@ -160,7 +151,7 @@ class _Writer:
         cam.CreateProjectionAttr(self.UsdGeom.Tokens.perspective)
         cam.CreateVerticalApertureAttr(VERTICAL_APERTURE)
         cam.CreateHorizontalApertureAttr(VERTICAL_APERTURE * ASPECT)
-        cam.CreateFocalLengthAttr(focal_length(camera.view_angle))
+        cam.CreateFocalLengthAttr(focal_length(camera.view_angle, VERTICAL_APERTURE))
         cam.CreateClippingRangeAttr(self.Gf.Vec2f(*self._clipping_range(camera)))
         self._set_transform(cam, camera_frame(camera))
         prim = cam.GetPrim()

@@ -7,7 +7,6 @@ The writer replaces the files atomically.
 """
 from __future__ import annotations
 
-import math
 import os
 import re
 from typing import Optional
@@ -47,7 +46,7 @@ def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
         up = axes[:, 1]
         _, _, ymin, ymax = raycam.viewplane(params, *render_size(render), render.pixel_aspect_x,
                                             render.pixel_aspect_y)
-        angle = convert.shortest32(math.degrees(2.0 * math.atan(0.5 * (ymax - ymin))))
+        angle = convert.shortest32(deps.module("camera").view_angle(1.0, ymax - ymin))  # window at distance 1
     rot = to_target[:3, :3]
     return Camera(tuple(float(v) for v in rot @ eye), tuple(float(v) for v in rot @ look),
                   tuple(float(v) for v in rot @ up), float(angle))

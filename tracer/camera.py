@@ -69,6 +69,12 @@ def focal_length(view_angle: float, film_height: float) -> float:
     return film_height / (2.0 * math.tan(math.radians(view_angle) / 2.0))
 
 
+def view_angle(focal: float, film_height: float) -> float:
+    """The vertical view angle (degrees) of a film ``film_height`` high at distance ``focal``: the inverse of
+    :func:`focal_length`."""
+    return math.degrees(2.0 * math.atan(0.5 * film_height / focal))
+
+
 def scene_bounds(compiled) -> tuple[np.ndarray, np.ndarray] | None:
     """World bounding box of the bounded primitives of a compiled scene, or None if there are none."""
     boxes = [c for c in (p.world_corners() for p in compiled.primitives if p.bounded) if c is not None]

@@ -13,7 +13,6 @@ so deep nesting cannot overflow Python's stack.
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
+from ..camera import focal_length, view_angle
 from ..errors import TracerError
 from ..model import (CSG, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene, SceneObject,
                      Settings, Shape, SourceLocation)
@@ -473,7 +473,7 @@ class _Reader:
             self.problem(prim, "camera with a degenerate transform")
             return
         eye = world[:3, 3]
-        angle = math.degrees(2.0 * math.atan(0.5 * aperture / focal))
+        angle = view_angle(focal, aperture)
         self.scene.camera = Camera(tuple(float(x) for x in eye),
                                    tuple(float(x) for x in eye - back / np.linalg.norm(back)),
                                    tuple(float(x) for x in up_axis / np.linalg.norm(up_axis)), angle)
@@ -481,7 +481,6 @@ class _Reader:
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
         """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
         in another tool since)."""
-        from ..camera import focal_length
         from .writer import camera_frame
 
         eye, look, up = (self.triple(prim, name) for name in (C.A_EYE, C.A_LOOK, C.A_UP))

@@ -17,15 +17,14 @@ from typing import Optional
 
 import numpy as np
 
+from . import deps
+
 #: Segments around the sphere, the cylinders and the torus ring; rings of the sphere; segments of the tube.
 SEGMENTS = 64
 SPHERE_RINGS = 32
 TORUS_TUBE_SEGMENTS = 32
 #: Half the side of the finite square that stands for SDL's infinite ``plane``.
 PLANE_HALF_SIZE = 1000.0
-#: Torus proportions, as the tracer traces it (ring radius 1).
-TORUS_RING_RADIUS = 1.0
-TORUS_TUBE_RADIUS = 0.2
 
 
 @dataclass
@@ -145,42 +144,23 @@ def plane() -> GenericMesh:
 
 
 def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMesh:
-    """Wall from z = 0 (radius 1) to z = 1 (radius ``small_radius``), with the base and cap discs."""
-    bottom = _ring(segments, 1.0, 0.0)
+    """Wall from z = 0 (radius 1) to z = 1 (radius ``small_radius``), with the base and cap discs: the
+    tracer's tessellation, the wall smooth and the discs flat, the rims sharp."""
+    data = deps.module("geometry.tessellate").tapered_cylinder_mesh(small_radius, segments)
+    faces = [vertices for vertices, _ in data.faces]
     n = segments
-    if small_radius == 0.0:  # a cone: the top ring is one apex
-        vertices = np.concatenate([bottom, [[0.0, 0.0, 1.0]]])
-        apex = n
-        faces: list[tuple[int, ...]] = [(j, (j + 1) % n, apex) for j in range(n)]
-        smooth = [True] * n
-    else:
-        vertices = np.concatenate([bottom, _ring(segments, small_radius, 1.0)])
-        faces = [(j, (j + 1) % n, n + (j + 1) % n, n + j) for j in range(n)]
-        smooth = [True] * n
-        faces.append(tuple(range(n, 2 * n)))  # the cap, facing +z
-        smooth.append(False)
-    faces.append(tuple(range(n - 1, -1, -1)))  # the base, facing -z
-    smooth.append(False)
+    smooth = np.arange(len(faces)) < n  # the wall's faces come first
     sharp = [(j, (j + 1) % n) for j in range(n)]
-    if small_radius != 0.0:
+    if small_radius != 0.0:  # (a cone's top is one apex, no rim)
         sharp += [(n + j, n + (j + 1) % n) for j in range(n)]
-    return GenericMesh(vertices, faces, np.array(smooth), sharp)
+    return GenericMesh(np.asarray(data.vertices, dtype=np.float64), faces, smooth, sharp)
 
 
 def torus(segments: int = SEGMENTS, tube_segments: int = TORUS_TUBE_SEGMENTS) -> GenericMesh:
-    u = 2.0 * np.pi * np.arange(segments) / segments
-    v = 2.0 * np.pi * np.arange(tube_segments) / tube_segments
-    uu, vv = np.meshgrid(u, v, indexing="ij")
-    radius = TORUS_RING_RADIUS + TORUS_TUBE_RADIUS * np.cos(vv)
-    vertices = np.stack([radius * np.cos(uu), radius * np.sin(uu), TORUS_TUBE_RADIUS * np.sin(vv)], axis=-1)
-    vertices = vertices.reshape(-1, 3)
-
-    def at(i: int, k: int) -> int:
-        return (i % segments) * tube_segments + k % tube_segments
-
-    faces = [(at(i, k), at(i + 1, k), at(i + 1, k + 1), at(i, k + 1))
-             for i in range(segments) for k in range(tube_segments)]
-    return GenericMesh(vertices, faces, np.ones(len(faces), bool))
+    """The tracer's tessellation of the generic torus, smooth."""
+    data = deps.module("geometry.tessellate").torus_mesh(segments, tube_segments)
+    faces = [vertices for vertices, _ in data.faces]
+    return GenericMesh(np.asarray(data.vertices, dtype=np.float64), faces, np.ones(len(faces), bool))
 
 
 def from_mesh_data(mesh, smooth: bool) -> GenericMesh:

@@ -17,11 +17,11 @@ import numpy as np
 from ..atomic import replacing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
+from ..geometry.tessellate import square_mesh, tapered_cylinder_mesh, torus_mesh
 from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
 from ..transforms import translation
 from . import common as C
 from .preview import preview_inputs
-from .tessellate import square_mesh, tapered_cylinder_mesh, torus_mesh
 
 PathLike = Union[str, "os.PathLike[str]"]
 

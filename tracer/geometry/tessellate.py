@@ -1,7 +1,7 @@
-"""Polygon meshes of the generic shapes USD has no implicit prim for, for other tools to show.
-
-Our own reader never uses these polygons: it restores the exact shape from ``sdl:shape``.  All meshes are
-in generic coordinates, faces counter-clockwise seen from outside, with exact per-corner normals.
+"""Polygon meshes of the generic shapes, for tools that draw polygons: the USD writer (shapes USD has no
+implicit prim for) and the Blender add-on (its preview meshes).  The tracer itself never uses them: it
+traces the exact shapes.  All meshes are in generic coordinates, faces counter-clockwise seen from outside,
+with exact per-corner normals.
 """
 from __future__ import annotations
 
@@ -22,8 +22,9 @@ def square_mesh() -> MeshData:
 
 
 def tapered_cylinder_mesh(small_radius: float, segments: int = AROUND) -> MeshData:
-    """Wall from radius 1 at z = 0 to ``small_radius`` at z = 1, the base disc and (unless it is a point)
-    the cap disc.  The wall's normal (cos a, sin a, 1 - s) is the gradient of r(z) - |xy|."""
+    """Wall from radius 1 at z = 0 to ``small_radius`` at z = 1 (``segments`` faces, first), the base disc
+    and (unless it is a point) the cap disc.  Vertices: the bottom ring, then the top ring or the apex.  The
+    wall's normal (cos a, sin a, 1 - s) is the gradient of r(z) - |xy|."""
     s = float(small_radius)
     angles = 2.0 * math.pi * np.arange(segments) / segments
     c, n = np.cos(angles), np.sin(angles)
@@ -49,6 +50,7 @@ def tapered_cylinder_mesh(small_radius: float, segments: int = AROUND) -> MeshDa
 
 
 def torus_mesh(around: int = AROUND, tube: int = TUBE) -> MeshData:
+    """Ring radius 1 about the z axis, tube radius TORUS_TUBE_RADIUS: ``around`` x ``tube`` quads."""
     r = TORUS_TUBE_RADIUS
     a = 2.0 * math.pi * np.arange(around) / around
     b = 2.0 * math.pi * np.arange(tube) / tube

@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import math
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
@@ -170,17 +169,13 @@ def _get_input(node, names, default):
     return default
 
 
-def roughness_from_exponent(exponent: float) -> float:
-    """A Phong exponent as a GGX-like roughness (the usual sqrt(2 / (n + 2)))."""
-    return min(1.0, math.sqrt(2.0 / (max(exponent, 0.0) + 2.0)))
-
-
 def apply_principled(material) -> None:
     """Make the Principled BSDF and the viewport colour look like the SDL material."""
     s = material.sdl
     diffuse = tuple(s.diffuse)
     material.diffuse_color = (*[min(c, 1.0) for c in diffuse], 1.0)
-    material.roughness = roughness_from_exponent(s.specular_exponent)
+    roughness = deps.module("appearance").display_roughness(s)
+    material.roughness = roughness
     material.metallic = s.reflectivity
     node = _principled(material)
     if node is None:
@@ -188,7 +183,7 @@ def apply_principled(material) -> None:
     _set_input(node, ("Base Color",), (*diffuse, 1.0))
     _set_input(node, ("Emission Color", "Emission"), (*tuple(s.emissive), 1.0))
     _set_input(node, ("Emission Strength",), 1.0)
-    _set_input(node, ("Roughness",), roughness_from_exponent(s.specular_exponent))
+    _set_input(node, ("Roughness",), roughness)
     _set_input(node, ("Specular IOR Level", "Specular"), min(1.0, sum(s.specular) / 3.0))
     _set_input(node, ("Metallic",), s.reflectivity)
     _set_input(node, ("Transmission Weight", "Transmission"), s.transparency)

@@ -6,9 +6,9 @@ exact.  Our own files do not depend on it: they keep every SDL value in ``sdl:*`
 """
 from __future__ import annotations
 
-import math
 from typing import Callable
 
+from ..appearance import display_roughness
 from ..model import Material
 
 #: UsdPreviewSurface's fallback values (its specification), for inputs a shader does not author.
@@ -24,15 +24,6 @@ def _clamp(x: float, low: float = 0.0, high: float = 1.0) -> float:
     return min(high, max(low, x))
 
 
-def preview_roughness(material: Material) -> float:
-    """UsdPreviewSurface roughness for an SDL material: the Cook-Torrance roughness where that model is in
-    use (specularFraction > 0), otherwise the Beckmann roughness whose highlight matches the Phong exponent
-    n, sqrt(2 / (n + 2)); clamped to [0, 1]."""
-    if material.specular_fraction > 0:
-        return _clamp(material.surface_roughness)
-    return _clamp(math.sqrt(2.0 / (max(material.specular_exponent, 0.0) + 2.0)))
-
-
 def preview_inputs(material: Material) -> dict[str, object]:
     """The shader inputs for an SDL material, by name: floats, colour triples, and the one int.
 
@@ -41,7 +32,7 @@ def preview_inputs(material: Material) -> dict[str, object]:
     inputs: dict[str, object] = {
         "diffuseColor": tuple(material.diffuse), "emissiveColor": tuple(material.emissive),
         "useSpecularWorkflow": 1, "specularColor": tuple(material.specular), "metallic": 0.0,
-        "opacity": _clamp(1.0 - material.transparency), "roughness": preview_roughness(material)}
+        "opacity": _clamp(1.0 - material.transparency), "roughness": display_roughness(material)}
     if material.speed_of_light > 0:
         inputs["ior"] = 1.0 / material.speed_of_light
     return inputs
@@ -54,7 +45,7 @@ def material_from_preview(value: Callable[[str], object]) -> Material:
     The ambient colour is the diffuse one (lit by SDL's globalAmbient); the metallic workflow's specular
     colour is 4 % white for a dielectric and the base colour for a metal, and ``metallic`` becomes mirror
     reflectivity; the roughness r becomes the Phong exponent 2 / r^2 - 2 (the inverse of
-    :func:`preview_roughness`); opacity below 1 becomes transparency, with speedOfLight 1 / ior."""
+    :func:`tracer.appearance.display_roughness`); opacity below 1 becomes transparency, with speedOfLight 1 / ior."""
     def get(name):
         got = value(name)
         return PREVIEW_DEFAULTS[name] if got is None else got

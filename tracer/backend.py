@@ -31,11 +31,11 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
             if backend == "c":
                 raise TracerError("the C core is not part of this installation")
         elif load_error is None:
-            reason = NativeTracer.unsupported(compiled)
-            if reason is None:
+            try:  # (the constructor checks that the C core can trace this scene)
                 return NativeTracer(compiled, threads)
-            if backend == "c":
-                raise TracerError(f"the C core cannot trace this scene: {reason}")
+            except TracerError:
+                if backend == "c":
+                    raise
         elif backend == "c":
             raise TracerError(f"the C core is not available: {load_error}")
         else:

@@ -26,7 +26,7 @@ from test_hard_cases import _sphere_on_plane
 from tracer import native
 from tracer.backend import make_tracer
 from tracer.compile import compile_scene
-from tracer.errors import TracerError
+from tracer.errors import FallbackWarning, TracerError
 from tracer.meshio import read_3vn
 from tracer.model import CSG, MeshData, Shape, Material
 from tracer.native.build import find_compiler, is_current, library_path, source_digest
@@ -353,7 +353,8 @@ def test_a_scene_the_core_cannot_trace_is_refused_and_falls_back():
     assert "something new" in native.NativeTracer.unsupported(compiled)
     with pytest.raises(TracerError):
         native.NativeTracer(compiled)
-    assert make_tracer(compiled, "auto").name == "numpy"
+    with pytest.warns(FallbackWarning, match="something new"):
+        assert make_tracer(compiled, "auto").name == "numpy"
 
 
 @requires_core

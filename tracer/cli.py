@@ -12,7 +12,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .errors import RenderCancelled, SDLError, TracerError
+from .errors import RenderCancelled, SDLError, TracerError, warnings_as_lines
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -244,8 +244,11 @@ def _bench(args) -> int:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), warnings_as_lines(sys.stderr):
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
+    except RenderCancelled:  # (a TracerError: caught first)
+        print("error: cancelled", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (SDLError, TracerError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -255,9 +258,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except OSError as err:
         print(f"error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
         return EXIT_USAGE
-    except RenderCancelled:
-        print("error: cancelled", file=sys.stderr)
-        return EXIT_INTERRUPTED
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

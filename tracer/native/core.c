@@ -9,6 +9,7 @@
 
 #include <pthread.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -980,39 +981,59 @@ void rt_destroy(void *handle)
     free(S);
 }
 
-void *rt_create(const SceneDesc *desc)
+/* Writes what rt_create refused into the caller's buffer (when it gave one) and fails. */
+#define REFUSE(...)                                              \
+    do {                                                         \
+        if (error && capacity > 0)                               \
+            snprintf(error, (size_t)capacity, __VA_ARGS__);      \
+        goto fail;                                               \
+    } while (0)
+
+void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
 {
+    if (error && capacity > 0)
+        error[0] = '\0';
     Scene *S = (Scene *)calloc(1, sizeof(Scene));
-    if (!S)
+    if (!S) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
         return NULL;
+    }
     S->d = *desc;
     const SceneDesc *D = &S->d;
     /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
     for (int64_t p = 0; p < D->n_prims; p++) {
         int kind = D->prim_kind[p];
-        if (kind < K_SPHERE || kind > K_MESH || D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
-            goto fail;
+        if (kind < 0 || kind >= K_COUNT)
+            REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
+        if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
+            REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
+                   (long long)D->n_materials);
         if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
-            goto fail;
+            REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
+                   (long long)D->n_meshes);
     }
     if (D->effects & FX_TEXTURES) {
         for (int64_t m = 0; m < D->n_materials; m++) {
             int32_t texture = D->mat_texture[m];
             int64_t image = D->mat_tex_image[m];
             if (texture < -3 || (texture > 0 && (image < 0 || image >= D->n_images)))
-                goto fail;
+                REFUSE("material %lld has texture %d (image %lld of %lld)", (long long)m, (int)texture,
+                       (long long)image, (long long)D->n_images);
         }
         for (int64_t i = 0; i < D->n_images; i++)
             if (D->image_info[2 * i] < 1 || D->image_info[2 * i + 1] < 1 || !D->image_data[i])
-                goto fail;
+                REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
+                       (long long)D->image_info[2 * i + 1]);
     }
     for (int64_t c = 0; c < D->n_csg; c++)
         if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
             !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
-            goto fail;
+            REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
+                   (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
     for (int64_t i = 0; i < D->n_objects; i++)
         if (!ref_ok(D, D->object_ref[i]))
-            goto fail;
+            REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
     for (int64_t i = 0; i < D->n_objects; i++) {
         int64_t depth = csg_depth_of(D, D->object_ref[i], 0);
         if (depth > S->csg_depth)
@@ -1020,7 +1041,7 @@ void *rt_create(const SceneDesc *desc)
     }
     S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
     if (!S->meshes)
-        goto fail;
+        REFUSE("out of memory");
     for (int64_t k = 0; k < D->n_meshes; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         int64_t nb = info[0], tb = info[2];
@@ -1055,20 +1076,21 @@ void *rt_create(const SceneDesc *desc)
         m->extent = D->mesh_extent[k];
         for (int64_t i = 0; i < m->n_tris; i++)
             if (m->order[i] < 0 || m->order[i] >= m->n_tris)
-                goto fail;
+                REFUSE("mesh %lld: triangle order entry %lld is out of range", (long long)k, (long long)i);
         m->depth = mesh_check_depth(m);
         if (m->depth < 0)
-            goto fail;
+            REFUSE("mesh %lld: inconsistent hierarchy (or out of memory)", (long long)k);
         if (m->depth > S->mesh_depth)
             S->mesh_depth = m->depth;
     }
     if (!build_tree(S))
-        goto fail;
+        REFUSE("out of memory (or more than 2^31 bounded objects) building the object hierarchy");
     return S;
 fail:
     rt_destroy(S);
     return NULL;
 }
+#undef REFUSE
 
 /* ------------------------------------------------------------------------------------------------------
  * Batches over threads */

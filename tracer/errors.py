@@ -71,3 +71,12 @@ def warnings_as_lines(stream: Optional[TextIO] = None):
 
         warnings.showwarning = show
         yield
+
+
+class SceneError(TracerError, ValueError):
+    """A scene, or a value in one, that the tracer cannot use: a degenerate camera, an unknown shape kind, a
+    mesh face using a vertex that does not exist.  (Also a ValueError, which is what these were before.)"""
+
+
+class WriteError(TracerError, ValueError):
+    """Something a file format (SDL, .3vn, USD) cannot express; nothing is written.  (Also a ValueError.)"""

@@ -21,6 +21,7 @@ from .errors import RenderCancelled, TracerError
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
+from .savings import RaySavings
 from .trace import RayCounts
 
 #: Width/height limit: a 16k x 16k float image is already 3 GiB.
@@ -57,7 +58,7 @@ class RenderResult:
     effects: frozenset = field(default_factory=frozenset)
 
     def stats(self) -> dict:
-        return {"rays": self.rays.as_dict(), "seconds": round(self.seconds, 6), "backend": self.backend,
+        return {"rays": self.rays.as_dict(), "skipped": self.rays.skipped(), "seconds": round(self.seconds, 6), "backend": self.backend,
                 "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
                 "effects": sorted(self.effects)}
 
@@ -88,11 +89,12 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            cancel: Optional[Callable[[], bool]] = None, backend: str = "auto",
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
-           threads: Optional[int] = None) -> RenderResult:
+           threads: Optional[int] = None, savings: Optional[RaySavings] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
     ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
+    ``savings``: which rays that cannot change the image are skipped (default: tracer.savings' defaults).
     """
     check_size(width, height)
     sampling.check(samples, sampling_mode, threshold)
@@ -100,7 +102,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     camera = scene_camera(compiled.scene, compiled, width / height)
     frame = CameraFrame.from_camera(camera, width / height)
-    tracer = make_tracer(compiled, backend, threads)
+    tracer = make_tracer(compiled, backend, threads, savings)
     passes = block_passes(block_size, progressive)
     # The film is stored bottom row first, as the lecture counts rows; the caller sees it flipped.
     film = np.zeros((height, width, 3), dtype=np.float32)

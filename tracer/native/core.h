@@ -23,7 +23,11 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32 };
-enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
+enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3,
+       /* rays not cast, per reason (tracer.savings.SKIP_REASONS; RayCounts' skipped_* fields) */
+       SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7, N_COUNTS = 8 };
+/* tracer.savings.RaySavings.flags() */
+enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 
 /* Keep in step with flatten.py's _SceneDesc (same order, same types). */
 typedef struct {
@@ -126,6 +130,7 @@ typedef struct {
 int64_t rt_desc_size(void);
 void *rt_create(const SceneDesc *desc);
 void rt_destroy(void *scene);
+int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed);
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
              int64_t *counts, int64_t threads);
 int rt_first_hits(void *scene, int64_t n, const double *origins, const double *directions, double *t,

@@ -23,6 +23,8 @@ from .compile import CompiledScene, CSGNode
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
 SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
+#: The on/off switches, in the bit order of RaySavings.flags() (the C core's SAVE_* bits).
+SWITCHES = ("inside_shadows", "shared_tir", "dark_materials")
 DEFAULT_CUTOFF = 1.0 / 512.0
 #: Shapes that bound a solid (every ray into one comes out again): not the square (a sheet) nor meshes
 #: (which may be open).  The plane is the half-space below it.
@@ -45,8 +47,8 @@ class RaySavings:
         return cls(cutoff=0.0, inside_shadows=False, shared_tir=False, dark_materials=False)
 
     def flags(self) -> int:
-        """The switches as bits, in the order of SKIP_REASONS after the cutoff (for the C core)."""
-        return (1 if self.inside_shadows else 0) | (2 if self.shared_tir else 0) | (4 if self.dark_materials else 0)
+        """The switches that are on, as bits in the order of SWITCHES (for the C core)."""
+        return sum(1 << k for k, name in enumerate(SWITCHES) if getattr(self, name))
 
 
 def dark_materials(compiled: CompiledScene) -> np.ndarray:

@@ -14,13 +14,16 @@ from typing import Optional
 
 from .compile import CompiledScene
 from .errors import FallbackWarning, TracerError
+from .savings import RaySavings
 from .trace import Tracer
 
 BACKENDS = ("auto", "c", "numpy")
 
 
-def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optional[int] = None):
-    """``threads``: the C core's worker threads (None: $SDL_TRACER_THREADS, else every core)."""
+def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optional[int] = None,
+                savings: Optional[RaySavings] = None):
+    """``threads``: the C core's worker threads (None: $SDL_TRACER_THREADS, else every core); ``savings``:
+    which useless rays to skip (None: the defaults of tracer.savings)."""
     if threads is not None and threads < 1:
         raise TracerError(f"threads must be 1 or more, not {threads}")
     if backend not in BACKENDS:
@@ -33,11 +36,11 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
                 raise TracerError("the C core is not part of this installation") from None
         else:
             try:  # (the constructor checks that the C core is loaded and can trace this scene)
-                return NativeTracer(compiled, threads)
+                return NativeTracer(compiled, threads, savings)
             except TracerError as err:
                 if backend == "c":
                     raise
                 warnings.warn(f"{err}; using the slower NumPy path", FallbackWarning, stacklevel=3)
-    tracer = Tracer(compiled)
+    tracer = Tracer(compiled, savings)
     tracer.name = "numpy"
     return tracer

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SceneError
 from ..model import MeshData
 from .hits import HitArrays
 
@@ -117,9 +118,9 @@ class TriangleMesh:
         vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(mesh.normals, dtype=np.float64).reshape(-1, 3)
         if tri_v.size and (tri_v.min() < 0 or tri_v.max() >= len(vertices)):
-            raise ValueError(f"mesh {mesh.origin!r}: a face uses a vertex index out of range")
+            raise SceneError(f"mesh {mesh.origin!r}: a face uses a vertex index out of range")
         if (tri_n >= len(normals)).any():
-            raise ValueError(f"mesh {mesh.origin!r}: a face uses a normal index out of range")
+            raise SceneError(f"mesh {mesh.origin!r}: a face uses a normal index out of range")
         self.triangle_count = len(tri_v)
 
         p = vertices[tri_v]  # (T, 3 corners, 3)

@@ -38,8 +38,16 @@ _i64p = ctypes.POINTER(ctypes.c_int64)
 _u8p = ctypes.POINTER(ctypes.c_uint8)
 
 
+#: A library file to load instead of looking for one ($SDL_TRACER_LIBRARY; make sanitize uses it).
+LIBRARY_OVERRIDE = "SDL_TRACER_LIBRARY"
+
+
 def _load() -> ctypes.CDLL:
-    """The prebuilt library of an installed package if it loads, else the development build."""
+    """$SDL_TRACER_LIBRARY if set; else the prebuilt library of an installed package if it loads, else the
+    development build."""
+    override = os.environ.get(LIBRARY_OVERRIDE)
+    if override:
+        return _configure(ctypes.CDLL(override))
     prebuilt = _builder.prebuilt_library()
     if prebuilt is None:
         return _configure(ctypes.CDLL(str(_builder.build())))

@@ -41,7 +41,8 @@ class BuildError(RuntimeError):
 
 
 def compile_flags() -> list[str]:
-    flags = ["-O3", "-fPIC", "-shared", "-pthread", "-std=c11", "-fno-math-errno", "-Wall", "-Wextra"]
+    flags = ["-O3", "-fPIC", "-shared", "-pthread", "-std=c11", "-fno-math-errno", "-ffp-contract=off", "-Wall",
+             "-Wextra"]
     if platform.machine().lower() in ("x86_64", "amd64"):
         flags.insert(1, "-march=x86-64-v2")
     return flags

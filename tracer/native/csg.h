@@ -26,8 +26,6 @@ static inline int csg_state(int op, int left, int right)
 }
 
 /* tracer.numerics.time_tolerance for one ray: scale_over_speed = (1 + max|o|) / |d|, eps the relative epsilon. */
-/* np.maximum (NaN wins) */
-static inline double nan_max2(double a, double b) { return (a != a || b != b) ? NAN : (a > b ? a : b); }
 
 static inline double time_tol(double eps, double scale_over_speed, double t)
 {

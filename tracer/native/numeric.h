@@ -16,6 +16,10 @@
 static inline double fmin_nan(double a, double b) { return (a < b || b != b) ? a : b; }
 static inline double fmax_nan(double a, double b) { return (a > b || b != b) ? a : b; }
 
+/* np.maximum / np.minimum: a NaN argument wins */
+static inline double nan_max2(double a, double b) { return (a != a || b != b) ? NAN : (a > b ? a : b); }
+static inline double nan_min2(double a, double b) { return (a != a || b != b) ? NAN : (a < b ? a : b); }
+
 static inline double clip(double x, double lo, double hi)  /* np.clip: NaN stays NaN */
 {
     return x < lo ? lo : (x > hi ? hi : x);

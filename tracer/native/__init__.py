@@ -21,7 +21,7 @@ from ..compile import CompiledScene
 from ..errors import TracerError
 from ..intersect.hits import HitArrays
 from ..trace import RayCounts
-from . import flatten
+from . import contract, flatten
 from . import build as _builder
 from .build import BuildError
 
@@ -54,15 +54,48 @@ def _load() -> ctypes.CDLL:
                                    _i32p, _i32p, _dp, _i8p]
     lib.rt_texture_colors.restype = ctypes.c_int
     lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
-    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
-        raise BuildError("the C core's SceneDesc does not match flatten.py's")
+    lib.rt_desc_layout.restype = ctypes.c_int64
+    lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
+    lib.rt_contract_digest.restype = ctypes.c_char_p
+    lib.rt_contract_digest.argtypes = []
+    mismatch = layout_mismatch(lib)
+    if mismatch:
+        raise BuildError(mismatch)
     return lib
 
 
-try:
-    _lib = _load()
-except (BuildError, OSError) as err:
-    load_error = str(err) or type(err).__name__
+def c_layout(lib: ctypes.CDLL) -> list[tuple[int, int]]:
+    """(offset, size) of every SceneDesc field as the C compiler laid it out, in contract.py's order."""
+    capacity = len(contract.SCENE_DESC)
+    offsets, sizes = np.zeros(capacity, np.int64), np.zeros(capacity, np.int64)
+    count = lib.rt_desc_layout(_ptr(offsets, ctypes.c_int64), _ptr(sizes, ctypes.c_int64), capacity)
+    if count != capacity:
+        return [(-1, -1)] * int(count)
+    return list(zip(offsets.tolist(), sizes.tolist()))
+
+
+def ctypes_layout() -> list[tuple[int, int]]:
+    """(offset, size) of every field of flatten.SceneDesc, the ctypes mirror."""
+    return [(getattr(flatten.SceneDesc, f.name).offset, getattr(flatten.SceneDesc, f.name).size)
+            for f in contract.SCENE_DESC]
+
+
+def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
+    """None if the library was built from this contract and lays SceneDesc out as ctypes does, else why not."""
+    built_from = lib.rt_contract_digest().decode()
+    if built_from != contract.digest():
+        return (f"the C core was built from another contract ({built_from}, not {contract.digest()}): "
+                "regenerate contract.h (python -m tracer.native.contract) and rebuild")
+    c, py = c_layout(lib), ctypes_layout()
+    if len(c) != len(py):
+        return f"the C core's SceneDesc has {len(c)} fields, contract.py {len(py)}"
+    for f, (c_off, c_size), (py_off, py_size) in zip(contract.SCENE_DESC, c, py):
+        if (c_off, c_size) != (py_off, py_size):
+            return (f"SceneDesc.{f.name} is at offset {c_off} ({c_size} bytes) in C but {py_off} ({py_size} bytes) "
+                    "in ctypes")
+    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
+        return "the C core's SceneDesc size differs from flatten.py's"
+    return None
 
 
 def default_threads() -> int:
@@ -89,6 +122,12 @@ def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
 
 def _ptr(array: np.ndarray, ctype):
     return array.ctypes.data_as(ctypes.POINTER(ctype))
+
+
+try:
+    _lib = _load()
+except (BuildError, OSError) as err:
+    load_error = str(err) or type(err).__name__
 
 
 class NativeTracer:

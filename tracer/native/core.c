@@ -8,6 +8,7 @@
 #define _POSIX_C_SOURCE 200809L
 
 #include <pthread.h>
+#include <stddef.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,6 +32,24 @@ const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
 const char *rt_build_id(void) { return rt_build_marker; }
 
 int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
+
+/* Offset and size of every SceneDesc field in contract.py's order, for the loader to compare with ctypes';
+ * returns the number of fields (nothing is written when capacity is smaller). */
+int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity)
+{
+    if (capacity < RT_SCENE_DESC_FIELD_COUNT)
+        return RT_SCENE_DESC_FIELD_COUNT;
+    int64_t k = 0;
+#define RT_FIELD_LAYOUT(name)                                  \
+    offsets[k] = (int64_t)offsetof(SceneDesc, name);           \
+    sizes[k] = (int64_t)sizeof(((const SceneDesc *)0)->name);  \
+    k++;
+    RT_SCENE_DESC_FIELDS(RT_FIELD_LAYOUT)
+#undef RT_FIELD_LAYOUT
+    return k;
+}
+
+const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 
 /* ------------------------------------------------------------------------------------------------------
  * The scene at run time */
@@ -72,7 +91,6 @@ typedef struct {
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
 } Scene;
 
-#define MEDIA_DEPTH 8
 #define SHADOW_CACHE 16
 
 typedef struct {

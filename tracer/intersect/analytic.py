@@ -13,11 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import TOLERANCES
 from .hits import HitArrays
 from .quadratic import solve_quadratic
-
-# Points this close (relative) to a rim still count as on the shape, so rays through edges do not leak.
-EDGE_TOLERANCE = 1e-12
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -109,9 +107,10 @@ def _one_hit(t, hit, entering, normal, part=0) -> HitArrays:
     return out
 
 
-def intersect_square(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+def intersect_square(origin: np.ndarray, direction: np.ndarray, edge: float = TOLERANCES.square_edge) -> HitArrays:
+    """``edge``: crossings this close (relative) outside the rim still count, so that edges do not leak."""
     t, crosses, p = _z_plane_crossing(origin, direction)
-    limit = 1.0 + EDGE_TOLERANCE
+    limit = 1.0 + edge
     hit = crosses & (np.abs(p[:, 0]) <= limit) & (np.abs(p[:, 1]) <= limit)
     out = _one_hit(t, hit, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(hit[:, None], p[:, :2], 0.0)

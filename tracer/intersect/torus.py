@@ -11,7 +11,8 @@ form (Ferrari) lose many digits for nearly double roots, so we:
    near-double root: it counts (as two roots, or one touching pair) only where the quartic's minimum
    next to it is below the rounding bound of evaluating the quartic there; and a real pair that the
    quartic does not go below zero between is a rounding artefact of a miss and is dropped.  The bound,
-   ``RESIDUAL_ULPS`` machine epsilons times the quartic's terms taken in absolute value, scales with
+   ``Tolerances.torus_residual_ulps`` machine epsilons (the coefficients take up to 6 operations each and
+   Horner's rule 8 more) times the quartic's terms taken in absolute value, scales with
    the coefficients, so the test is as tight at 1e-8 as at 1e8.
 """
 from __future__ import annotations
@@ -19,13 +20,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import TORUS_TUBE_RADIUS
+from ..numerics import TOLERANCES, Tolerances
 from .hits import HitArrays
 
 RING_RADIUS = 1.0
-NEWTON_STEPS = 4
-#: Rounding bound of the quartic's value, in machine epsilons of its terms' absolute sum: the coefficients
-#: take up to 6 operations each and Horner's rule 8 more (pbrt's gamma(n) with room to spare).
-RESIDUAL_ULPS = 16.0
 EPSILON = np.finfo(float).eps
 
 
@@ -62,16 +60,16 @@ def quartic_at(s: np.ndarray, coeffs) -> np.ndarray:
     return (((s + c3) * s + c2) * s + c1) * s + c0
 
 
-def residual_bound(s: np.ndarray, magnitudes) -> np.ndarray:
+def residual_bound(s: np.ndarray, magnitudes, ulps: float) -> np.ndarray:
     """How far from zero a computed quartic value at s can be when the exact one is zero."""
     a = np.abs(s)
-    return RESIDUAL_ULPS * EPSILON * quartic_at(a, magnitudes)
+    return ulps * EPSILON * quartic_at(a, magnitudes)
 
 
-def _minimum_near(s: np.ndarray, coeffs) -> np.ndarray:
+def _minimum_near(s: np.ndarray, coeffs, steps: int) -> np.ndarray:
     """Newton steps on the quartic's derivative from s: the local extremum a complex pair sits over."""
     c3, c2, c1, c0 = coeffs
-    for _ in range(NEWTON_STEPS):
+    for _ in range(steps):
         d1 = ((4.0 * s + 3.0 * c3) * s + 2.0 * c2) * s + c1
         d2 = (12.0 * s + 6.0 * c3) * s + 2.0 * c2
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -80,10 +78,10 @@ def _minimum_near(s: np.ndarray, coeffs) -> np.ndarray:
     return s
 
 
-def _polish(s: np.ndarray, coeffs) -> np.ndarray:
+def _polish(s: np.ndarray, coeffs, steps: int) -> np.ndarray:
     """Newton steps on the monic quartic, each kept only where it reduces the residual."""
     c3, c2, c1, c0 = (c[:, None] for c in coeffs)
-    for _ in range(NEWTON_STEPS):
+    for _ in range(steps):
         p = (((s + c3) * s + c2) * s + c1) * s + c0
         dp = ((4.0 * s + 3.0 * c3) * s + 2.0 * c2) * s + c1
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -94,20 +92,21 @@ def _polish(s: np.ndarray, coeffs) -> np.ndarray:
     return s
 
 
-def _accepted_roots(roots: np.ndarray, coeffs, magnitudes) -> np.ndarray:
+def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> np.ndarray:
     """Sorted real roots (M, 4) from the companion eigenvalues, +inf in unused slots (see module doc)."""
     col = [c[:, None] for c in coeffs]
     mag = [m[:, None] for m in magnitudes]
+    ulps, steps = tol.torus_residual_ulps, tol.torus_newton_steps
     real = roots.imag == 0.0
     # A complex pair: both members start Newton from the same real part, so they find the same extremum.
-    centre = _minimum_near(roots.real.copy(), col)
+    centre = _minimum_near(roots.real.copy(), col, steps)
     depth = quartic_at(centre, col)
     curvature = (12.0 * centre + 6.0 * col[0]) * centre + 2.0 * col[1]
-    near_double = ~real & (depth <= residual_bound(centre, mag)) & (curvature > 0.0)
+    near_double = ~real & (depth <= residual_bound(centre, mag, ulps)) & (curvature > 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.sqrt(np.maximum(-depth, 0.0) / (0.5 * curvature))
     split = np.where(roots.imag > 0.0, centre - half, centre + half)
-    s = _polish(np.where(real, roots.real, np.where(near_double, split, 0.0)), coeffs)
+    s = _polish(np.where(real, roots.real, np.where(near_double, split, 0.0)), coeffs, steps)
     s = np.where(real | near_double, s, np.inf)
     s.sort(axis=1)
     # Between an entry and its exit the quartic is negative (inside the tube), between an exit and the
@@ -117,7 +116,7 @@ def _accepted_roots(roots: np.ndarray, coeffs, magnitudes) -> np.ndarray:
         both = finite[:, first] & finite[:, second]
         mid = 0.5 * (np.where(both, s[:, first], 0.0) + np.where(both, s[:, second], 0.0))
         value = quartic_at(mid[:, None], col)[:, 0]
-        bound = residual_bound(mid[:, None], mag)[:, 0]
+        bound = residual_bound(mid[:, None], mag, ulps)[:, 0]
         wrong = both & ((value > bound) if inside else (value < -bound))
         s[wrong, first] = np.inf
         s[wrong, second] = np.inf
@@ -135,7 +134,7 @@ def torus_normal(points: np.ndarray, tube: float = TORUS_TUBE_RADIUS) -> np.ndar
     return grad
 
 
-def intersect_torus(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances = TOLERANCES) -> HitArrays:
     """All hits of the lines origin + t * direction with the generic torus (K = 4 slots)."""
     n = origin.shape[0]
     hits = HitArrays.empty(n, 4)
@@ -159,7 +158,7 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     companion[:, 0, :] = -np.stack(coeffs, axis=1)
     companion[:, 1, 0] = companion[:, 2, 1] = companion[:, 3, 2] = 1.0
     roots = np.linalg.eigvals(companion)
-    s = _accepted_roots(roots, coeffs, coefficient_magnitudes(o, u))
+    s = _accepted_roots(roots, coeffs, coefficient_magnitudes(o, u), tol)
     points = o[:, None, :] + np.where(np.isfinite(s), s, 0.0)[..., None] * u[:, None, :]
     normal = torus_normal(points)
     t = np.where(np.isfinite(s), (s + shift[:, None]) / speed[idx, None], np.inf)

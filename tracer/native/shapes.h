@@ -10,7 +10,7 @@
 #include "core.h"
 #include "numeric.h"
 
-/* EDGE_TOLERANCE, TORUS_RING and TORUS_TUBE come from contract.h (via core.h). */
+/* TORUS_RING and TORUS_TUBE come from contract.h (via core.h). */
 
 static inline void set_hit(Hit *h, double t, int entering, double nx, double ny, double nz, int part)
 {
@@ -22,6 +22,7 @@ static inline void set_hit(Hit *h, double t, int entering, double nx, double ny,
     h->part = part;
     h->shape = -1;
     h->entering = entering;
+    h->err = 0.0;
 }
 
 /* Roots -b/a -+ sqrt(disc)/a about the line's point nearest the centre (analytic.intersect_sphere). */
@@ -73,14 +74,14 @@ static int hits_cube(const double *o, const double *d, Hit *out)
 }
 
 /* The square (thin: the caller turns its crossing into an enter/exit pair) and the plane z = 0. */
-static int hits_z_plane(const double *o, const double *d, Hit *out, int bounded)
+static int hits_z_plane(const double *o, const double *d, Hit *out, int bounded, double edge)
 {
     if (d[2] == 0.0)
         return 0;
     double t = (0.0 - o[2]) / d[2];
     double px = o[0] + t * d[0], py = o[1] + t * d[1];
     if (bounded) {
-        double limit = 1.0 + EDGE_TOLERANCE;
+        double limit = 1.0 + edge;
         if (!(fabs(px) <= limit && fabs(py) <= limit))
             return 0;
     }

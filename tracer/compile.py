@@ -36,6 +36,11 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
     return np.einsum("ij,ij->i", perp, perp) <= radius * radius
 
 
+#: Closed shapes whose normals must agree with their entering flags (the square is a sheet, meshes keep
+#: their triangles' orientation, the plane's normal and flag come from one sign).
+SOLID_ANALYTIC_KINDS = ("sphere", "cube", "taperedCylinder", "cylinder", "cone", "torus")
+
+
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
     """The first hit per ray with t_min < t < t_max (K = 1; t = inf where there is none).
 
@@ -218,8 +223,9 @@ class Primitive:
         """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
         linear = np.abs(self.inverse[:3, :3])
         raw_scale = np.max(np.abs(origins) @ linear.T + np.abs(self.inverse[:3, 3]), axis=1)
-        return numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
-                                           self.generic_size, self.rounding)
+        # (plus the shape's own root error, where it has one: the torus)
+        return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
+                                                        self.generic_size, self.rounding)
 
     def world_corners(self) -> Optional[np.ndarray]:
         pts = self._generic_points()
@@ -256,6 +262,8 @@ class Primitive:
         shift = np.where(np.isfinite(shift), shift, 0.0)
         centred = o + shift[:, None] * d
         local = self.generic_hits(centred, d)
+        if self.kind in SOLID_ANALYTIC_KINDS or self._planes is not None:
+            analytic.agree_with_crossing(local, d)
         local.t = local.t + shift[:, None]
         local.error = self.time_errors(origins[idx], centred, d, local)
         local.normal = local.normal @ self.normal_matrix

@@ -58,6 +58,20 @@ def intersect_sphere(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     return _two_hits(t_lo, t_hi, p_lo, p_hi, 0, 0, hit)
 
 
+def agree_with_crossing(hits: HitArrays, direction: np.ndarray) -> None:
+    """Make each normal agree with its entering flag (n . d <= 0 entering, >= 0 leaving), in place.
+
+    Where a shape is nearly degenerate (scaled by 1e-9 along one axis) or the ray grazes it, the computed
+    normal can lean, by rounding, to the wrong side of the ray; its component along the ray is then
+    removed, which is the least change that makes it a normal of a grazing crossing.
+    """
+    along = np.einsum("nkj,nj->nk", hits.normal, direction)
+    wrong = np.isfinite(hits.t) & np.where(hits.entering, along > 0.0, along < 0.0)
+    if wrong.any():
+        speed2 = np.einsum("nj,nj->n", direction, direction)
+        hits.normal -= np.where(wrong, along / speed2[:, None], 0.0)[..., None] * direction[:, None, :]
+
+
 def _slab_interval(o: np.ndarray, d: np.ndarray, lo: float, hi: float):
     """Entry and exit parameters of a line with the slab lo <= x <= hi (±inf for parallel lines)."""
     with np.errstate(divide="ignore", invalid="ignore"):

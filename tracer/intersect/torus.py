@@ -8,8 +8,8 @@ form (Ferrari) lose many digits for nearly double roots, so we:
    caller already moved the origin there), so coefficients are O(1) however far away the eye is;
 3. take the eigenvalues of its companion matrix (backward stable; NumPy batches them);
 4. keep the real ones and polish each with Newton steps on the quartic itself.  A complex pair is a
-   near-double root: it counts (as two roots, or one touching pair) only where the quartic's minimum
-   next to it is below the rounding bound of evaluating the quartic there; and a real pair that the
+   near-double root: it counts (as two roots, or one touching pair) only where the quartic's extremum
+   next to it is zero within the rounding bound of evaluating the quartic there; and a real pair that the
    quartic does not go below zero between is a rounding artefact of a miss and is dropped.  The bound,
    ``Tolerances.torus_residual_ulps`` machine epsilons (the coefficients take up to 6 operations each and
    Horner's rule 8 more) times the quartic's terms taken in absolute value, scales with
@@ -102,7 +102,9 @@ def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> n
     centre = _minimum_near(roots.real.copy(), col, steps)
     depth = quartic_at(centre, col)
     curvature = (12.0 * centre + 6.0 * col[0]) * centre + 2.0 * col[1]
-    near_double = ~real & (depth <= residual_bound(centre, mag, ulps)) & (curvature > 0.0)
+    # Only a double root within rounding (|p| at the extremum below the bound): a deep minimum is one
+    # between two real roots, which Newton can wander to from a far complex pair.
+    near_double = ~real & (np.abs(depth) <= residual_bound(centre, mag, ulps)) & (curvature > 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.sqrt(np.maximum(-depth, 0.0) / (0.5 * curvature))
     split = np.where(roots.imag > 0.0, centre - half, centre + half)
@@ -158,7 +160,8 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances =
     companion[:, 0, :] = -np.stack(coeffs, axis=1)
     companion[:, 1, 0] = companion[:, 2, 1] = companion[:, 3, 2] = 1.0
     roots = np.linalg.eigvals(companion)
-    s = _accepted_roots(roots, coeffs, coefficient_magnitudes(o, u), tol)
+    magnitudes = coefficient_magnitudes(o, u)
+    s = _accepted_roots(roots, coeffs, magnitudes, tol)
     points = o[:, None, :] + np.where(np.isfinite(s), s, 0.0)[..., None] * u[:, None, :]
     normal = torus_normal(points)
     t = np.where(np.isfinite(s), (s + shift[:, None]) / speed[idx, None], np.inf)
@@ -168,4 +171,17 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances =
     # hits alternate in, out, in, out; parity is exact even where a grazing hit's normal is ambiguous.
     hits.entering[idx] = np.isfinite(t) & (np.arange(4) % 2 == 0)
     hits.part[idx] = np.where(np.isfinite(t), 0, -1)
+    hits.error[idx] = np.where(np.isfinite(t), root_error(s, coeffs, magnitudes, tol) / speed[idx, None], 0.0)
     return hits
+
+
+def root_error(s: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> np.ndarray:
+    """How far (M, 4) roots s can be from the exact ones: the residual bound over the slope, or, near a
+    double root where the slope vanishes, over the curvature (|p| ~ p''/2 delta^2)."""
+    col = [c[:, None] for c in coeffs]
+    x = np.where(np.isfinite(s), s, 0.0)
+    bound = residual_bound(x, [m[:, None] for m in magnitudes], tol.torus_residual_ulps)
+    slope = np.abs(((4.0 * x + 3.0 * col[0]) * x + 2.0 * col[1]) * x + col[2])
+    curvature = np.abs((12.0 * x + 6.0 * col[0]) * x + 2.0 * col[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.fmin(bound / slope, np.sqrt(2.0 * bound / curvature))

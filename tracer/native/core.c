@@ -229,6 +229,12 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
     return 0;
 }
 
+/* Closed analytic shapes: their normals must agree with their entering flags (compile.SOLID_ANALYTIC_KINDS). */
+static inline int solid_analytic(int32_t kind)
+{
+    return kind == K_SPHERE || kind == K_CUBE || kind == K_TAPERED || kind == K_TORUS || kind == K_POLYHEDRON;
+}
+
 /* World ray -> generic origin moved to the line's point nearest the generic centre (returns the shift). */
 static inline double prim_generic_ray(const double *inv, const double *o, const double *d, double *og, double *dg)
 {
@@ -266,6 +272,9 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
         if (!list_reserve(w, out, 8))
             return 0;
         n = analytic_hits(S, p, og, dg, out->h, &out->inside);
+        if (solid_analytic(D->prim_kind[p]))
+            for (int64_t i = 0; i < n; i++)
+                agree_with_crossing(&out->h[i], dg);
     }
     const double *rounding = D->prim_rounding + 2 * p;
     double raw_scale = affine_point_scale(inv, o);
@@ -273,7 +282,8 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
         Hit *h = &out->h[i];
         h->t += shift;
         h->shape = (int32_t)p;
-        h->err = generic_time_error(h->t, raw_scale, og, dg, h->n, rounding[1], rounding[0]);
+        /* (plus the shape's own root error, where it has one: the torus) */
+        h->err += generic_time_error(h->t, raw_scale, og, dg, h->n, rounding[1], rounding[0]);
     }
     out->n = n;
     return 1;
@@ -313,7 +323,9 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         const double *rounding = D->prim_rounding + 2 * p;
         if (raw_scale < 0.0)
             raw_scale = affine_point_scale(inv, o);
-        double err = generic_time_error(t, raw_scale, og, dg, buf[i].n, rounding[1], rounding[0]);
+        if (solid_analytic(D->prim_kind[p]))
+            agree_with_crossing(&buf[i], dg);
+        double err = buf[i].err + generic_time_error(t, raw_scale, og, dg, buf[i].n, rounding[1], rounding[0]);
         if (t - err > t_min) {
             *out = buf[i];
             out->t = t;

@@ -12,6 +12,18 @@
 
 /* TORUS_RING and TORUS_TUBE come from contract.h (via core.h). */
 
+/* analytic.agree_with_crossing for one hit: a normal on the wrong side of the ray loses its component
+ * along the ray. */
+static inline void agree_with_crossing(Hit *h, const double *d)
+{
+    double along = dot3(h->n, d);
+    if (h->entering ? along > 0.0 : along < 0.0) {
+        double k = along / dot3(d, d);
+        for (int i = 0; i < 3; i++)
+            h->n[i] -= k * d[i];
+    }
+}
+
 static inline void set_hit(Hit *h, double t, int entering, double nx, double ny, double nz, int part)
 {
     h->t = t;
@@ -295,7 +307,7 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
             double centre = torus_minimum_near(wr[i], c, newton_steps);
             double depth = quartic_at(centre, c);
             double curvature = (12.0 * centre + 6.0 * c[0]) * centre + 2.0 * c[1];
-            if (!(depth <= torus_residual_bound(centre, m, residual_ulps)) || !(curvature > 0.0))
+            if (!(fabs(depth) <= torus_residual_bound(centre, m, residual_ulps)) || !(curvature > 0.0))
                 continue;
             double half = sqrt((depth < 0.0 ? -depth : 0.0) / (0.5 * curvature));
             start = wi[i] > 0.0 ? centre - half : centre + half;
@@ -337,6 +349,11 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
         double t = (s[i] + shift) / speed;
         /* Hits alternate in, out, in, out along the line (it starts outside the bounded torus). */
         set_hit(&out[n], t, (n % 2) == 0, g[0], g[1], g[2], 0);
+        /* torus.root_error: residual bound over the slope, or near a double root over the curvature */
+        double limit = torus_residual_bound(s[i], m, residual_ulps);
+        double slope = fabs(((4.0 * s[i] + 3.0 * c[0]) * s[i] + 2.0 * c[1]) * s[i] + c[2]);
+        double curvature = fabs((12.0 * s[i] + 6.0 * c[0]) * s[i] + 2.0 * c[1]);
+        out[n].err = fmin_nan(limit / slope, sqrt(2.0 * limit / curvature)) / speed;
         n++;
     }
     return n;

@@ -214,10 +214,12 @@ class Primitive:
     @cached_property
     def rounding(self) -> float:
         """Relative rounding of this primitive's generic hit points: the hit computation's gamma plus the
-        error of the inverse matrix itself (its residual inverse @ matrix - I, which grows with the
-        matrix's condition number)."""
-        residual = np.max(np.abs(self.inverse @ self.matrix - np.eye(4)).sum(axis=1))
-        return numerics.gamma(self.tolerances.hit_ulps) + float(residual)
+        error of the inverse matrix itself, its residual inverse @ matrix - I relative to the products'
+        magnitudes |inverse| @ |matrix| (it grows with the matrix's condition number)."""
+        residual = np.abs(self.inverse @ self.matrix - np.eye(4))
+        magnitude = np.abs(self.inverse) @ np.abs(self.matrix)
+        relative = np.max(np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0))
+        return numerics.gamma(self.tolerances.hit_ulps) + float(relative)
 
     def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
         """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""

@@ -22,6 +22,7 @@ from .errors import RenderCancelled, TracerError
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
+from .savings import RaySavings
 from .tiles import DEFAULT_TILE, PixelTracer, TilePlan, block_passes, camera_rays_for, trace_tile
 from .trace import RayCounts
 
@@ -58,8 +59,8 @@ class RenderResult:
     effects: frozenset = field(default_factory=frozenset)
 
     def stats(self) -> dict:
-        return {"rays": self.rays.as_dict(), "seconds": round(self.seconds, 6), "backend": self.backend,
-                "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
+        return {"rays": self.rays.as_dict(), "skipped": self.rays.skipped(), "seconds": round(self.seconds, 6),
+                "backend": self.backend, "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
                 "effects": sorted(self.effects)}
 
 
@@ -75,11 +76,12 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            cancel: Optional[Callable[[], bool]] = None, backend: str = "auto",
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
-           threads: Optional[int] = None) -> RenderResult:
+           threads: Optional[int] = None, savings: Optional[RaySavings] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
     ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
+    ``savings``: which rays that cannot change the image are skipped (default: tracer.savings' defaults).
     """
     check_size(width, height)
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
@@ -87,7 +89,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     started = time.perf_counter()
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
-    tracer = make_tracer(compiled, backend, threads)
+    tracer = make_tracer(compiled, backend, threads, savings)
     shade = PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
     # The film is stored bottom row first, as the lecture counts rows; the caller sees it flipped.
     film = np.zeros((height, width, 3), dtype=np.float32)

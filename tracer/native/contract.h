@@ -11,8 +11,11 @@ enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
+enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
+enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define K_COUNT 8
 #define RAY_KIND_COUNT 4
+#define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
 /* the generic torus' ring radius (tracer.intersect.torus:RING_RADIUS) */
 #define TORUS_RING 1.0
@@ -187,6 +190,6 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "ade029835080399a"
+#define RT_CONTRACT_DIGEST "6e4dded2a61b2ff4"
 
 #endif

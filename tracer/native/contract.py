@@ -24,6 +24,7 @@ from typing import Optional
 
 import numpy as np
 
+from .. import savings as _savings
 from ..model import MESH_KINDS, POLYHEDRON_KINDS
 
 HEADER = Path(__file__).resolve().parent / "contract.h"
@@ -46,6 +47,10 @@ CSG_OPS = ("union", "intersection", "difference")
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures")
 #: Ray kinds in the order of the C core's counters (tracer.trace.RAY_KINDS is the NumPy side).
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
+#: After the ray kinds, the counters of rays not cast, per reason (SKIP_*); and the bits of
+#: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
+SKIP_REASONS = _savings.SKIP_REASONS
+SAVINGS_SWITCHES = _savings.SWITCHES
 
 
 def c_name(name: str) -> str:
@@ -276,8 +281,11 @@ def header_text() -> str:
     out.append(_enum("OP", CSG_OPS, range(len(CSG_OPS))))
     out.append(_enum("FX", EFFECTS, [EFFECT_BITS[e] for e in EFFECTS]))
     out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
+    out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
+    out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
     out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")
+    out.append(f"#define N_COUNTS {len(RAY_KINDS) + len(SKIP_REASONS)}  /* rays cast per kind, then skipped per reason */")
     out.append("")
     for c in CONSTANTS:
         value = c.value()

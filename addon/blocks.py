@@ -87,15 +87,24 @@ class BlockRenderer:
         self.chunk = max(1, int(DEFAULT_CHUNK if chunk is None else chunk))
         self.want_alpha = alpha
         self.backend = backend
-        self.color = np.zeros((self.height, self.width, 3), dtype=np.float32)
-        self.alpha = np.ones((self.height, self.width), dtype=np.float32)
+        # One RGBA film (what Blender's passes and textures take, so handing it over copies nothing);
+        # colour and coverage are views of it.
+        self.film = np.zeros((self.height, self.width, 4), dtype=np.float32)
+        self.film[..., 3] = 1.0
+        self.color = self.film[..., :3]
+        self.alpha = self.film[..., 3]
         top = self.passes[0]
         tile = max(int(tile), top)
         tile -= tile % top  # tiles start on multiples of every stride
         self.tile = tile
+        self.items = []
+        for p, stride in enumerate(self.passes):
+            # A coarse pass traces one ray per stride x stride block: its tiles are stride times wider, so
+            # each item still traces about tile x tile rays (per-item costs would dominate otherwise).
+            side = tile * (stride // self.passes[-1])
+            self.items += [WorkItem(p, stride, r, c, min(r + side, self.height), min(c + side, self.width))
+                           for r in range(0, self.height, side) for c in range(0, self.width, side)]
         tiles = [(r, c) for r in range(0, self.height, tile) for c in range(0, self.width, tile)]
-        self.items = [WorkItem(p, stride, r, c, min(r + tile, self.height), min(c + tile, self.width))
-                      for p, stride in enumerate(self.passes) for r, c in tiles]
         if self.adaptive:  # the refinement pass: stride 1, after every block pass
             self.items += [WorkItem(len(self.passes), 1, r, c, min(r + tile, self.height), min(c + tile, self.width))
                            for r, c in tiles]
@@ -169,7 +178,8 @@ class BlockRenderer:
             return self._refine
 
     def trace_item(self, item: WorkItem, cancel: Optional[Callable[[], bool]] = None) -> WorkItem:
-        rng = np.random.default_rng((self.seed, item.pass_index, item.r0, item.c0))
+        # (one ray per pixel goes through the pixel's centre: no random numbers)
+        rng = np.random.default_rng((self.seed, item.pass_index, item.r0, item.c0)) if self.samples > 1 else None
         if item.pass_index >= len(self.passes):  # adaptive refinement
             rr, cc = np.nonzero(self._refine_mask()[item.r0:item.r1, item.c0:item.c1])
             rr, cc = rr + item.r0, cc + item.c0
@@ -266,11 +276,9 @@ class BlockRenderer:
         return self.items[min(self.done, len(self.items) - 1)].pass_index if self.items else 0
 
     def rgba(self) -> np.ndarray:
-        """(height, width, 4) float32, bottom row first; colour as traced (linear), premultiplied by alpha."""
-        out = np.empty((self.height, self.width, 4), dtype=np.float32)
-        out[..., :3] = self.color
-        out[..., 3] = self.alpha
-        return out
+        """(height, width, 4) float32, bottom row first; colour as traced (linear), premultiplied by alpha.
+        The film itself, not a copy: it changes while tracing goes on."""
+        return self.film
 
     def counts(self):
         total = deps.module("trace").RayCounts()

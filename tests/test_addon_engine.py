@@ -165,8 +165,7 @@ def test_block_renderer_cancel_and_time_slices():
         return np.broadcast_to(cam.eye, d.shape), d
 
     r = blocks.BlockRenderer(compiled, rays_for, 32, 32, block_size=4, progressive=True, tile=16)
-    # tiles of a coarse pass are stride times wider (the same rays per item): 64, 32 and 16 pixels here
-    assert [sum(i.pass_index == p for i in r.items) for p in range(3)] == [1, 1, 4] and r.pass_count == 3
+    assert len(r.items) == 3 * 4 and r.pass_count == 3
     r.run_for(0.0)  # one item per slice at least: the viewport refines while the user waits
     assert r.done >= 1 and not r.finished
     while not r.finished:

@@ -75,6 +75,11 @@ def render_settings(scene) -> dict:
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
 
+def displayed() -> bool:
+    """Whether anyone sees a final render while it is traced: not under ``blender -b`` nor in the bpy module."""
+    return not bpy.app.background
+
+
 def write_pass(render_pass, pixels: np.ndarray) -> None:
     """Copy a (height, width, channels) float32 film into a render pass at memory speed.
 
@@ -165,10 +170,15 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             def rays_for(rows, cols, dy=0.5, dx=0.5):
                 return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
 
+            settings = render_settings(scene)
+            if settings["progressive"] and not displayed():
+                # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
+                # the same rays either way, so the image is the same without them.
+                settings["block_size"] = 1
             tracer = blocks.BlockRenderer(compiled, rays_for, width, height, alpha=render.film_transparent,
-                                          seed=scene.frame_current, **render_settings(scene))
+                                          seed=scene.frame_current, **settings)
             shown = FilmUpdates(lambda: (write_pass(layer, tracer.rgba()), self.update_result(result)),
-                                enabled=not bpy.app.background)
+                                enabled=displayed())
 
             status_shown = [0.0]
 

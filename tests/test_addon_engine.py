@@ -79,15 +79,19 @@ def test_render_equals_the_tracers_own_render():
     assert np.all(image[..., 3] == 1.0)
 
 
-def test_blocks_coarse_to_fine_every_pixel_once():
+def test_blocks_coarse_to_fine_every_pixel_once(monkeypatch):
     import_sdl(SCENES / "shapes.sdl")
     set_resolution(96, 72)
     settings = bpy.context.scene.sdl_render
     settings.block_size, settings.progressive = 8, True
-    render_rgba("SDL_RAYTRACER")
+    unseen = render_rgba("SDL_RAYTRACER")  # (the bpy module shows nothing: no coarse passes to watch)
+    assert engine.LAST_RENDER["passes"] == [1] and engine.LAST_RENDER["rays"]["camera"] == 96 * 72
+    monkeypatch.setattr(engine, "displayed", lambda: True)
+    refined = render_rgba("SDL_RAYTRACER")
     stats = engine.LAST_RENDER
     assert stats["passes"] == [8, 4, 2, 1] and stats["tiles_done"] == stats["tiles_total"]
     assert stats["rays"]["camera"] == 96 * 72
+    np.testing.assert_array_equal(refined, unseen)  # the same rays through every pixel
     settings.progressive = False
     coarse = render_rgba("SDL_RAYTRACER")
     assert engine.LAST_RENDER["rays"]["camera"] == 12 * 9  # one ray per 8 x 8 block
@@ -165,7 +169,8 @@ def test_block_renderer_cancel_and_time_slices():
         return np.broadcast_to(cam.eye, d.shape), d
 
     r = blocks.BlockRenderer(compiled, rays_for, 32, 32, block_size=4, progressive=True, tile=16)
-    assert len(r.items) == 3 * 4 and r.pass_count == 3
+    # a coarse pass's tiles are stride times wider (as many rays per item): 64, 32 and 16 pixels here
+    assert [len(r.pass_items(p)) for p in range(3)] == [1, 1, 4] and r.pass_count == 3
     r.run_for(0.0)  # one item per slice at least: the viewport refines while the user waits
     assert r.done >= 1 and not r.finished
     while not r.finished:

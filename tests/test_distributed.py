@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -246,3 +247,56 @@ def test_frames_need_a_usd_stage(tmp_path):
     assert done.returncode == 2 and "frames need a USD stage" in done.stderr and done.stderr.count("\n") == 1
     done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--frames", "3-1")
     assert done.returncode == 2 and "--frames 3-1" in done.stderr
+
+
+def _certificates(folder: Path) -> dict:
+    """A CA and one certificate for 127.0.0.1 signed by it (scheduler, worker and client share it)."""
+    (folder / "ext.cnf").write_text("subjectAltName = IP:127.0.0.1, DNS:localhost\n")
+
+    def openssl(*args):
+        subprocess.run(["openssl", *args], cwd=folder, check=True, capture_output=True, timeout=PROCESS_LIMIT)
+
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "2",
+            "-subj", "/CN=test-ca")
+    openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "node.key", "-out", "node.csr", "-subj", "/CN=localhost")
+    openssl("x509", "-req", "-in", "node.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+            "-out", "node.pem", "-days", "2", "-extfile", "ext.cnf")
+    return {name: str(folder / name) for name in ("ca.pem", "node.pem", "node.key")}
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="makes its certificates with the openssl command")
+def test_tls_scheduler_with_dasks_own_security_settings(tmp_path):
+    """A scheduler and a worker that speak only TLS: render reads the client's certificate from Dask's
+    configuration (here its environment variables) and gets the local bytes; without it, one line."""
+    certs = _certificates(tmp_path)
+    tls = ["--tls-ca-file", certs["ca.pem"], "--tls-cert", certs["node.pem"], "--tls-key", certs["node.key"]]
+    address = f"tls://127.0.0.1:{_free_port()}"
+    port = address.rsplit(":", 1)[1]
+    started = []
+    try:
+        started.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--protocol", "tls",
+                                         "--host", "127.0.0.1", "--port", port, "--no-dashboard", *tls],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        started.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
+                                         "1", "--no-dashboard", *tls],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        settings = {"DASK_DISTRIBUTED__COMM__TLS__CA_FILE": certs["ca.pem"],
+                    "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT": certs["node.pem"],
+                    "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY": certs["node.key"],
+                    "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "60s"}  # (the scheduler may still be starting)
+        args = ["render", SCENES / "glass.sdl", "--width", 40, "--height", 30, "--samples", 4, "-q"]
+        done = _run(*args, "-o", tmp_path / "tls.png", "--scheduler", address, env=settings)
+        assert done.returncode == 0, done.stderr
+        assert _run(*args, "-o", tmp_path / "local.png").returncode == 0
+        assert (tmp_path / "tls.png").read_bytes() == (tmp_path / "local.png").read_bytes()
+        plain = _run(*args, "-o", tmp_path / "x.png", "--scheduler", address)
+        assert plain.returncode == 2 and "TLS needs Dask's TLS settings" in plain.stderr
+        assert plain.stderr.count("\n") == 1 and not (tmp_path / "x.png").exists()
+    finally:
+        for process in reversed(started):
+            process.terminate()
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()

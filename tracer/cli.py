@@ -94,6 +94,9 @@ def _add_cluster_options(r: argparse.ArgumentParser) -> None:
                         "'sdl-raytracer[distributed]'; see docs/distributed.md)")
     r.add_argument("--frames", metavar="A-B",
                    help="a USD stage's frames A to B, written as OUT_####.png (OUT_0001.png for frame 1)")
+    r.add_argument("--tile", type=int, default=None, metavar="N",
+                   help="with --scheduler or --frames: tile side in pixels, one task each (default 256 on a "
+                        "cluster, 64 on this machine); the image does not depend on it")
 
 
 SDL_EXTENSIONS = (".sdl", ".dat")
@@ -221,8 +224,12 @@ def _render_job(args) -> int:
     scene = dist.read_scene(args.scene, args.lenient, times[0])
     for message in scene.warnings:
         print(f"warning: {message}", file=sys.stderr)
+    if args.tile is not None and args.tile < 1:
+        raise TracerError(f"--tile must be 1 or more, not {args.tile}")
+    from .tiles import DEFAULT_TILE
+    tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
-                   samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
+                   tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
                    backend=args.backend, threads=args.threads, max_depth=args.max_depth)
     job.plan()  # bad settings are reported before any cluster starts
     started = time.perf_counter()
@@ -243,7 +250,7 @@ def _render_job(args) -> int:
                 if args.max_depth is not None:
                     scene.settings.max_recursion_depth = args.max_depth
                 result = render(scene, args.width, args.height, block_size=args.block_size,
-                                progressive=args.progressive, on_tile=progress, samples=args.samples,
+                                progressive=args.progressive, tile=tile, on_tile=progress, samples=args.samples,
                                 sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
                                 threads=args.threads)
                 write(index, result.image, result.rays, result.backend)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import functools
 import hashlib
 import os
 import re
@@ -36,6 +37,10 @@ from .model import Scene
 from .trace import RayCounts
 
 INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
+#: Tile side on a cluster.  Each task costs about 5 ms of CPU beyond its tracing (scheduler, transfer,
+#: assembly: bench/cluster.py); a 256 x 256 tile of a 16-sample 4K frame traces for about 0.4 s, so the
+#: overhead stays near 1 %, while a 4K frame still has 135 tiles to spread over the workers.
+CLUSTER_TILE = 256
 LOCAL_PREFIX = "local:"
 
 
@@ -131,13 +136,13 @@ class Job:
     height: int
     block_size: int = 1
     progressive: bool = False
-    tile: int = 64
+    tile: int = CLUSTER_TILE
     samples: int = 1
     sampling_mode: str = "jittered"
     threshold: float = 0.05
     seed: int = 0
     backend: str = "auto"
-    threads: Optional[int] = None  # the C core's threads in each worker (None: the worker's default)
+    threads: Optional[int] = None  # the C core's threads per task (None: the worker's cores / its threads)
     max_depth: Optional[int] = None
 
     def plan(self):
@@ -188,6 +193,25 @@ def _compiled(bundle: SceneBundle, time: Optional[float], max_depth: Optional[in
         return _scenes[key]
 
 
+def _worker_core_threads() -> int:
+    """C-core threads for each task when the job leaves it open: this machine's cores shared among the
+    worker's task threads (which trace tiles at the same time)."""
+    try:
+        from distributed import get_worker
+        tasks_at_once = get_worker().state.nthreads
+    except (ImportError, ValueError, AttributeError):
+        tasks_at_once = 1
+    return max(1, _machine_threads() // max(1, tasks_at_once))
+
+
+def _machine_threads() -> int:
+    try:
+        from .native import default_threads
+    except ImportError:  # no C core in this installation: the count does not matter
+        return 1
+    return default_threads()
+
+
 def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
     from .backend import make_tracer
 
@@ -197,8 +221,15 @@ def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
         tracers = _local.tracers = {}
     key = (bundle.digest, time, job.max_depth, job.backend, job.threads)
     if key not in tracers:
-        tracers[key] = make_tracer(compiled, job.backend, job.threads)
+        tracers[key] = make_tracer(compiled, job.backend, job.threads or _worker_core_threads())
     return compiled, tracers[key]
+
+
+@functools.lru_cache(maxsize=8)
+def _plan(job: Job):
+    """A worker's plan of a job, made once (it lists every tile: making it per task would cost as much as
+    the number of tiles, for every tile)."""
+    return job.plan()
 
 
 def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: tuple[int, int, int, int],
@@ -209,7 +240,7 @@ def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: 
     from .tiles import PixelTracer, Tile, camera_rays_for, trace_rect, trace_tile
 
     compiled, tracer = _tracer(bundle, job, time)
-    plan = job.plan()
+    plan = _plan(job)
     aspect = job.width / job.height
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, aspect), aspect)
     before = copy.copy(tracer.counts)
@@ -251,10 +282,18 @@ def connect(address: str, threads: Optional[int] = None) -> Iterator[object]:
 
     cluster = None
     timeout = dask.config.get("distributed.comm.timeouts.connect")
+    if address.startswith("tls://") and \
+            distributed.security.Security().get_connection_args("client").get("ssl_context") is None:
+        raise TracerError(f"--scheduler {address}: TLS needs Dask's TLS settings for a client "
+                          "(distributed.comm.tls.ca-file, .client.cert, .client.key in Dask's configuration; "
+                          "see docs/distributed.md)")
     try:
         if workers is not None:
+            # No dashboard; the scheduler's HTTP endpoint on any free loopback port (not a warning when
+            # 8787 is taken by another cluster).
             cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                               dashboard_address=None, silence_logs=40)
+                                               host="127.0.0.1", dashboard_address=None, silence_logs=40,
+                                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
             client = distributed.Client(cluster, timeout=timeout)
         else:
             client = distributed.Client(address, timeout=timeout)
@@ -279,8 +318,7 @@ def local_threads(address: str) -> Optional[int]:
     workers = parse_address(address)
     if workers is None:
         return None
-    from .native import default_threads
-    return max(1, default_threads() // workers)
+    return max(1, _machine_threads() // workers)
 
 
 @dataclass

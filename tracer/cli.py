@@ -212,6 +212,7 @@ def _render_job(args) -> int:
     from . import distributed as dist
     from .imageio import save_image
     from .render import check_size, render
+    from .trace import RayCounts
 
     if args.scheduler is not None:
         dist.parse_address(args.scheduler)
@@ -230,16 +231,16 @@ def _render_job(args) -> int:
     tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
                    tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
-                   backend=args.backend, threads=args.threads, max_depth=args.max_depth)
+                   backend=args.backend, threads=args.threads, max_depth=args.max_depth,
+                   savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
     started = time.perf_counter()
-    rays, backends = {}, set()
+    rays, backends = RayCounts(), set()
 
     def write(index, image, counts, backend):
         save_image(image, outputs[index])
         backends.add(backend)
-        for kind, n in counts.as_dict().items():
-            rays[kind] = rays.get(kind, 0) + n
+        rays.add(counts)
 
     progress = _Progress(not args.quiet)
     try:
@@ -252,7 +253,7 @@ def _render_job(args) -> int:
                 result = render(scene, args.width, args.height, block_size=args.block_size,
                                 progressive=args.progressive, tile=tile, on_tile=progress, samples=args.samples,
                                 sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                                threads=args.threads)
+                                threads=args.threads, savings=job.savings)
                 write(index, result.image, result.rays, result.backend)
         else:
             bundle = dist.SceneBundle.of(args.scene, scene, args.lenient)
@@ -263,7 +264,8 @@ def _render_job(args) -> int:
     finally:
         progress.close()
     if args.stats:
-        print(json.dumps({"rays": rays, "seconds": round(time.perf_counter() - started, 6),
+        print(json.dumps({"rays": rays.as_dict(), "skipped": rays.skipped(),
+                          "seconds": round(time.perf_counter() - started, 6),
                           "backend": ",".join(sorted(backends)), "width": args.width, "height": args.height,
                           "frames": len(times), "scheduler": args.scheduler}))
     return 0

@@ -18,8 +18,10 @@ C cores share this machine's cores.  Dask is optional: ``pip install sdl-raytrac
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import copy
+import dataclasses
 import functools
 import hashlib
 import os
@@ -34,6 +36,7 @@ import numpy as np
 
 from .errors import TracerError
 from .model import Scene
+from .savings import RaySavings
 from .trace import RayCounts
 
 INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
@@ -144,6 +147,7 @@ class Job:
     backend: str = "auto"
     threads: Optional[int] = None  # the C core's threads per task (None: the worker's cores / its threads)
     max_depth: Optional[int] = None
+    savings: Optional[RaySavings] = None  # rays not cast (None: tracer.savings' defaults)
 
     def plan(self):
         from .tiles import TilePlan
@@ -154,10 +158,13 @@ class Job:
 
 # -- the worker side -----------------------------------------------------------------------------------------
 
+#: Compiled scenes a worker process keeps (a frame each, for sequences; the oldest go first).
+KEPT_SCENES = 4
+
 _lock = threading.Lock()
-_folders: dict[str, tempfile.TemporaryDirectory] = {}  # bundle digest -> unpacked files
-_scenes: dict[tuple, object] = {}  # (digest, time, max depth) -> compiled scene
-_local = threading.local()  # per worker thread: {(scene key, backend, threads): tracer}
+_folders: dict[str, tempfile.TemporaryDirectory] = {}  # bundle digest -> its unpacked files
+_scenes: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()  # (digest, time, depth) -> compiled
+_local = threading.local()  # per worker thread: the tracer of the scene it traced last
 
 
 def _where() -> str:
@@ -175,22 +182,29 @@ def _compiled(bundle: SceneBundle, time: Optional[float], max_depth: Optional[in
 
     key = (bundle.digest, time, max_depth)
     with _lock:
-        if key not in _scenes:
-            folder = _folders.get(bundle.digest)
-            if folder is None:  # (removed when the worker process ends)
-                folder = _folders[bundle.digest] = tempfile.TemporaryDirectory(prefix="sdl-scene-")
-                bundle.unpack(Path(folder.name))
-            scene_path = Path(folder.name) / bundle.scene
-            try:
-                scene = read_scene(scene_path, bundle.lenient, time)
-                if max_depth is not None:
-                    scene.settings.max_recursion_depth = max_depth
-                _scenes[key] = compile_scene(scene)
-            except (SDLError, TracerError, OSError, ValueError) as err:
-                # One line naming the file as the user knows it, not the worker's copy.
-                message = str(err).replace(folder.name, bundle.origin)
-                raise TracerError(f"{_where()}: {message}") from None
-        return _scenes[key]
+        if key in _scenes:
+            _scenes.move_to_end(key)
+            return _scenes[key]
+        folder = _folders.get(bundle.digest)
+        if folder is None:  # (removed when the worker process ends, or when another bundle arrives)
+            for old in _folders.values():
+                old.cleanup()
+            _folders.clear()
+            folder = _folders[bundle.digest] = tempfile.TemporaryDirectory(prefix="sdl-scene-")
+            bundle.unpack(Path(folder.name))
+        try:
+            scene = read_scene(Path(folder.name) / bundle.scene, bundle.lenient, time)
+            if max_depth is not None:
+                scene.settings.max_recursion_depth = max_depth
+            compiled = compile_scene(scene)
+        except (SDLError, TracerError, OSError, ValueError) as err:
+            # One line naming the file as the user knows it, not the worker's copy.
+            message = str(err).replace(folder.name, bundle.origin)
+            raise TracerError(f"{_where()}: {message}") from None
+        _scenes[key] = compiled
+        while len(_scenes) > KEPT_SCENES:
+            _scenes.popitem(last=False)
+        return compiled
 
 
 def _worker_core_threads() -> int:
@@ -216,13 +230,12 @@ def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
     from .backend import make_tracer
 
     compiled = _compiled(bundle, time, job.max_depth)
-    tracers = getattr(_local, "tracers", None)
-    if tracers is None:
-        tracers = _local.tracers = {}
-    key = (bundle.digest, time, job.max_depth, job.backend, job.threads)
-    if key not in tracers:
-        tracers[key] = make_tracer(compiled, job.backend, job.threads or _worker_core_threads())
-    return compiled, tracers[key]
+    key = (bundle.digest, time, job.max_depth, job.backend, job.threads, job.savings)
+    kept = getattr(_local, "kept", None)
+    if kept is None or kept[0] != key:  # a thread keeps one tracer: tiles of one frame come together
+        tracer = make_tracer(compiled, job.backend, job.threads or _worker_core_threads(), job.savings)
+        kept = _local.kept = (key, tracer)
+    return compiled, kept[1]
 
 
 @functools.lru_cache(maxsize=8)
@@ -251,7 +264,8 @@ def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: 
         r0, c0, r1, c1 = rect
         window = np.zeros((r1 - r0, c1 - c0, 3), dtype=np.float32)
         trace_tile(plan, Tile(len(plan.passes), 1, *rect), window, shade, refine, at=(r0, c0))
-    rays = RayCounts(**{k: v - getattr(before, k) for k, v in tracer.counts.as_dict().items()})
+    rays = RayCounts(**{f.name: getattr(tracer.counts, f.name) - getattr(before, f.name)
+                        for f in dataclasses.fields(RayCounts)})
     return window, rays, tracer.name
 
 

@@ -144,6 +144,22 @@ def test_an_unreachable_scheduler_is_one_line_and_exit_2(tmp_path):
     assert "cannot reach the scheduler" in done.stderr and not out.exists()
 
 
+def test_a_scheduler_without_workers_is_one_line_not_a_wait(tmp_path):
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", address.rsplit(":", 1)[1], "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--width", 16, "--height", 12,
+                    "--scheduler", address, env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "20s"})
+    finally:
+        scheduler.terminate()
+        scheduler.wait(timeout=30)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f"error: --scheduler {address}: no worker joined the scheduler within 20s\n"
+    assert not (tmp_path / "x.png").exists()
+
+
 @pytest.mark.parametrize("address, what", [("local:0", "local:N"), ("nonsense", "tcp://HOST:8786")])
 def test_bad_scheduler_addresses(tmp_path, address, what):
     done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--scheduler", address)

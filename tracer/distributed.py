@@ -285,11 +285,12 @@ def parse_address(address: str) -> Optional[int]:
 
 
 @contextlib.contextmanager
-def connect(address: str, threads: Optional[int] = None) -> Iterator[object]:
+def connect(address: str) -> Iterator[object]:
     """A Dask client for ``address`` (closed, with any cluster it started, when the block ends).
 
     ``tls://`` addresses use Dask's own security settings (``distributed.comm.tls.*`` in Dask's
-    configuration).  Connecting waits at most Dask's ``distributed.comm.timeouts.connect``."""
+    configuration).  Connecting, and then waiting for a first worker, take at most Dask's
+    ``distributed.comm.timeouts.connect`` each: a scheduler without workers would leave the render waiting."""
     workers = parse_address(address)
     distributed = require_dask()
     import dask
@@ -319,6 +320,10 @@ def connect(address: str, threads: Optional[int] = None) -> Iterator[object]:
     except ValueError as err:  # a malformed address, an unknown protocol
         raise TracerError(f"--scheduler {address}: {err}") from None
     try:
+        try:
+            client.wait_for_workers(1, timeout=dask.utils.parse_timedelta(timeout))
+        except (OSError, TimeoutError):
+            raise TracerError(f"--scheduler {address}: no worker joined the scheduler within {timeout}") from None
         yield client
     finally:
         client.close()

@@ -46,16 +46,18 @@ bench: setup
 	$(PY) bench/run.py
 	$(PY) bench/memory.py
 
-# The Blender extension zip (Blender 4.2+) and the legacy add-on zip (Blender 3.x/4.1), in dist/.
+# The Blender extension zips in dist/: linux-x64 and windows-x64 with the C core prebuilt (Windows
+# cross-compiled with mingw-w64 and smoke-tested under Wine when installed), one for other platforms
+# (macOS: compiled on first use), and the legacy add-on zip for Blender 3.x/4.1. Needs cmake.
 .PHONY: extension
 extension: setup
-	$(PY) scripts/build_extension.py
-	$(PY) scripts/build_extension.py --legacy
+	$(PY) scripts/build_extension.py --all
 
 # The C core, built by CMake as the wheel builds it (CMakeLists.txt; needs cmake):
 #   make warnings   -Wall -Wextra -Werror with gcc and with clang (apt-get install -y clang)
 #   make sanitize   the C-vs-NumPy tests with the core built under AddressSanitizer and UBSan
-#   make wheel      pip wheel . into dist/, then the packaging tests (a fresh environment without cc)
+#   make wheel      pip wheel . into dist/, then the packaging tests: the wheel and the extension zips
+#                   render with the prebuilt core where no compiler is on PATH
 CMAKE ?= cmake
 SANITIZED := build/sanitize/_core.so
 SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py

@@ -145,10 +145,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                                             (render.border_min_x, render.border_max_x,
                                              render.border_min_y, render.border_max_y))
         width, height = x1 - x0, y1 - y0
-        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False}
+        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False,
+                 "view_layer": depsgraph.view_layer.name}
         LAST_RENDER.clear()
         LAST_RENDER.update(stats)
-        result = self.begin_result(0, 0, width, height)
+        # Blender calls render() once per view layer, with that layer's depsgraph (its own visible
+        # collections); the result must name the layer, else every layer's image lands in the first.
+        result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         try:
             layer = result.layers[0].passes["Combined"]
             cam_obj = self.camera_override or scene.camera

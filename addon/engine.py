@@ -121,7 +121,7 @@ class FilmUpdates:
 class SDLRenderEngine(bpy.types.RenderEngine):
     bl_idname = ENGINE_ID
     bl_label = "SDL Ray Tracer"
-    bl_use_preview = False
+    bl_use_preview = True  # material previews traced too (small, one ray per pixel: well under a second)
     bl_use_postprocess = True
     bl_use_eevee_viewport = True  # Material Preview mode draws with EEVEE
 
@@ -174,6 +174,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
 
             settings = render_settings(scene)
+            if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
+                settings.update(block_size=1, progressive=False, samples=1)
             if settings["progressive"] and not displayed():
                 # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
                 # the same rays either way, so the image is the same without them.
@@ -277,6 +279,8 @@ def compatible_panels():
               "RENDER_PT_stamp", "RENDER_PT_post_processing", "DATA_PT_lens", "DATA_PT_camera",
               "DATA_PT_camera_display", "DATA_PT_context_light", "DATA_PT_light", "DATA_PT_context_camera",
               "MATERIAL_PT_preview", "MATERIAL_PT_context_material", "WORLD_PT_context_world",
+              "EEVEE_MATERIAL_PT_context_material",  # the slot list and New (3.4-5.0 give it this name)
+              "DATA_PT_preview",
               "RENDER_PT_format_presets", "RENDER_PT_film", "OBJECT_PT_visibility",
               "VIEWLAYER_PT_layer", "DATA_PT_camera_dof"}
     found = []

@@ -12,6 +12,7 @@ image is finished; any change to the scene or the view starts again.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import traceback
@@ -75,6 +76,15 @@ def render_settings(scene) -> dict:
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
 
+def preview_lighting(tracer_scene) -> None:
+    """Blender's preview scene has lights of 10 and 70 W, which as SDL lights (1000 W is colour 1) leave a
+    material preview nearly black: scale them together so that the brightest is white, as SDL scenes are lit."""
+    peak = max((max(light.color) for light in tracer_scene.lights), default=0.0)
+    if peak > 0:
+        tracer_scene.lights = [dataclasses.replace(light, color=tuple(c / peak for c in light.color))
+                               for light in tracer_scene.lights]
+
+
 def displayed() -> bool:
     """Whether anyone sees a final render while it is traced: not under ``blender -b`` nor in the bpy module."""
     return not bpy.app.background
@@ -124,6 +134,7 @@ class SDLRenderEngine(bpy.types.RenderEngine):
     bl_use_preview = True  # material previews traced too (small, one ray per pixel: well under a second)
     bl_use_postprocess = True
     bl_use_eevee_viewport = True  # Material Preview mode draws with EEVEE
+    _draw_seconds = 0.0  # what the last viewport draw took
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -165,6 +176,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             params = camera_params(cam_obj, matrix)
             self.update_stats("", "SDL Ray Tracer | building the scene")
             tracer_scene, warnings = build_scene(depsgraph, "RENDER")
+            if self.is_preview:
+                preview_lighting(tracer_scene)
             for message in warnings:
                 self.report({"WARNING"}, message)
             compiled = deps.module("compile").compile_scene(tracer_scene)
@@ -249,15 +262,20 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 self._view = (key, renderer)
             renderer = self._view[1]
             if not renderer.finished:
-                renderer.run_for(VIEWPORT_SLICE)
+                # at least as long as drawing takes (slow on software OpenGL), so tracing keeps half the time
+                renderer.run_for(max(VIEWPORT_SLICE, self._draw_seconds))
         except Exception as exc:  # noqa: BLE001
             self.update_stats("", f"SDL Ray Tracer: {exc}")
             return
+        started = time.perf_counter()
         self._draw(depsgraph.scene, renderer.rgba(), width, height)
+        self._draw_seconds = time.perf_counter() - started
         self.update_stats("", "SDL Ray Tracer | " + ("done" if renderer.finished else
                                                      f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
         if not renderer.finished:
             self.tag_redraw()
+            if not bpy.app.timers.is_registered(_redraw_rendered_viewports):
+                bpy.app.timers.register(_redraw_rendered_viewports, first_interval=0.0)
 
     def _draw(self, scene, rgba: np.ndarray, width: int, height: int) -> None:
         import gpu
@@ -271,6 +289,16 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         draw_texture_2d(texture, (0, 0), width, height)
         self.unbind_display_space_shader()
         gpu.state.blend_set("NONE")
+
+
+def _redraw_rendered_viewports() -> None:
+    """Draw the Rendered viewports again, to trace their next slice.  A one-shot timer, because Blender 3.4
+    does not honour ``tag_redraw`` asked from inside ``view_draw``: the image stopped refining there."""
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D" and area.spaces.active.shading.type == "RENDERED":
+                area.tag_redraw()
+    return None
 
 
 def compatible_panels():
@@ -304,6 +332,8 @@ def register() -> None:
 
 
 def unregister() -> None:
+    if bpy.app.timers.is_registered(_redraw_rendered_viewports):
+        bpy.app.timers.unregister(_redraw_rendered_viewports)
     for cls in _added_to:
         cls.COMPAT_ENGINES.discard(ENGINE_ID)
     _added_to.clear()

@@ -35,6 +35,12 @@ accuracy: setup
 # 10 to 10,000 spheres, and the C core against the NumPy path. Needs povray (apt-get install -y povray) and,
 # for the plot in docs/performance.png, matplotlib; results go to bench/results/results.json. bench/memory.py:
 # peak memory of 960x540 to 4K renders in full-frame buffers (bench/results/memory.json).
+# Rendering on a Dask cluster (bench/cluster.py): the 4K glass.sdl table of docs/distributed.md, plain local
+# against --scheduler local:1 and local:2, and the per-tile overhead (bench/results/distributed.json).
+.PHONY: bench-cluster
+bench-cluster: setup
+	$(PY) bench/cluster.py
+
 .PHONY: bench
 bench: setup
 	$(PY) bench/run.py

@@ -14,6 +14,11 @@ enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define K_COUNT 8
+/* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
+#define RT_SHAPE_HITS(X) X(K_SPHERE, hits_sphere) X(K_CUBE, hits_cube)
+#define RT_SHAPE_UV(X) X(K_TAPERED, wall_and_discs_uv)
+/* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
+#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON)
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
@@ -190,6 +195,6 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "daabe5fedaca0193"
+#define RT_CONTRACT_DIGEST "806b83f4b4621e7c"
 
 #endif

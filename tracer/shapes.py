@@ -99,6 +99,11 @@ REGISTRY: tuple[ShapeKind, ...] = (
     *(_polyhedron(k) for k in ("tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond")),
     ShapeKind("teapot", "MESH", family="mesh", normals_agree=False, closed=False),
     ShapeKind("mesh", "MESH", family="mesh", normals_agree=False, closed=False, addable=False),
+    # SDL extensions (append new kinds here: C kind codes follow this order).
+    ShapeKind("paraboloid", "PARABOLOID", box=((0.0, 0.0, 0.5), (1.0, 1.0, 0.5)),
+              intersect="tracer.intersect.paraboloid:intersect_paraboloid", c_intersect="hits_paraboloid",
+              uv=WALL_AND_DISCS_UV, c_uv="wall_and_discs_uv",
+              tessellate="tracer.intersect.paraboloid:paraboloid_mesh"),
 )
 
 #: SDL keyword -> entry.

@@ -13,6 +13,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .errors import RenderCancelled, SDLError, TracerError
+from .model import MAX_RECURSION_DEPTH, traced_depth
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -153,7 +154,10 @@ def _render(args) -> int:
     if args.max_depth is not None:
         if args.max_depth < 0:
             raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")
-        scene.settings.max_recursion_depth = args.max_depth
+        if args.max_depth > MAX_RECURSION_DEPTH:
+            print(f"warning: --max-depth {args.max_depth} is more than the tracer follows: "
+                  f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
+        scene.settings.max_recursion_depth = traced_depth(args.max_depth)
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,

@@ -12,6 +12,7 @@ import numpy as np
 
 from .compile import CompiledScene
 from . import numerics
+from .model import traced_depth
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: How many nested transparent objects a ray remembers being inside.
@@ -226,7 +227,7 @@ class Tracer:
         if "lighting" in self.effects:
             local += self._direct_light(point, facing, d, mat, diffuse, offset)
         color[idx] = local
-        if level < self.scene.settings.max_recursion_depth:
+        if level < traced_depth(self.scene.settings.max_recursion_depth):
             if "reflection" in self.effects:
                 color[idx] += self._reflection(point, facing, d, mat, offset, level, media.subset(idx))
             if "refraction" in self.effects:

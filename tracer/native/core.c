@@ -73,6 +73,8 @@ typedef struct {
 } Scene;
 
 #define MEDIA_DEPTH 8
+/* = tracer.model.MAX_RECURSION_DEPTH */
+#define RT_MAX_RECURSION_DEPTH 64
 #define SHADOW_CACHE 16
 
 typedef struct {
@@ -968,6 +970,13 @@ void *rt_create(const SceneDesc *desc)
     if (!S)
         return NULL;
     S->d = *desc;
+    /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
+     * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
+     * says; tracer.model.traced_depth applies the same bound to the NumPy path. */
+    if (S->d.max_depth > RT_MAX_RECURSION_DEPTH)
+        S->d.max_depth = RT_MAX_RECURSION_DEPTH;
+    if (S->d.max_depth < 0)
+        S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
     /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
     for (int64_t p = 0; p < D->n_prims; p++) {

@@ -19,7 +19,7 @@ import numpy as np
 from .. import numerics
 from ..compile import CompiledScene, CSGNode, Primitive
 from ..intersect import torus
-from ..model import POLYHEDRON_KINDS, SHAPE_KINDS
+from ..model import POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
 
 KIND_CODES = {"sphere": 0, "cube": 1, "square": 2, "plane": 3, "taperedCylinder": 4, "cylinder": 4, "cone": 4,
               "torus": 5, **{k: 6 for k in POLYHEDRON_KINDS}, "teapot": 7, "mesh": 7}
@@ -293,7 +293,7 @@ class FlatScene:
         scalars = dict(background=tuple(settings.background), global_ambient=tuple(settings.global_ambient),
                        min_reflectivity=float(settings.min_reflectivity),
                        min_transparency=float(settings.min_transparency),
-                       max_depth=int(settings.max_recursion_depth), effects=effects,
+                       max_depth=traced_depth(settings.max_recursion_depth), effects=effects,
                        mesh_constants=self._mesh_constants(meshes),
                        # read now, not compiled in: tracer.accuracy varies them
                        relative_epsilon=float(numerics.RELATIVE_EPSILON),

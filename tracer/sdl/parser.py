@@ -33,7 +33,7 @@ import numpy as np
 from .. import transforms
 from ..errors import SDLError
 from ..meshio import read_3vn
-from ..model import (ANALYTIC_KINDS, CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene,
+from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene,
                      SceneObject, Shape, SourceLocation)
 from .lexer import Token, tokenize, to_float
 
@@ -234,8 +234,12 @@ class _Reader:
         """Strict: raise.  Lenient: keep the message and let the caller carry on."""
         if self.strict:
             raise error
+        self._note(error)
+
+    def _note(self, error: SDLError) -> None:
+        """Something read, but not as written (a value beyond a limit): a warning, strict or not.  The same
+        message met again (a typo inside a macro used ten times) is still one problem."""
         message = str(error)
-        # The same mistake met again (a typo inside a macro used ten times) is still one problem.
         if message not in self.reported:
             self.reported.add(message)
             self.scene.warnings.append(message)
@@ -345,6 +349,10 @@ class _Reader:
         value, token = self._number_token(keyword)
         if not value.is_integer() or value < 0:
             return self._report(self._error(token, "maxRecursionDepth must be a whole number >= 0"))
+        if value > MAX_RECURSION_DEPTH:  # read, in strict mode too: a deep setting is no mistake
+            self._note(self._error(token, f"maxRecursionDepth is more than the tracer follows: "
+                                          f"{MAX_RECURSION_DEPTH} used"))
+            value = MAX_RECURSION_DEPTH
         self.scene.settings.max_recursion_depth = int(value)
 
     def _make_pixmap(self, keyword: Token, groups) -> None:

@@ -22,8 +22,8 @@ import numpy as np
 
 from ..camera import focal_length, view_angle
 from ..errors import TracerError
-from ..model import (CSG, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene, SceneObject,
-                     Settings, Shape, SourceLocation)
+from ..model import (CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene,
+                     SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
@@ -192,6 +192,10 @@ class _Reader:
         except _BAD_VALUE as exc:
             self.problem(root, f"cannot read the scene settings ({exc})", "SDL's defaults used")
             return
+        if s.max_recursion_depth > MAX_RECURSION_DEPTH or s.max_recursion_depth < 0:
+            self.note(root, f"{C.A_MAX_DEPTH} = {s.max_recursion_depth} is outside 0..{MAX_RECURSION_DEPTH}: "
+                            f"{traced_depth(s.max_recursion_depth)} used")
+            s.max_recursion_depth = traced_depth(s.max_recursion_depth)
         self.scene.settings = s
         if len(numbers) != len(files):
             self.problem(root, "sdl:pixmapNumbers and sdl:pixmapFiles differ in length", "pixmaps left out")

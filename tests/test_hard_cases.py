@@ -10,6 +10,7 @@ import tracer
 from tracer.compile import compile_scene
 from tracer.model import CSG, MAX_RECURSION_DEPTH
 from tracer.render import render
+from tracer.savings import RaySavings
 from tracer.trace import Media, Tracer, refract
 from helpers import Camera, Light, ray_hits, rotation, scaling, scene_of, shape, translation
 
@@ -254,7 +255,7 @@ def test_parallel_mirrors_asked_for_depth_100_go_to_the_deepest_traced():
     scene = scene_of(shape("square", translation(0, 0, -1) @ scaling(5, 5, 1), **mirror),
                      shape("square", translation(0, 0, 1) @ scaling(5, 5, 1), **mirror),
                      max_recursion_depth=100, global_ambient=(1, 1, 1), background=(0, 0, 0))
-    tr = Tracer(compile_scene(scene))
+    tr = Tracer(compile_scene(scene), RaySavings.none())  # every bounce, however little it adds
     color = tr.camera_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]))
     assert tr.counts.reflection == MAX_RECURSION_DEPTH
     assert color[0, 0] == pytest.approx(ambient * (1 - r ** (MAX_RECURSION_DEPTH + 1)) / (1 - r), rel=1e-12)

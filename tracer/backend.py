@@ -10,14 +10,17 @@ from typing import Optional
 
 from .compile import CompiledScene
 from .errors import TracerError
+from .savings import RaySavings
 from .trace import Tracer
 
 BACKENDS = ("auto", "c", "numpy")
 _warned = False
 
 
-def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optional[int] = None):
-    """``threads``: the C core's worker threads (None: $SDL_TRACER_THREADS, else every core)."""
+def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optional[int] = None,
+                savings: Optional[RaySavings] = None):
+    """``threads``: the C core's worker threads (None: $SDL_TRACER_THREADS, else every core); ``savings``:
+    which useless rays to skip (None: the defaults of tracer.savings)."""
     if threads is not None and threads < 1:
         raise TracerError(f"threads must be 1 or more, not {threads}")
     if backend not in BACKENDS:
@@ -32,7 +35,7 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
                 raise TracerError("the C core is not part of this installation")
         elif load_error is None:
             try:  # (the constructor checks that the C core can trace this scene)
-                return NativeTracer(compiled, threads)
+                return NativeTracer(compiled, threads, savings)
             except TracerError:
                 if backend == "c":
                     raise
@@ -40,7 +43,7 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
             raise TracerError(f"the C core is not available: {load_error}")
         else:
             _warn_once(load_error)
-    tracer = Tracer(compiled)
+    tracer = Tracer(compiled, savings)
     tracer.name = "numpy"
     return tracer
 

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
+from dataclasses import replace
 from typing import Optional, Sequence
 
 import numpy as np
@@ -52,8 +54,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="threads of the C core (default: $SDL_TRACER_THREADS, else every core)")
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
+    r.add_argument("--cutoff", type=float, default=None, metavar="W",
+                   help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
+                        "(default 1/512; 0 traces them all)")
+    r.add_argument("--all-rays", action="store_true",
+                   help="trace every ray the recursion asks for, even those that cannot change the image "
+                        "(no cutoff, no skipped shadow feelers, total internal reflection traced twice)")
     r.add_argument("--stats", action="store_true",
-                   help="print JSON statistics (ray counts, seconds, backend) on stdout")
+                   help="print JSON statistics (ray counts, rays skipped per reason, seconds, backend) on stdout")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress display")
 
     b = sub.add_parser("bench", help="measurements")
@@ -146,6 +154,18 @@ class _Progress:
             sys.stderr.write("\n")
 
 
+def _savings(args):
+    """The RaySavings that --all-rays and --cutoff ask for."""
+    from .savings import RaySavings
+
+    savings = RaySavings.none() if args.all_rays else RaySavings()
+    if args.cutoff is not None:
+        if not (math.isfinite(args.cutoff) and 0.0 <= args.cutoff <= 1.0):
+            raise TracerError(f"--cutoff must be a weight between 0 and 1, not {args.cutoff}")
+        savings = replace(savings, cutoff=args.cutoff)
+    return savings
+
+
 def _render(args) -> int:
     from .imageio import save_image
     from .render import render
@@ -158,12 +178,13 @@ def _render(args) -> int:
             print(f"warning: --max-depth {args.max_depth} is more than the tracer follows: "
                   f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
         scene.settings.max_recursion_depth = traced_depth(args.max_depth)
+    savings = _savings(args)
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
                         progressive=args.progressive, on_tile=progress, samples=args.samples,
                         sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                        threads=args.threads)
+                        threads=args.threads, savings=savings)
     finally:
         progress.close()
     save_image(result.image, args.output)

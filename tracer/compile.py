@@ -171,6 +171,16 @@ class Primitive:
             self._mesh = cache[key][1]
         self.center, self.radius = self._world_bounding_sphere() if bounds is None else bounds
 
+    @property
+    def triangle_mesh(self):
+        """The :class:`tracer.intersect.mesh.TriangleMesh` of a mesh or teapot (shared by its instances), else None."""
+        return self._mesh
+
+    @property
+    def face_planes(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """A convex polyhedron's face planes (normals (F, 3), offsets (F,): n . p <= offset), else None."""
+        return self._planes
+
     def _generic_points(self) -> Optional[np.ndarray]:
         if self._mesh is not None or self._planes is not None:
             return np.asarray(self.shape.mesh.vertices, dtype=np.float64)

@@ -8,6 +8,7 @@
 #define _POSIX_C_SOURCE 200809L
 
 #include <pthread.h>
+#include <stddef.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,6 +32,24 @@ const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
 const char *rt_build_id(void) { return rt_build_marker; }
 
 int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
+
+/* Offset and size of every SceneDesc field in contract.py's order, for the loader to compare with ctypes';
+ * returns the number of fields (nothing is written when capacity is smaller). */
+int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity)
+{
+    if (capacity < RT_SCENE_DESC_FIELD_COUNT)
+        return RT_SCENE_DESC_FIELD_COUNT;
+    int64_t k = 0;
+#define RT_FIELD_LAYOUT(name)                                  \
+    offsets[k] = (int64_t)offsetof(SceneDesc, name);           \
+    sizes[k] = (int64_t)sizeof(((const SceneDesc *)0)->name);  \
+    k++;
+    RT_SCENE_DESC_FIELDS(RT_FIELD_LAYOUT)
+#undef RT_FIELD_LAYOUT
+    return k;
+}
+
+const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 
 /* ------------------------------------------------------------------------------------------------------
  * The scene at run time */
@@ -70,11 +89,12 @@ typedef struct {
     int64_t n_unbounded;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
+    /* tracer.savings: which useless rays are skipped (rt_set_savings) */
+    double cutoff;        /* a secondary ray of smaller cumulative weight is not traced */
+    int64_t savings;      /* SAVE_* bits */
+    uint8_t *sealed;      /* objects x lights: a feeler from inside the object to the light is blocked */
 } Scene;
 
-#define MEDIA_DEPTH 8
-/* = tracer.model.MAX_RECURSION_DEPTH */
-#define RT_MAX_RECURSION_DEPTH 64
 #define SHADOW_CACHE 16
 
 typedef struct {
@@ -89,7 +109,7 @@ typedef struct {
     RawBuffer raw;
     int64_t *mesh_stack;
     TreeEntry *tree_stack;
-    int64_t counts[4];
+    int64_t counts[N_COUNTS];
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
     int oom;
 } Work;
@@ -593,9 +613,9 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
  * textures (shadows and Cook-Torrance only ever come with lighting, see tracer.compile.live_effects). */
 #define SHADE_VARIANT(NAME, L, SH, CT, RL, RR, TX)                                                          \
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
-                     const Media *media, double *out)                                                      \
+                     const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, out, L, SH, CT, RL, RR, TX, NAME);                            \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, NAME);                    \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -961,6 +981,7 @@ void rt_destroy(void *handle)
     free(S->pairs);
     free(S->items);
     free(S->unbounded);
+    free(S->sealed);
     free(S);
 }
 
@@ -973,8 +994,8 @@ void *rt_create(const SceneDesc *desc)
     /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
      * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
      * says; tracer.model.traced_depth applies the same bound to the NumPy path. */
-    if (S->d.max_depth > RT_MAX_RECURSION_DEPTH)
-        S->d.max_depth = RT_MAX_RECURSION_DEPTH;
+    if (S->d.max_depth > MAX_RECURSION_DEPTH)
+        S->d.max_depth = MAX_RECURSION_DEPTH;
     if (S->d.max_depth < 0)
         S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
@@ -1061,6 +1082,24 @@ fail:
     return NULL;
 }
 
+/* Which useless rays to skip (see tracer.savings); `sealed` has n_objects x n_lights entries, copied.
+ * 0 on success, -1 out of memory. */
+int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed)
+{
+    Scene *S = (Scene *)scene;
+    size_t n = (size_t)(S->d.n_objects * S->d.n_lights);
+    uint8_t *copy = (uint8_t *)malloc(n ? n : 1);
+    if (!copy)
+        return -1;
+    if (n)
+        memcpy(copy, sealed, n);
+    free(S->sealed);
+    S->sealed = copy;
+    S->cutoff = cutoff;
+    S->savings = flags;
+    return 0;
+}
+
 /* ------------------------------------------------------------------------------------------------------
  * Batches over threads */
 
@@ -1082,7 +1121,7 @@ typedef struct {
 
 typedef struct {
     Job *job;
-    int64_t counts[4];
+    int64_t counts[N_COUNTS];
     int failed;
 } Worker;
 
@@ -1108,7 +1147,7 @@ static void *run_worker(void *arg)
         for (int64_t i = start; i < end; i++) {
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
-                job->shade(S, &w, o, d, 0, &air, job->colors + 3 * i);
+                job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
                 int64_t obj;
@@ -1167,7 +1206,7 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
             pthread_join(ids[k], NULL);
         failed |= workers[k].failed;
         if (counts)
-            for (int c = 0; c < 4; c++)
+            for (int c = 0; c < N_COUNTS; c++)
                 counts[c] += workers[k].counts[c];
     }
     return failed ? -1 : 0;

@@ -89,10 +89,10 @@ def test_texture_moves_with_its_object():
 
 
 def test_image_lookup_seam_and_orientation():
-    image = np.zeros((4, 8, 3))
-    image[0] = (0, 0, 1)  # bottom row (row 0 is the bottom here)
-    image[-1] = (1, 0, 0)
-    image[:, 0, 1] = 1.0  # first column green
+    image = np.zeros((4, 8, 3), dtype=np.uint8)  # 8-bit, as load_image keeps pictures
+    image[0] = (0, 0, 255)  # bottom row (row 0 is the bottom here)
+    image[-1] = (255, 0, 0)
+    image[:, 0, 1] = 255  # first column green
     u = np.array([1e-9, 1 - 1e-9])
     both = sample_bilinear(image, u, np.array([0.5, 0.5]), wrap_u=True, wrap_v=False)
     assert both[0] == pytest.approx(both[1], abs=1e-6)  # no seam at u = 0 / 1

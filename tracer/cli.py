@@ -5,17 +5,22 @@ Errors in the user's input end the program with one line on stderr and exit stat
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
+import signal
 import sys
+import threading
+import warnings
 from dataclasses import replace
 from typing import Optional, Sequence
 
 import numpy as np
 
-from .errors import RenderCancelled, SDLError, TracerError
+from .errors import RenderCancelled, TracerError
 from .model import MAX_RECURSION_DEPTH, traced_depth
+from .reporting import error_message, warning_message
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -195,17 +200,18 @@ def _render(args) -> int:
 
 def describe(scene) -> dict:
     """What ``info`` prints: objects, lights, camera, settings and live effects."""
-    from .compile import compile_scene
-    from .model import CSG
+    from .compile import compile_scene, fold_tree
+
+    def shape_info(shape):
+        info = {"shape": shape.kind, "position": [round(float(x), 6) for x in shape.matrix[:3, 3]],
+                "groups": list(shape.groups)}
+        if shape.mesh_file:
+            info["file"] = shape.mesh_file
+        return info
 
     def obj_info(obj):
-        if isinstance(obj, CSG):
-            return {"boolean": obj.op, "groups": list(obj.groups), "children": [obj_info(obj.left), obj_info(obj.right)]}
-        info = {"shape": obj.kind, "position": [round(float(x), 6) for x in obj.matrix[:3, 3]],
-                "groups": list(obj.groups)}
-        if obj.mesh_file:
-            info["file"] = obj.mesh_file
-        return info
+        return fold_tree(obj, shape_info, lambda node, left, right: {
+            "boolean": node.op, "groups": list(node.groups), "children": [left, right]})
 
     compiled = compile_scene(scene)
     camera = scene.camera
@@ -222,19 +228,25 @@ def describe(scene) -> dict:
 def _info(args) -> int:
     info = describe(_load(args))
     if args.json:
-        print(json.dumps(info, indent=2))
+        try:
+            print(json.dumps(info, indent=2))
+        except RecursionError:  # json's encoder recurses per level of nesting
+            raise TracerError(f"{args.scene}: booleans nested too deeply to write as JSON "
+                              f"(use info without --json)") from None
         return 0
 
     def lines(obj, indent):
-        pad = "  " * indent
-        group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
-        if "boolean" in obj:
-            yield f"{pad}{obj['boolean']}{group}"
-            for child in obj["children"]:
-                yield from lines(child, indent + 1)
-        else:
-            extra = f" {obj['file']}" if "file" in obj else ""
-            yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
+        todo = [(obj, indent)]  # without recursion: booleans may nest deeper than Python's stack
+        while todo:
+            obj, indent = todo.pop()
+            pad = "  " * indent
+            group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
+            if "boolean" in obj:
+                yield f"{pad}{obj['boolean']}{group}"
+                todo += [(child, indent + 1) for child in reversed(obj["children"])]
+            else:
+                extra = f" {obj['file']}" if "file" in obj else ""
+                yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
 
     print(f"objects: {len(info['objects'])}")
     for obj in info["objects"]:
@@ -266,19 +278,37 @@ def _bench(args) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """Warnings raised by the libraries we call (Pillow through tracer.textures, say) printed as ``warning:``
+    lines when the command ends, not as Python's two-line warnings."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            yield
+        finally:
+            for record in caught:
+                print(f"warning: {warning_message(record)}", file=sys.stderr)
+
+
+def _terminate_like_interrupt() -> None:
+    """SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is removed."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
+    _terminate_like_interrupt()
+    subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with np.errstate(all="ignore"):
+        with _warnings_as_lines(), np.errstate(all="ignore"):
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
-    except (SDLError, TracerError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_USAGE
-    except FileNotFoundError as err:
-        print(f"error: {err.filename or err}: no such file", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as err:
-        print(f"error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
+    except (TracerError, OSError, MemoryError) as err:
+        message = error_message(err, subject)
+        if message is None:
+            raise
+        print(f"error: {message}", file=sys.stderr)
         return EXIT_USAGE
     except RenderCancelled:
         print("error: cancelled", file=sys.stderr)

@@ -33,11 +33,19 @@ class SDLError(TracerError):
     def __str__(self) -> str:
         text = f"{self.where}: {self.message}"
         if self.token is not None:
-            text += f" (found {self.token!r}"
+            text += f" (found {_cut(self.token)!r}"
             text += f", expected {self.expected})" if self.expected else ")"
         elif self.expected:
             text += f" (expected {self.expected})"
         return text
+
+
+#: Longest token quoted whole in a message; a longer one shows its start and its length.
+MAX_QUOTED_TOKEN = 40
+
+
+def _cut(token: str) -> str:
+    return token if len(token) <= MAX_QUOTED_TOKEN else f"{token[:MAX_QUOTED_TOKEN]}... ({len(token)} characters)"
 
 
 class RenderCancelled(TracerError):

@@ -107,7 +107,7 @@ typedef struct {
     const int64_t *mat_tex_image;            /* per material: index into image_data, -1 for none */
     int64_t n_images;
     const int64_t *image_info;               /* 2 per image: width, height */
-    const double *const *image_data;         /* per image: height x width x 3 floats in [0, 1], row 0 at the bottom */
+    const uint8_t *const *image_data;        /* per image: height x width x 3 bytes (texel value = byte / 255), row 0 at the bottom */
     const int64_t *noise_perm;               /* 512: tracer.textures.noise.PERM */
     const double *noise_gradients;           /* 12 x 3: tracer.textures.noise.GRADIENTS */
     /* tolerances read when the scene is flattened (so that a measurement can change them) */
@@ -188,6 +188,6 @@ typedef struct {
     X(relative_epsilon) \
     X(torus_newton_steps)
 #define RT_SCENE_DESC_FIELD_COUNT 70
-#define RT_CONTRACT_DIGEST "f64c9640df437410"
+#define RT_CONTRACT_DIGEST "62deb5d030557bb4"
 
 #endif

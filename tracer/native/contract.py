@@ -231,7 +231,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mat_tex_image", "*i64", "per material: index into image_data, -1 for none"),
     F("n_images", "i64"),
     F("image_info", "*i64", "2 per image: width, height"),
-    F("image_data", "**f64", "per image: height x width x 3 floats in [0, 1], row 0 at the bottom"),
+    F("image_data", "**u8", "per image: height x width x 3 bytes (texel value = byte / 255), row 0 at the bottom"),
     F("noise_perm", "*i64", "512: tracer.textures.noise.PERM"),
     F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
     F("relative_epsilon", "f64", "tracer.numerics.RELATIVE_EPSILON",

@@ -226,8 +226,8 @@ static inline void bilinear_axis(double coord, int64_t size, int wrap, int64_t *
     *i1 = b;
 }
 
-/* image: height x width x 3, row 0 at the bottom. */
-static void sample_bilinear(const double *image, int64_t width, int64_t height, double u, double v, int wrap_u,
+/* image: height x width x 3 bytes, row 0 at the bottom; a texel's value is its byte / 255, as in images.py. */
+static void sample_bilinear(const uint8_t *image, int64_t width, int64_t height, double u, double v, int wrap_u,
                             int wrap_v, double *out)
 {
     if (!isfinite(u))
@@ -238,11 +238,11 @@ static void sample_bilinear(const double *image, int64_t width, int64_t height, 
     double fx, fy;
     bilinear_axis(u, width, wrap_u, &x0, &x1, &fx);
     bilinear_axis(v, height, wrap_v, &y0, &y1, &fy);
-    const double *a = image + 3 * (y1 * width + x0), *b = image + 3 * (y1 * width + x1);
-    const double *c = image + 3 * (y0 * width + x0), *e = image + 3 * (y0 * width + x1);
+    const uint8_t *a = image + 3 * (y1 * width + x0), *b = image + 3 * (y1 * width + x1);
+    const uint8_t *c = image + 3 * (y0 * width + x0), *e = image + 3 * (y0 * width + x1);
     for (int k = 0; k < 3; k++) {
-        double top = a[k] * (1 - fx) + b[k] * fx;
-        double bottom = c[k] * (1 - fx) + e[k] * fx;
+        double top = a[k] / 255.0 * (1 - fx) + b[k] / 255.0 * fx;
+        double bottom = c[k] / 255.0 * (1 - fx) + e[k] / 255.0 * fx;
         out[k] = bottom * (1 - fy) + top * fy;
     }
 }

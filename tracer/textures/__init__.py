@@ -26,12 +26,15 @@ class TextureSet:
     def __init__(self, scene, primitives):
         self.primitives = primitives
         self.images: dict[int, np.ndarray] = {}
+        loaded: dict[str, np.ndarray] = {}  # one picture per file, however many numbers name it
         for number in sorted({p.shape.material.texture for p in primitives}):
             if number > 0:
                 path = scene.pixmaps.get(number)
                 if path is None:
                     raise TracerError(f"texture {number} is used but the scene has no 'makePixmap {number} file'")
-                self.images[number] = load_image(path)
+                if path not in loaded:
+                    loaded[path] = load_image(path)
+                self.images[number] = loaded[path]
             elif number < 0 and number not in SOLID_TEXTURES:
                 raise TracerError(f"texture {number} is not a known solid texture (use -1, -2 or -3)")
 

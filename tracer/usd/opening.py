@@ -16,6 +16,7 @@ import sys
 import tempfile
 
 from ..errors import TracerError
+from ..userfiles import check_regular
 from . import common as C
 
 #: The message part of one error in a Tf.ErrorException's text: "Error in 'func' at line N in file F : 'what'".
@@ -57,7 +58,7 @@ def open_stage(path) -> tuple[object, list[str]]:
     """(stage, composition errors as messages) for a USD file; FileNotFoundError if it does not exist, a
     TracerError naming it if USD cannot read it."""
     pxr = C.pxr()
-    name = os.fspath(path)
+    name = check_regular(path, "USD file")
     if not os.path.isfile(name):
         if os.path.exists(name):
             raise TracerError(f"{name}: not a file")

@@ -176,6 +176,11 @@ def _render(args) -> int:
     from .render import render
 
     scene = _load(args)
+    if args.lenient:
+        from .textures import drop_unreadable_textures
+
+        for message in drop_unreadable_textures(scene):
+            print(f"warning: {message}", file=sys.stderr)
     if args.max_depth is not None:
         if args.max_depth < 0:
             raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")

@@ -27,6 +27,8 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define TORUS_IMAG_TOLERANCE 1e-06
 /* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
+/* most octaves of turbulence summed (marble); a larger count is read as this one (tracer.textures.noise:MAX_OCTAVES) */
+#define MAX_OCTAVES 32
 /* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
 #define MAX_RECURSION_DEPTH 64
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
@@ -188,6 +190,6 @@ typedef struct {
     X(relative_epsilon) \
     X(torus_newton_steps)
 #define RT_SCENE_DESC_FIELD_COUNT 70
-#define RT_CONTRACT_DIGEST "62deb5d030557bb4"
+#define RT_CONTRACT_DIGEST "a26b8c3b73bfc34b"
 
 #endif

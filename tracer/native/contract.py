@@ -90,6 +90,8 @@ CONSTANTS = (
     Constant("TORUS_IMAG_TOLERANCE", "tracer.intersect.torus:IMAG_TOLERANCE", "double",
              "quartic roots this close to the real axis count as real"),
     Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
+             "most octaves of turbulence summed (marble); a larger count is read as this one"),
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
              "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",

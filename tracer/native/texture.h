@@ -129,7 +129,8 @@ static void tex_wood(const int64_t *perm, const double *grad, const double *q, c
 static void tex_marble(const int64_t *perm, const double *grad, const double *q, const double *p, double *out)
 {
     double stripes = q[0], strength = q[1];
-    int64_t octaves = np_to_int64(q[2]);  /* int(octaves): truncation (turbulence3 keeps at least 1) */
+    /* int(min(octaves, MAX_OCTAVES)): truncation (turbulence3 keeps at least 1) */
+    int64_t octaves = q[2] >= MAX_OCTAVES ? MAX_OCTAVES : np_to_int64(q[2]);
     double doubled[3] = {p[0] * 2.0, p[1] * 2.0, p[2] * 2.0};
     double wave = sin(stripes * M_PI_VALUE * p[0] + strength * turbulence3(perm, grad, doubled, octaves));
     double vein = pow(1.0 - fabs(wave), 3.0);

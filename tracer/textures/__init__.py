@@ -20,6 +20,32 @@ def image_repeats(parameters) -> tuple[float, float]:
     return repeat_u, repeat_v
 
 
+def drop_unreadable_textures(scene) -> list[str]:
+    """For lenient reading: every texture that cannot be used (a picture that cannot be read, a missing
+    makePixmap, an unknown solid texture) is taken off the shapes that use it, which are then drawn with their
+    material's own colours.  Returns one message per problem, naming the file."""
+    from dataclasses import replace
+
+    shapes = scene.shapes()
+    problems: dict[int, str] = {}
+    for number in sorted({s.material.texture for s in shapes}):
+        if number > 0:
+            path = scene.pixmaps.get(number)
+            if path is None:
+                problems[number] = f"texture {number} is used but the scene has no 'makePixmap {number} file'"
+                continue
+            try:
+                load_image(path)
+            except TracerError as err:
+                problems[number] = str(err)
+        elif number < 0 and number not in SOLID_TEXTURES:
+            problems[number] = f"texture {number} is not a known solid texture (use -1, -2 or -3)"
+    for shape in shapes:
+        if shape.material.texture in problems:
+            shape.material = replace(shape.material, texture=0)
+    return [f"{message}: drawn without that texture" for message in dict.fromkeys(problems.values())]
+
+
 class TextureSet:
     """The textures a compiled scene uses, with its images loaded once."""
 

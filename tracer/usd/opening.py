@@ -18,6 +18,7 @@ import tempfile
 from ..errors import TracerError
 from ..userfiles import check_regular
 from . import common as C
+from .budget import check_prim_budget
 
 #: The message part of one error in a Tf.ErrorException's text: "Error in 'func' at line N in file F : 'what'".
 _ERROR_MESSAGE = re.compile(r"Error in .*? : '(.*)'\s*$", re.DOTALL)
@@ -70,6 +71,7 @@ def open_stage(path) -> tuple[object, list[str]]:
         with _held_stderr():
             if layer is not None:
                 layer.Reload()
+            check_prim_budget(name)  # before USD composes what may be millions of prims
             stage = pxr.Usd.Stage.Open(name, pxr.Usd.Stage.LoadAll)
     except pxr.Tf.ErrorException as exc:
         message = usd_error_message(str(exc))

@@ -88,15 +88,15 @@ def test_unwritable_output_names_the_users_file_not_the_temporary(tmp_path):
     folder = tmp_path / "locked"
     folder.mkdir()
     folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    # root may write into any folder, but not create files in /sys
+    target = folder / "out.png" if not os.access(folder, os.W_OK) else Path("/sys/out.png")
     try:
-        if os.access(folder, os.W_OK):
-            pytest.skip("running as a user who may write anywhere (root)")
-        outcome = run_cli(["render", _scene(tmp_path), "-o", folder / "out.png", "--width", 8, "--height", 8],
-                          names=["out.png"])
+        outcome = run_cli(["render", _scene(tmp_path), "-o", target, "--width", 8, "--height", 8],
+                          names=[str(target)])
     finally:
         folder.chmod(stat.S_IRWXU)
     assert outcome.verdict == "error", outcome.describe()
-    assert ".tmp" not in outcome.stderr
+    assert "Permission denied" in outcome.stderr and ".tmp" not in outcome.stderr
 
 
 def test_file_size_limit_gives_a_message_naming_the_output(tmp_path):

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import TracerError
+from .errors import SceneError
 from .model import Camera, Scene
 
 DEFAULT_VIEW_ANGLE = 40.0
@@ -35,15 +35,15 @@ class CameraFrame:
         eye = np.asarray(camera.eye, dtype=float)
         n = _unit(eye - np.asarray(camera.look, dtype=float))
         if n is None:
-            raise ValueError("camera eye and look-at point coincide")
+            raise SceneError("camera eye and look-at point coincide")
         up = _unit(np.asarray(camera.up, dtype=float))
         u = np.cross(up if up is not None else np.zeros(3), n)
         if not np.linalg.norm(u) > 1e-12:
-            raise ValueError("camera up vector is parallel to the viewing direction")
+            raise SceneError("camera up vector is parallel to the viewing direction")
         u /= np.linalg.norm(u)
         v = np.cross(n, u)
         if not 0.0 < camera.view_angle < 180.0:
-            raise ValueError(f"camera view angle must be between 0 and 180 degrees, not {camera.view_angle}")
+            raise SceneError(f"camera view angle must be between 0 and 180 degrees, not {camera.view_angle}")
         h = math.tan(math.radians(camera.view_angle) / 2.0)
         return cls(eye, u, v, n, h, h * aspect)
 
@@ -114,7 +114,7 @@ def framing_camera(compiled, aspect: float = 4 / 3) -> Camera:
         eye = center + distance * direction
     if not (np.all(np.isfinite(eye)) and np.all(np.isfinite(center))):
         source = getattr(compiled.scene, "source", None)
-        raise TracerError(f"{source or 'scene'}: the scene is too large (about {radius:.3g} across) for an "
+        raise SceneError(f"{source or 'scene'}: the scene is too large (about {radius:.3g} across) for an "
                           f"automatic camera: give one with 'camera'")
     return Camera(tuple(eye), tuple(center), (0.0, 1.0, 0.0), DEFAULT_VIEW_ANGLE)
 

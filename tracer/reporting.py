@@ -4,13 +4,12 @@ The command line prints ``error: `` + :func:`error_message` and exits 2; the Ble
 text in its report.  Errors meant for users (TracerError, SDLError) already name the file and place; OS
 errors are given the file they concern (never the hidden temporary file an atomic write uses); running out
 of memory names the input.  Anything else is a bug and is not translated (None), so that it is seen.
-Library warnings (Pillow's, NumPy's, USD's) are turned into ``warning:`` lines by :func:`warning_message`.
+Warnings become ``warning:`` lines through tracer.errors.warnings_as_lines.
 """
 from __future__ import annotations
 
 import errno
 import re
-import warnings
 from typing import Optional
 
 from .errors import TracerError
@@ -59,12 +58,3 @@ def error_message(err: BaseException, subject: Optional[str] = None) -> Optional
         where = f"{shown_name(subject)}: " if subject else ""
         return f"{where}not enough memory ({err or 'the request is too large for this machine'})"
     return None
-
-
-def warning_message(record: warnings.WarningMessage) -> str:
-    """A library's warning as one line (without ``warning: ``): its own message, which names the file where
-    our wrappers re-raise it (tracer.textures.images.ImageWarning), else the category's name before it."""
-    text = str(record.message)
-    if issubclass(record.category, UserWarning) and record.category.__module__.startswith("tracer"):
-        return shortened(text)
-    return shortened(f"{record.category.__name__}: {text}")

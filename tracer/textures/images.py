@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import TracerError
+from ..errors import TracerError, TracerWarning
 from ..userfiles import open_regular, shown_name
 
 #: Largest picture accepted, in pixels: 8192 x 8192 (192 MiB as 8-bit RGB).  Below Pillow's own
@@ -23,7 +23,7 @@ from ..userfiles import open_regular, shown_name
 MAX_TEXELS = 8192 * 8192
 
 
-class ImageWarning(UserWarning):
+class ImageWarning(TracerWarning):
     """Something odd in a picture that did not stop reading it; the message names the file."""
 
 

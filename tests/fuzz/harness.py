@@ -24,6 +24,8 @@ REPO = Path(__file__).resolve().parents[2]
 
 #: A run that takes longer than this is a hang (the inputs are tiny and the images 32 x 24).
 HANG_SECONDS = 20.0
+#: An error line longer than this echoes the input instead of describing it (tracer.reporting cuts at 600).
+MAX_ERROR_LINE = 700
 #: Peak resident memory above which a run counts as over budget.
 MEMORY_BYTES = 2 << 30
 
@@ -103,13 +105,18 @@ def run_cli(args: Sequence, *, output: Optional[Path] = None, names: Sequence[st
         seconds = time.monotonic() - start
         err.seek(0)
         stderr = err.read().decode("utf-8", "replace")
-    peak = usage.ru_maxrss * 1024
-    outcome = Outcome("", proc.returncode, stderr, seconds, peak, args=args)
-    outcome.verdict, outcome.detail = _judge(outcome, hung.is_set(), output, names, memory_bytes)
+    return judge(Outcome("", proc.returncode, stderr, seconds, usage.ru_maxrss * 1024, args=args),
+                 hung.is_set(), output, names, memory_bytes)
+
+
+def judge(outcome: Outcome, hung: bool, output: Optional[Path] = None, names: Sequence[str] = (),
+          memory_bytes: int = MEMORY_BYTES) -> Outcome:
+    """Fill in ``outcome.verdict`` and ``outcome.detail`` from how the run ended."""
+    outcome.verdict, outcome.detail = _verdict(outcome, hung, output, names, memory_bytes)
     return outcome
 
 
-def _judge(o: Outcome, hung: bool, output: Optional[Path], names: Sequence[str], memory_bytes: int):
+def _verdict(o: Outcome, hung: bool, output: Optional[Path], names: Sequence[str], memory_bytes: int):
     if hung:
         return "hang", f"killed after {o.seconds:.0f} s"
     if "Traceback (most recent call last)" in o.stderr:
@@ -132,7 +139,7 @@ def _judge(o: Outcome, hung: bool, output: Optional[Path], names: Sequence[str],
     if o.returncode == 2:
         if len(errors) != 1:
             return "bad-error", f"{len(errors)} error lines"
-        if len(errors[0]) > 400:
+        if len(errors[0]) > MAX_ERROR_LINE:
             return "bad-error", f"error line of {len(errors[0])} characters"
         if names and not any(name in errors[0] for name in names):
             return "bad-error", f"error line names none of {list(names)}: {errors[0][:200]}"

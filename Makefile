@@ -45,3 +45,10 @@ bench: setup
 extension: setup
 	$(PY) scripts/build_extension.py
 	$(PY) scripts/build_extension.py --legacy
+
+# Hostile input (tests/fuzz/): 10,000 mutated scenes, meshes, images and USD stages through the command line,
+# each in its own process; fails on any traceback, signal, hang past 20 s, memory past 2 GB or C != NumPy.
+# Failing inputs are copied to out/fuzz-findings/.  The test suite runs a seeded slice of 300.
+.PHONY: fuzz
+fuzz: setup
+	$(PY) tests/fuzz/fuzz.py --count 10000 --seed $${FUZZ_SEED:-1} --findings out/fuzz-findings

@@ -32,14 +32,14 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parents[1]))
 
-from harness import FAILURES, HANG_SECONDS, MEMORY_BYTES, Outcome, judge  # noqa: E402
+from harness import FAILURES, HANG_SECONDS, MEMORY_BYTES, WALL_FACTOR, Outcome, judge  # noqa: E402
 from mutate import SCENES, Case, make_case  # noqa: E402
 
 #: Image difference allowed between the backends (tracer's C = NumPy promise).
 SAME_IMAGE = 1
 
 
-def _child(argv: list[str], folder: Path, memory_bytes: int) -> None:
+def _child(argv: list[str], folder: Path, memory_bytes: int, cpu_seconds: float) -> None:
     """In the forked child: limits, redirections, the command; never returns."""
     code = 1
     try:
@@ -47,6 +47,10 @@ def _child(argv: list[str], folder: Path, memory_bytes: int) -> None:
         limit = memory_bytes + (1 << 30)
         resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        # CPU seconds, not wall-clock ones, decide a hang: on a loaded machine a run may wait long for a core
+        # (the parent still kills anything past WALL_FACTOR times the limit: a read blocked on a FIFO).
+        cpu = max(1, int(cpu_seconds))
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))
         signal.signal(signal.SIGINT, signal.default_int_handler)
         os.chdir(folder)
         for fd, name in ((1, "stdout"), (2, "stderr")):
@@ -72,28 +76,30 @@ def _child(argv: list[str], folder: Path, memory_bytes: int) -> None:
 
 
 class Runner:
-    """Up to ``jobs`` children at a time."""
+    """Up to ``jobs`` children at a time; finished ones collect in ``done`` as (token, Outcome, hung)."""
 
     def __init__(self, jobs: int, timeout: float, memory_bytes: int):
         self.jobs, self.timeout, self.memory_bytes = jobs, timeout, memory_bytes
         self.running: dict[int, tuple] = {}
+        self.done: list = []
 
-    def start(self, argv: list[str], folder: Path, token) -> None:
+    def start(self, argv: list[str], folder: Path, token, cpu_seconds: float | None = None) -> None:
         while len(self.running) >= self.jobs:
             self.done.append(self.wait_one())
         sys.stdout.flush()
         sys.stderr.flush()
+        cpu_seconds = cpu_seconds or self.timeout
         pid = os.fork()
         if pid == 0:
-            _child(argv, folder, self.memory_bytes)
-        self.running[pid] = (time.monotonic(), argv, folder, token, [False])
+            _child(argv, folder, self.memory_bytes, cpu_seconds)
+        self.running[pid] = (time.monotonic(), argv, folder, token, [False], cpu_seconds)
 
     def wait_one(self):
         """Reap one finished child (killing any past the limit meanwhile): (token, Outcome) or None."""
         while True:
             now = time.monotonic()
-            for pid, (started, _, _, _, killed) in self.running.items():
-                if not killed[0] and now - started > self.timeout:
+            for pid, (started, _, _, _, killed, cpu_seconds) in self.running.items():
+                if not killed[0] and now - started > WALL_FACTOR * cpu_seconds:
                     killed[0] = True
                     try:
                         os.killpg(pid, signal.SIGKILL)
@@ -106,33 +112,33 @@ class Runner:
             else:
                 time.sleep(0.01)
                 continue
-            started, argv, folder, token, killed = self.running.pop(pid)
+            started, argv, folder, token, killed, _ = self.running.pop(pid)
             stderr = (folder / "stderr").read_text("utf-8", "replace") if (folder / "stderr").exists() else ""
-            outcome = Outcome("", os.waitstatus_to_exitcode(status), stderr, time.monotonic() - started,
-                              usage.ru_maxrss * 1024, args=argv)
-            return token, outcome, killed[0]
+            code = os.waitstatus_to_exitcode(status)
+            outcome = Outcome("", code, stderr, time.monotonic() - started, usage.ru_maxrss * 1024, args=argv)
+            return token, outcome, killed[0] or code in (-signal.SIGXCPU, -signal.SIGKILL)
 
     def drain(self):
         while self.running:
             self.done.append(self.wait_one())
 
 
-def _compare(case: Case, folder: Path, first: Path, runner_timeout: float, memory_bytes: int):
-    """Render a scene that rendered again with the other backend; None if the images agree, else why not."""
+def _compare_argv(case: Case) -> list[str]:
+    """The command rendering a case again with the other backend, into other.png."""
+    backend = "c" if "numpy" in case.options else "numpy"
+    options = [o for i, o in enumerate(case.options) if o != "--backend" and case.options[i - 1:i] != ["--backend"]]
+    return ["render", case.main, "-o", "other.png", *options, "--backend", backend]
+
+
+def _compared(folder: Path, outcome: Outcome, hung: bool):
+    """None if out.png and other.png agree within SAME_IMAGE, else why not."""
     import numpy as np
     from PIL import Image
 
-    backend = "c" if "numpy" in case.options else "numpy"
-    options = [o for i, o in enumerate(case.options) if o != "--backend" and case.options[i - 1:i] != ["--backend"]]
     other = folder / "other.png"
-    runner = Runner(1, runner_timeout * 3, memory_bytes)  # the NumPy path is slower
-    runner.done = []
-    runner.start(["render", case.main, "-o", other.name, *options, "--backend", backend], folder, None)
-    runner.drain()
-    _, outcome, killed = runner.done[0]
-    if killed or outcome.returncode != 0 or not other.exists():
-        return f"the {backend} backend did not render it (exit {outcome.returncode}): {outcome.stderr[-300:]}"
-    a = np.asarray(Image.open(first).convert("RGB"), dtype=np.int16)
+    if hung or outcome.returncode != 0 or not other.exists():
+        return f"the other backend did not render it (exit {outcome.returncode}): {outcome.stderr[-300:]}"
+    a = np.asarray(Image.open(folder / "out.png").convert("RGB"), dtype=np.int16)
     b = np.asarray(Image.open(other).convert("RGB"), dtype=np.int16)
     worst = int(np.abs(a - b).max()) if a.shape == b.shape else 255
     return None if worst <= SAME_IMAGE else f"C and NumPy images differ by up to {worst}/255"
@@ -144,7 +150,6 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
     for folder in ("images", "meshes"):  # the bundled scenes name these relative to themselves
         shutil.copytree(SCENES / folder, work / folder)
     runner = Runner(jobs, timeout, memory_bytes)
-    runner.done = []
     verdicts: Counter = Counter()
     failures, mismatches, compared = [], [], 0
     seeds = [only] if only is not None else [seed * 1_000_003 + i for i in range(count)]
@@ -152,7 +157,15 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
 
     def finish(item):
         nonlocal compared
-        (case_seed, case, folder), outcome, killed = item
+        (case_seed, case, folder, comparing), outcome, killed = item
+        if comparing:
+            why = _compared(folder, outcome, killed)
+            if why:
+                mismatches.append({"seed": case_seed, "kind": case.kind, "detail": why})
+                if log:
+                    log(f"MISMATCH seed {case_seed} {case.kind}: {why}")
+            shutil.rmtree(folder, ignore_errors=True)
+            return
         output = folder / "out.png"
         judge(outcome, killed, output if case.command == "render" else None,
               names=[*case.files, "--", case.main], memory_bytes=memory_bytes)
@@ -173,11 +186,9 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
               and outcome.verdict == "image" and "--lenient" not in case.options
               and (case_seed % compare_every == 0 or only is not None)):
             compared += 1
-            why = _compare(case, folder, output, timeout, memory_bytes)
-            if why:
-                mismatches.append({"seed": case_seed, "kind": case.kind, "detail": why})
-                if log:
-                    log(f"MISMATCH seed {case_seed} {case.kind}: {why}")
+            # (the NumPy path is the slower one: it gets more time)
+            runner.start(_compare_argv(case), folder, (case_seed, case, folder, True), cpu_seconds=6 * timeout)
+            return
         shutil.rmtree(folder, ignore_errors=True)
 
     try:
@@ -194,14 +205,15 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
                 argv += ["-o", "out.png"]
             elif case.command == "convert":
                 argv += ["out.sdl" if case.kind == "usd" else "out.usda"]
-            runner.start(argv + case.options, folder, (case_seed, case, folder))
+            runner.start(argv + case.options, folder, (case_seed, case, folder, False))
             while runner.done:
                 finish(runner.done.pop())
             if log and (index + 1) % 500 == 0:
                 log(f"{index + 1} inputs, {time.monotonic() - started:.0f} s: {dict(verdicts)}")
-        runner.drain()
-        while runner.done:
-            finish(runner.done.pop())
+        while runner.running or runner.done:
+            runner.drain()
+            while runner.done:
+                finish(runner.done.pop())
     finally:
         shutil.rmtree(work, ignore_errors=True)
     failed = {kind: verdicts[kind] for kind in FAILURES if verdicts[kind]}

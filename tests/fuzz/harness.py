@@ -22,8 +22,10 @@ from typing import Optional, Sequence
 
 REPO = Path(__file__).resolve().parents[2]
 
-#: A run that takes longer than this is a hang (the inputs are tiny and the images 32 x 24).
+#: A run that takes more CPU seconds than this is a hang (the inputs are tiny and the images 32 x 24).
 HANG_SECONDS = 20.0
+#: ... and one still running after this many times as long in wall-clock time (blocked, say) is killed.
+WALL_FACTOR = 5
 #: An error line longer than this echoes the input instead of describing it (tracer.reporting cuts at 600).
 MAX_ERROR_LINE = 700
 #: Peak resident memory above which a run counts as over budget.
@@ -58,7 +60,7 @@ class Outcome:
                 f"  args: {' '.join(map(str, self.args))}\n  stderr tail: {tail}")
 
 
-def _limit_child(memory_bytes: int):
+def _limit_child(memory_bytes: int, cpu_seconds: float):
     def apply():
         os.setsid()  # its own process group, so a hang can be killed with every thread and child
         # RLIMIT_DATA counts the heap and private anonymous mappings (NumPy arrays, thread stacks) but not
@@ -66,6 +68,10 @@ def _limit_child(memory_bytes: int):
         limit = memory_bytes + (1 << 30)
         resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        # CPU seconds decide a hang (a loaded machine may keep a run waiting for a core); the parent kills
+        # what is still there after WALL_FACTOR times as long in wall-clock time (a read blocked on a FIFO).
+        cpu = max(1, int(cpu_seconds))
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))
     return apply
 
 
@@ -85,7 +91,7 @@ def run_cli(args: Sequence, *, output: Optional[Path] = None, names: Sequence[st
         start = time.monotonic()
         proc = subprocess.Popen([sys.executable, "-m", "tracer", *args], stdout=out, stderr=err,
                                 stdin=subprocess.DEVNULL, cwd=cwd, env=child_env,
-                                preexec_fn=_limit_child(memory_bytes))
+                                preexec_fn=_limit_child(memory_bytes, timeout))
         hung = threading.Event()
 
         def kill():
@@ -95,7 +101,7 @@ def run_cli(args: Sequence, *, output: Optional[Path] = None, names: Sequence[st
             except ProcessLookupError:
                 pass
 
-        timer = threading.Timer(timeout, kill)
+        timer = threading.Timer(WALL_FACTOR * timeout, kill)
         timer.start()
         try:
             _, status, usage = os.wait4(proc.pid, 0)
@@ -117,8 +123,8 @@ def judge(outcome: Outcome, hung: bool, output: Optional[Path] = None, names: Se
 
 
 def _verdict(o: Outcome, hung: bool, output: Optional[Path], names: Sequence[str], memory_bytes: int):
-    if hung:
-        return "hang", f"killed after {o.seconds:.0f} s"
+    if hung or o.returncode in (-signal.SIGXCPU, -signal.SIGKILL):
+        return "hang", f"stopped after {o.seconds:.0f} s"
     if "Traceback (most recent call last)" in o.stderr:
         return "traceback", o.stderr.strip().splitlines()[-1]
     if o.returncode < 0:

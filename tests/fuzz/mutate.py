@@ -67,7 +67,7 @@ def seeds() -> dict[str, list]:
 
         texts = _seed_texts()
         pixels = (np.indices((12, 16)).sum(axis=0)[..., None] * np.array([9, 17, 29])).astype(np.uint8)
-        picture = Image.fromarray(pixels, "RGB")
+        picture = Image.fromarray(pixels)  # (H, W, 3) uint8: RGB
         images = {"png": [(SCENES / "images" / "bricks.png").read_bytes()],
                   "bmp": [(SCENES / "images" / "uvgrid.bmp").read_bytes()]}
         for kind, fmt in (("png", "PNG"), ("bmp", "BMP"), ("jpeg", "JPEG"), ("ppm", "PPM")):
@@ -111,7 +111,9 @@ def mutate_bytes(rng: random.Random, data: bytes, rounds: int = 0) -> bytes:
 _NUMBER = re.compile(r"(?<![\w.])[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
-def mutate_text(rng: random.Random, text: str, kind: str) -> str:
+def mutate_text(rng: random.Random, text: str, kind: str, deep: int = 1500) -> str:
+    """``deep``: the deepest boolean nesting to insert (the NumPy path takes minutes over 1,500 levels: it is
+    the slow reference, so its runs get shallower trees)."""
     lines = text.split("\n")
     for _ in range(rng.randint(1, 5)):
         choice = rng.random()
@@ -128,7 +130,7 @@ def mutate_text(rng: random.Random, text: str, kind: str) -> str:
         elif choice < 0.7 and kind == "sdl":
             lines.insert(at, " ".join(rng.choice(WORDS) for _ in range(rng.randint(1, 4))))
         elif choice < 0.75 and kind == "sdl":
-            depth = rng.choice((10, 200, 1500))
+            depth = min(deep, rng.choice((10, 200, 1500)))
             lines.insert(at, " ".join(rng.choice(("union", "difference", "intersection")) for _ in range(depth)) +
                          " sphere" * (depth + 1))
         elif choice < 0.8 and kind == "sdl":
@@ -230,8 +232,12 @@ def make_case(seed: int, kind: str | None = None) -> Case:
     pool = seeds()[kind]
     original = rng.choice(pool)
     name = f"in{seed}"
+    roll = rng.random()
+    command = "info" if roll < 0.08 else "convert" if roll < 0.14 and kind in ("sdl", "usd") else "render"
+    options = render_options(rng) if command == "render" else ["--json"] * rng.randint(0, 1) if command == "info" else []
+    deep = 1500 if "numpy" not in options else 100
     if kind == "sdl":
-        case = Case(kind, {f"{name}.sdl": mutate_text(rng, original, kind).encode()})
+        case = Case(kind, {f"{name}.sdl": mutate_text(rng, original, kind, deep).encode()})
     elif kind == "usd":
         text = original if rng.random() < 0.1 else mutate_text(rng, original, kind)
         case = Case(kind, {f"{name}.usda": text.encode()})
@@ -248,12 +254,5 @@ def make_case(seed: int, kind: str | None = None) -> Case:
         else:
             body = mutate_bytes(rng, original)
         case = Case(kind, {f"{name}.sdl": TEXTURED.format(name=f"{name}.{ext}").encode(), f"{name}.{ext}": body})
-    roll = rng.random()
-    if roll < 0.08:
-        case.command = "info"
-        case.options = ["--json"] if rng.random() < 0.5 else []
-    elif roll < 0.14 and kind in ("sdl", "usd"):
-        case.command = "convert"
-    else:
-        case.options = render_options(rng)
+    case.command, case.options = command, options
     return case

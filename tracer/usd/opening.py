@@ -35,22 +35,29 @@ def usd_error_message(text: str) -> str:
 
 
 @contextlib.contextmanager
-def _held_stderr():
-    """Catch what C++ code prints on file descriptor 2 meanwhile (and drop it: the caller reports the same
-    problems itself).  Where fd 2 cannot be redirected, nothing is held back."""
+def held_stderr():
+    """Catch what C++ code prints on file descriptor 2 meanwhile.  Yields a list that, after the block, holds
+    USD's diagnostics, one line each (``Warning: in F at line N of FILE -- what`` becomes ``what``), for the
+    caller to report its own way or drop.  Where fd 2 cannot be redirected, nothing is held back."""
+    printed: list[str] = []
     try:
         sys.stderr.flush()
         saved = os.dup(2)
     except (OSError, ValueError):
-        yield
+        yield printed
         return
     try:
         with tempfile.TemporaryFile() as sink:
             os.dup2(sink.fileno(), 2)
             try:
-                yield
+                yield printed
             finally:
                 os.dup2(saved, 2)
+                sink.seek(0)
+                text = sink.read().decode("utf-8", "replace")
+                for chunk in re.split(r"\n(?=\S)", text.strip()):
+                    if chunk.strip():
+                        printed.append(" ".join(chunk.split(" -- ", 1)[-1].split()))
     finally:
         os.close(saved)
 
@@ -68,7 +75,7 @@ def open_stage(path) -> tuple[object, list[str]]:
     # registry as it was then; read the file as it is now.
     layer = pxr.Sdf.Layer.Find(name)
     try:
-        with _held_stderr():
+        with held_stderr():
             if layer is not None:
                 layer.Reload()
             check_prim_budget(name)  # before USD composes what may be millions of prims

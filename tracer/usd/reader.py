@@ -28,7 +28,7 @@ from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
 from .meshes import sdl_mesh, usd_mesh
-from .opening import open_stage, usd_error_message
+from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -547,6 +547,9 @@ def load_usd(path: PathLike, strict: bool = True, time: Optional[float] = None) 
     each becomes one message in ``scene.warnings`` and the rest is read.  Approximations (a rect light read
     as a point light, a material that is not a UsdPreviewSurface) are warnings either way."""
     stage, composition_errors = open_stage(path)
-    scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
+    with held_stderr() as printed:  # what USD says while we read (a binding without its API, say)
+        scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
+    for message in dict.fromkeys(printed):
+        scene.warnings.append(f"{os.fspath(path)}: USD says: {message}")
     scene.source = Path(path)
     return scene

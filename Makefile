@@ -46,6 +46,38 @@ extension: setup
 	$(PY) scripts/build_extension.py
 	$(PY) scripts/build_extension.py --legacy
 
+# The C core, built by CMake as the wheel builds it (CMakeLists.txt; needs cmake):
+#   make warnings   -Wall -Wextra -Werror with gcc and with clang (apt-get install -y clang)
+#   make sanitize   the C-vs-NumPy tests with the core built under AddressSanitizer and UBSan
+#   make wheel      pip wheel . into dist/, then the packaging tests (a fresh environment without cc)
+CMAKE ?= cmake
+SANITIZED := build/sanitize/_core.so
+SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py
+
+.PHONY: warnings sanitize wheel contract
+warnings:
+	@for cc in gcc clang; do \
+		if ! command -v $$cc >/dev/null; then echo "warning: $$cc not found, not checked" >&2; continue; fi; \
+		$(CMAKE) -S . -B build/warnings-$$cc -DCMAKE_C_COMPILER=$$cc -DRT_WERROR=ON >/dev/null && \
+		$(CMAKE) --build build/warnings-$$cc --clean-first || exit 1; \
+	done
+
+sanitize: setup
+	$(CMAKE) -S . -B build/sanitize -DCMAKE_C_COMPILER=gcc -DRT_SANITIZE=ON -DRT_WERROR=ON >/dev/null
+	$(CMAKE) --build build/sanitize
+	SDL_TRACER_LIBRARY=$(CURDIR)/$(SANITIZED) LD_PRELOAD="$$(gcc -print-file-name=libasan.so)" \
+		ASAN_OPTIONS=detect_leaks=0:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+		$(PY) -m pytest -q -p no:cacheprovider $(SANITIZE_TESTS)
+
+wheel: setup
+	rm -f dist/sdl_raytracer-*.whl
+	$(PY) -m pip wheel -q --no-deps -w dist .
+	SDL_TRACER_WHEEL="$$(ls dist/sdl_raytracer-*.whl)" $(PY) -m pytest -q -m packaging tests/test_packaging.py
+
+# Rewrites tracer/native/contract.h from tracer/native/contract.py (see docs/contributing.md).
+contract: setup
+	$(PY) -W ignore::RuntimeWarning -m tracer.native.contract
+
 # Hostile input (tests/fuzz/): 10,000 mutated scenes, meshes, images and USD stages through the command line,
 # each in its own process; fails on any traceback, signal, hang past 20 s, memory past 2 GB or C != NumPy.
 # Failing inputs are copied to out/fuzz-findings/.  The test suite runs a seeded slice of 300.

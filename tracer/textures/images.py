@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -27,13 +28,29 @@ class ImageWarning(TracerWarning):
     """Something odd in a picture that did not stop reading it; the message names the file."""
 
 
+#: ``decode(path) -> (height, width, 3) floats in [0, 1], row 0 at the bottom`` (a TracerError for an unreadable
+#: file), used where Pillow cannot be imported: the Blender add-on sets Blender's own image loading, since
+#: Blender's Python ships without Pillow.
+_fallback_decoder: Optional[Callable[[Path], np.ndarray]] = None
+
+
+def set_fallback_decoder(decode: Optional[Callable[[Path], np.ndarray]]) -> None:
+    """Read textures with ``decode`` when Pillow is not importable (None: no fallback)."""
+    global _fallback_decoder
+    _fallback_decoder = decode
+
+
 def load_image(path: str | Path) -> np.ndarray:
     """(height, width, 3) uint8, row 0 at the *bottom*.  TracerError naming the file for anything that
     cannot be read; what the decoder warns about becomes an :class:`ImageWarning` naming the file."""
-    from PIL import Image
-
     path = Path(path)
     name = shown_name(str(path))
+    try:
+        from PIL import Image
+    except ImportError:
+        if _fallback_decoder is None:
+            raise TracerError(f"{name}: reading texture images needs Pillow (pip install Pillow)") from None
+        return _from_fallback(name, _fallback_decoder(path))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -58,6 +75,20 @@ def load_image(path: str | Path) -> np.ndarray:
         if issubclass(record.category, Image.DecompressionBombWarning):
             continue  # the size check above has already refused such a picture
         warnings.warn(ImageWarning(f"{name}: {record.message}"), stacklevel=2)
+    return texels
+
+
+def _from_fallback(name: str, rgb) -> np.ndarray:
+    """The fallback decoder's floats in [0, 1] as 8-bit texels (an 8-bit file's bytes come back exactly)."""
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise TracerError(f"{name}: cannot read texture image (decoded to shape {rgb.shape})")
+    _check_size(name, rgb.shape[1], rgb.shape[0])
+    texels = np.empty(rgb.shape, dtype=np.uint8)
+    for top in range(0, rgb.shape[0], 256):  # a band at a time: no float copy of the whole picture
+        band = np.nan_to_num(rgb[top:top + 256], nan=0.0).astype(np.float32)
+        np.clip(band, 0.0, 1.0, out=band)
+        texels[top:top + 256] = np.rint(band * 255.0)
     return texels
 
 

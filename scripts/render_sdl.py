@@ -4,8 +4,9 @@
     .venv/bin/python scripts/render_sdl.py SCENE.sdl OUT.png [WIDTH HEIGHT]
 
 Uses the add-on when it is installed and enabled, else registers the checkout's ``addon`` package.  The
-scene is imported into an empty file, rendered at WIDTH x HEIGHT (default 640 x 480) with the Standard
-view transform (the tracer's colours unchanged) and written to OUT.  Problems are one line and exit 2.
+scene is imported into an empty file, rendered at WIDTH x HEIGHT (default 640 x 480) with the colour
+management the importer sets (View Transform Raw: the tracer's PNG, see docs/blender.md) and written to
+OUT.  Problems are one line and exit 2.
 """
 from __future__ import annotations
 
@@ -58,7 +59,6 @@ def main() -> int:
         scene.render.engine = "SDL_RAYTRACER"
         scene.render.resolution_x, scene.render.resolution_y = width, height
         scene.render.resolution_percentage = 100
-        scene.view_settings.view_transform = "Standard"
         scene.render.filepath = str(out)
         started = time.perf_counter()
         bpy.ops.render.render()

@@ -22,14 +22,18 @@ from typing import Optional, Sequence
 
 REPO = Path(__file__).resolve().parents[2]
 
+#: Under AddressSanitizer (make sanitize preloads it) the C core's memory is shadowed and its code slower:
+#: address-space limits would stop ASan itself from starting, so only the peak resident size is judged, and
+#: the time and memory budgets are doubled.
+SANITIZED = "libasan" in os.environ.get("LD_PRELOAD", "")
 #: A run that takes more CPU seconds than this is a hang (the inputs are tiny and the images 32 x 24).
-HANG_SECONDS = 20.0
+HANG_SECONDS = 20.0 * (2 if SANITIZED else 1)
 #: ... and one still running after this many times as long in wall-clock time (blocked, say) is killed.
 WALL_FACTOR = 5
 #: An error line longer than this echoes the input instead of describing it (tracer.reporting cuts at 600).
 MAX_ERROR_LINE = 700
 #: Peak resident memory above which a run counts as over budget.
-MEMORY_BYTES = 2 << 30
+MEMORY_BYTES = (2 << 30) * (2 if SANITIZED else 1)
 
 # Verdicts that keep the promise; every other verdict is a failure of that name.
 GOOD = ("image", "error")
@@ -60,13 +64,18 @@ class Outcome:
                 f"  args: {' '.join(map(str, self.args))}\n  stderr tail: {tail}")
 
 
+def set_memory_limit(memory_bytes: int) -> None:
+    """In a child: a backstop a little above the budget, which ru_maxrss then judges exactly.  RLIMIT_DATA
+    counts the heap and private anonymous mappings (NumPy arrays, thread stacks), not shared libraries."""
+    if not SANITIZED:
+        limit = memory_bytes + (1 << 30)
+        resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
+
+
 def _limit_child(memory_bytes: int, cpu_seconds: float):
     def apply():
         os.setsid()  # its own process group, so a hang can be killed with every thread and child
-        # RLIMIT_DATA counts the heap and private anonymous mappings (NumPy arrays, thread stacks) but not
-        # shared libraries: a backstop a little above the budget, which ru_maxrss then judges exactly.
-        limit = memory_bytes + (1 << 30)
-        resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
+        set_memory_limit(memory_bytes)
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
         # CPU seconds decide a hang (a loaded machine may keep a run waiting for a core); the parent kills
         # what is still there after WALL_FACTOR times as long in wall-clock time (a read blocked on a FIFO).

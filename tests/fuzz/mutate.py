@@ -225,10 +225,10 @@ def render_options(rng: random.Random) -> list[str]:
     return options
 
 
-def make_case(seed: int, kind: str | None = None) -> Case:
-    """The case for one seed (its kind drawn too, unless given)."""
+def make_case(seed: int, kinds: tuple[str, ...] = KINDS) -> Case:
+    """The case for one seed, of one of ``kinds``."""
     rng = random.Random(seed)
-    kind = kind or rng.choice(KINDS)
+    kind = rng.choice(kinds)
     pool = seeds()[kind]
     original = rng.choice(pool)
     name = f"in{seed}"

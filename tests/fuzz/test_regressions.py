@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from harness import REPO, run_cli
+from harness import REPO, SANITIZED, run_cli
 
 REGRESSIONS = Path(__file__).parent / "regressions"
 CASES = sorted(p for p in REGRESSIONS.iterdir() if p.suffix in (".sdl", ".usda"))
@@ -37,6 +37,8 @@ def directives(path: Path) -> dict:
 
 @pytest.mark.parametrize("case", CASES, ids=[p.name for p in CASES])
 def test_regression_case_keeps_the_promise(case, tmp_path):
+    if SANITIZED and case.suffix == ".usda":
+        pytest.skip("under make sanitize: usd-core's C++ exceptions abort with ASan's runtime preloaded")
     info = directives(case)
     assert "class" in info, f"{case.name} does not say which crash it covers"
     output = tmp_path / "out.png"

@@ -34,7 +34,7 @@ sys.path.insert(0, str(HERE.parents[1]))
 
 from harness import (FAILURES, HANG_SECONDS, MEMORY_BYTES, WALL_FACTOR, Outcome, judge,  # noqa: E402
                      SANITIZED, set_memory_limit)
-from mutate import KINDS, SCENES, Case, make_case  # noqa: E402
+from mutate import SCENES, Case, make_case  # noqa: E402
 
 #: Image difference allowed between the backends (tracer's C = NumPy promise).
 SAME_IMAGE = 1
@@ -200,7 +200,7 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
     try:
         for index, case_seed in enumerate(seeds):
             # (under make sanitize, usd-core's C++ exceptions abort with ASan's runtime preloaded: no USD)
-            case = make_case(case_seed, tuple(k for k in KINDS if not (SANITIZED and k == "usd")))
+            case = make_case(case_seed, usd=not SANITIZED)
             folder = work / f"case{case_seed}"
             folder.mkdir()
             for folder_name in ("images", "meshes"):

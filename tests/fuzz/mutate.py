@@ -225,15 +225,17 @@ def render_options(rng: random.Random) -> list[str]:
     return options
 
 
-def make_case(seed: int, kinds: tuple[str, ...] = KINDS) -> Case:
-    """The case for one seed, of one of ``kinds``."""
+def make_case(seed: int, usd: bool = True) -> Case:
+    """The case for one seed; ``usd`` False: nothing that needs usd-core (no USD input, no convert)."""
     rng = random.Random(seed)
-    kind = rng.choice(kinds)
+    kind = rng.choice(KINDS if usd else tuple(k for k in KINDS if k != "usd"))
     pool = seeds()[kind]
     original = rng.choice(pool)
     name = f"in{seed}"
     roll = rng.random()
     command = "info" if roll < 0.08 else "convert" if roll < 0.14 and kind in ("sdl", "usd") else "render"
+    if command == "convert" and not usd:
+        command = "info"
     options = render_options(rng) if command == "render" else ["--json"] * rng.randint(0, 1) if command == "info" else []
     deep = 1500 if "numpy" not in options else 100
     if kind == "sdl":

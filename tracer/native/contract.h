@@ -114,6 +114,7 @@ typedef struct {
     double tol_offset_ulps;
     double tol_torus_residual_ulps;
     int64_t tol_torus_newton_steps;
+    double tol_torus_pair_shortcut;
     double tol_square_edge;
 } SceneDesc;
 
@@ -192,8 +193,9 @@ typedef struct {
     X(tol_offset_ulps) \
     X(tol_torus_residual_ulps) \
     X(tol_torus_newton_steps) \
+    X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "ae97b5bf97764d5d"
+#define RT_SCENE_DESC_FIELD_COUNT 75
+#define RT_CONTRACT_DIGEST "c7bdc332d9384186"
 
 #endif

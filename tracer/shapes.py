@@ -12,6 +12,7 @@ can read it without import cycles.
 """
 from __future__ import annotations
 
+import functools
 import importlib
 from dataclasses import dataclass
 from typing import Callable, Optional
@@ -35,7 +36,7 @@ class ShapeKind:
     * ``tessellate() -> MeshData``: polygons for USD and Blender, for kinds that have no parameter.
 
     ``c_intersect`` and ``c_uv`` name the C functions (``int f(const double *o, const double *d, Hit *out)``
-    and ``void f(double x, double y, double z, int part, double *u, double *v, int *wrap_u, int *wrap_v)``)
+    and ``void f(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)``)
     that contract.h's generated dispatch tables call for the kind.  Kinds without them (parameters,
     tolerances) are dispatched by hand in compile.py, core.c and texture.h.
     """
@@ -62,9 +63,14 @@ class ShapeKind:
 
     def function(self, field: str) -> Callable:
         """The Python function a field names, imported from this tracer package (whatever it is called)."""
-        module, name = getattr(self, field).split(":")
-        package = __package__ or "tracer"
-        return getattr(importlib.import_module(package + module[len("tracer"):]), name)
+        return _resolve(getattr(self, field))
+
+
+@functools.cache
+def _resolve(reference: str) -> Callable:
+    module, name = reference.split(":")
+    package = __package__ or "tracer"
+    return getattr(importlib.import_module(package + module[len("tracer"):]), name)
 
 
 #: The mapping of a wall about z by angle and height with its discs as squares (the tapered cylinders').

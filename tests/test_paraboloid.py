@@ -121,13 +121,22 @@ def test_tessellation_is_closed_outward_and_on_the_surface():
     assert all(count == 1 and edges.get((b, a)) == 1 for (a, b), count in edges.items())
 
 
-def test_blender_mesh_comes_from_the_registry():
-    pytest.importorskip("bpy")
-    from addon import primitives, operators
+def test_blender_adds_exports_and_draws_it_from_the_registry(tmp_path):
+    bpy = pytest.importorskip("bpy")
+    from addon import convert, exporter, operators
+    from blender_scripts.addon_env import fresh, shape_objects
 
-    mesh = primitives.generic_mesh("paraboloid")
-    assert len(mesh.faces) == len(paraboloid_mesh().faces) and mesh.corner_normals is not None
-    assert "paraboloid" in [item[0] for item in operators.SHAPE_ITEMS]
+    assert "paraboloid" in [item[0] for item in operators.SHAPE_ITEMS]  # in the Add menu
+    fresh()
+    bpy.ops.object.sdl_add_shape(kind="paraboloid")
+    [obj] = shape_objects()
+    assert obj["sdl_kind"] == "paraboloid"
+    drawn = np.array([v.co for v in obj.data.vertices])
+    assert len(obj.data.polygons) == len(paraboloid_mesh().faces)
+    assert np.allclose(drawn, paraboloid_mesh().vertices, atol=1e-6)  # float32 in Blender
+    path = tmp_path / "added.sdl"
+    exporter.export_sdl(bpy.context, str(path), convert.axis_matrix("-Z", "Y"), use_selection=False)
+    assert [s.kind for s in tracer.load(str(path)).shapes()] == ["paraboloid"]
 
 
 def test_textured_render_is_the_same_on_both_backends():

@@ -23,6 +23,14 @@ def test_every_named_function_exists(entry):
             assert f"K_{entry.c_kind}, {name})" in header
 
 
+def test_every_registry_dispatched_kind_has_its_c_side():
+    # A kind whose NumPy intersection the registry dispatches is traced in C only through c_intersect: without
+    # it the C core would find no hits on the shape rather than refuse the scene.
+    for entry in shapes.REGISTRY:
+        assert (entry.intersect is None) == (entry.c_intersect is None), entry.keyword
+        assert (entry.uv is None) == (entry.c_uv is None), entry.keyword
+
+
 def test_readers_follow_the_registry():
     assert model.SHAPE_KINDS == tuple(e.keyword for e in shapes.REGISTRY)
     assert set(contract.KIND_CODES) == set(model.SHAPE_KINDS)

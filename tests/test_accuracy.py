@@ -19,7 +19,8 @@ from tracer.render import render
 from tracer.target import FIRST_BATCH, sample_to_error, standard_error
 
 ROOT = Path(__file__).resolve().parent.parent
-TINY = BenchConfig(width=24, height=18, reference_samples=64, seeds=3, sample_counts=(4, 16), targets=(0.05,))
+TINY = BenchConfig(width=24, height=18, reference_samples=64, seeds=3, sample_counts=(4, 16), targets=(0.05,),
+                   savings_size=(24, 18))
 
 
 def _scene():
@@ -61,6 +62,9 @@ def test_accuracy_bench_writes_rows_with_spreads_slopes_and_fronts(tmp_path):
     assert not by["depth 0"]["pareto_rays"]  # only trade-off rows are ranked
     assert set(summary["slopes"]) == {"regular", "jittered", "adaptive"}
     assert summary["targets"][0]["measured_rmse"] > 0
+    timed = summary["savings"]["timed"]
+    assert timed["rays_all"] > timed["rays_all"] - timed["rays_saved"] > 0 or timed["rays_saved"] == 0
+    assert timed["max_change_8bit"] <= 0.5 and timed["seconds_all"] > 0 and timed["iqr_with"] >= 0
     assert json.loads((tmp_path / "tiny.json").read_text())["reference"]["samples"] == 64
     with Image.open(tmp_path / "tiny.png") as plot:
         assert plot.size[0] > 1000
@@ -158,3 +162,15 @@ def test_cli_target_error_reports_the_estimate(tmp_path, capsys):
     assert "estimated error" in captured.err
     assert main(["render", str(ROOT / "scenes" / "lecture.sdl"), "-o", out, "--target-error", "nan"]) == 2
     assert "error: the target error" in capsys.readouterr().err
+
+
+def test_cli_bench_writes_the_report_and_refuses_too_few_seeds(tmp_path, capsys):
+    lecture = str(ROOT / "scenes" / "lecture.sdl")
+    assert main(["bench", "accuracy", lecture, "-o", str(tmp_path), "--width", "12", "--height", "9",
+                 "--reference-samples", "16", "--seeds", "3"]) == 0
+    assert {"lecture.csv", "lecture.json", "lecture.png", "target_error.png", "report.md"} <= \
+        {p.name for p in tmp_path.iterdir()}
+    assert main(["bench", "accuracy", lecture, "-o", str(tmp_path), "--seeds", "2"]) == 2
+    assert "error: --seeds must be at least 3" in capsys.readouterr().err
+    assert main(["bench", "accuracy", lecture, "-o", str(tmp_path), "--width", "6", "--height", "6"]) == 2
+    assert "error: the accuracy bench needs images of at least 7 x 7" in capsys.readouterr().err

@@ -51,6 +51,8 @@ DEEP = 8  # the recursion depth the depth rows are compared with
 FIELDS = ("group", "setting", "samples", "runs", "rays", *(f"rays_{k}" for k in RAY_KINDS), "rmse_mean", "rmse_std",
           "psnr_mean", "ssim_mean", "depth_bias", "seconds_median", "seconds_iqr", "compile_median",
           "trace_median", "pareto_rays", "pareto_seconds")
+#: Edges of the bins of per-pixel error estimates in the target plot (at least 10 pixels per bin are shown).
+TARGET_BINS = 1e-4 * 2.0 ** np.arange(11)
 #: The rows that trade error for cost (the Pareto fronts are taken over them).
 TRADE_GROUPS = ("block size", "baseline", "samples (regular)", "samples (jittered)", "samples (adaptive)")
 
@@ -82,6 +84,8 @@ class BenchConfig:
     sample_counts: tuple[int, ...] = (4, 16, 64, 256)
     targets: tuple[float, ...] = (0.02, 0.01, 0.005)
     backend: str = "auto"
+    #: the ray savings are timed at a size where tracing, not per-render overhead, takes the time
+    savings_size: tuple[int, int] = (320, 240)
 
 
 def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflection", "shape:torus"}),
@@ -212,16 +216,36 @@ def measure_targets(scene: Scene, reference: np.ndarray, config: BenchConfig, se
         estimate = result.error_estimate
         # Per pixel, the RMS over the channels, as the estimate's unit is one channel's error.
         per_pixel = np.sqrt(np.mean((np.clip(result.image, 0, 1) - reference) ** 2, axis=2))
-        edges = np.quantile(estimate.per_pixel, np.linspace(0, 1, 9))
-        which = np.clip(np.searchsorted(edges, estimate.per_pixel, side="right") - 1, 0, len(edges) - 2)
+        # Bins of the estimate, by factors of two from 1e-4 (below it, pixels are flat: a variance near 0).
+        which = np.digitize(estimate.per_pixel, TARGET_BINS)
         bins = [(float(np.sqrt(np.mean(estimate.per_pixel[which == b] ** 2))),
                  float(np.sqrt(np.mean(per_pixel[which == b] ** 2))))
-                for b in range(len(edges) - 1) if np.any(which == b)]
+                for b in range(1, len(TARGET_BINS)) if np.count_nonzero(which == b) >= 10]
         out.append({"target": target, "estimated_rmse": estimate.rms, "measured_rmse": errors(result.image, reference)["rmse"],
                     "worst_estimate": estimate.worst, "measured_p99": float(np.percentile(per_pixel, 99)),
                     "samples_mean": estimate.samples_mean, "pixels_at_limit": estimate.pixels_at_limit,
                     "rays": int(sum(result.rays.as_dict().values())), "seconds": result.seconds, "bins": bins})
     return out
+
+
+def measure_savings(scene: Scene, config: BenchConfig) -> dict:
+    """What the ray savings save at a size where tracing, not overhead, takes the time: rays (exact) and
+    seconds (median and IQR of ``config.seeds`` runs each way, interleaved), and the largest pixel change."""
+    width, height = config.savings_size
+    compiled = compile_scene(scene)
+    seconds: dict[str, list[float]] = {"all": [], "saved": []}
+    images, rays = {}, {}
+    for _ in range(config.seeds):
+        for key, savings in (("all", RaySavings.none()), ("saved", None)):
+            result = render(compiled, width, height, backend=config.backend, savings=savings)
+            seconds[key].append(result.seconds)
+            images[key], rays[key] = np.clip(result.image, 0, 1), sum(result.rays.as_dict().values())
+    quartiles = {k: np.percentile(v, [25, 50, 75]) for k, v in seconds.items()}
+    return {"width": width, "height": height, "rays_all": rays["all"], "rays_saved": rays["all"] - rays["saved"],
+            "seconds_all": float(quartiles["all"][1]), "seconds_with": float(quartiles["saved"][1]),
+            "iqr_all": float(quartiles["all"][2] - quartiles["all"][0]),
+            "iqr_with": float(quartiles["saved"][2] - quartiles["saved"][0]),
+            "max_change_8bit": float(np.abs(images["all"] - images["saved"]).max() * 255)}
 
 
 def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchConfig(), progress=print) -> dict:
@@ -271,8 +295,7 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
         "slopes": slopes, "targets": targets, "rows": rows,
         "savings": None if every is None else {
             "rays_all": every["rays"], "rays_saved": every["rays"] - baseline["rays"],
-            "seconds_all": every["seconds_median"], "seconds_saved": every["seconds_median"] - baseline["seconds_median"],
-            "skipped": baseline["skipped"]},
+            "skipped": baseline["skipped"], "timed": measure_savings(scene, config)},
     }
     for r in rows:
         progress(f"  {r['setting']:<20} rmse {r['rmse_mean']:.5f} ± {r['rmse_std']:.5f}  {r['rays']:>10} rays  "
@@ -282,6 +305,10 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
         progress(f"  slope {mode}: {fit['slope']:+.3f} ± {fit['stderr']:.3f}")
     if bias is not None:
         progress(f"  depth bias (depth {depth} against {DEEP}): RMSE {bias:.5f}")
+    if summary["savings"]:
+        t = summary["savings"]["timed"]
+        progress(f"  savings at {t['width']} x {t['height']}: {t['rays_saved']} of {t['rays_all']} rays, "
+                 f"{t['seconds_with']:.3f} s against {t['seconds_all']:.3f} s, max change {t['max_change_8bit']:.2f}/255")
     for t in targets:
         progress(f"  target {t['target']:g}: estimated {t['estimated_rmse']:.5f}, measured {t['measured_rmse']:.5f}")
     _write_csv(rows, out_dir / f"{name}.csv")
@@ -384,17 +411,18 @@ def plot_targets(summaries: list[dict], path: Path) -> None:
         line = axes[0].plot([t["estimated_rmse"] for t in pts], [t["measured_rmse"] for t in pts], "o-",
                             label=s["scene"])[0]
         axes[0].plot([t["target"] for t in pts], [t["measured_rmse"] for t in pts], "x", color=line.get_color())
-        for t in pts:
+        for t in (t for t in pts if t["bins"]):
             est, got = zip(*t["bins"])
             axes[1].plot(est, got, ".-", color=line.get_color(), alpha=0.6)
             everything += list(est) + list(got) + [t["target"]]
         everything += [t["estimated_rmse"] for t in pts] + [t["measured_rmse"] for t in pts]
-    positive = [v for v in everything if v > 0]
-    lo, hi = (min(positive) / 2, max(positive) * 2) if positive else (1e-4, 1)
+    lo, hi = TARGET_BINS[0] / 2, max([TARGET_BINS[-1], *everything]) * 2
     for ax, title in ((axes[0], "whole image (o: estimate, x: target E)"), (axes[1], "pixels binned by estimate")):
         ax.plot([lo, hi], [lo, hi], "k--", alpha=0.5, label="measured = estimated")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
         ax.set_xlabel("estimated RMSE")
         ax.set_ylabel("measured RMSE (against the reference)")
         ax.set_title(title, fontsize=9)
@@ -406,6 +434,8 @@ def plot_targets(summaries: list[dict], path: Path) -> None:
 
 
 def _fmt(x: float, digits: int = 4) -> str:
+    if abs(x) < 1e-12:  # the spread of a deterministic setting (rounding leaves ~1e-19)
+        return "0"
     return f"{x:.{digits}f}" if x >= 10 ** -(digits - 1) else f"{x:.2e}"
 
 
@@ -419,14 +449,14 @@ def write_report(summaries: list[dict], path: Path) -> None:
                   f"{ref['samples']} rays/pixel at depth {ref['depth']}, its own estimated RMSE "
                   f"{ref['estimated_rmse']:.2e} ({ref['seconds']:.1f} s); smallest RMSE reported "
                   f"{ref['smallest_reported_rmse']:.2e}.", "",
-                  "| setting | RMSE mean ± sd | rays | seconds median (IQR) | compile / trace s | Pareto |",
+                  "| setting | RMSE mean ± sd | rays | seconds median (IQR) | compile / trace ms | Pareto |",
                   "|---|---|---|---|---|---|"]
         for r in s["rows"]:
             pareto = "/".join(k for k, on in (("rays", r["pareto_rays"]), ("time", r["pareto_seconds"])) if on)
             bias = f" (depth bias {_fmt(r['depth_bias'])})" if r["depth_bias"] != "" else ""
             lines.append(f"| {r['setting']}{bias} | {_fmt(r['rmse_mean'])} ± {_fmt(r['rmse_std'])} | {r['rays']:,} | "
-                         f"{r['seconds_median']:.3f} ({r['seconds_iqr']:.3f}) | {r['compile_median']:.3f} / "
-                         f"{r['trace_median']:.3f} | {pareto} |")
+                         f"{r['seconds_median']:.3f} ({r['seconds_iqr']:.3f}) | {1000 * r['compile_median']:.1f} / "
+                         f"{1000 * r['trace_median']:.1f} | {pareto} |")
         lines.append("")
         base = next(r for r in s["rows"] if r["group"] == "baseline")
         lines.append("Rays of the baseline per kind: " + ", ".join(f"{k} {base[f'rays_{k}']:,}" for k in RAY_KINDS)
@@ -439,9 +469,12 @@ def write_report(summaries: list[dict], path: Path) -> None:
             lines.append(f"Depth bias: depth {b['depth']} against depth {b['against']}, RMSE {b['rmse']:.5f}.")
         if s["savings"]:
             v = s["savings"]
+            t = v["timed"]
             lines.append(f"Ray savings: {v['rays_saved']:,} of {v['rays_all']:,} rays "
-                         f"({100 * v['rays_saved'] / v['rays_all']:.1f} %), {v['seconds_saved']:+.3f} s of "
-                         f"{v['seconds_all']:.3f} s (medians; within the IQR unless larger).")
+                         f"({100 * v['rays_saved'] / v['rays_all']:.1f} %) at this size; at {t['width']} x "
+                         f"{t['height']}: {t['rays_saved']:,} of {t['rays_all']:,} rays, {t['seconds_with']:.3f} s "
+                         f"(IQR {t['iqr_with']:.3f}) against {t['seconds_all']:.3f} s (IQR {t['iqr_all']:.3f}) "
+                         f"with every ray, largest pixel change {t['max_change_8bit']:.2f}/255.")
         if s["targets"]:
             lines += ["", "| target E | estimated RMSE | measured RMSE | 99th pct. pixel | rays/pixel | pixels at limit |",
                       "|---|---|---|---|---|---|"]

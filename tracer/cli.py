@@ -269,12 +269,15 @@ def _bench(args) -> int:
     from .sdl.parser import load
 
     check_size(args.width, args.height)
+    if min(args.width, args.height) < 7:  # scikit-image's SSIM window
+        raise TracerError(f"the accuracy bench needs images of at least 7 x 7 pixels, not {args.width} x {args.height}")
     if args.seeds < 3:
         raise TracerError(f"--seeds must be at least 3 (a spread needs them), not {args.seeds}")
     if args.reference_samples < 2:
         raise TracerError(f"--reference-samples must be at least 2, not {args.reference_samples}")
     config = BenchConfig(width=args.width, height=args.height, reference_samples=args.reference_samples,
-                         seeds=args.seeds, backend=args.backend)
+                         seeds=args.seeds, backend=args.backend,
+                         savings_size=(max(args.width, 320), max(args.height, 240)))
     out = Path(args.output)
     scenes = [(Path(path).stem, load(path, strict=not args.lenient)) for path in args.scenes]
     summaries = [measure(scene, name, out, config, progress=lambda line: print(line, flush=True))

@@ -37,7 +37,7 @@ def test_accuracy_bench_writes_rows_with_spreads_slopes_and_fronts(tmp_path):
     rows = summary["rows"]
     assert [r["setting"] for r in table] == [r["setting"] for r in rows]
     by = {r["setting"]: r for r in rows}
-    assert {"B=16", "1 ray/pixel", "regular 16", "jittered 4", "depth 0", "newton 0", "epsilon 0.001",
+    assert {"B=16", "1 ray/pixel", "regular 16", "jittered 4", "depth 0", "newton 0", "ulps 1e+08",
             "all rays traced"} <= set(by)
     assert all(r["runs"] == 3 for r in rows)
     # Seeds move jittered samples, not the regular grid: a spread only where there is randomness.

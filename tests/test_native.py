@@ -26,7 +26,7 @@ from test_hard_cases import _sphere_on_plane
 from tracer import native
 from tracer.backend import make_tracer
 from tracer.compile import compile_scene
-from tracer.errors import TracerError
+from tracer.errors import FallbackWarning, TracerError
 from tracer.meshio import read_3vn
 from tracer.model import CSG, MeshData, Shape, Material
 from tracer.native.build import find_compiler, is_current, library_path, source_digest
@@ -354,7 +354,8 @@ def test_a_scene_the_core_cannot_trace_is_refused_and_falls_back():
     assert "something new" in native.NativeTracer.unsupported(compiled)
     with pytest.raises(TracerError):
         native.NativeTracer(compiled)
-    assert make_tracer(compiled, "auto").name == "numpy"
+    with pytest.warns(FallbackWarning, match="something new"):
+        assert make_tracer(compiled, "auto").name == "numpy"
 
 
 @requires_core
@@ -693,14 +694,14 @@ def test_textured_shapes_images(offset, picture):
 
 @pytest.mark.parametrize("scene_name", ["glass", "shapes"])
 def test_changed_tolerances_reach_the_c_core(scene_name):
-    """tracer.accuracy varies the relative epsilon and the torus's Newton steps: the C core reads them when
-    the scene is flattened, so it renders what the NumPy path renders with the same values, and a coarse
-    epsilon changes what is traced (glass: rays through near-coincident surfaces; shapes: shadow edges)."""
+    """tracer.accuracy varies the hit-error ulps and the torus's Newton steps: the C core reads them from the
+    compiled scene, so it renders what the NumPy path renders with the same values, and coarse bounds
+    change what is traced (glass: rays through near-coincident surfaces; shapes: shadow edges)."""
     from tracer.accuracy import Setting, solver_tolerances
 
     scene = tracer.load(ROOT / "scenes" / f"{scene_name}.sdl")
     default_c = render(scene, 64, 48, backend="c")
-    coarse = Setting("tolerances", "coarse", offset_epsilon=1e-2, newton_steps=0)
+    coarse = Setting("tolerances", "coarse", hit_ulps=1e14, newton_steps=0)
     with solver_tolerances(coarse):
         c = render(scene, 64, 48, backend="c")
         reference = render(scene, 64, 48, backend="numpy")

@@ -40,7 +40,6 @@ import numpy as np
 
 from . import numerics
 from .compile import compile_scene, live_effects
-from .intersect import torus
 from .model import Scene
 from .render import render
 from .savings import RaySavings
@@ -65,8 +64,8 @@ class Setting:
     samples: int = 1
     mode: str = "jittered"
     depth: Optional[int] = None  # None: the scene's own maxRecursionDepth
-    #: numerics.RELATIVE_EPSILON: sets the self-intersection offset and the CSG "same time" tolerance
-    offset_epsilon: Optional[float] = None
+    #: numerics.Tolerances.hit_ulps: scales the hit-error bounds behind ray offsets and CSG merging
+    hit_ulps: Optional[float] = None
     newton_steps: Optional[int] = None  # torus root polishing
     savings: Optional[RaySavings] = None  # None: the defaults
 
@@ -99,7 +98,7 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
     deep = effects & {"reflection", "refraction"}
     if deep:
         out += [Setting("recursion depth", f"depth {d}", depth=d) for d in sorted({0, 1, 2, scene_depth, DEEP})]
-    out += [Setting("relative epsilon", f"epsilon {e:g}", offset_epsilon=e) for e in (1e-15, 1e-12, 1e-6, 1e-3)]
+    out += [Setting("hit error ulps", f"ulps {e:g}", hit_ulps=e) for e in (1, 4, 64, 1e4, 1e8)]
     if "shape:torus" in effects:
         out += [Setting("torus Newton steps", f"newton {n}", newton_steps=n) for n in (0, 1)]
     if deep or "shadows" in effects:
@@ -109,17 +108,17 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
 
 @contextlib.contextmanager
 def solver_tolerances(setting: Setting) -> Iterator[None]:
-    """Temporarily use a setting's tolerances: module-level constants that the NumPy path reads at call time
-    and the C core when a render flattens the scene."""
-    saved = numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS
+    """Temporarily use a setting's tolerances: numerics.TOLERANCES, which compile_scene copies into the
+    scenes it compiles (and flatten hands to the C core)."""
+    saved = numerics.TOLERANCES
     try:
-        if setting.offset_epsilon is not None:
-            numerics.RELATIVE_EPSILON = setting.offset_epsilon
+        if setting.hit_ulps is not None:
+            numerics.TOLERANCES = replace(numerics.TOLERANCES, hit_ulps=setting.hit_ulps)
         if setting.newton_steps is not None:
-            torus.NEWTON_STEPS = setting.newton_steps
+            numerics.TOLERANCES = replace(numerics.TOLERANCES, torus_newton_steps=setting.newton_steps)
         yield
     finally:
-        numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS = saved
+        numerics.TOLERANCES = saved
 
 
 def _with_depth(scene: Scene, depth: Optional[int]) -> Scene:

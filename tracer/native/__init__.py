@@ -42,7 +42,7 @@ def _load() -> ctypes.CDLL:
     lib.rt_desc_size.restype = ctypes.c_int64
     lib.rt_desc_size.argtypes = []
     lib.rt_create.restype = ctypes.c_void_p
-    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc)]
+    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_char_p, ctypes.c_int64]
     lib.rt_destroy.restype = None
     lib.rt_destroy.argtypes = [ctypes.c_void_p]
     lib.rt_set_savings.restype = ctypes.c_int
@@ -149,16 +149,20 @@ class NativeTracer:
 
     def __init__(self, compiled: CompiledScene, threads: Optional[int] = None,
                  savings: Optional[RaySavings] = None):
-        reason = self.unsupported(compiled)
+        if _lib is None:
+            raise TracerError(f"the C core is not available: {load_error}")
+        reason = flatten.unsupported_reason(compiled)
         if reason is not None:
             raise TracerError(f"the C core cannot trace this scene: {reason}")
         self.scene = compiled
         self.counts = RayCounts()
         self.threads = threads or default_threads()
         self._flat = flatten.FlatScene(compiled)  # owns the arrays the C side points into
-        self._handle = _lib.rt_create(ctypes.byref(self._flat.desc))
+        message = ctypes.create_string_buffer(256)
+        self._handle = _lib.rt_create(ctypes.byref(self._flat.desc), message, len(message))
         if not self._handle:
-            raise TracerError("the C core rejected the scene description (out of memory or inconsistent)")
+            reason = message.value.decode(errors="replace") or "no reason given"
+            raise TracerError(f"the C core refused the scene description: {reason}")
         self.savings = RaySavings() if savings is None else savings
         effects = compiled.effects
         sealed = (sealed_lights(compiled) if self.savings.inside_shadows and "shadows" in effects

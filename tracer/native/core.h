@@ -32,12 +32,14 @@ typedef struct {
     int32_t shape;
     int32_t entering;
     int32_t pad;
+    double err;         /* bound on the rounding error of t (tracer.numerics) */
 } Hit;
 
 int64_t rt_desc_size(void);
 int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity);
 const char *rt_contract_digest(void);
-void *rt_create(const SceneDesc *desc);
+/* NULL when the description is refused; then `error` (capacity bytes, may be NULL) says what was refused. */
+void *rt_create(const SceneDesc *desc, char *error, int64_t capacity);
 void rt_destroy(void *scene);
 int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed);
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,

@@ -20,7 +20,7 @@ from tracer.target import FIRST_BATCH, sample_to_error, standard_error
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = BenchConfig(width=24, height=18, reference_samples=64, seeds=3, sample_counts=(4, 16), targets=(0.05,),
-                   savings_size=(24, 18))
+                   savings_size=(24, 18), savings_runs=3)
 
 
 def _scene():
@@ -56,7 +56,7 @@ def test_accuracy_bench_writes_rows_with_spreads_slopes_and_fronts(tmp_path):
     # The cheapest and the most accurate trade-off settings are on the fronts.
     trade = [r for r in rows if r["group"] in TRADE_GROUPS]
     assert min(trade, key=lambda r: r["rays"])["pareto_rays"]
-    assert min(trade, key=lambda r: r["seconds_median"])["pareto_seconds"]
+    assert min(trade, key=lambda r: r["cpu_median"])["pareto_seconds"]  # the time front is on CPU seconds
     best = min(trade, key=lambda r: r["rmse_mean"])
     assert best["pareto_rays"] and best["pareto_seconds"]
     assert not by["depth 0"]["pareto_rays"]  # only trade-off rows are ranked

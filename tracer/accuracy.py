@@ -11,13 +11,14 @@ For each scene:
   recursion depth, solver tolerances, and every ray traced (no savings).  Each setting runs once per seed
   (``seeds`` >= 3; the runs of all settings are interleaved, so a change in the machine's load touches
   them all alike): the error is the mean and standard deviation over the seeds, the time the median and
-  interquartile range, split into compiling the scene and tracing it; rays are counted per kind (a cost
-  axis without timing noise);
+  interquartile range — wall seconds, split into compiling the scene and tracing it, and CPU seconds of all
+  the process's threads, which a busy machine disturbs far less; rays are counted per kind (a cost axis
+  without timing noise);
 * **depth bias**: each depth row's RMSE against the same rays at depth max(8, scene's) (pixel-centre rays, so
   sampling noise cancels exactly), and the scene's own depth as its own row;
 * **slopes**: RMSE against samples per sampling mode, fitted on log-log axes (``scipy.stats.linregress``)
   over N >= 4;
-* the **Pareto front** of the sampling and block-size rows, error against rays and against seconds;
+* the **Pareto front** of the sampling and block-size rows, error against rays and against CPU seconds;
 * **error targets**: ``--target-error E`` renders, their estimated against their measured error.
 
 Metrics come from scikit-image (``mean_squared_error``, ``peak_signal_noise_ratio``,
@@ -48,7 +49,8 @@ from .trace import RAY_KINDS
 REFERENCE_PART = 1024  # tracer.sampling.MAX_SAMPLES: the reference is the mean of parts of this many rays
 DEEP = 8  # the recursion depth the depth rows are compared with
 FIELDS = ("group", "setting", "samples", "runs", "rays", *(f"rays_{k}" for k in RAY_KINDS), "rmse_mean", "rmse_std",
-          "psnr_mean", "ssim_mean", "depth_bias", "seconds_median", "seconds_iqr", "compile_median",
+          "psnr_mean", "ssim_mean", "depth_bias", "seconds_median", "seconds_iqr", "cpu_median", "cpu_iqr",
+          "compile_median",
           "trace_median", "pareto_rays", "pareto_seconds")
 #: Edges of the bins of per-pixel error estimates in the target plot (at least 10 pixels per bin are shown).
 TARGET_BINS = 1e-4 * 2.0 ** np.arange(11)
@@ -83,8 +85,10 @@ class BenchConfig:
     sample_counts: tuple[int, ...] = (4, 16, 64, 256)
     targets: tuple[float, ...] = (0.02, 0.01, 0.005)
     backend: str = "auto"
-    #: the ray savings are timed at a size where tracing, not per-render overhead, takes the time
+    #: the ray savings are timed at a size where tracing, not per-render overhead, takes the time, over
+    #: more runs than the settings (a difference of 10-30 % has to stand out of this machine's noise)
     savings_size: tuple[int, int] = (320, 240)
+    savings_runs: int = 15
 
 
 def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflection", "shape:torus"}),
@@ -156,14 +160,14 @@ def reference_image(scene: Scene, config: BenchConfig, seed: int = 1_000_003) ->
 def _run(scene: Scene, setting: Setting, seed: int, config: BenchConfig):
     """One render of a setting: (result, compile seconds, trace seconds)."""
     with solver_tolerances(setting):
-        started = time.perf_counter()
+        started, cpu_started = time.perf_counter(), time.process_time()
         compiled = compile_scene(_with_depth(scene, setting.depth))
         compiled_at = time.perf_counter()
         result = render(compiled, config.width, config.height, block_size=setting.block_size,
                         samples=setting.samples, sampling_mode=setting.mode, seed=seed, backend=config.backend,
                         savings=setting.savings)
-        done = time.perf_counter()
-    return result, compiled_at - started, done - compiled_at
+        done, cpu = time.perf_counter(), time.process_time() - cpu_started
+    return result, compiled_at - started, done - compiled_at, cpu
 
 
 def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -192,6 +196,7 @@ def _summarise(setting: Setting, runs: list[dict]) -> dict:
     rmse = np.array([r["rmse"] for r in runs])
     seconds = np.array([r["compile"] + r["trace"] for r in runs])
     q1, median, q3 = np.percentile(seconds, [25, 50, 75])
+    c1, cpu, c3 = np.percentile([r["cpu"] for r in runs], [25, 50, 75])
     rays = {k: float(np.mean([r["rays"][k] for r in runs])) for k in RAY_KINDS}
     return {"group": setting.group, "setting": setting.label, "samples": setting.samples, "runs": len(runs),
             "rays": round(sum(rays.values())), **{f"rays_{k}": round(v) for k, v in rays.items()},
@@ -200,6 +205,7 @@ def _summarise(setting: Setting, runs: list[dict]) -> dict:
             "ssim_mean": float(np.mean([r["ssim"] for r in runs])),
             "depth_bias": runs[0].get("depth_bias", ""),
             "seconds_median": float(median), "seconds_iqr": float(q3 - q1),
+            "cpu_median": float(cpu), "cpu_iqr": float(c3 - c1),
             "compile_median": float(np.median([r["compile"] for r in runs])),
             "trace_median": float(np.median([r["trace"] for r in runs])),
             "pareto_rays": False, "pareto_seconds": False,
@@ -229,21 +235,29 @@ def measure_targets(scene: Scene, reference: np.ndarray, config: BenchConfig, se
 
 def measure_savings(scene: Scene, config: BenchConfig) -> dict:
     """What the ray savings save at a size where tracing, not overhead, takes the time: rays (exact) and
-    seconds (median and IQR of ``config.seeds`` runs each way, interleaved), and the largest pixel change."""
+    seconds (median and IQR of ``config.savings_runs`` runs each way, interleaved), and the largest pixel
+    change."""
     width, height = config.savings_size
     compiled = compile_scene(scene)
     seconds: dict[str, list[float]] = {"all": [], "saved": []}
+    cpu: dict[str, list[float]] = {"all": [], "saved": []}
     images, rays = {}, {}
-    for _ in range(config.seeds):
+    for _ in range(config.savings_runs):
         for key, savings in (("all", RaySavings.none()), ("saved", None)):
+            cpu_started = time.process_time()
             result = render(compiled, width, height, backend=config.backend, savings=savings)
+            cpu[key].append(time.process_time() - cpu_started)
             seconds[key].append(result.seconds)
             images[key], rays[key] = np.clip(result.image, 0, 1), sum(result.rays.as_dict().values())
     quartiles = {k: np.percentile(v, [25, 50, 75]) for k, v in seconds.items()}
+    cpu_quartiles = {k: np.percentile(v, [25, 50, 75]) for k, v in cpu.items()}
     return {"width": width, "height": height, "rays_all": rays["all"], "rays_saved": rays["all"] - rays["saved"],
             "seconds_all": float(quartiles["all"][1]), "seconds_with": float(quartiles["saved"][1]),
             "iqr_all": float(quartiles["all"][2] - quartiles["all"][0]),
-            "iqr_with": float(quartiles["saved"][2] - quartiles["saved"][0]),
+            "iqr_with": float(quartiles["saved"][2] - quartiles["saved"][0]), "runs": config.savings_runs,
+            "cpu_all": float(cpu_quartiles["all"][1]), "cpu_with": float(cpu_quartiles["saved"][1]),
+            "cpu_iqr_all": float(cpu_quartiles["all"][2] - cpu_quartiles["all"][0]),
+            "cpu_iqr_with": float(cpu_quartiles["saved"][2] - cpu_quartiles["saved"][0]),
             "max_change_8bit": float(np.abs(images["all"] - images["saved"]).max() * 255)}
 
 
@@ -261,8 +275,8 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
     deep_images: dict[int, np.ndarray] = {}
     for seed in range(config.seeds):  # interleaved: every setting once per round
         for setting in settings:
-            result, compile_s, trace_s = _run(scene, setting, seed, config)
-            run = {**errors(result.image, reference), "compile": compile_s, "trace": trace_s,
+            result, compile_s, trace_s, cpu_s = _run(scene, setting, seed, config)
+            run = {**errors(result.image, reference), "compile": compile_s, "trace": trace_s, "cpu": cpu_s,
                    "rays": result.rays.as_dict(), "skipped": result.rays.skipped()}
             if setting.group == "recursion depth":  # pixel-centre rays: the same at every depth
                 deep_images.setdefault(setting.depth, np.clip(result.image, 0, 1))
@@ -276,7 +290,7 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
                 row["depth_bias"] = errors(deep_images[setting.depth], deep_images[DEEP])["rmse"]
         bias = errors(deep_images[depth], deep_images[DEEP])["rmse"]
     trade = [r for r in rows if r["group"] in TRADE_GROUPS]
-    for axis, key in (("rays", "pareto_rays"), ("seconds_median", "pareto_seconds")):
+    for axis, key in (("rays", "pareto_rays"), ("cpu_median", "pareto_seconds")):
         front = pareto_front([r[axis] for r in trade], [r["rmse_mean"] for r in trade])
         for r, on in zip(trade, front):
             r[key] = bool(on)
@@ -298,7 +312,7 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
     }
     for r in rows:
         progress(f"  {r['setting']:<20} rmse {r['rmse_mean']:.5f} ± {r['rmse_std']:.5f}  {r['rays']:>10} rays  "
-                 f"{r['seconds_median']:.3f} s (IQR {r['seconds_iqr']:.3f})"
+                 f"{r['seconds_median']:.3f} s (IQR {r['seconds_iqr']:.3f}), CPU {r['cpu_median']:.3f} s"
                  + ("  pareto" if r["pareto_rays"] or r["pareto_seconds"] else ""))
     for mode, fit in slopes.items():
         progress(f"  slope {mode}: {fit['slope']:+.3f} ± {fit['stderr']:.3f}")
@@ -307,7 +321,8 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
     if summary["savings"]:
         t = summary["savings"]["timed"]
         progress(f"  savings at {t['width']} x {t['height']}: {t['rays_saved']} of {t['rays_all']} rays, "
-                 f"{t['seconds_with']:.3f} s against {t['seconds_all']:.3f} s, max change {t['max_change_8bit']:.2f}/255")
+                 f"{t['seconds_with']:.3f} s against {t['seconds_all']:.3f} s (CPU {t['cpu_with']:.3f} against "
+                 f"{t['cpu_all']:.3f}), max change {t['max_change_8bit']:.2f}/255")
     for t in targets:
         progress(f"  target {t['target']:g}: estimated {t['estimated_rmse']:.5f}, measured {t['measured_rmse']:.5f}")
     _write_csv(rows, out_dir / f"{name}.csv")
@@ -358,7 +373,7 @@ def _plot_scene(summary: dict, path: Path) -> None:
     markers = dict(zip(TRADE_GROUPS, "oDs^v"))
     colors = {group: f"C{k}" for k, group in enumerate(TRADE_GROUPS)}  # the same in all three panels
     for ax, axis, key, spread in ((axes[0], "rays", "pareto_rays", None),
-                                  (axes[1], "seconds_median", "pareto_seconds", "seconds_iqr")):
+                                  (axes[1], "cpu_median", "pareto_seconds", "cpu_iqr")):
         for group in TRADE_GROUPS:
             pts = [r for r in rows if r["group"] == group]
             if not pts:
@@ -371,7 +386,7 @@ def _plot_scene(summary: dict, path: Path) -> None:
                 label="Pareto front")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("rays" if axis == "rays" else "seconds (median; bars: IQR)")
+        ax.set_xlabel("rays" if axis == "rays" else "CPU seconds, all threads (median; bars: IQR)")
         ax.set_ylabel("RMSE (mean over seeds; bars: ±1 sd)")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
@@ -448,13 +463,15 @@ def write_report(summaries: list[dict], path: Path) -> None:
                   f"{ref['samples']} rays/pixel at depth {ref['depth']}, its own estimated RMSE "
                   f"{ref['estimated_rmse']:.2e} ({ref['seconds']:.1f} s); smallest RMSE reported "
                   f"{ref['smallest_reported_rmse']:.2e}.", "",
-                  "| setting | RMSE mean ± sd | rays | seconds median (IQR) | compile / trace ms | Pareto |",
-                  "|---|---|---|---|---|---|"]
+                  "| setting | RMSE mean ± sd | rays | seconds median (IQR) | CPU s median (IQR) | compile / trace ms "
+                  "| Pareto |",
+                  "|---|---|---|---|---|---|---|"]
         for r in s["rows"]:
             pareto = "/".join(k for k, on in (("rays", r["pareto_rays"]), ("time", r["pareto_seconds"])) if on)
             bias = f" (depth bias {_fmt(r['depth_bias'])})" if r["depth_bias"] != "" else ""
             lines.append(f"| {r['setting']}{bias} | {_fmt(r['rmse_mean'])} ± {_fmt(r['rmse_std'])} | {r['rays']:,} | "
-                         f"{r['seconds_median']:.3f} ({r['seconds_iqr']:.3f}) | {1000 * r['compile_median']:.1f} / "
+                         f"{r['seconds_median']:.3f} ({r['seconds_iqr']:.3f}) | {r['cpu_median']:.3f} "
+                         f"({r['cpu_iqr']:.3f}) | {1000 * r['compile_median']:.1f} / "
                          f"{1000 * r['trace_median']:.1f} | {pareto} |")
         lines.append("")
         base = next(r for r in s["rows"] if r["group"] == "baseline")
@@ -471,9 +488,12 @@ def write_report(summaries: list[dict], path: Path) -> None:
             t = v["timed"]
             lines.append(f"Ray savings: {v['rays_saved']:,} of {v['rays_all']:,} rays "
                          f"({100 * v['rays_saved'] / v['rays_all']:.1f} %) at this size; at {t['width']} x "
-                         f"{t['height']}: {t['rays_saved']:,} of {t['rays_all']:,} rays, {t['seconds_with']:.3f} s "
+                         f"{t['height']}: {t['rays_saved']:,} of {t['rays_all']:,} rays; medians of {t['runs']} runs: "
+                         f"{t['seconds_with']:.3f} s "
                          f"(IQR {t['iqr_with']:.3f}) against {t['seconds_all']:.3f} s (IQR {t['iqr_all']:.3f}) "
-                         f"with every ray, largest pixel change {t['max_change_8bit']:.2f}/255.")
+                         f"with every ray; CPU seconds (all threads) {t['cpu_with']:.3f} (IQR {t['cpu_iqr_with']:.3f}) "
+                         f"against {t['cpu_all']:.3f} (IQR {t['cpu_iqr_all']:.3f}); largest pixel change "
+                         f"{t['max_change_8bit']:.2f}/255.")
         if s["targets"]:
             lines += ["", "| target E | estimated RMSE | measured RMSE | 99th pct. pixel | rays/pixel | pixels at limit |",
                       "|---|---|---|---|---|---|"]

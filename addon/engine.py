@@ -12,6 +12,7 @@ image is finished; any change to the scene or the view starts again.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import traceback
@@ -28,8 +29,12 @@ ENGINE_ID = "SDL_RAYTRACER"
 LAST_RENDER: dict = {}
 #: Seconds of tracing per viewport redraw.
 VIEWPORT_SLICE = 0.08
-#: Longest pause between two updates of the render result during a final render.
+#: Shortest pause between two updates of the render result during a final render.
 UPDATE_INTERVAL = 0.25
+#: Shortest pause between two progress messages.
+STATUS_INTERVAL = 0.1
+#: Showing the film may take at most this share of a final render's time.
+UPDATE_SHARE = 0.05
 
 
 def render_size(render) -> tuple[int, int]:
@@ -71,20 +76,65 @@ def render_settings(scene) -> dict:
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
 
-def _write_rect(render_pass, rgba: np.ndarray) -> None:
-    flat_rgba = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+def preview_lighting(tracer_scene) -> None:
+    """Blender's preview scene has lights of 10 and 70 W, which as SDL lights (1000 W is colour 1) leave a
+    material preview nearly black: scale them together so that the brightest is white, as SDL scenes are lit."""
+    peak = max((max(light.color) for light in tracer_scene.lights), default=0.0)
+    if peak > 0:
+        tracer_scene.lights = [dataclasses.replace(light, color=tuple(c / peak for c in light.color))
+                               for light in tracer_scene.lights]
+
+
+def displayed() -> bool:
+    """Whether anyone sees a final render while it is traced: not under ``blender -b`` nor in the bpy module."""
+    return not bpy.app.background
+
+
+def write_pass(render_pass, pixels: np.ndarray) -> None:
+    """Copy a (height, width, channels) float32 film into a render pass at memory speed.
+
+    ``RenderPass.rect`` is a (pixels, channels) float array.  Blender 4.x/5.0 take a flat buffer of every
+    float in ``foreach_set``; Blender 3.x counts the first dimension only and takes the (pixels, channels)
+    array itself.  Both read the NumPy buffer directly; assigning ``rect`` from Python lists instead costs
+    seconds per frame at 1080p."""
+    height, width, channels = pixels.shape
+    rows = np.ascontiguousarray(pixels, dtype=np.float32).reshape(height * width, channels)
     try:
-        render_pass.rect.foreach_set(flat_rgba)
-    except (AttributeError, TypeError):
-        render_pass.rect = flat_rgba.reshape(-1, 4).tolist()
+        render_pass.rect.foreach_set(rows.reshape(-1))
+    except TypeError:  # Blender 3.x: "expected sequence size <pixels>"
+        render_pass.rect.foreach_set(rows)
+
+
+class FilmUpdates:
+    """When a final render shows its film so far: at the end of each pass and every UPDATE_INTERVAL, but
+    spaced so that copying the film (a whole 1080p frame costs tens of milliseconds) stays within
+    UPDATE_SHARE of the time; never without a window to show it in (``blender -b``, the bpy module)."""
+
+    def __init__(self, show, enabled: bool = True):
+        self.show, self.enabled = show, enabled
+        self.last = time.perf_counter()
+        self.cost = 0.0
+
+    def offer(self, pass_done: bool) -> bool:
+        if not self.enabled:
+            return False
+        now = time.perf_counter()
+        since = now - self.last
+        if since < self.cost / UPDATE_SHARE or (since < UPDATE_INTERVAL and not pass_done):
+            return False
+        self.show()
+        self.last = time.perf_counter()
+        self.cost = self.last - now
+        return True
 
 
 class SDLRenderEngine(bpy.types.RenderEngine):
     bl_idname = ENGINE_ID
     bl_label = "SDL Ray Tracer"
-    bl_use_preview = False
+    bl_use_preview = True  # material previews traced too (small, one ray per pixel: well under a second)
     bl_use_postprocess = True
     bl_use_eevee_viewport = True  # Material Preview mode draws with EEVEE
+    _draw_seconds = 0.0  # what the last viewport draw took
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -106,10 +156,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                                             (render.border_min_x, render.border_max_x,
                                              render.border_min_y, render.border_max_y))
         width, height = x1 - x0, y1 - y0
-        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False}
+        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False,
+                 "view_layer": depsgraph.view_layer.name}
         LAST_RENDER.clear()
         LAST_RENDER.update(stats)
-        result = self.begin_result(0, 0, width, height)
+        # Blender calls render() once per view layer, with that layer's depsgraph (its own visible
+        # collections); the result must name the layer, else every layer's image lands in the first.
+        result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         try:
             layer = result.layers[0].passes["Combined"]
             cam_obj = self.camera_override or scene.camera
@@ -123,6 +176,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             params = camera_params(cam_obj, matrix)
             self.update_stats("", "SDL Ray Tracer | building the scene")
             tracer_scene, warnings = build_scene(depsgraph, "RENDER")
+            if self.is_preview:
+                preview_lighting(tracer_scene)
             for message in warnings:
                 self.report({"WARNING"}, message)
             compiled = deps.module("compile").compile_scene(tracer_scene)
@@ -131,27 +186,36 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             def rays_for(rows, cols, dy=0.5, dx=0.5):
                 return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
 
+            settings = render_settings(scene)
+            if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
+                settings.update(block_size=1, progressive=False, samples=1)
+            if settings["progressive"] and not displayed():
+                # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
+                # the same rays either way, so the image is the same without them.
+                settings["block_size"] = 1
             tracer = blocks.BlockRenderer(compiled, rays_for, width, height, alpha=render.film_transparent,
-                                          seed=scene.frame_current, **render_settings(scene))
-            last = [0.0]
+                                          seed=scene.frame_current, **settings)
+            shown = FilmUpdates(lambda: (write_pass(layer, tracer.rgba()), self.update_result(result)),
+                                enabled=displayed())
+
+            status_shown = [0.0]
 
             def on_item(item):
-                now = time.perf_counter()
                 pass_done = tracer.done == len(tracer.items) or \
                     tracer.items[min(tracer.done, len(tracer.items) - 1)].pass_index != item.pass_index
-                if pass_done or now - last[0] >= UPDATE_INTERVAL:
-                    last[0] = now
-                    _write_rect(layer, tracer.rgba())
-                    self.update_result(result)
-                self.update_progress(tracer.fraction)
-                self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
-                                      f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
+                shown.offer(pass_done)
+                now = time.perf_counter()
+                if pass_done or now - status_shown[0] >= STATUS_INTERVAL:  # (blender -b prints each one)
+                    status_shown[0] = now
+                    self.update_progress(tracer.fraction)
+                    self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
+                                          f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
 
             try:
                 tracer.run(cancel=self.cancelled, on_item=on_item)
             except blocks.Cancelled:
                 LAST_RENDER["cancelled"] = True
-            _write_rect(layer, tracer.rgba())
+            write_pass(layer, tracer.rgba())
             counts = tracer.counts().as_dict()
             LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
                                 "tiles_done": tracer.done, "tiles_total": len(tracer.items),
@@ -198,15 +262,20 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 self._view = (key, renderer)
             renderer = self._view[1]
             if not renderer.finished:
-                renderer.run_for(VIEWPORT_SLICE)
+                # at least as long as drawing takes (slow on software OpenGL), so tracing keeps half the time
+                renderer.run_for(max(VIEWPORT_SLICE, self._draw_seconds))
         except Exception as exc:  # noqa: BLE001
             self.update_stats("", f"SDL Ray Tracer: {exc}")
             return
+        started = time.perf_counter()
         self._draw(depsgraph.scene, renderer.rgba(), width, height)
+        self._draw_seconds = time.perf_counter() - started
         self.update_stats("", "SDL Ray Tracer | " + ("done" if renderer.finished else
                                                      f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
         if not renderer.finished:
             self.tag_redraw()
+            if not bpy.app.timers.is_registered(_redraw_rendered_viewports):
+                bpy.app.timers.register(_redraw_rendered_viewports, first_interval=0.0)
 
     def _draw(self, scene, rgba: np.ndarray, width: int, height: int) -> None:
         import gpu
@@ -222,12 +291,24 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         gpu.state.blend_set("NONE")
 
 
+def _redraw_rendered_viewports() -> None:
+    """Draw the Rendered viewports again, to trace their next slice.  A one-shot timer, because Blender 3.4
+    does not honour ``tag_redraw`` asked from inside ``view_draw``: the image stopped refining there."""
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D" and area.spaces.active.shading.type == "RENDERED":
+                area.tag_redraw()
+    return None
+
+
 def compatible_panels():
     """Blender's own panels that work with this engine (they list the engines they support)."""
     wanted = {"RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output", "RENDER_PT_dimensions",
               "RENDER_PT_stamp", "RENDER_PT_post_processing", "DATA_PT_lens", "DATA_PT_camera",
               "DATA_PT_camera_display", "DATA_PT_context_light", "DATA_PT_light", "DATA_PT_context_camera",
               "MATERIAL_PT_preview", "MATERIAL_PT_context_material", "WORLD_PT_context_world",
+              "EEVEE_MATERIAL_PT_context_material",  # the slot list and New (3.4-5.0 give it this name)
+              "DATA_PT_preview",
               "RENDER_PT_format_presets", "RENDER_PT_film", "OBJECT_PT_visibility",
               "VIEWLAYER_PT_layer", "DATA_PT_camera_dof"}
     found = []
@@ -251,6 +332,8 @@ def register() -> None:
 
 
 def unregister() -> None:
+    if bpy.app.timers.is_registered(_redraw_rendered_viewports):
+        bpy.app.timers.unregister(_redraw_rendered_viewports)
     for cls in _added_to:
         cls.COMPAT_ENGINES.discard(ENGINE_ID)
     _added_to.clear()

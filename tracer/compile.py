@@ -167,6 +167,8 @@ class Primitive:
         self.thin = shape.kind == "square"
         self.bounded = shape.kind != "plane"
         self.tolerances = numerics.TOLERANCES
+        #: numerics.inverse_rounding of the matrix (compile_scene fills it for all shapes at once)
+        self.inverse_error: Optional[float] = None
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
@@ -211,20 +213,24 @@ class Primitive:
         pts = self._generic_points() if self.kind not in ("sphere", "cube", "square", "plane") else None
         return float(np.max(np.abs(pts))) if pts is not None and pts.size else 1.0
 
-    @cached_property
+    @property
     def rounding(self) -> float:
         """Relative rounding of this primitive's generic hit points: the hit computation's gamma plus the
-        error of the inverse matrix itself, its residual inverse @ matrix - I relative to the products'
-        magnitudes |inverse| @ |matrix| (it grows with the matrix's condition number)."""
-        residual = np.abs(self.inverse @ self.matrix - np.eye(4))
-        magnitude = np.abs(self.inverse) @ np.abs(self.matrix)
-        relative = np.max(np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0))
-        return numerics.gamma(self.tolerances.hit_ulps) + float(relative)
+        error of the inverse matrix itself."""
+        if self.inverse_error is None:
+            self.inverse_error = float(numerics.inverse_rounding(self.inverse[None], self.matrix[None])[0])
+        return numerics.gamma(self.tolerances.hit_ulps) + self.inverse_error
+
+    @cached_property
+    def inverse_norms(self) -> tuple[float, float]:
+        """(max row sum of |inverse[:3, :3]|, max |inverse[:3, 3]|): bound the size of a transformed origin,
+        before any cancellation, as ``first * max|o| + second``."""
+        return (float(np.max(np.abs(self.inverse[:3, :3]).sum(axis=1))), float(np.max(np.abs(self.inverse[:3, 3]))))
 
     def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
         """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
-        linear = np.abs(self.inverse[:3, :3])
-        raw_scale = np.max(np.abs(origins) @ linear.T + np.abs(self.inverse[:3, 3]), axis=1)
+        linear, translation = self.inverse_norms
+        raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
         # (plus the shape's own root error, where it has one: the torus)
         return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
                                                         self.generic_size, self.rounding)
@@ -457,6 +463,10 @@ def compile_scene(scene: Scene) -> CompiledScene:
     # one as before, and the first bad one raises.
     bounds = _batched_bounds(shapes) if inverses is not None else None
     objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
+    if inverses is not None and primitives:
+        errors = numerics.inverse_rounding(inverses, np.stack([s.matrix for s in shapes]).astype(np.float64))
+        for prim, error in zip(primitives, errors.tolist()):
+            prim.inverse_error = error
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
     effects = live_effects(scene)

@@ -35,7 +35,7 @@ typedef struct {
     const double *prim_param;                /* 1: tapered cylinder's small radius */
     const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
-    const double *prim_rounding;             /* 2: relative rounding of generic hit points, generic size (tracer.numerics) */
+    const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
     /* triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local) */
@@ -190,6 +190,6 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "6e4dded2a61b2ff4"
+#define RT_CONTRACT_DIGEST "daabe5fedaca0193"
 
 #endif

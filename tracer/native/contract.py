@@ -78,7 +78,10 @@ class Constant:
 
     def value(self):
         module, attribute = self.source.split(":")
-        value = getattr(importlib.import_module(module), attribute)
+        # "tracer.x" names a module of this tracer package, wherever it lives (the Blender add-on vendors
+        # it as sdl_raytracer.tracer, where an absolute "tracer" is not importable)
+        package = __package__.rsplit(".", 1)[0]
+        value = getattr(importlib.import_module(package + module[len("tracer"):]), attribute)
         return float(value) if self.kind == "double" else int(value)
 
 
@@ -164,7 +167,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_param", "*f64", "1: tapered cylinder's small radius"),
     F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
-    F("prim_rounding", "*f64", "2: relative rounding of generic hit points, generic size (tracer.numerics)"),
+    F("prim_rounding", "*f64", "4: rounding / generic size, generic size, |inverse| and |translation| (numerics)"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64",
       section="triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local)"),

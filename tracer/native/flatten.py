@@ -170,7 +170,8 @@ class FlatScene:
         a["prim_param"] = [float(prims[k].shape.small_radius) if code == KIND["TAPERED"] else 0.0
                            for k, code in enumerate(codes.tolist())]
         a["prim_material"] = [p.material_id for p in prims]
-        a["prim_rounding"] = np.array([(p.rounding, p.generic_size) for p in prims], dtype=np.float64).reshape(-1, 2)
+        a["prim_rounding"] = np.array([(p.rounding / p.generic_size, p.generic_size, *p.inverse_norms) for p in prims],
+                                      dtype=np.float64).reshape(-1, 4)
 
         # Polyhedra planes and meshes (instances share one mesh).
         planes, aux = [], []

@@ -162,6 +162,9 @@ def test_cli_target_error_reports_the_estimate(tmp_path, capsys):
     assert "estimated error" in captured.err
     assert main(["render", str(ROOT / "scenes" / "lecture.sdl"), "-o", out, "--target-error", "nan"]) == 2
     assert "error: the target error" in capsys.readouterr().err
+    assert main(["render", str(ROOT / "scenes" / "lecture.sdl"), "-o", out, "--target-error", "0.01",
+                 "--scheduler", "local:1"]) == 2
+    assert "error: --target-error cannot be combined with --scheduler" in capsys.readouterr().err
 
 
 def test_cli_bench_writes_the_report_and_refuses_too_few_seeds(tmp_path, capsys):

@@ -191,6 +191,8 @@ def _render(args) -> int:
     from .render import render
 
     if args.scheduler is not None or args.frames is not None:
+        if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
+            raise TracerError("--target-error cannot be combined with --scheduler or --frames")
         return _render_job(args)
     scene = _load(args)
     if args.max_depth is not None:

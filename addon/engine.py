@@ -21,7 +21,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import blocks, deps, raycam
+from . import blocks, deps, passes, raycam
 from .scene_build import SceneBuilder, matrix_np
 
 ENGINE_ID = "SDL_RAYTRACER"
@@ -103,6 +103,35 @@ def write_pass(render_pass, pixels: np.ndarray) -> None:
         render_pass.rect.foreach_set(rows.reshape(-1))
     except TypeError:  # Blender 3.x: "expected sequence size <pixels>"
         render_pass.rect.foreach_set(rows)
+
+
+def write_first_hit_passes(layer, names, tracer, compiled, rays_for, params, scene, chunk: int = 1 << 16) -> None:
+    """Depth, Normal, Diffuse Color, Position and Mist (those in ``names``) of the ray through each pixel's
+    centre, into the render layer's passes (addon/passes.py says what each holds)."""
+    height, width = tracer.height, tracer.width
+    matrix = np.asarray(params.matrix, dtype=np.float64)
+    eye, forward = matrix[:3, 3], -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+    mist = None
+    if scene.world is not None:
+        m = scene.world.mist_settings
+        mist = (float(m.start), float(m.depth), m.falloff)
+    backend = tracer.backend_tracer()
+    films = {}
+    rows_all, cols_all = np.divmod(np.arange(height * width), width)  # film order: bottom row first
+    for start in range(0, height * width, chunk):
+        rows, cols = rows_all[start:start + chunk], cols_all[start:start + chunk]
+        origins, directions = rays_for(rows, cols)
+        origins = np.ascontiguousarray(np.broadcast_to(origins, directions.shape), dtype=np.float64)
+        directions = np.ascontiguousarray(directions, dtype=np.float64)
+        values = passes.compute(names, backend, compiled, origins, directions, eye, forward, mist)
+        for name, value in values.items():
+            film = films.setdefault(name, np.empty((height * width, value.shape[1]), dtype=np.float32))
+            film[start:start + len(value)] = value
+    for name, film in films.items():
+        render_pass = layer.passes.find_pass(name, "") if hasattr(layer.passes, "find_pass") else None
+        render_pass = render_pass or layer.passes.get(name)
+        if render_pass is not None:
+            write_pass(render_pass, film.reshape(height, width, -1))
 
 
 class FilmUpdates:
@@ -216,6 +245,11 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             except blocks.Cancelled:
                 LAST_RENDER["cancelled"] = True
             write_pass(layer, tracer.rgba())
+            wanted = passes.enabled(depsgraph.view_layer)
+            if wanted and not LAST_RENDER["cancelled"]:
+                self.update_stats("", "SDL Ray Tracer | passes")
+                write_first_hit_passes(result.layers[0], wanted, tracer, compiled, rays_for, params, scene)
+            LAST_RENDER["passes_written"] = wanted if not LAST_RENDER["cancelled"] else []
             counts = tracer.counts().as_dict()
             LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
                                 "tiles_done": tracer.done, "tiles_total": len(tracer.items),
@@ -230,6 +264,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             traceback.print_exc()
         finally:
             self.end_result(result)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """The passes this engine writes, for the Render Layers node and the render result."""
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        for name in passes.enabled(renderlayer):
+            _, channels, kind = passes.PASSES[name]
+            self.register_pass(scene, renderlayer, name, len(channels), channels, kind)
 
     # -- viewport -------------------------------------------------------------------------------------
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Optional, Union
+from typing import Callable, Optional, Union
 
 import numpy as np
 
@@ -342,18 +342,22 @@ class CSGNode:
         return self.left.center, self.left.radius
 
     def leaves(self):
-        for child in (self.left, self.right):
-            if isinstance(child, CSGNode):
-                yield from child.leaves()
+        """The primitives under this node, left to right (without recursion, as everywhere a tree is walked:
+        booleans read from a file may nest deeper than Python's stack)."""
+        todo = [self.right, self.left]
+        while todo:
+            node = todo.pop()
+            if isinstance(node, CSGNode):
+                todo += (node.right, node.left)
             else:
-                yield child
+                yield node
 
     def may_hit(self, origins, directions):
         return lines_near_sphere(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
-        return combine(self.op, self.left.intersect(origins, directions),
-                       self.right.intersect(origins, directions))
+        return fold_tree(self, lambda prim: prim.intersect(origins, directions),
+                         lambda node, left, right: combine(node.op, left, right))
 
 
     def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
@@ -364,6 +368,26 @@ class CSGNode:
 
 
 Node = Union[Primitive, CSGNode]
+
+
+def fold_tree(root, leaf: Callable, join: Callable):
+    """Evaluate a tree of booleans bottom-up without recursion: ``leaf(primitive)`` for each leaf, left to
+    right, and ``join(node, left_value, right_value)`` for each boolean once its children are done.  Works
+    for compiled trees (CSGNode) and for the model's (tracer.model.CSG) alike."""
+    if not isinstance(root, (CSG, CSGNode)):
+        return leaf(root)
+    values: list = []
+    todo: list = [(root, False)]
+    while todo:
+        node, children_done = todo.pop()
+        if not isinstance(node, (CSG, CSGNode)):
+            values.append(leaf(node))
+        elif children_done:
+            right = values.pop()
+            values.append(join(node, values.pop(), right))
+        else:
+            todo += ((node, True), (node.right, False), (node.left, False))
+    return values[0]
 
 
 @dataclass
@@ -415,15 +439,15 @@ class CompiledScene:
 
 def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict,
                     inverses: Optional[np.ndarray] = None, bounds: Optional[list] = None) -> Node:
-    if isinstance(obj, CSG):
-        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids, mesh_cache, inverses, bounds),
-                       _compile_object(obj.right, primitives, material_ids, mesh_cache, inverses, bounds))
-    mat_id = material_ids.setdefault(obj.material, len(material_ids))
-    index = len(primitives)
-    prim = Primitive(obj, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
-                     bounds=None if bounds is None else bounds[index])
-    primitives.append(prim)
-    return prim
+    def leaf(shape: Shape) -> Primitive:
+        mat_id = material_ids.setdefault(shape.material, len(material_ids))
+        index = len(primitives)
+        prim = Primitive(shape, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
+                         bounds=None if bounds is None else bounds[index])
+        primitives.append(prim)
+        return prim
+
+    return fold_tree(obj, leaf, lambda node, left, right: CSGNode(node.op, left, right))
 
 
 def live_effects(scene: Scene) -> frozenset[str]:

@@ -225,7 +225,8 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
         *inside = plane_inside_at_start(o, d);
         return hits_z_plane(o, d, out, 0, D->tol_square_edge);
     case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS: return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, out);
+    case K_TORUS:
+        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
     case K_POLYHEDRON: {
         const int64_t *aux = D->prim_aux + 2 * p;
         return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
@@ -1030,6 +1031,13 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
         return NULL;
     }
     S->d = *desc;
+    /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
+     * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
+     * says; tracer.model.traced_depth applies the same bound to the NumPy path. */
+    if (S->d.max_depth > MAX_RECURSION_DEPTH)
+        S->d.max_depth = MAX_RECURSION_DEPTH;
+    if (S->d.max_depth < 0)
+        S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
     /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
     for (int64_t p = 0; p < D->n_prims; p++) {

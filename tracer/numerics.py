@@ -42,6 +42,9 @@ class Tolerances:
     torus_residual_ulps: float = 16.0
     #: Newton steps that polish each torus root.
     torus_newton_steps: int = 4
+    #: Torus: complex root pairs further than this (relative) from the real axis are not searched for a
+    #: double root (a shortcut: the quartic is ~ im^2 there, 10^8 times above its rounding bound).
+    torus_pair_shortcut: float = 1e-4
     #: The square's rim, relative: a crossing this close outside still counts, so that edges do not leak.
     square_edge: float = 1e-12
 
@@ -76,12 +79,15 @@ def generic_time_error(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray,
     reach = np.abs(np.where(np.isfinite(t), t, 0.0)) * np.max(np.abs(direction), axis=1)[:, None]
     scale = raw_scale[:, None] + np.max(np.abs(origin), axis=1)[:, None] + reach + size
     error = rounding / size * scale
-    # (|d| cos phi)^2 = (n.d)^2 / |n|^2 and (|d| sqrt(E))^2 = |d|^2 E: one square root.
+    # (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2, |d|^2 E |n|^2)):
+    # one square root, one division; a zero normal counts as grazing.
     along = np.einsum("nkj,nj->nk", normal, direction)
+    nn = np.einsum("nkj,nkj->nk", normal, normal)
+    dd = np.einsum("nj,nj->n", direction, direction)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
-        crossing = along * along / np.einsum("nkj,nkj->nk", normal, normal)
-        grazing = np.einsum("nj,nj->n", direction, direction)[:, None] * error
-        return size * error / np.sqrt(np.where(crossing > grazing, crossing, grazing))
+        crossing, grazing = along * along, dd * error * nn
+        bound = size * error * np.sqrt(nn / np.where(crossing > grazing, crossing, grazing))
+        return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
 
 
 def offset_distance(t: np.ndarray, t_error: np.ndarray, origins: np.ndarray, directions: np.ndarray,

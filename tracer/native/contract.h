@@ -110,6 +110,7 @@ typedef struct {
     double tol_offset_ulps;
     double tol_torus_residual_ulps;
     int64_t tol_torus_newton_steps;
+    double tol_torus_pair_shortcut;
     double tol_square_edge;
 } SceneDesc;
 
@@ -188,8 +189,9 @@ typedef struct {
     X(tol_offset_ulps) \
     X(tol_torus_residual_ulps) \
     X(tol_torus_newton_steps) \
+    X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "daabe5fedaca0193"
+#define RT_SCENE_DESC_FIELD_COUNT 75
+#define RT_CONTRACT_DIGEST "189039fe0d3132f4"
 
 #endif

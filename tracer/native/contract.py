@@ -237,6 +237,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("tol_offset_ulps", "f64"),
     F("tol_torus_residual_ulps", "f64"),
     F("tol_torus_newton_steps", "i64"),
+    F("tol_torus_pair_shortcut", "f64"),
     F("tol_square_edge", "f64"),
 )
 del F

@@ -225,7 +225,8 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
         *inside = plane_inside_at_start(o, d);
         return hits_z_plane(o, d, out, 0, D->tol_square_edge);
     case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS: return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, out);
+    case K_TORUS:
+        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
     case K_POLYHEDRON: {
         const int64_t *aux = D->prim_aux + 2 * p;
         return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);

@@ -249,7 +249,8 @@ class FlatScene:
         tol = compiled.tolerances
         scalars.update(tol_hit_ulps=float(tol.hit_ulps), tol_offset_ulps=float(tol.offset_ulps),
                        tol_torus_residual_ulps=float(tol.torus_residual_ulps),
-                       tol_torus_newton_steps=int(tol.torus_newton_steps), tol_square_edge=float(tol.square_edge))
+                       tol_torus_newton_steps=int(tol.torus_newton_steps),
+                       tol_torus_pair_shortcut=float(tol.torus_pair_shortcut), tol_square_edge=float(tol.square_edge))
         self.desc = SceneDesc()
         for f in contract.SCENE_DESC:
             if not f.is_pointer:

@@ -89,14 +89,15 @@ static inline double point_error(const ErrorFrame *f, double t)
 }
 
 /* The bound on t's error from E and the generic normal: size E / (|d| max(cos phi, sqrt E)), with one square
- * root, (|d| cos phi)^2 being (n.d)^2 / |n|^2. */
+ * root and one division: (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2,
+ * |d|^2 E |n|^2)); a zero normal counts as grazing. */
 static inline double time_error(const ErrorFrame *f, double error, const double *dg, const double *n)
 {
-    double along = dot3(n, dg);
-    double crossing = along * along / dot3(n, n), grazing = f->dd * error;
-    if (!(crossing > grazing))  /* (also where the normal is 0: crossing is NaN) */
-        crossing = grazing;
-    return f->size * error / sqrt(crossing);
+    double along = dot3(n, dg), nn = dot3(n, n);
+    if (!(nn > 0.0))
+        return f->size * sqrt(error / f->dd);
+    double crossing = along * along, grazing = f->dd * error * nn;
+    return f->size * error * sqrt(nn / (crossing > grazing ? crossing : grazing));
 }
 
 /* Is delta > time_error(f, error, dg, n)?  The same test without the square root, for the many candidate

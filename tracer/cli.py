@@ -387,7 +387,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (TracerError, OSError, MemoryError) as err:
+    except Exception as err:  # noqa: BLE001 — translated if it is the input's fault, else raised again
         message = error_message(err, subject)
         if message is None:
             raise

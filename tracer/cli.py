@@ -5,16 +5,21 @@ Errors in the user's input end the program with one line on stderr and exit stat
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
+import signal
 import sys
+import threading
 from dataclasses import replace
 from typing import Optional, Sequence
 
 import numpy as np
 
-from .errors import RenderCancelled, SDLError, TracerError, warnings_as_lines
+from .errors import RenderCancelled, TracerError, warnings_as_lines
+from .model import MAX_RECURSION_DEPTH, traced_depth
+from .reporting import error_message
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -53,6 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="threads of the C core (default: $SDL_TRACER_THREADS, else every core)")
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
+    r.add_argument("--target-error", type=float, default=None, metavar="E",
+                   help="sample each pixel until its estimated error (standard error of its mean, linear "
+                        "colour; 1/255 is one 8-bit step) is at most E, and report the estimate "
+                        "(replaces --samples, --sampling and --block-size)")
     r.add_argument("--cutoff", type=float, default=None, metavar="W",
                    help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
                         "(default 1/512; 0 traces them all)")
@@ -69,9 +78,13 @@ def build_parser() -> argparse.ArgumentParser:
     acc = bench.add_parser("accuracy", help="error against a dense reference, and time, for each setting")
     acc.add_argument("scenes", nargs="+", metavar="SCENE", help="SDL scene files")
     acc.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the CSV files and plots")
-    acc.add_argument("--width", type=int, default=160)
-    acc.add_argument("--height", type=int, default=120)
-    acc.add_argument("--reference-samples", type=int, default=64)
+    acc.add_argument("--width", type=int, default=96)
+    acc.add_argument("--height", type=int, default=72)
+    acc.add_argument("--reference-samples", type=int, default=2048, metavar="N",
+                     help="jittered rays per pixel of the reference (default 2048)")
+    acc.add_argument("--seeds", type=int, default=5, metavar="K",
+                     help="runs of each setting, one per seed: error mean and spread, time median and IQR "
+                          "(default 5, at least 3)")
     acc.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto")
     acc.add_argument("--lenient", action="store_true")
 
@@ -179,26 +192,44 @@ def _savings(args):
 
 
 def _render(args) -> int:
+    from .backend import load_core
     from .imageio import save_image
     from .render import render
 
     if args.scheduler is not None or args.frames is not None:
+        if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
+            raise TracerError("--target-error cannot be combined with --scheduler or --frames")
         return _render_job(args)
     scene = _load(args)
+    if args.lenient:
+        from .textures import drop_unreadable_textures
+
+        for message in drop_unreadable_textures(scene):
+            print(f"warning: {message}", file=sys.stderr)
     if args.max_depth is not None:
         if args.max_depth < 0:
             raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")
-        scene.settings.max_recursion_depth = args.max_depth
+        if args.max_depth > MAX_RECURSION_DEPTH:
+            print(f"warning: --max-depth {args.max_depth} is more than the tracer follows: "
+                  f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
+        scene.settings.max_recursion_depth = traced_depth(args.max_depth)
     savings = _savings(args)
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
                         progressive=args.progressive, on_tile=progress, samples=args.samples,
                         sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                        threads=args.threads, savings=savings)
+                        threads=args.threads, savings=savings, target_error=args.target_error)
     finally:
         progress.close()
     save_image(result.image, args.output)
+    if result.error_estimate is not None and not args.quiet:
+        from .target import MAX_SAMPLES
+        e = result.error_estimate
+        print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g}); "
+              f"{e.samples_mean:.1f} rays per pixel on average, {e.pixels_at_limit} pixels at the "
+              f"{MAX_SAMPLES}-ray limit", file=sys.stderr)
     if args.stats:
         print(json.dumps(result.stats()))
     return 0
@@ -210,6 +241,7 @@ def _render_job(args) -> int:
     import time
 
     from . import distributed as dist
+    from .backend import load_core
     from .imageio import save_image
     from .render import check_size, render
     from .trace import RayCounts
@@ -234,6 +266,7 @@ def _render_job(args) -> int:
                    backend=args.backend, threads=args.threads, max_depth=args.max_depth,
                    savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     started = time.perf_counter()
     rays, backends = RayCounts(), set()
 
@@ -273,17 +306,18 @@ def _render_job(args) -> int:
 
 def describe(scene) -> dict:
     """What ``info`` prints: objects, lights, camera, settings and live effects."""
-    from .compile import compile_scene
-    from .model import CSG
+    from .compile import compile_scene, fold_tree
+
+    def shape_info(shape):
+        info = {"shape": shape.kind, "position": [round(float(x), 6) for x in shape.matrix[:3, 3]],
+                "groups": list(shape.groups)}
+        if shape.mesh_file:
+            info["file"] = shape.mesh_file
+        return info
 
     def obj_info(obj):
-        if isinstance(obj, CSG):
-            return {"boolean": obj.op, "groups": list(obj.groups), "children": [obj_info(obj.left), obj_info(obj.right)]}
-        info = {"shape": obj.kind, "position": [round(float(x), 6) for x in obj.matrix[:3, 3]],
-                "groups": list(obj.groups)}
-        if obj.mesh_file:
-            info["file"] = obj.mesh_file
-        return info
+        return fold_tree(obj, shape_info, lambda node, left, right: {
+            "boolean": node.op, "groups": list(node.groups), "children": [left, right]})
 
     compiled = compile_scene(scene)
     camera = scene.camera
@@ -300,19 +334,25 @@ def describe(scene) -> dict:
 def _info(args) -> int:
     info = describe(_load(args))
     if args.json:
-        print(json.dumps(info, indent=2))
+        try:
+            print(json.dumps(info, indent=2))
+        except RecursionError:  # json's encoder recurses per level of nesting
+            raise TracerError(f"{args.scene}: booleans nested too deeply to write as JSON "
+                              f"(use info without --json)") from None
         return 0
 
     def lines(obj, indent):
-        pad = "  " * indent
-        group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
-        if "boolean" in obj:
-            yield f"{pad}{obj['boolean']}{group}"
-            for child in obj["children"]:
-                yield from lines(child, indent + 1)
-        else:
-            extra = f" {obj['file']}" if "file" in obj else ""
-            yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
+        todo = [(obj, indent)]  # without recursion: booleans may nest deeper than Python's stack
+        while todo:
+            obj, indent = todo.pop()
+            pad = "  " * indent
+            group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
+            if "boolean" in obj:
+                yield f"{pad}{obj['boolean']}{group}"
+                todo += [(child, indent + 1) for child in reversed(obj["children"])]
+            else:
+                extra = f" {obj['file']}" if "file" in obj else ""
+                yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
 
     print(f"objects: {len(info['objects'])}")
     for obj in info["objects"]:
@@ -332,34 +372,57 @@ def _info(args) -> int:
 def _bench(args) -> int:
     from pathlib import Path
 
-    from .accuracy import measure
+    from .accuracy import BenchConfig, measure, plot_targets, write_report
     from .render import check_size
     from .sdl.parser import load
 
     check_size(args.width, args.height)
-    for path in args.scenes:
-        scene = load(path, strict=not args.lenient)
-        measure(scene, Path(path).stem, Path(args.output), args.width, args.height, args.reference_samples,
-                args.backend, progress=lambda line: print(line, flush=True))
+    if min(args.width, args.height) < 7:  # scikit-image's SSIM window
+        raise TracerError(f"the accuracy bench needs images of at least 7 x 7 pixels, not {args.width} x {args.height}")
+    if args.seeds < 3:
+        raise TracerError(f"--seeds must be at least 3 (a spread needs them), not {args.seeds}")
+    if args.reference_samples < 2:
+        raise TracerError(f"--reference-samples must be at least 2, not {args.reference_samples}")
+    config = BenchConfig(width=args.width, height=args.height, reference_samples=args.reference_samples,
+                         seeds=args.seeds, backend=args.backend,
+                         savings_size=(max(args.width, 320), max(args.height, 240)))
+    out = Path(args.output)
+    scenes = [(Path(path).stem, load(path, strict=not args.lenient)) for path in args.scenes]
+    summaries = [measure(scene, name, out, config, progress=lambda line: print(line, flush=True))
+                 for name, scene in scenes]
+    plot_targets(summaries, out / "target_error.png")
+    write_report(summaries, out / "report.md")
     return 0
+
+
+@contextlib.contextmanager
+def _terminate_like_interrupt():
+    """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
+    removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
+    subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with np.errstate(all="ignore"), warnings_as_lines(sys.stderr):
+        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr):
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (SDLError, TracerError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_USAGE
-    except FileNotFoundError as err:
-        print(f"error: {err.filename or err}: no such file", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as err:
-        print(f"error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
+    except Exception as err:  # noqa: BLE001 — translated if it is the input's fault, else raised again
+        message = error_message(err, subject)
+        if message is None:
+            raise
+        print(f"error: {message}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Optional, Union
+from typing import Callable, Optional, Union
 
 import numpy as np
 
-from . import numerics
+from . import numerics, shapes
 from .errors import TracerError
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
@@ -36,9 +36,8 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
     return np.einsum("ij,ij->i", perp, perp) <= radius * radius
 
 
-#: Closed shapes whose normals must agree with their entering flags (the square is a sheet, meshes keep
-#: their triangles' orientation, the plane's normal and flag come from one sign).
-SOLID_ANALYTIC_KINDS = ("sphere", "cube", "taperedCylinder", "cylinder", "cone", "torus")
+#: Closed analytic shapes whose normals must agree with their entering flags (ShapeKind.normals_agree).
+SOLID_ANALYTIC_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.family == "analytic" and e.normals_agree)
 
 
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
@@ -73,10 +72,11 @@ def _checked_inverse(shape: Shape) -> np.ndarray:
 #: The eight corners of the generic cube, for the bounding spheres of the closed-form shapes.
 #: (Shared by every primitive, so read-only.)
 _CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-_SQUARE_CORNERS = _CORNERS * (1, 1, 0)
-_TORUS_CORNERS = _CORNERS * (1.0 + TORUS_TUBE_RADIUS, 1.0 + TORUS_TUBE_RADIUS, TORUS_TUBE_RADIUS)
 _DISC_BOX = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
-for _constant in (_CORNERS, _SQUARE_CORNERS, _TORUS_CORNERS, _DISC_BOX):
+#: The corners of each registered kind's generic box.
+_BOX_CORNERS = {e.keyword: np.asarray(e.box[0]) + _CORNERS * np.asarray(e.box[1])
+                for e in shapes.REGISTRY if e.box is not None}
+for _constant in (_CORNERS, _DISC_BOX, *_BOX_CORNERS.values()):
     _constant.setflags(write=False)
 
 
@@ -84,12 +84,8 @@ def _analytic_generic_points(shape: Shape) -> Optional[np.ndarray]:
     """Points whose hull holds a closed-form shape's generic solid (8 of them), or None for the plane,
     polyhedra and meshes."""
     kind = shape.kind
-    if kind == "sphere" or kind == "cube":
-        return _CORNERS
-    if kind == "square":
-        return _SQUARE_CORNERS
-    if kind == "torus":
-        return _TORUS_CORNERS
+    if kind in _BOX_CORNERS:
+        return _BOX_CORNERS[kind]
     if kind in ("taperedCylinder", "cylinder", "cone"):
         top = max(shape.small_radius, 0.0)
         # Corners of the squares that bound the two discs: the frustum lies inside their hull.
@@ -164,9 +160,14 @@ class Primitive:
         self.inverse = _checked_inverse(shape) if inverse is None else inverse
         # World normal = generic normal through the inverse-transpose; as row vectors: n_g @ inverse[:3,:3].
         self.normal_matrix = self.inverse[:3, :3]
-        self.thin = shape.kind == "square"
-        self.bounded = shape.kind != "plane"
+        entry = shapes.KINDS[shape.kind]
+        self.thin = entry.thin
+        self.bounded = entry.bounded
+        self._intersect = entry.function("intersect") if entry.intersect else None
+        self._normals_agree = entry.normals_agree
         self.tolerances = numerics.TOLERANCES
+        #: numerics.inverse_rounding of the matrix (compile_scene fills it for all shapes at once)
+        self.inverse_error: Optional[float] = None
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
@@ -211,20 +212,24 @@ class Primitive:
         pts = self._generic_points() if self.kind not in ("sphere", "cube", "square", "plane") else None
         return float(np.max(np.abs(pts))) if pts is not None and pts.size else 1.0
 
-    @cached_property
+    @property
     def rounding(self) -> float:
         """Relative rounding of this primitive's generic hit points: the hit computation's gamma plus the
-        error of the inverse matrix itself, its residual inverse @ matrix - I relative to the products'
-        magnitudes |inverse| @ |matrix| (it grows with the matrix's condition number)."""
-        residual = np.abs(self.inverse @ self.matrix - np.eye(4))
-        magnitude = np.abs(self.inverse) @ np.abs(self.matrix)
-        relative = np.max(np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0))
-        return numerics.gamma(self.tolerances.hit_ulps) + float(relative)
+        error of the inverse matrix itself."""
+        if self.inverse_error is None:
+            self.inverse_error = float(numerics.inverse_rounding(self.inverse[None], self.matrix[None])[0])
+        return numerics.gamma(self.tolerances.hit_ulps) + self.inverse_error
+
+    @cached_property
+    def inverse_norms(self) -> tuple[float, float]:
+        """(max row sum of |inverse[:3, :3]|, max |inverse[:3, 3]|): bound the size of a transformed origin,
+        before any cancellation, as ``first * max|o| + second``."""
+        return (float(np.max(np.abs(self.inverse[:3, :3]).sum(axis=1))), float(np.max(np.abs(self.inverse[:3, 3]))))
 
     def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
         """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
-        linear = np.abs(self.inverse[:3, :3])
-        raw_scale = np.max(np.abs(origins) @ linear.T + np.abs(self.inverse[:3, 3]), axis=1)
+        linear, translation = self.inverse_norms
+        raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
         # (plus the shape's own root error, where it has one: the torus)
         return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
                                                         self.generic_size, self.rounding)
@@ -234,11 +239,9 @@ class Primitive:
         return None if pts is None else transform_points(self.matrix, pts)
 
     def generic_hits(self, o: np.ndarray, d: np.ndarray) -> HitArrays:
+        if self._intersect is not None:
+            return self._intersect(o, d)
         kind = self.kind
-        if kind == "sphere":
-            return analytic.intersect_sphere(o, d)
-        if kind == "cube":
-            return analytic.intersect_cube(o, d)
         if kind == "square":
             return analytic.intersect_square(o, d, self.tolerances.square_edge)
         if kind == "plane":
@@ -264,7 +267,7 @@ class Primitive:
         shift = np.where(np.isfinite(shift), shift, 0.0)
         centred = o + shift[:, None] * d
         local = self.generic_hits(centred, d)
-        if self.kind in SOLID_ANALYTIC_KINDS or self._planes is not None:
+        if self._normals_agree:
             analytic.agree_with_crossing(local, d)
         local.t = local.t + shift[:, None]
         local.error = self.time_errors(origins[idx], centred, d, local)
@@ -336,18 +339,22 @@ class CSGNode:
         return self.left.center, self.left.radius
 
     def leaves(self):
-        for child in (self.left, self.right):
-            if isinstance(child, CSGNode):
-                yield from child.leaves()
+        """The primitives under this node, left to right (without recursion, as everywhere a tree is walked:
+        booleans read from a file may nest deeper than Python's stack)."""
+        todo = [self.right, self.left]
+        while todo:
+            node = todo.pop()
+            if isinstance(node, CSGNode):
+                todo += (node.right, node.left)
             else:
-                yield child
+                yield node
 
     def may_hit(self, origins, directions):
         return lines_near_sphere(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
-        return combine(self.op, self.left.intersect(origins, directions),
-                       self.right.intersect(origins, directions))
+        return fold_tree(self, lambda prim: prim.intersect(origins, directions),
+                         lambda node, left, right: combine(node.op, left, right))
 
 
     def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
@@ -358,6 +365,26 @@ class CSGNode:
 
 
 Node = Union[Primitive, CSGNode]
+
+
+def fold_tree(root, leaf: Callable, join: Callable):
+    """Evaluate a tree of booleans bottom-up without recursion: ``leaf(primitive)`` for each leaf, left to
+    right, and ``join(node, left_value, right_value)`` for each boolean once its children are done.  Works
+    for compiled trees (CSGNode) and for the model's (tracer.model.CSG) alike."""
+    if not isinstance(root, (CSG, CSGNode)):
+        return leaf(root)
+    values: list = []
+    todo: list = [(root, False)]
+    while todo:
+        node, children_done = todo.pop()
+        if not isinstance(node, (CSG, CSGNode)):
+            values.append(leaf(node))
+        elif children_done:
+            right = values.pop()
+            values.append(join(node, values.pop(), right))
+        else:
+            todo += ((node, True), (node.right, False), (node.left, False))
+    return values[0]
 
 
 @dataclass
@@ -409,15 +436,15 @@ class CompiledScene:
 
 def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict,
                     inverses: Optional[np.ndarray] = None, bounds: Optional[list] = None) -> Node:
-    if isinstance(obj, CSG):
-        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids, mesh_cache, inverses, bounds),
-                       _compile_object(obj.right, primitives, material_ids, mesh_cache, inverses, bounds))
-    mat_id = material_ids.setdefault(obj.material, len(material_ids))
-    index = len(primitives)
-    prim = Primitive(obj, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
-                     bounds=None if bounds is None else bounds[index])
-    primitives.append(prim)
-    return prim
+    def leaf(shape: Shape) -> Primitive:
+        mat_id = material_ids.setdefault(shape.material, len(material_ids))
+        index = len(primitives)
+        prim = Primitive(shape, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
+                         bounds=None if bounds is None else bounds[index])
+        primitives.append(prim)
+        return prim
+
+    return fold_tree(obj, leaf, lambda node, left, right: CSGNode(node.op, left, right))
 
 
 def live_effects(scene: Scene) -> frozenset[str]:
@@ -457,6 +484,10 @@ def compile_scene(scene: Scene) -> CompiledScene:
     # one as before, and the first bad one raises.
     bounds = _batched_bounds(shapes) if inverses is not None else None
     objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
+    if inverses is not None and primitives:
+        errors = numerics.inverse_rounding(inverses, np.stack([s.matrix for s in shapes]).astype(np.float64))
+        for prim, error in zip(primitives, errors.tolist()):
+            prim.inverse_error = error
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
     effects = live_effects(scene)

@@ -17,6 +17,7 @@ from .atomic import replacing
 from .errors import SDLError, WriteError
 from .model import MeshData
 from .sdl.lexer import to_float
+from .userfiles import read_text
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -74,7 +75,7 @@ def read_3vn(path: PathLike) -> MeshData:
     name = os.fspath(path)
     try:
         # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number.
-        text = Path(path).read_text(encoding="utf-8", errors="replace")
+        text = read_text(path, "mesh file")
     except OSError as exc:
         raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
     numbers = _Numbers(text, name)

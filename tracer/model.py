@@ -13,21 +13,20 @@ from typing import Optional, Union
 
 import numpy as np
 
+from . import shapes
 from .errors import SceneError
+from .shapes import TORUS_TUBE_RADIUS  # noqa: F401 - part of the model's vocabulary
 
 Color = tuple[float, float, float]
 Vec3 = tuple[float, float, float]
 
 #: Generic shapes whose geometry is a closed-form surface.
-ANALYTIC_KINDS = ("sphere", "cube", "square", "plane", "taperedCylinder", "cylinder", "cone", "torus")
+ANALYTIC_KINDS = shapes.keywords("analytic")
 #: Built-in convex polyhedra (the book loads these from .3vn files).
-POLYHEDRON_KINDS = ("tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond")
+POLYHEDRON_KINDS = shapes.keywords("polyhedron")
 #: Shapes made of triangles.
-MESH_KINDS = ("teapot", "mesh")
-SHAPE_KINDS = ANALYTIC_KINDS + POLYHEDRON_KINDS + MESH_KINDS
-
-#: Tube radius of the generic torus (its ring radius is 1), as the book draws it.
-TORUS_TUBE_RADIUS = 0.2
+MESH_KINDS = shapes.keywords("mesh")
+SHAPE_KINDS = shapes.keywords()
 
 
 @dataclass(frozen=True)
@@ -173,6 +172,17 @@ class Camera:
     look: Vec3
     up: Vec3 = (0.0, 1.0, 0.0)
     view_angle: float = 45.0
+
+
+#: The deepest reflection/refraction recursion traced.  A deeper maxRecursionDepth is read as this one, with
+#: a warning: each level adds at most 1/2^level-ish light in any physical scene, while an unbounded depth lets
+#: one file run a thread out of stack (the C core recurses about 1 KB per level) or for ever.
+MAX_RECURSION_DEPTH = 64
+
+
+def traced_depth(depth: int) -> int:
+    """The recursion depth the tracers follow for a setting of ``depth``: 0 .. MAX_RECURSION_DEPTH."""
+    return max(0, min(int(depth), MAX_RECURSION_DEPTH))
 
 
 @dataclass

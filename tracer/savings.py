@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compile import CompiledScene, CSGNode
+from . import shapes
+from .compile import CompiledScene, CSGNode, fold_tree
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
 SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
@@ -27,9 +28,8 @@ SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
 SWITCHES = ("inside_shadows", "shared_tir", "dark_materials")
 DEFAULT_CUTOFF = 1.0 / 512.0
 #: Shapes that bound a solid (every ray into one comes out again): not the square (a sheet) nor meshes
-#: (which may be open).  The plane is the half-space below it.
-CLOSED_KINDS = frozenset({"sphere", "cube", "plane", "taperedCylinder", "cylinder", "cone", "torus",
-                          "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond"})
+#: (which may be open).  The plane is the half-space below it.  (ShapeKind.closed)
+CLOSED_KINDS = frozenset(e.keyword for e in shapes.REGISTRY if e.closed)
 #: A direction for the point-in-solid test that no bundled shape's faces are parallel to.
 _PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
 
@@ -61,9 +61,7 @@ def dark_materials(compiled: CompiledScene) -> np.ndarray:
 
 
 def _closed(node) -> bool:
-    if isinstance(node, CSGNode):
-        return _closed(node.left) and _closed(node.right)
-    return node.kind in CLOSED_KINDS
+    return fold_tree(node, lambda prim: prim.kind in CLOSED_KINDS, lambda _, left, right: left and right)
 
 
 def _contains(node, point: np.ndarray) -> bool | None:

@@ -6,14 +6,19 @@
 #include <stdint.h>
 
 enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TORUS = 5, K_POLYHEDRON = 6,
-       K_MESH = 7 };
+       K_MESH = 7, K_PARABOLOID = 8 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
-#define K_COUNT 8
+#define K_COUNT 9
+/* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
+#define RT_SHAPE_HITS(X) X(K_SPHERE, hits_sphere) X(K_CUBE, hits_cube) X(K_PARABOLOID, hits_paraboloid)
+#define RT_SHAPE_UV(X) X(K_TAPERED, wall_and_discs_uv) X(K_PARABOLOID, wall_and_discs_uv)
+/* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
+#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
@@ -23,6 +28,10 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define TORUS_TUBE 0.2
 /* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
+/* most octaves of turbulence summed (marble); a larger count is read as this one (tracer.textures.noise:MAX_OCTAVES) */
+#define MAX_OCTAVES 32
+/* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
+#define MAX_RECURSION_DEPTH 64
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
 #define TEX_PARAMS 9
 
@@ -35,7 +44,7 @@ typedef struct {
     const double *prim_param;                /* 1: tapered cylinder's small radius */
     const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
-    const double *prim_rounding;             /* 2: relative rounding of generic hit points, generic size (tracer.numerics) */
+    const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
     /* triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local) */
@@ -102,7 +111,7 @@ typedef struct {
     const int64_t *mat_tex_image;            /* per material: index into image_data, -1 for none */
     int64_t n_images;
     const int64_t *image_info;               /* 2 per image: width, height */
-    const double *const *image_data;         /* per image: height x width x 3 floats in [0, 1], row 0 at the bottom */
+    const uint8_t *const *image_data;        /* per image: height x width x 3 bytes (texel value = byte / 255), row 0 at the bottom */
     const int64_t *noise_perm;               /* 512: tracer.textures.noise.PERM */
     const double *noise_gradients;           /* 12 x 3: tracer.textures.noise.GRADIENTS */
     /* tolerances: the compiled scene's, not constants (a measurement varies them) */
@@ -110,6 +119,7 @@ typedef struct {
     double tol_offset_ulps;
     double tol_torus_residual_ulps;
     int64_t tol_torus_newton_steps;
+    double tol_torus_pair_shortcut;
     double tol_square_edge;
 } SceneDesc;
 
@@ -188,8 +198,9 @@ typedef struct {
     X(tol_offset_ulps) \
     X(tol_torus_residual_ulps) \
     X(tol_torus_newton_steps) \
+    X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "6e4dded2a61b2ff4"
+#define RT_SCENE_DESC_FIELD_COUNT 75
+#define RT_CONTRACT_DIGEST "60aa324fa40c4bb6"
 
 #endif

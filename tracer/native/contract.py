@@ -25,23 +25,14 @@ from typing import Optional
 import numpy as np
 
 from .. import savings as _savings
-from ..model import MESH_KINDS, POLYHEDRON_KINDS
+from .. import shapes as _shapes
 
 HEADER = Path(__file__).resolve().parent / "contract.h"
 
 # ------------------------------------------------------------------------------------------------ codes
 
-#: C shape kinds in code order, each with the SDL kinds it traces.
-SHAPE_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("SPHERE", ("sphere",)),
-    ("CUBE", ("cube",)),
-    ("SQUARE", ("square",)),
-    ("PLANE", ("plane",)),
-    ("TAPERED", ("taperedCylinder", "cylinder", "cone")),
-    ("TORUS", ("torus",)),
-    ("POLYHEDRON", POLYHEDRON_KINDS),
-    ("MESH", MESH_KINDS),
-)
+#: C shape kinds in code order, each with the SDL kinds it traces (from the shape registry).
+SHAPE_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = _shapes.c_kinds()
 CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures")
@@ -89,6 +80,10 @@ CONSTANTS = (
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
     Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
+             "most octaves of turbulence summed (marble); a larger count is read as this one"),
+    Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
+             "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
              "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
 )
@@ -167,7 +162,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_param", "*f64", "1: tapered cylinder's small radius"),
     F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
-    F("prim_rounding", "*f64", "2: relative rounding of generic hit points, generic size (tracer.numerics)"),
+    F("prim_rounding", "*f64", "4: rounding / generic size, generic size, |inverse| and |translation| (numerics)"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64",
       section="triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local)"),
@@ -229,7 +224,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mat_tex_image", "*i64", "per material: index into image_data, -1 for none"),
     F("n_images", "i64"),
     F("image_info", "*i64", "2 per image: width, height"),
-    F("image_data", "**f64", "per image: height x width x 3 floats in [0, 1], row 0 at the bottom"),
+    F("image_data", "**u8", "per image: height x width x 3 bytes (texel value = byte / 255), row 0 at the bottom"),
     F("noise_perm", "*i64", "512: tracer.textures.noise.PERM"),
     F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
     F("tol_hit_ulps", "f64", "CompiledScene.tolerances (tracer.numerics.Tolerances), field for field",
@@ -237,6 +232,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("tol_offset_ulps", "f64"),
     F("tol_torus_residual_ulps", "f64"),
     F("tol_torus_newton_steps", "i64"),
+    F("tol_torus_pair_shortcut", "f64"),
     F("tol_square_edge", "f64"),
 )
 del F
@@ -275,6 +271,30 @@ def _double(value: float) -> str:
     return text if any(c in text for c in ".en") else text + ".0"
 
 
+def _shape_dispatch() -> list[str]:
+    """The C core's per-kind tables from the shape registry: X-macros over the kinds whose intersection and
+    texture mapping are registered C functions, and which kinds' normals agree with their entering flags."""
+    def per_c_kind(field: str) -> list[tuple[str, str]]:
+        out = []
+        for c_kind, keywords in SHAPE_KINDS:
+            names = {getattr(_shapes.KINDS[k], field) for k in keywords}
+            assert len(names) == 1, f"the SDL kinds of K_{c_kind} disagree on {field}"
+            name = names.pop()
+            if name:
+                out.append((c_kind, name))
+        return out
+
+    def x_macro(name: str, pairs) -> str:
+        return f"#define {name}(X)" + "".join(f" X(K_{k}, {f})" for k, f in pairs)
+
+    agree = [k for k, words in SHAPE_KINDS if all(_shapes.KINDS[w].normals_agree for w in words)]
+    return ["/* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */",
+            x_macro("RT_SHAPE_HITS", per_c_kind("c_intersect")),
+            x_macro("RT_SHAPE_UV", per_c_kind("c_uv")),
+            "/* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */",
+            "#define RT_NORMALS_AGREE(kind) (" + " || ".join(f"(kind) == K_{k}" for k in agree) + ")"]
+
+
 def header_text() -> str:
     """The C header, as generated from the tables above (and the constants' current values)."""
     out = ["/* GENERATED by `python -m tracer.native.contract` from tracer/native/contract.py: do not edit.",
@@ -287,6 +307,7 @@ def header_text() -> str:
     out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
     out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
+    out += _shape_dispatch()
     out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")
     out.append(f"#define N_COUNTS {len(RAY_KINDS) + len(SKIP_REASONS)}  /* rays cast per kind, then skipped per reason */")
     out.append("")

@@ -20,18 +20,22 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
+from .. import shapes
 from ..camera import focal_length, view_angle
 from ..errors import TracerError
-from ..model import (CSG, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene, SceneObject,
-                     Settings, Shape, SourceLocation)
+from ..model import (CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene,
+                     SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
 from .meshes import sdl_mesh, usd_mesh
-from .opening import open_stage
+from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+#: Kinds written as their tessellation (USD has no implicit prim for them) and read back as the exact shape.
+_TESSELLATED = frozenset(e.keyword for e in shapes.REGISTRY if e.tessellate is not None)
 
 #: A distant light becomes a point light this many scene radii away, against its direction.
 DISTANT_LIGHT_DISTANCE = 1.0e5
@@ -58,7 +62,7 @@ class _Reader:
     def __init__(self, stage, file: str, strict: bool = True, time: Optional[float] = None):
         pxr = C.pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = pxr.Gf, pxr.Sdf, pxr.Usd, pxr.UsdGeom
-        self.UsdLux, self.UsdShade = pxr.UsdLux, pxr.UsdShade
+        self.UsdLux, self.UsdShade, self.Tf = pxr.UsdLux, pxr.UsdShade, pxr.Tf
         self.stage = stage
         self.file = file
         self.strict = strict
@@ -99,8 +103,12 @@ class _Reader:
         return default if value is None else tuple(float(x) for x in value)
 
     def world(self, prim) -> np.ndarray:
-        """The prim's local-to-world matrix in SDL's y-up world."""
-        return self.up @ C.from_gf(self.xforms.GetLocalToWorldTransform(prim))
+        """The prim's local-to-world matrix in SDL's y-up world.  An xformOp USD cannot evaluate is a
+        ValueError with USD's own words (the prim is then reported as unreadable)."""
+        try:
+            return self.up @ C.from_gf(self.xforms.GetLocalToWorldTransform(prim))
+        except self.Tf.ErrorException as exc:
+            raise ValueError(f"its transform: {usd_error_message(str(exc))}") from None
 
     # -- the whole stage --------------------------------------------------------------------------------
 
@@ -192,6 +200,10 @@ class _Reader:
         except _BAD_VALUE as exc:
             self.problem(root, f"cannot read the scene settings ({exc})", "SDL's defaults used")
             return
+        if s.max_recursion_depth > MAX_RECURSION_DEPTH or s.max_recursion_depth < 0:
+            self.note(root, f"{C.A_MAX_DEPTH} = {s.max_recursion_depth} is outside 0..{MAX_RECURSION_DEPTH}: "
+                            f"{traced_depth(s.max_recursion_depth)} used")
+            s.max_recursion_depth = traced_depth(s.max_recursion_depth)
         self.scene.settings = s
         if len(numbers) != len(files):
             self.problem(root, "sdl:pixmapNumbers and sdl:pixmapFiles differ in length", "pixmaps left out")
@@ -272,7 +284,7 @@ class _Reader:
         if kind == "taperedCylinder" and shape.kind == "mesh":
             shape = Shape("taperedCylinder", shape.matrix,
                           tapered_radius=float(self.get(prim, C.A_SMALL_RADIUS, 1.0)))
-        elif kind in ("torus", "square") and shape.kind == "mesh":
+        elif kind in _TESSELLATED and shape.kind == "mesh":
             shape = Shape(kind, shape.matrix)
         elif kind is not None and kind != shape.kind:
             self.note(prim, f"sdl:shape {kind!r} does not match its USD type: read as {shape.kind}")
@@ -336,7 +348,7 @@ class _Reader:
         if kind in POLYHEDRON_KINDS or kind == "teapot":
             from ..sdl.parser import builtin_mesh
             return Shape(kind, world, mesh=builtin_mesh(kind))
-        if kind in ("torus", "square", "taperedCylinder"):
+        if kind in _TESSELLATED or kind == "taperedCylinder":
             return Shape("mesh", world)  # the caller makes the exact shape
         if kind == "mesh" and self.get(prim, C.A_MESH_POINTS) is not None:
             data = sdl_mesh(self, prim)
@@ -413,7 +425,11 @@ class _Reader:
         exposure = float(self.get(prim, "inputs:exposure", 0.0))
         if light.GetEnableColorTemperatureAttr().Get(self.time):
             self.note(prim, "colour temperature is not supported: the light's colour used")
-        color = tuple(c * intensity * 2.0 ** exposure for c in base)
+        with np.errstate(over="ignore", invalid="ignore"):
+            color = tuple(float(c * intensity * np.exp2(exposure)) for c in base)
+        if not all(np.isfinite(color)):
+            self.problem(prim, f"light brightness out of range (intensity {intensity:g}, exposure {exposure:g})")
+            return
         exact = self.triple(prim, C.A_LIGHT_COLOR)
         # Our exact colour, unless the light was changed in another tool since (its float colour differs).
         if exact is not None and tuple(float(np.float32(c)) for c in exact) == color:
@@ -474,8 +490,16 @@ class _Reader:
             return
         eye = world[:3, 3]
         angle = view_angle(focal, aperture)
+        if not 0.0 < angle < 180.0:  # a focal length so long (or film so small) that no angle is left
+            self.problem(prim, f"camera focal length {focal:g} and aperture {aperture:g} give no usable view "
+                               f"angle", "the scene framed instead")
+            return
+        # The look-at point a unit in front of the eye, or further for an eye so far out that a unit step
+        # would be lost to rounding (half the eye's distance: no overflow even at 1e308).
+        far = float(np.max(np.abs(eye)))
+        step = 1.0 if far < 2.0 ** 40 else 0.5 * far
         self.scene.camera = Camera(tuple(float(x) for x in eye),
-                                   tuple(float(x) for x in eye - back / np.linalg.norm(back)),
+                                   tuple(float(x) for x in eye - step * back / np.linalg.norm(back)),
                                    tuple(float(x) for x in up_axis / np.linalg.norm(up_axis)), angle)
 
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
@@ -531,6 +555,9 @@ def load_usd(path: PathLike, strict: bool = True, time: Optional[float] = None) 
     each becomes one message in ``scene.warnings`` and the rest is read.  Approximations (a rect light read
     as a point light, a material that is not a UsdPreviewSurface) are warnings either way."""
     stage, composition_errors = open_stage(path)
-    scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
+    with held_stderr() as printed:  # what USD says while we read (a binding without its API, say)
+        scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
+    for message in dict.fromkeys(printed):
+        scene.warnings.append(f"{os.fspath(path)}: USD says: {message}")
     scene.source = Path(path)
     return scene

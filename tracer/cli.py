@@ -5,6 +5,7 @@ Errors in the user's input end the program with one line on stderr and exit stat
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -191,6 +192,7 @@ def _savings(args):
 
 
 def _render(args) -> int:
+    from .backend import load_core
     from .imageio import save_image
     from .render import render
 
@@ -212,6 +214,7 @@ def _render(args) -> int:
                   f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
         scene.settings.max_recursion_depth = traced_depth(args.max_depth)
     savings = _savings(args)
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
@@ -238,6 +241,7 @@ def _render_job(args) -> int:
     import time
 
     from . import distributed as dist
+    from .backend import load_core
     from .imageio import save_image
     from .render import check_size, render
     from .trace import RayCounts
@@ -262,6 +266,7 @@ def _render_job(args) -> int:
                    backend=args.backend, threads=args.threads, max_depth=args.max_depth,
                    savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     started = time.perf_counter()
     rays, backends = RayCounts(), set()
 
@@ -390,23 +395,30 @@ def _bench(args) -> int:
     return 0
 
 
-def _terminate_like_interrupt() -> None:
-    """SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is removed."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, signal.default_int_handler)
+@contextlib.contextmanager
+def _terminate_like_interrupt():
+    """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
+    removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    _terminate_like_interrupt()
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with np.errstate(all="ignore"), warnings_as_lines(sys.stderr):
+        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr):
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (TracerError, OSError, MemoryError) as err:
+    except Exception as err:  # noqa: BLE001 — translated if it is the input's fault, else raised again
         message = error_message(err, subject)
         if message is None:
             raise

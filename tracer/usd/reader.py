@@ -490,6 +490,10 @@ class _Reader:
             return
         eye = world[:3, 3]
         angle = view_angle(focal, aperture)
+        if not 0.0 < angle < 180.0:  # a focal length so long (or film so small) that no angle is left
+            self.problem(prim, f"camera focal length {focal:g} and aperture {aperture:g} give no usable view "
+                               f"angle", "the scene framed instead")
+            return
         # The look-at point a unit in front of the eye, or further for an eye so far out that a unit step
         # would be lost to rounding (half the eye's distance: no overflow even at 1e308).
         far = float(np.max(np.abs(eye)))

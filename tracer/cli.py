@@ -192,6 +192,7 @@ def _savings(args):
 
 
 def _render(args) -> int:
+    from .backend import load_core
     from .imageio import save_image
     from .render import render
 
@@ -213,6 +214,7 @@ def _render(args) -> int:
                   f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
         scene.settings.max_recursion_depth = traced_depth(args.max_depth)
     savings = _savings(args)
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
@@ -239,6 +241,7 @@ def _render_job(args) -> int:
     import time
 
     from . import distributed as dist
+    from .backend import load_core
     from .imageio import save_image
     from .render import check_size, render
     from .trace import RayCounts
@@ -263,6 +266,7 @@ def _render_job(args) -> int:
                    backend=args.backend, threads=args.threads, max_depth=args.max_depth,
                    savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     started = time.perf_counter()
     rays, backends = RayCounts(), set()
 

@@ -144,7 +144,19 @@ class TriangleMesh:
 
     def _build_bvh(self, tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
                    leaf_size: int, bins: int) -> None:
-        """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids)."""
+        """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids): built by
+        the C core when it is there (the same tree, in a fraction of the time), else in NumPy."""
+        native = _native_builder() if 2 <= bins <= 64 and leaf_size >= 1 else None
+        if native is None:
+            self._build_bvh_numpy(tri_lo, tri_hi, centroid, leaf_size, bins)
+            return
+        tree = native(tri_lo, tri_hi, centroid, leaf_size, bins)
+        self._store_nodes(tree["lo"], tree["hi"], tree["left"], tree["right"], tree["first"], tree["count"],
+                          tree["axis"], tree["order"])
+
+    def _build_bvh_numpy(self, tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
+                         leaf_size: int, bins: int) -> None:
+        """The reference builder (bvh_build.h builds the same tree)."""
         t_count = len(tri_lo)
         order = np.arange(t_count, dtype=np.int64)
         lo, hi, left, right, first, count, axes = [], [], [], [], [], [], []
@@ -433,6 +445,15 @@ class TriangleMesh:
         with np.errstate(all="ignore"):
             smooth = smooth / length[:, None]
         return np.where(usable[:, None], smooth, geometric)
+
+
+def _native_builder():
+    """tracer.native.build_mesh_bvh when the C core is built, else None."""
+    try:
+        from .. import native
+    except ImportError:
+        return None
+    return native.build_mesh_bvh if native.load_error is None else None
 
 
 class _Rays:

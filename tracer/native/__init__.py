@@ -54,6 +54,11 @@ def _load() -> ctypes.CDLL:
                                    _i32p, _i32p, _dp, _i8p]
     lib.rt_texture_colors.restype = ctypes.c_int
     lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
+    lib.rt_scan_numbers.restype = ctypes.c_int64
+    lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
+    lib.rt_build_mesh_bvh.restype = ctypes.c_int64
+    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, _i64p, _dp, _dp,
+                                      _i64p, _i64p, _i64p, _i64p, _i8p]
     if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
         raise BuildError("the C core's SceneDesc does not match flatten.py's")
     return lib
@@ -89,6 +94,42 @@ def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
 
 def _ptr(array: np.ndarray, ctype):
     return array.ctypes.data_as(ctypes.POINTER(ctype))
+
+
+def scan_numbers(data: bytes) -> Optional[np.ndarray]:
+    """The values of the white-space separated decimal numbers in ``data`` (see scan.h), or None when it
+    holds anything else: a word that is not such a number, a byte outside ASCII.  Needs the C core."""
+    if _lib is None:
+        raise TracerError(f"the C core is not available: {load_error}")
+    bad = ctypes.c_int64(-1)
+    count = _lib.rt_scan_numbers(data, len(data), None, 0, ctypes.byref(bad))
+    if count < 0:
+        return None
+    values = np.empty(count, dtype=np.float64)
+    if _lib.rt_scan_numbers(data, len(data), _ptr(values, ctypes.c_double), count, ctypes.byref(bad)) != count:
+        return None
+    return values
+
+
+def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int) -> dict:
+    """The BVH of TriangleMesh's builder (the same arrays, see bvh_build.h), built in C.  Node boxes are
+    not padded.  Needs the C core."""
+    if _lib is None:
+        raise TracerError(f"the C core is not available: {load_error}")
+    boxes = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3) for a in (tri_lo, tri_hi, centroid)]
+    n = len(boxes[0])
+    room = max(2 * n - 1, 1)
+    out = dict(order=np.empty(n, np.int64), lo=np.empty((room, 3)), hi=np.empty((room, 3)),
+               left=np.empty(room, np.int64), right=np.empty(room, np.int64), first=np.empty(room, np.int64),
+               count=np.empty(room, np.int64), axis=np.empty(room, np.int8))
+    nodes = _lib.rt_build_mesh_bvh(n, *(_ptr(a, ctypes.c_double) for a in boxes), int(leaf_size), int(bins),
+                                   _ptr(out["order"], ctypes.c_int64), _ptr(out["lo"], ctypes.c_double),
+                                   _ptr(out["hi"], ctypes.c_double), *(_ptr(out[k], ctypes.c_int64) for k in
+                                                                       ("left", "right", "first", "count")),
+                                   _ptr(out["axis"], ctypes.c_int8))
+    if nodes < 0:
+        raise MemoryError("the C core ran out of memory building a mesh BVH")
+    return {k: (v if k == "order" else v[:nodes].copy()) for k, v in out.items()}
 
 
 class NativeTracer:

@@ -12,6 +12,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .blas import one_blas_thread
 from .errors import RenderCancelled, SDLError, TracerError
 
 EXIT_USAGE = 2
@@ -244,7 +245,7 @@ def _bench(args) -> int:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), one_blas_thread():
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except (SDLError, TracerError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -7,18 +7,23 @@ kind, textures) is what lets the tracer do no work at all for the others: the sh
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import hashlib
+import os
+import weakref
+from dataclasses import astuple, dataclass, field
+from operator import attrgetter
 from typing import Optional, Union
 
 import numpy as np
 
+from .blas import one_blas_thread
 from .errors import TracerError
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, POLYHEDRON_KINDS, Material, Scene, SceneObject, Shape, TORUS_TUBE_RADIUS,
-                    iter_shapes)
+from .model import (CSG, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
+                    TORUS_TUBE_RADIUS, iter_shapes)
 from .transforms import transform_points
 
 
@@ -162,12 +167,11 @@ class Primitive:
             from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in ("teapot", "mesh"):
-            from .intersect.mesh import TriangleMesh
-            # Instances of one mesh (the same MeshData) share one BVH.
+            # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
             cache = {} if mesh_cache is None else mesh_cache
             key = id(shape.mesh)
             if key not in cache:
-                cache[key] = (shape.mesh, TriangleMesh(shape.mesh))
+                cache[key] = (shape.mesh, triangle_mesh(shape.mesh))
             self._mesh = cache[key][1]
         self.center, self.radius = self._world_bounding_sphere() if bounds is None else bounds
 
@@ -391,7 +395,97 @@ def live_effects(scene: Scene) -> frozenset[str]:
     return frozenset(effects)
 
 
+#: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same
+#: .3vn in a thousand shapes, or in a scene compiled again, is built once.
+_TRIANGLE_MESHES: "weakref.WeakValueDictionary[tuple, object]" = weakref.WeakValueDictionary()
+
+
+def mesh_digest(mesh: MeshData) -> bytes:
+    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from)."""
+    h = hashlib.blake2b(digest_size=20)
+    for array in (mesh.vertices, mesh.normals):
+        array = np.ascontiguousarray(array, dtype=np.float64)
+        h.update(repr(array.shape).encode())
+        h.update(array.tobytes())
+    faces = mesh.faces
+    if isinstance(faces, FaceList):
+        h.update(b"packed")
+        for array in (faces.sizes, faces.vertex_index, faces.normal_index):
+            h.update(b"-" if array is None else np.ascontiguousarray(array, dtype=np.int64).tobytes())
+    else:
+        h.update(b"list")
+        h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
+    return h.digest()
+
+
+def triangle_mesh(mesh: MeshData):
+    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after."""
+    from .intersect import mesh as mesh_module
+
+    key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
+    built = _TRIANGLE_MESHES.get(key)
+    if built is None:
+        built = mesh_module.TriangleMesh(mesh)
+        _TRIANGLE_MESHES[key] = built
+    return built
+
+
+def content_key(scene: Scene) -> tuple:
+    """Everything compile_scene reads from a scene, in a form that compares quickly: two scenes (or one
+    scene at two times) with equal keys compile to the same thing.
+
+    Objects are compared by identity *and* by what compile_scene reads from them (kind, material, taper,
+    matrix, mesh content; a boolean's operation and operands), so replacing, reordering or editing any of
+    them, even a matrix changed in place, gives another key.  Pixmap files count with their size and
+    modification time.  The key holds no object: ids stay meaningful because the cached entry keeps the
+    objects alive (see compile_scene)."""
+    nodes, shapes, structure = [], [], []
+    todo = list(reversed(scene.objects))
+    while todo:
+        node = todo.pop()
+        nodes.append(node)
+        if isinstance(node, CSG):
+            structure.append((node.op, id(node.left), id(node.right)))
+            todo += (node.right, node.left)
+        else:
+            shapes.append(node)
+    matrices = hashlib.blake2b(digest_size=20)
+    if shapes:
+        matrices.update(np.stack([np.asarray(s.matrix, dtype=np.float64) for s in shapes]).tobytes())
+    meshes = {id(s.mesh): s.mesh for s in shapes if s.mesh is not None}
+    pixmaps = []
+    for number, path in sorted(scene.pixmaps.items()):
+        try:
+            stat = os.stat(path)
+            pixmaps.append((number, str(path), stat.st_size, stat.st_mtime_ns))
+        except OSError:
+            pixmaps.append((number, str(path), None, None))
+    fields = (tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius"))
+    return (tuple(map(id, nodes)), tuple(structure), *fields, tuple(id(s.mesh) for s in shapes),
+            tuple((k, mesh_digest(m)) for k, m in meshes.items()),
+            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps)), nodes
+
+
 def compile_scene(scene: Scene) -> CompiledScene:
+    """The scene ready to trace.  Compiled once: the result is kept on the scene with its content_key, and
+    returned again for as long as the scene's content has not changed."""
+    with one_blas_thread():
+        key, nodes = content_key(scene)
+        cached = getattr(scene, _CACHE_ATTRIBUTE, None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        compiled = _compile(scene)
+    # (the nodes are kept so that the ids in the key cannot be reused by new objects while it is cached)
+    setattr(scene, _CACHE_ATTRIBUTE, (key, compiled, nodes))
+    return compiled
+
+
+#: Where compile_scene keeps its result on the Scene (not a dataclass field: copies and replace() of a
+#: scene do not carry it, and it never takes part in comparisons).
+_CACHE_ATTRIBUTE = "_compiled_cache"
+
+
+def _compile(scene: Scene) -> CompiledScene:
     primitives: list[Primitive] = []
     material_ids: dict[Material, int] = {}
     mesh_cache: dict = {}

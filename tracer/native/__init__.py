@@ -132,6 +132,21 @@ def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
     return {k: (v if k == "order" else v[:nodes].copy()) for k, v in out.items()}
 
 
+def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
+    """The FlatScene of a compiled scene, made once per compiled scene and kept on it (a second render of
+    it flattens nothing), again only when the solver tolerances it reads have changed (tracer.accuracy)."""
+    from .. import numerics
+    from ..intersect import torus
+
+    key = (numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS)
+    cached = getattr(compiled, "_flat_cache", None)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    flat = flatten.FlatScene(compiled)
+    compiled._flat_cache = (key, flat)
+    return flat
+
+
 class NativeTracer:
     """Shades batches of camera rays in C for one compiled scene, counting every ray it casts."""
 
@@ -151,7 +166,7 @@ class NativeTracer:
         self.scene = compiled
         self.counts = RayCounts()
         self.threads = threads or default_threads()
-        self._flat = flatten.FlatScene(compiled)  # owns the arrays the C side points into
+        self._flat = _flat_scene(compiled)  # owns the arrays the C side points into
         self._handle = _lib.rt_create(ctypes.byref(self._flat.desc))
         if not self._handle:
             raise TracerError("the C core rejected the scene description (out of memory or inconsistent)")

@@ -1,12 +1,11 @@
 """Tracing an image in blocks, coarse to fine, for the render engine and the viewport (no bpy).
 
-The same rule as ``tracer.render`` (the lecture's ``raytrace(scn, blockSize)``): in a pass of stride B one
-ray is traced per B x B block, through the block's lower-left pixel, and the whole block takes its
-colour; progressive refinement runs B, B/2, ..., 1 and each pass traces only the pixels that are new at
-its stride.  What differs is where the rays come from (any function of pixel rows and columns, so that
-Blender's camera and viewport can be matched exactly), and how the work is driven: a tile of a pass is
-one work item; items are traced in chunks of rays with a cancel check between chunks (so Esc is
-honoured *within* a block), by several threads at once, or a time slice at a time for the viewport.
+The passes, tiles, new-at-this-stride rule and pixel sampling are the tracer's own (``tracer.tiles``, the
+same scheduler the command line and a Dask cluster use), so the add-on's image is the command line's.
+What differs here is where the rays come from (any function of pixel rows and columns, so that Blender's
+camera and viewport can be matched exactly), and how the work is driven: a tile of a pass is one work
+item; items are traced in chunks of rays with a cancel check between chunks (so Esc is honoured *within*
+a block), by several threads at once, or a time slice at a time for the viewport.
 
 The film is stored bottom row first, as Blender's render results and textures are.
 """
@@ -15,12 +14,14 @@ from __future__ import annotations
 import concurrent.futures
 import threading
 import time
-from dataclasses import dataclass
-from typing import Callable, Iterator, Optional
+from typing import TYPE_CHECKING, Callable, Iterator, Optional
 
 import numpy as np
 
 from . import deps
+
+if TYPE_CHECKING:  # a work item is one tile of one pass
+    from tracer.tiles import Tile
 
 RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]  # (rows, cols, dy, dx) -> (origins, directions)
 
@@ -29,33 +30,12 @@ DEFAULT_CHUNK = 2048
 
 
 def block_passes(block_size: int, progressive: bool) -> list[int]:
-    return deps.module("render").block_passes(int(block_size), bool(progressive))
+    return deps.module("tiles").block_passes(int(block_size), bool(progressive))
 
 
 def resolve_threads(threads: int) -> int:
     """0 means the tracer's default: $SDL_TRACER_THREADS, else every core this process may run on."""
     return int(threads) if threads and threads > 0 else deps.module("native").default_threads()
-
-
-@dataclass(frozen=True)
-class WorkItem:
-    pass_index: int
-    stride: int
-    r0: int
-    c0: int
-    r1: int
-    c1: int
-
-    def positions(self):
-        """Sample positions of this tile at its stride, and which of them are new in this pass."""
-        rows = np.arange(self.r0, self.r1, self.stride)
-        cols = np.arange(self.c0, self.c1, self.stride)
-        grid_r, grid_c = np.meshgrid(rows, cols, indexing="ij")
-        if self.pass_index == 0:
-            new = np.ones(grid_r.shape, dtype=bool)
-        else:
-            new = (grid_r % (2 * self.stride) != 0) | (grid_c % (2 * self.stride) != 0)
-        return grid_r, grid_c, new
 
 
 class Cancelled(Exception):
@@ -76,30 +56,25 @@ class BlockRenderer:
                  progressive: bool = False, threads: int = 1, tile: int = DEFAULT_TILE,
                  chunk: Optional[int] = None, alpha: bool = False, backend: str = "auto", samples: int = 1,
                  sampling: str = "jittered", threshold: float = 0.05, seed: int = 0):
-        deps.module("sampling").check(int(samples), sampling, float(threshold))
+        self.plan = deps.module("tiles").TilePlan(
+            int(width), int(height), block_size=int(block_size), progressive=bool(progressive), tile=int(tile),
+            samples=int(samples), sampling_mode=sampling, threshold=float(threshold), seed=int(seed))
         self.compiled = compiled
         self.rays_for = rays_for
-        self.width, self.height = int(width), int(height)
-        self.passes = block_passes(block_size, progressive)
-        self.samples, self.sampling, self.threshold, self.seed = int(samples), sampling, float(threshold), seed
-        self.adaptive = sampling == "adaptive" and self.samples > 1
+        self.width, self.height = self.plan.width, self.plan.height
+        self.passes = self.plan.passes
+        self.tile = self.plan.tile
+        self.items = self.plan.items
+        self.pass_count = self.plan.pass_count
         self.threads = resolve_threads(threads)
         self.chunk = max(1, int(DEFAULT_CHUNK if chunk is None else chunk))
         self.want_alpha = alpha
         self.backend = backend
-        self.color = np.zeros((self.height, self.width, 3), dtype=np.float32)
-        self.alpha = np.ones((self.height, self.width), dtype=np.float32)
-        top = self.passes[0]
-        tile = max(int(tile), top)
-        tile -= tile % top  # tiles start on multiples of every stride
-        self.tile = tile
-        tiles = [(r, c) for r in range(0, self.height, tile) for c in range(0, self.width, tile)]
-        self.items = [WorkItem(p, stride, r, c, min(r + tile, self.height), min(c + tile, self.width))
-                      for p, stride in enumerate(self.passes) for r, c in tiles]
-        if self.adaptive:  # the refinement pass: stride 1, after every block pass
-            self.items += [WorkItem(len(self.passes), 1, r, c, min(r + tile, self.height), min(c + tile, self.width))
-                           for r, c in tiles]
-        self.pass_count = len(self.passes) + self.adaptive
+        # With alpha the coverage is traced as a fourth channel of the same film (views give colour and alpha).
+        self._film = np.zeros((self.height, self.width, 4 if alpha else 3), dtype=np.float32)
+        self.color = self._film[..., :3]
+        self.alpha = self._film[..., 3] if alpha else np.ones((self.height, self.width), dtype=np.float32)
+        self.alpha[...] = 1.0
         self.done = 0
         self.seconds = 0.0
         self._local = threading.local()
@@ -128,34 +103,6 @@ class BlockRenderer:
         self._tracer()
         return 1 if self.backend_name == "c" else self.threads
 
-    def _trace(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int, rng, cancel) -> tuple:
-        """Mean colour (and coverage) of ``per_pixel`` rays in each given pixel, in chunks of rays."""
-        tracer = self._tracer()
-        colors = np.empty((rows.size, 3), dtype=np.float64)
-        cover = np.ones(rows.size, dtype=np.float32)
-        pixels_per_chunk = max(1, self.chunk // per_pixel)
-        for start in range(0, rows.size, pixels_per_chunk):
-            if cancel is not None and cancel():
-                raise Cancelled()
-            stop = min(start + pixels_per_chunk, rows.size)
-            r, c = rows[start:stop], cols[start:stop]
-            if per_pixel == 1:
-                dy = dx = 0.5
-            else:
-                dy, dx = deps.module("sampling").offsets(per_pixel, self.sampling != "regular", r.size, rng)
-                dy, dx = dy.ravel(), dx.ravel()
-                r, c = np.repeat(r, per_pixel), np.repeat(c, per_pixel)
-            origins, directions = self.rays_for(r, c, dy, dx)
-            origins = np.ascontiguousarray(origins, dtype=np.float64)
-            directions = np.ascontiguousarray(directions, dtype=np.float64)
-            traced = np.asarray(tracer.camera_rays(origins, directions), dtype=np.float64)
-            if self.want_alpha:  # coverage: the share of a pixel's rays that hit something
-                hit = self._hits(tracer, origins, directions)
-                traced = np.where(hit[:, None], traced, 0.0)
-                cover[start:stop] = hit.reshape(-1, per_pixel).mean(axis=1)
-            colors[start:stop] = traced.reshape(-1, per_pixel, 3).mean(axis=1)
-        return colors, cover
-
     def _hits(self, tracer, origins, directions) -> np.ndarray:
         """Which rays hit anything (for the film's alpha), by the same backend that shades them."""
         if hasattr(tracer, "first_hits"):
@@ -165,38 +112,29 @@ class BlockRenderer:
     def _refine_mask(self) -> np.ndarray:
         with self._lock:  # judged once, on the film every block pass has finished
             if self._refine is None:
-                self._refine = deps.module("sampling").contrast_mask(self.color, self.threshold)
+                self._refine = self.plan.refine_mask(self.color)
             return self._refine
 
-    def trace_item(self, item: WorkItem, cancel: Optional[Callable[[], bool]] = None) -> WorkItem:
-        rng = np.random.default_rng((self.seed, item.pass_index, item.r0, item.c0))
-        if item.pass_index >= len(self.passes):  # adaptive refinement
-            rr, cc = np.nonzero(self._refine_mask()[item.r0:item.r1, item.c0:item.c1])
-            rr, cc = rr + item.r0, cc + item.c0
-            if rr.size:
-                colors, cover = self._trace(rr, cc, self.samples, rng, cancel)
-                self.color[rr, cc] = colors
-                self.alpha[rr, cc] = cover
-            return item
-        grid_r, grid_c, new = item.positions()
-        samples = self.color[grid_r, grid_c]
-        cover = self.alpha[grid_r, grid_c]
-        per_pixel = 1 if self.adaptive else self.samples
-        colors, hit = self._trace(grid_r[new], grid_c[new], per_pixel, rng, cancel)
-        samples[new] = colors
-        cover[new] = hit
-        s = item.stride
-        block = np.repeat(np.repeat(samples, s, axis=0), s, axis=1)
-        self.color[item.r0:item.r1, item.c0:item.c1] = block[: item.r1 - item.r0, : item.c1 - item.c0]
-        block_a = np.repeat(np.repeat(cover, s, axis=0), s, axis=1)
-        self.alpha[item.r0:item.r1, item.c0:item.c1] = block_a[: item.r1 - item.r0, : item.c1 - item.c0]
+    def trace_item(self, item, cancel: Optional[Callable[[], bool]] = None):
+        """Trace one tile of one pass (a ``tracer.tiles.Tile``) into the film, asking ``cancel`` between
+        chunks of rays."""
+        def checkpoint() -> None:
+            if cancel is not None and cancel():
+                raise Cancelled()
+
+        tracer = self._tracer()
+        shade = deps.module("tiles").PixelTracer(
+            self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint, alpha=self.want_alpha,
+            first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
+        refine = self._refine_mask() if self.plan.is_refinement(item) else None
+        deps.module("tiles").trace_tile(self.plan, item, self._film, shade, refine)
         return item
 
-    def pass_items(self, pass_index: int) -> list[WorkItem]:
-        return [i for i in self.items if i.pass_index == pass_index]
+    def pass_items(self, pass_index: int) -> list[Tile]:
+        return self.plan.pass_items(pass_index)
 
     def run(self, cancel: Optional[Callable[[], bool]] = None,
-            on_item: Optional[Callable[[WorkItem], None]] = None, poll: float = 0.05) -> None:
+            on_item: Optional[Callable[[Tile], None]] = None, poll: float = 0.05) -> None:
         """Trace everything.  ``cancel`` and ``on_item`` are only ever called on the calling thread (Blender's
         API wants that); worker threads see cancellation through an event checked between chunks."""
         started = time.perf_counter()
@@ -234,7 +172,7 @@ class BlockRenderer:
         finally:
             self.seconds += time.perf_counter() - started
 
-    def steps(self) -> Iterator[WorkItem]:
+    def steps(self) -> Iterator[Tile]:
         """The remaining items one at a time, on the calling thread (for time-sliced viewport drawing)."""
         while self.done < len(self.items):
             item = self.items[self.done]

@@ -6,7 +6,8 @@ import numpy as np
 from tracer.model import Camera, Light, Material, Scene, Settings, Shape
 from tracer.transforms import rotation, scaling, translation
 
-__all__ = ["shape", "scene_of", "rotation", "scaling", "translation", "Material", "Camera", "Light", "ray_hits"]
+__all__ = ["shape", "scene_of", "rotation", "scaling", "translation", "Material", "Camera", "Light", "ray_hits",
+           "hits_on", "scaled"]
 
 
 def shape(kind: str, matrix=None, **material) -> Shape:
@@ -17,8 +18,41 @@ def scene_of(*objects, lights=(), camera=None, **settings) -> Scene:
     return Scene(objects=list(objects), lights=list(lights), camera=camera, settings=Settings(**settings))
 
 
-def ray_hits(scene, start, direction):
-    """(t, entering) pairs of tracer.hits, for compact assertions."""
+def hits_on(backend: str, scene, start, direction) -> list:
+    """tracer.hits (every crossing with t > 0, sorted, as tracer.query.Hit) computed by ``backend``: "numpy"
+    is tracer.hits itself, "c" the C core's whole-line hits of each object."""
     import tracer
+    from tracer.compile import CompiledScene, compile_scene
+    from tracer.query import Hit
 
-    return [(h.t, h.entering) for h in tracer.hits(scene, start, direction)]
+    if backend == "numpy":
+        return tracer.hits(scene, start, direction)
+    from tracer.native import NativeTracer
+
+    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+    core = NativeTracer(compiled, threads=1)
+    origin, dirn = np.asarray(start, dtype=float), np.asarray(direction, dtype=float)
+    found = []
+    for k in range(len(compiled.objects)):
+        h = core.object_hits(k, origin, dirn)
+        for j in range(h.t.shape[1]):
+            t = float(h.t[0, j])
+            if t > 0.0:
+                normal = h.normal[0, j] / np.linalg.norm(h.normal[0, j])
+                found.append(Hit(t, bool(h.entering[0, j]), tuple((origin + t * dirn).tolist()),
+                                 tuple(normal.tolist()), compiled.primitives[int(h.shape[0, j])].shape))
+    return sorted(found, key=lambda hit: hit.t)
+
+
+def ray_hits(scene, start, direction, backend: str = "numpy"):
+    """(t, entering) pairs of tracer.hits (by ``backend``, see hits_on), for compact assertions."""
+    return [(h.t, h.entering) for h in hits_on(backend, scene, start, direction)]
+
+
+def scaled(backend: str, width: int, height: int) -> tuple[int, int]:
+    """The image size a test on both backends renders (see the ``backend`` fixture in conftest.py): as asked
+    for the C core, half of each side (at least 16) for the NumPy path, so that running a test twice costs
+    little more than running it once."""
+    if backend == "numpy":
+        return max(16, width // 2), max(16, height // 2)
+    return width, height

@@ -1,4 +1,5 @@
-"""Rendering: blocks, progressive passes, callbacks, cancel, the camera, shading values, live effects."""
+"""Rendering: blocks, progressive passes, callbacks, cancel, the camera, shading values, live effects (each on
+both backends where it renders)."""
 from __future__ import annotations
 
 import math
@@ -11,7 +12,7 @@ from tracer.camera import CameraFrame, framing_camera
 from tracer.compile import compile_scene
 from tracer.errors import RenderCancelled, TracerError
 from tracer.render import block_passes, render
-from tracer.trace import Tracer
+from tracer.backend import make_tracer
 
 
 def _scene(**settings):
@@ -32,9 +33,9 @@ def test_block_passes():
         block_passes(0, progressive=False)
 
 
-def test_block_size_fills_blocks_with_lower_left_sample():
-    full = render(_scene(), 48, 32).image
-    blocky = render(_scene(), 48, 32, block_size=4).image
+def test_block_size_fills_blocks_with_lower_left_sample(backend):
+    full = render(_scene(), 48, 32, backend=backend).image
+    blocky = render(_scene(), 48, 32, block_size=4, backend=backend).image
     h = full.shape[0]
     for top in range(0, h, 4):
         for left in range(0, 48, 4):
@@ -45,11 +46,12 @@ def test_block_size_fills_blocks_with_lower_left_sample():
             assert np.all(block == sample)
 
 
-def test_progressive_traces_each_pixel_once_and_matches_full_render():
+def test_progressive_traces_each_pixel_once_and_matches_full_render(backend):
     seen = []
-    result = render(_scene(), 40, 30, block_size=8, progressive=True, tile=16, on_tile=seen.append)
+    result = render(_scene(), 40, 30, block_size=8, progressive=True, tile=16, on_tile=seen.append,
+                    backend=backend)
     assert result.rays.camera == 40 * 30
-    assert np.array_equal(result.image, render(_scene(), 40, 30).image)
+    assert np.array_equal(result.image, render(_scene(), 40, 30, backend=backend).image)
     strides = [u.block_size for u in seen]
     assert strides == sorted(strides, reverse=True) and set(strides) == {8, 4, 2, 1}
     fractions = [u.fraction for u in seen]
@@ -63,10 +65,10 @@ def test_progressive_traces_each_pixel_once_and_matches_full_render():
         assert np.all(cover == 1)
 
 
-def test_cancel_stops_between_tiles():
+def test_cancel_stops_between_tiles(backend):
     calls = []
     with pytest.raises(RenderCancelled):
-        render(_scene(), 64, 64, tile=16, on_tile=calls.append, cancel=lambda: len(calls) >= 3)
+        render(_scene(), 64, 64, tile=16, on_tile=calls.append, cancel=lambda: len(calls) >= 3, backend=backend)
     assert len(calls) == 3
 
 
@@ -76,14 +78,15 @@ def test_bad_image_sizes_are_refused(width, height):
         render(_scene(), width, height)
 
 
-def test_shading_matches_blinn_phong_by_hand():
+def test_shading_matches_blinn_phong_by_hand(backend):
     # One ray straight down onto the top of a unit sphere; light above and to the side.
     mat = dict(ambient=(0.2, 0.3, 0.4), diffuse=(0.5, 0.6, 0.7), specular=(0.8, 0.8, 0.8),
                specular_exponent=10, emissive=(0.01, 0.02, 0.03))
     light_pos, light_col = np.array([3.0, 4.0, 0.0]), np.array([0.9, 0.8, 0.7])
     scene = scene_of(shape("sphere", **mat), lights=[Light(tuple(light_pos), tuple(light_col))],
                      global_ambient=(0.5, 0.5, 0.5))
-    color = Tracer(compile_scene(scene)).camera_rays(np.array([[0.0, 5.0, 0.0]]), np.array([[0.0, -1.0, 0.0]]))[0]
+    tracer = make_tracer(compile_scene(scene), backend)
+    color = tracer.camera_rays(np.array([[0.0, 5.0, 0.0]]), np.array([[0.0, -1.0, 0.0]]))[0]
     p, m, v = np.array([0, 1.0, 0]), np.array([0, 1.0, 0]), np.array([0, 1.0, 0])
     s = (light_pos - p) / np.linalg.norm(light_pos - p)
     h = (s + v) / np.linalg.norm(s + v)
@@ -92,19 +95,19 @@ def test_shading_matches_blinn_phong_by_hand():
     assert color == pytest.approx(expected, rel=1e-12)
 
 
-def test_symmetric_scene_gives_symmetric_image():
+def test_symmetric_scene_gives_symmetric_image(backend):
     scene = scene_of(
         shape("plane", rotation(-90, 1, 0, 0), diffuse=(0.5, 0.5, 0.5)),
         shape("sphere", translation(0, 1, 0), diffuse=(0.8, 0.3, 0.2), specular=(0.5, 0.5, 0.5), specular_exponent=20),
         shape("cone", translation(-2, 0, 0) @ rotation(-90, 1, 0, 0)),
         shape("cone", translation(2, 0, 0) @ rotation(-90, 1, 0, 0)),
         lights=[Light((0, 6, 4), (1, 1, 1))], camera=Camera((0, 2, 8), (0, 1, 0), (0, 1, 0), 40))
-    image = render(scene, 64, 48).image
+    image = render(scene, 64, 48, backend=backend).image
     assert np.abs(image - image[:, ::-1]).max() < 1e-9
     assert np.abs(image - image[::-1]).max() > 0.1  # and it is not trivially uniform
 
 
-def test_default_camera_frames_every_object():
+def test_default_camera_frames_every_object(backend):
     objects = [shape("sphere", translation(x, y, z)) for x, y, z in [(-5, 0, 0), (6, 2, -3), (0, -4, 2)]]
     scene = scene_of(*objects, background=(0, 0, 0))
     compiled = compile_scene(scene)
@@ -117,33 +120,35 @@ def test_default_camera_frames_every_object():
         x = np.dot(rel, frame.u) / depth / frame.half_width
         y = np.dot(rel, frame.v) / depth / frame.half_height
         assert depth > 0 and abs(x) < 0.9 and abs(y) < 0.9
-    image = render(scene, 80, 60).image
+    image = render(scene, 80, 60, backend=backend).image
     assert (image.max(axis=2) > 0).mean() > 0.01  # the objects are visible
 
 
-def _counts(scene):
-    return render(scene, 24, 18).rays
+def _counts(scene, backend):
+    result = render(scene, 24, 18, backend=backend)
+    assert result.backend == backend
+    return result.rays
 
 
-def test_only_live_effects_cast_rays():
-    base = _counts(_scene())
+def test_only_live_effects_cast_rays(backend):
+    base = _counts(_scene(), backend)
     assert base.shadow > 0 and base.reflection == 0 and base.refraction == 0
     dark = _scene()
     dark.lights.clear()
-    assert _counts(dark).shadow == 0
+    assert _counts(dark, backend).shadow == 0
     mirror = _scene()
     mirror.objects.append(shape("cube", translation(-2.2, 0.7, 0), reflectivity=0.8))
-    with_mirror = _counts(mirror)
+    with_mirror = _counts(mirror, backend)
     assert with_mirror.reflection > 0 and with_mirror.refraction == 0
     weak = _scene()
     weak.objects.append(shape("cube", translation(-2.2, 0.7, 0), reflectivity=0.3))  # below minReflectivity 0.5
-    assert _counts(weak).reflection == 0
+    assert _counts(weak, backend).reflection == 0
     glass = _scene()
     glass.objects.append(shape("sphere", translation(-2.2, 1, 1), transparency=0.9, speed_of_light=0.7))
-    assert _counts(glass).refraction > 0
+    assert _counts(glass, backend).refraction > 0
     flat = _scene(max_recursion_depth=0)
     flat.objects.append(shape("sphere", translation(-2.2, 1, 1), transparency=0.9, reflectivity=0.9))
-    counts = _counts(flat)
+    counts = _counts(flat, backend)
     assert counts.reflection == 0 and counts.refraction == 0
     assert "refraction" not in compile_scene(flat).effects
 

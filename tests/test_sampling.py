@@ -52,9 +52,9 @@ def test_ray_counts_and_adaptive_economy():
 
 def test_strata():
     assert sampling.grid_shape(16) == (4, 4) and sampling.grid_shape(8) == (2, 4) and sampling.grid_shape(7) == (1, 7)
-    dy, dx = sampling.offsets(16, jitter=False, count=1)
+    dy, dx = sampling.offsets(16, False, np.array([0]), np.array([0]))
     assert sorted(set(np.round(dx[0], 6))) == [0.125, 0.375, 0.625, 0.875]
-    dy, dx = sampling.offsets(16, jitter=True, count=500, rng=np.random.default_rng(1))
+    dy, dx = sampling.offsets(16, True, np.arange(500) // 20, np.arange(500) % 20, seed=1)
     cell_x = np.floor(dx * 4).astype(int)
     cell_y = np.floor(dy * 4).astype(int)
     assert np.all(cell_x == np.tile(np.arange(4), 4)) and np.all(cell_y == np.repeat(np.arange(4), 4))

@@ -1,4 +1,4 @@
-"""Every bundled scene reads cleanly, renders, and shows its objects where they are."""
+"""Every bundled scene reads cleanly, renders (on both backends), and shows its objects where they are."""
 from __future__ import annotations
 
 import re
@@ -11,9 +11,10 @@ import tracer
 from tracer.camera import CameraFrame, scene_camera
 from tracer.compile import compile_scene
 from tracer.model import Shape
+from helpers import scaled
 
 SCENES = sorted((Path(__file__).parent.parent / "scenes").glob("*.sdl"))
-WIDTH, HEIGHT = 160, 120
+WIDTH, HEIGHT = 160, 120  # (the NumPy variants render half of that)
 
 
 def test_there_are_scenes_for_every_feature():
@@ -39,13 +40,13 @@ def test_scenes_use_every_sdl_keyword():
     assert sorted(KEYWORDS - words) == []
 
 
-def _project(frame: CameraFrame, point):
+def _project(frame: CameraFrame, point, width: int, height: int):
     rel = np.asarray(point) - frame.eye
     depth = -np.dot(rel, frame.n)
     x = np.dot(rel, frame.u) / depth / frame.half_width
     y = np.dot(rel, frame.v) / depth / frame.half_height
-    col = int((x + 1) / 2 * WIDTH)
-    row_from_bottom = int((y + 1) / 2 * HEIGHT)
+    col = int((x + 1) / 2 * width)
+    row_from_bottom = int((y + 1) / 2 * height)
     return depth, row_from_bottom, col
 
 
@@ -57,14 +58,16 @@ def _dominant(color) -> int | None:
 
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
-def test_scene_renders_objects_in_their_colours(path):
+def test_scene_renders_objects_in_their_colours(path, backend):
     scene = tracer.load(path)
     assert scene.warnings == []
-    result = tracer.render(scene, WIDTH, HEIGHT)
+    width, height = scaled(backend, WIDTH, HEIGHT)
+    result = tracer.render(scene, width, height, backend=backend)
     image = result.image
-    assert image.shape == (HEIGHT, WIDTH, 3) and np.all(np.isfinite(image))
+    assert result.backend == backend
+    assert image.shape == (height, width, 3) and np.all(np.isfinite(image))
     compiled = compile_scene(scene)
-    frame = CameraFrame.from_camera(scene_camera(scene, compiled, WIDTH / HEIGHT), WIDTH / HEIGHT)
+    frame = CameraFrame.from_camera(scene_camera(scene, compiled, width / height), width / height)
     checked = 0
     for obj in compiled.objects:
         if not obj.bounded:
@@ -73,11 +76,11 @@ def test_scene_renders_objects_in_their_colours(path):
         # Look at the centre, or near it where the centre is hollow (a drilled CSG object).
         for offset in [(0, 0)] + [(a * 0.3, b * 0.3) for a in (-1, 1) for b in (-1, 1)]:
             aim = obj.center + obj.radius * (offset[0] * frame.u + offset[1] * frame.v)
-            depth, row, col = _project(frame, aim)
-            if depth <= 0 or not (0 <= row < HEIGHT and 0 <= col < WIDTH):
+            depth, row, col = _project(frame, aim, width, height)
+            if depth <= 0 or not (0 <= row < height and 0 <= col < width):
                 continue
             # The pixel's ray must meet this very object first.
-            direction = frame.directions(np.array([row]), np.array([col]), HEIGHT, WIDTH)[0]
+            direction = frame.directions(np.array([row]), np.array([col]), height, width)[0]
             first = tracer.hits(compiled, frame.eye, direction)
             if first and id(first[0].shape) in leaves:
                 break
@@ -87,7 +90,7 @@ def test_scene_renders_objects_in_their_colours(path):
         hue = _dominant(mat.diffuse)
         if hue is None or mat.reflectivity > 0 or mat.transparency > 0 or mat.texture:
             continue
-        pixel = image[HEIGHT - 1 - row, col]
+        pixel = image[height - 1 - row, col]
         assert _dominant(pixel) == hue, f"{first[0].shape.kind} at pixel {(row, col)} is {pixel}, diffuse {mat.diffuse}"
         checked += 1
     # In the glass scene the coloured blocks stand behind the glass: only the floor is in plain view.
@@ -110,31 +113,33 @@ def test_jack_is_built_with_macros():
     assert all(isinstance(s, Shape) for s in grouped)
 
 
-def test_glass_scene_refracts():
+def test_glass_scene_refracts(backend):
     scene = tracer.load(Path(__file__).parent.parent / "scenes" / "glass.sdl")
-    with_glass = tracer.render(scene, 80, 60)
+    with_glass = tracer.render(scene, *scaled(backend, 80, 60), backend=backend)
     assert with_glass.rays.refraction > 0 and with_glass.rays.reflection > 0
     for shape in scene.shapes():
         if shape.material.transparency > 0:
             shape.material = type(shape.material)(**{**shape.material.__dict__, "transparency": 0.0})
-    opaque = tracer.render(scene, 80, 60)
+    opaque = tracer.render(scene, *scaled(backend, 80, 60), backend=backend)
     assert opaque.rays.refraction == 0
     changed = np.abs(with_glass.image - opaque.image).max(axis=2) > 0.05
     assert changed.mean() > 0.05  # the glass objects look different from opaque ones
 
 
-def test_textures_scene_shows_its_textures():
+def test_textures_scene_shows_its_textures(backend):
     scene = tracer.load(Path(__file__).parent.parent / "scenes" / "textures.sdl")
-    textured = tracer.render(scene, 160, 120).image
+    size = scaled(backend, 160, 120)
+    textured = tracer.render(scene, *size, backend=backend).image
     for shape in scene.shapes():
         shape.material = type(shape.material)(**{**shape.material.__dict__, "texture": 0})
-    plain = tracer.render(scene, 160, 120).image
+    plain = tracer.render(scene, *size, backend=backend).image
     changed = np.abs(textured - plain).max(axis=2) > 0.05
     assert changed.mean() > 0.3
     # The checkerboard floor alternates light and dark along the bottom row.
     row = textured[-1, :, 0]
     assert (row > 0.6).mean() > 0.2 and (row < 0.3).mean() > 0.2
     # The brick wall is red with light mortar.
-    wall = textured[5:25, 40:120]
+    h, w = textured.shape[:2]
+    wall = textured[h * 5 // 120:h * 25 // 120, w // 4:w * 3 // 4]  # (rows 5-25, columns 40-120 at 160 x 120)
     red = (wall[..., 0] > 1.5 * wall[..., 1]).mean()
     assert 0.5 < red < 0.95

@@ -1,4 +1,5 @@
-"""Solid textures, noise, image lookups and mappings, Cook–Torrance."""
+"""Solid textures, noise, image lookups and mappings, Cook–Torrance (textured renders on both backends; the C
+core's texture colours point by point: tests/test_native.py)."""
 from __future__ import annotations
 
 
@@ -14,7 +15,8 @@ from tracer.textures.images import sample_bilinear
 from tracer.textures.mapping import surface_uv
 from tracer.textures.noise import noise, turbulence
 from tracer.textures.solid import checkerboard, marble, wood
-from tracer.trace import Tracer, cook_torrance
+from tracer.backend import make_tracer
+from tracer.trace import cook_torrance
 
 rng = np.random.default_rng(7)
 
@@ -78,11 +80,11 @@ def test_marble_mixes_its_two_colours():
     assert (colors[:, 0] > 0.9).mean() > 0.3 and (colors[:, 0] < 0.5).mean() > 0.02  # base and veins
 
 
-def test_texture_moves_with_its_object():
+def test_texture_moves_with_its_object(backend):
     def color_at_top(dx):
         scene = scene_of(shape("sphere", translation(dx, 0, 0), texture=-3, ambient=(1, 1, 1), diffuse=(0, 0, 0)),
                          global_ambient=(1, 1, 1))
-        tr = Tracer(compile_scene(scene))
+        tr = make_tracer(compile_scene(scene), backend)
         return tr.camera_rays(np.array([[dx + 0.3, 5.0, 0.2]]), np.array([[0.0, -1.0, 0.0]]))[0]
 
     assert color_at_top(0.0) == pytest.approx(color_at_top(12.75), abs=1e-9)
@@ -118,7 +120,7 @@ def test_cube_faces_map_unmirrored_from_outside():
         assert u[1] > u[0] and v[1] == pytest.approx(v[0])
 
 
-def test_image_texture_renders_on_a_square(tmp_path):
+def test_image_texture_renders_on_a_square(tmp_path, backend):
     picture = np.zeros((2, 2, 3), dtype=np.uint8)
     picture[:, 0] = (255, 0, 0)  # left column red, right column blue
     picture[:, 1] = (0, 0, 255)
@@ -126,7 +128,9 @@ def test_image_texture_renders_on_a_square(tmp_path):
     scene = tracer.parse_sdl("""camera 0 0 5 0 0 0 0 1 0 30
         globalAmbient 1 1 1 background 0 0 0 makePixmap 3 lr.png
         ambient 1 1 1 diffuse 0 0 0 texture 3 square""", base_dir=tmp_path)
-    image = tracer.render(scene, 40, 40).image
+    result = tracer.render(scene, 40, 40, backend=backend)
+    assert result.backend == backend
+    image = result.image
     # The square spans about columns 5..35; beyond the outer texel centres (u < 1/4, u > 3/4) the
     # bilinear lookup clamps to pure colours, between them it blends.
     assert image[20, 8] == pytest.approx((1, 0, 0), abs=1e-6)

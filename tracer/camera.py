@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import SceneError
 from .model import Camera, Scene
 
 DEFAULT_VIEW_ANGLE = 40.0
@@ -34,15 +35,15 @@ class CameraFrame:
         eye = np.asarray(camera.eye, dtype=float)
         n = eye - np.asarray(camera.look, dtype=float)
         if not np.linalg.norm(n) > 0:
-            raise ValueError("camera eye and look-at point coincide")
+            raise SceneError("camera eye and look-at point coincide")
         n /= np.linalg.norm(n)
         u = np.cross(np.asarray(camera.up, dtype=float), n)
         if not np.linalg.norm(u) > 1e-12:
-            raise ValueError("camera up vector is parallel to the viewing direction")
+            raise SceneError("camera up vector is parallel to the viewing direction")
         u /= np.linalg.norm(u)
         v = np.cross(n, u)
         if not 0.0 < camera.view_angle < 180.0:
-            raise ValueError(f"camera view angle must be between 0 and 180 degrees, not {camera.view_angle}")
+            raise SceneError(f"camera view angle must be between 0 and 180 degrees, not {camera.view_angle}")
         h = math.tan(math.radians(camera.view_angle) / 2.0)
         return cls(eye, u, v, n, h, h * aspect)
 

@@ -6,14 +6,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
+from dataclasses import replace
 from typing import Optional, Sequence
 
 import numpy as np
 
 from .blas import one_blas_thread
-from .errors import RenderCancelled, SDLError, TracerError
+from .errors import RenderCancelled, SDLError, TracerError, warnings_as_lines
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -52,9 +54,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="threads of the C core (default: $SDL_TRACER_THREADS, else every core)")
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
+    r.add_argument("--cutoff", type=float, default=None, metavar="W",
+                   help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
+                        "(default 1/512; 0 traces them all)")
+    r.add_argument("--all-rays", action="store_true",
+                   help="trace every ray the recursion asks for, even those that cannot change the image "
+                        "(no cutoff, no skipped shadow feelers, total internal reflection traced twice)")
     r.add_argument("--stats", action="store_true",
-                   help="print JSON statistics (ray counts, seconds, backend) on stdout")
+                   help="print JSON statistics (ray counts, rays skipped per reason, seconds, backend) on stdout")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress display")
+    _add_cluster_options(r)
 
     b = sub.add_parser("bench", help="measurements")
     bench = b.add_subparsers(dest="bench", required=True)
@@ -77,6 +86,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--lenient", action="store_true",
                    help="read what can be read: print one warning per problem in the file and go on")
     return parser
+
+
+def _add_cluster_options(r: argparse.ArgumentParser) -> None:
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="render the tiles on a Dask cluster: a scheduler's address (tcp://HOST:8786, tls://...) "
+                        "or local:N for N worker processes on this machine (pip install "
+                        "'sdl-raytracer[distributed]'; see docs/distributed.md)")
+    r.add_argument("--frames", metavar="A-B",
+                   help="a USD stage's frames A to B, written as OUT_####.png (OUT_0001.png for frame 1)")
 
 
 SDL_EXTENSIONS = (".sdl", ".dat")
@@ -146,26 +164,102 @@ class _Progress:
             sys.stderr.write("\n")
 
 
+def _savings(args):
+    """The RaySavings that --all-rays and --cutoff ask for."""
+    from .savings import RaySavings
+
+    savings = RaySavings.none() if args.all_rays else RaySavings()
+    if args.cutoff is not None:
+        if not (math.isfinite(args.cutoff) and 0.0 <= args.cutoff <= 1.0):
+            raise TracerError(f"--cutoff must be a weight between 0 and 1, not {args.cutoff}")
+        savings = replace(savings, cutoff=args.cutoff)
+    return savings
+
+
 def _render(args) -> int:
     from .imageio import save_image
     from .render import render
 
+    if args.scheduler is not None or args.frames is not None:
+        return _render_job(args)
     scene = _load(args)
     if args.max_depth is not None:
         if args.max_depth < 0:
             raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")
         scene.settings.max_recursion_depth = args.max_depth
+    savings = _savings(args)
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
                         progressive=args.progressive, on_tile=progress, samples=args.samples,
                         sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                        threads=args.threads)
+                        threads=args.threads, savings=savings)
     finally:
         progress.close()
     save_image(result.image, args.output)
     if args.stats:
         print(json.dumps(result.stats()))
+    return 0
+
+
+def _render_job(args) -> int:
+    """``render --scheduler`` (tiles on a Dask cluster) and ``render --frames`` (a USD stage's frames)."""
+    import dataclasses
+    import time
+
+    from . import distributed as dist
+    from .imageio import save_image
+    from .render import check_size, render
+
+    if args.scheduler is not None:
+        dist.parse_address(args.scheduler)
+        dist.require_dask()
+    if args.max_depth is not None and args.max_depth < 0:
+        raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")
+    check_size(args.width, args.height)
+    times = dist.frame_times(args.frames) if args.frames is not None else [None]
+    outputs = [args.output] if args.frames is None else [dist.frame_path(args.output, t) for t in times]
+    scene = dist.read_scene(args.scene, args.lenient, times[0])
+    for message in scene.warnings:
+        print(f"warning: {message}", file=sys.stderr)
+    job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
+                   samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
+                   backend=args.backend, threads=args.threads, max_depth=args.max_depth)
+    job.plan()  # bad settings are reported before any cluster starts
+    started = time.perf_counter()
+    rays, backends = {}, set()
+
+    def write(index, image, counts, backend):
+        save_image(image, outputs[index])
+        backends.add(backend)
+        for kind, n in counts.as_dict().items():
+            rays[kind] = rays.get(kind, 0) + n
+
+    progress = _Progress(not args.quiet)
+    try:
+        if args.scheduler is None:  # frames on this machine, one after the other
+            for index, frame in enumerate(times):
+                if index:
+                    scene = dist.read_scene(args.scene, args.lenient, frame)
+                if args.max_depth is not None:
+                    scene.settings.max_recursion_depth = args.max_depth
+                result = render(scene, args.width, args.height, block_size=args.block_size,
+                                progressive=args.progressive, on_tile=progress, samples=args.samples,
+                                sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
+                                threads=args.threads)
+                write(index, result.image, result.rays, result.backend)
+        else:
+            bundle = dist.SceneBundle.of(args.scene, scene, args.lenient)
+            threads = args.threads or dist.local_threads(args.scheduler)
+            with dist.connect(args.scheduler) as client:
+                dist.render_frames(client, bundle, dataclasses.replace(job, threads=threads), times, write,
+                                   progress)
+    finally:
+        progress.close()
+    if args.stats:
+        print(json.dumps({"rays": rays, "seconds": round(time.perf_counter() - started, 6),
+                          "backend": ",".join(sorted(backends)), "width": args.width, "height": args.height,
+                          "frames": len(times), "scheduler": args.scheduler}))
     return 0
 
 
@@ -245,8 +339,11 @@ def _bench(args) -> int:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        with np.errstate(all="ignore"), one_blas_thread():
+        with np.errstate(all="ignore"), warnings_as_lines(sys.stderr), one_blas_thread():
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
+    except RenderCancelled:  # (a TracerError: caught first)
+        print("error: cancelled", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (SDLError, TracerError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_USAGE
@@ -256,9 +353,6 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except OSError as err:
         print(f"error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
         return EXIT_USAGE
-    except RenderCancelled:
-        print("error: cancelled", file=sys.stderr)
-        return EXIT_INTERRUPTED
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -171,9 +171,19 @@ class Primitive:
             cache = {} if mesh_cache is None else mesh_cache
             key = id(shape.mesh)
             if key not in cache:
-                cache[key] = (shape.mesh, triangle_mesh(shape.mesh))
+                cache[key] = (shape.mesh, shared_triangle_mesh(shape.mesh))
             self._mesh = cache[key][1]
         self.center, self.radius = self._world_bounding_sphere() if bounds is None else bounds
+
+    @property
+    def triangle_mesh(self):
+        """The :class:`tracer.intersect.mesh.TriangleMesh` of a mesh or teapot (shared by its instances), else None."""
+        return self._mesh
+
+    @property
+    def face_planes(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """A convex polyhedron's face planes (normals (F, 3), offsets (F,): n . p <= offset), else None."""
+        return self._planes
 
     def _generic_points(self) -> Optional[np.ndarray]:
         if self._mesh is not None or self._planes is not None:
@@ -418,7 +428,7 @@ def mesh_digest(mesh: MeshData) -> bytes:
     return h.digest()
 
 
-def triangle_mesh(mesh: MeshData):
+def shared_triangle_mesh(mesh: MeshData):
     """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after."""
     from .intersect import mesh as mesh_module
 

@@ -1,7 +1,10 @@
 """Errors a user can see.  Every message names where (file:line:column) and what."""
 from __future__ import annotations
 
-from typing import Optional
+import contextlib
+import sys
+import warnings
+from typing import Optional, TextIO
 
 
 class TracerError(Exception):
@@ -42,3 +45,38 @@ class SDLError(TracerError):
 
 class RenderCancelled(TracerError):
     """Raised inside a render when the caller's cancel check says stop."""
+
+
+class TracerWarning(UserWarning):
+    """Something a user should know that does not stop the work (the CLI prints it as one ``warning:`` line)."""
+
+
+class FallbackWarning(TracerWarning):
+    """``backend="auto"`` traced with the NumPy path because the C core could not; the message says why."""
+
+
+@contextlib.contextmanager
+def warnings_as_lines(stream: Optional[TextIO] = None):
+    """Inside: every :class:`TracerWarning` is printed as one ``warning: ...`` line (each time it happens);
+    other warnings as Python shows them."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", TracerWarning)
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, TracerWarning):
+                print(f"warning: {message}", file=stream or sys.stderr)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
+class SceneError(TracerError, ValueError):
+    """A scene, or a value in one, that the tracer cannot use: a degenerate camera, an unknown shape kind, a
+    mesh face using a vertex that does not exist.  (Also a ValueError, which is what these were before.)"""
+
+
+class WriteError(TracerError, ValueError):
+    """Something a file format (SDL, .3vn, USD) cannot express; nothing is written.  (Also a ValueError.)"""

@@ -15,7 +15,7 @@ from typing import Iterator, Optional, Union
 import numpy as np
 
 from .atomic import replacing
-from .errors import SDLError
+from .errors import SDLError, WriteError
 from .model import FaceList, MeshData
 from .sdl.lexer import to_float
 
@@ -208,7 +208,7 @@ def _fmt(x: float) -> str:
     """Shortest text that reads back as exactly the same float."""
     x = float(x)
     if not np.isfinite(x):
-        raise ValueError(f"cannot write the non-finite number {x!r} to a .3vn file")
+        raise WriteError(f"cannot write the non-finite number {x!r} to a .3vn file")
     return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
@@ -223,7 +223,7 @@ def format_3vn(mesh: MeshData) -> str:
     face_lines = []
     for verts, norms in mesh.faces:
         if len(verts) < 3:
-            raise ValueError(f"a face needs at least 3 vertices, not {len(verts)}")
+            raise WriteError(f"a face needs at least 3 vertices, not {len(verts)}")
         if len(norms) != len(verts):
             normals.append(tuple(_face_normal(vertices[list(verts)])))
             norms = (len(normals) - 1,) * len(verts)

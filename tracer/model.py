@@ -14,6 +14,8 @@ from typing import Optional, Union
 
 import numpy as np
 
+from .errors import SceneError
+
 Color = tuple[float, float, float]
 Vec3 = tuple[float, float, float]
 
@@ -171,7 +173,7 @@ class Shape:
 
     def __post_init__(self) -> None:
         if self.kind not in SHAPE_KINDS:
-            raise ValueError(f"unknown shape kind {self.kind!r}")
+            raise SceneError(f"unknown shape kind {self.kind!r}")
         self.matrix = np.array(self.matrix, dtype=np.float64).reshape(4, 4)
 
     @property
@@ -198,7 +200,7 @@ class CSG:
 
     def __post_init__(self) -> None:
         if self.op not in self.OPS:
-            raise ValueError(f"unknown boolean {self.op!r}")
+            raise SceneError(f"unknown boolean {self.op!r}")
 
     def leaves(self) -> list[Shape]:
         return [s for child in (self.left, self.right) for s in iter_shapes(child)]

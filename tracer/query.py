@@ -7,6 +7,7 @@ from typing import Sequence, Union
 import numpy as np
 
 from .compile import CompiledScene, compile_scene
+from .errors import SceneError
 from .model import Scene, Shape
 
 
@@ -28,7 +29,7 @@ def hits(scene: Union[Scene, CompiledScene], start: Sequence[float], direction: 
     origin = np.asarray(start, dtype=float).reshape(1, 3)
     dirn = np.asarray(direction, dtype=float).reshape(1, 3)
     if not (np.all(np.isfinite(origin)) and np.all(np.isfinite(dirn))) or not np.any(dirn):
-        raise ValueError("a ray needs a finite start and a finite, non-zero direction")
+        raise SceneError("a ray needs a finite start and a finite, non-zero direction")
     found: list[Hit] = []
     for obj in compiled.objects:
         h = obj.intersect(origin, dirn)

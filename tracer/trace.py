@@ -6,12 +6,13 @@ Each effect runs only if the compiled scene says it is live, and every ray cast 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from .compile import CompiledScene
 from . import numerics
+from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_lights
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: How many nested transparent objects a ray remembers being inside.
@@ -20,17 +21,26 @@ MEDIA_DEPTH = 8
 
 @dataclass
 class RayCounts:
+    """Rays cast per kind, and rays not cast per reason (tracer.savings.SKIP_REASONS, same order)."""
+
     camera: int = 0
     shadow: int = 0
     reflection: int = 0
     refraction: int = 0
+    skipped_cutoff: int = 0
+    skipped_inside_shadow: int = 0
+    skipped_shared_tir: int = 0
+    skipped_dark_material: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {k: int(getattr(self, k)) for k in RAY_KINDS}
 
+    def skipped(self) -> dict[str, int]:
+        return {reason: int(getattr(self, f"skipped_{reason}")) for reason in SKIP_REASONS}
+
     def add(self, other: "RayCounts") -> None:
-        for k in RAY_KINDS:
-            setattr(self, k, getattr(self, k) + getattr(other, k))
+        for f in fields(self):
+            setattr(self, f.name, getattr(self, f.name) + getattr(other, f.name))
 
 
 @dataclass
@@ -186,22 +196,31 @@ def refract(direction: np.ndarray, normal: np.ndarray, ratio: np.ndarray):
 
 
 class Tracer:
-    """Shades batches of rays for one compiled scene, counting every ray it casts."""
+    """Shades batches of rays for one compiled scene, counting every ray it casts (and every ray that
+    ``savings`` lets it skip, see tracer.savings)."""
 
-    def __init__(self, scene: CompiledScene):
+    def __init__(self, scene: CompiledScene, savings: RaySavings | None = None):
         self.scene = scene
         self.counts = RayCounts()
         self.effects = scene.effects
+        self.savings = RaySavings() if savings is None else savings
         self.material_of = np.array([p.material_id for p in scene.primitives] or [0], dtype=int)
         self.background = np.asarray(scene.settings.background, dtype=float)
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
+        self.dark = dark_materials(scene)
+        self.sealed = sealed_lights(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        self.counts.camera += origins.shape[0]
-        return self.shade(origins, directions, 0, Media.air(origins.shape[0]))
-
-    def shade(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media) -> np.ndarray:
         n = origins.shape[0]
+        self.counts.camera += n
+        return self.shade(origins, directions, 0, Media.air(n), np.ones(n))
+
+    def shade(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media,
+              weight: np.ndarray | None = None) -> np.ndarray:
+        """Colours of the rays; ``weight``: each ray's share of its pixel (for the contribution cutoff;
+        default 1)."""
+        n = origins.shape[0]
+        weight = np.ones(n) if weight is None else weight
         color = np.broadcast_to(self.background, (n, 3)).copy()
         if n == 0:
             return color
@@ -224,22 +243,35 @@ class Tracer:
             ambient, diffuse = ambient * texture, diffuse * texture
         local = mats.emissive[mat] + self.ambient_light * ambient
         if "lighting" in self.effects:
-            local += self._direct_light(point, facing, d, mat, diffuse, offset)
+            inside_of = np.where(hits.entering[idx], -1, hits.obj[idx])  # the object the ray was inside
+            local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of)
         color[idx] = local
-        if level < self.scene.settings.max_recursion_depth:
-            if "reflection" in self.effects:
-                color[idx] += self._reflection(point, facing, d, mat, offset, level, media.subset(idx))
-            if "refraction" in self.effects:
-                color[idx] += self._refraction(point, facing, d, mat, offset, level, media.subset(idx),
-                                               hits.entering[idx], hits.obj[idx])
+        if level < self.scene.settings.max_recursion_depth and self.effects & {"reflection", "refraction"}:
+            reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
+                                                     hits.entering[idx], hits.obj[idx], weight[idx])
+            color[idx] += reflected
+            color[idx] += transmitted
         return color
 
-    def _direct_light(self, point, normal, direction, mat, diffuse, offset) -> np.ndarray:
+    def _skip_shadow(self, mat, inside_of, light: int) -> np.ndarray:
+        """Rows whose feeler towards ``light`` need not be cast (counted per reason); they get no light."""
+        skip = np.zeros(mat.shape[0], dtype=bool)
+        if self.savings.dark_materials:
+            skip = self.dark[mat]
+            self.counts.skipped_dark_material += int(skip.sum())
+        if self.sealed is not None:
+            inside = (inside_of >= 0) & ~skip
+            inside[inside] = self.sealed[inside_of[inside], light]
+            self.counts.skipped_inside_shadow += int(inside.sum())
+            skip = skip | inside
+        return skip
+
+    def _direct_light(self, point, normal, direction, mat, diffuse, offset, inside_of) -> np.ndarray:
         mats = self.scene.materials
         total = np.zeros_like(point)
         to_eye = -direction / np.linalg.norm(direction, axis=1, keepdims=True)
         feeler_start = point + offset * normal
-        for light_pos, light_color in zip(self.scene.light_positions, self.scene.light_colors):
+        for light, (light_pos, light_color) in enumerate(zip(self.scene.light_positions, self.scene.light_colors)):
             to_light = light_pos - point
             s = to_light / np.linalg.norm(to_light, axis=1, keepdims=True)
             lambert = _dot(s, normal)
@@ -247,6 +279,9 @@ class Tracer:
             lit = lambert > 0.0
             if "shadows" in self.effects and lit.any():
                 rows = np.nonzero(lit)[0]
+                skip = self._skip_shadow(mat[rows], inside_of[rows], light)
+                lit[rows[skip]] = False
+                rows = rows[~skip]
                 self.counts.shadow += rows.size
                 lit[rows] &= ~occluded(self.scene, feeler_start[rows], light_pos - feeler_start[rows])
             rows = np.nonzero(lit)[0]
@@ -268,49 +303,58 @@ class Tracer:
             total[rows] += (contribution + specular) * light_color
         return total
 
-    def _reflection(self, point, normal, direction, mat, offset, level, media) -> np.ndarray:
+    def _worth_tracing(self, wanted: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """The rows of ``wanted`` whose weight reaches the contribution cutoff (the others are counted)."""
+        keep = wanted & (weight >= self.savings.cutoff)
+        self.counts.skipped_cutoff += int(np.count_nonzero(wanted & ~keep))
+        return np.nonzero(keep)[0]
+
+    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight):
+        """The reflected and the transmitted colour, each already times its coefficient."""
         settings = self.scene.settings
         mats = self.scene.materials
-        k = mats.reflectivity[mat]
-        rows = np.nonzero((k >= settings.min_reflectivity) & (k > 0.0))[0]
-        out = np.zeros_like(point)
-        if rows.size:
-            out[rows] = k[rows, None] * self._reflected(point[rows], normal[rows], direction[rows],
-                                                        offset[rows], level, media.subset(rows))
-        return out
+        n = point.shape[0]
+        kr, kt = mats.reflectivity[mat], mats.transparency[mat]
+        reflects = ("reflection" in self.effects) & (kr >= settings.min_reflectivity) & (kr > 0.0)
+        transmits = ("refraction" in self.effects) & (kt >= settings.min_transparency) & (kt > 0.0)
+        reflected, transmitted = np.zeros_like(point), np.zeros_like(point)
+        # Snell's law first: under total internal reflection the transmitted ray is the mirror ray.
+        rows = np.nonzero(transmits)[0]
+        c1 = media.subset(rows).current_speed()
+        inside = media.subset(rows).entered(obj[rows], mats.speed_of_light[mat[rows]])
+        outside = media.subset(rows).left(obj[rows])
+        ent = entering[rows]
+        after = Media(np.where(ent[:, None], inside.objects, outside.objects),
+                      np.where(ent[:, None], inside.speeds, outside.speeds),
+                      np.where(ent, inside.depth, outside.depth))
+        c2 = np.where(ent, mats.speed_of_light[mat[rows]], outside.current_speed())
+        through, total_internal = refract(direction[rows], normal[rows], c2 / c1)
+        tir = np.zeros(n, dtype=bool)
+        tir[rows] = total_internal
+        shared = tir & reflects if self.savings.shared_tir else np.zeros(n, dtype=bool)
+        self.counts.skipped_shared_tir += int(shared.sum())
+        # The mirror ray, weighted by both coefficients where it also stands for the internal reflection.
+        mirror_weight = weight * np.where(shared, kr + kt, kr)
+        mirror = self._worth_tracing(reflects, mirror_weight)
+        if mirror.size:
+            reflected[mirror] = self._reflected(point[mirror], normal[mirror], direction[mirror], offset[mirror],
+                                                level, media.subset(mirror), mirror_weight[mirror])
+        transmitted[shared] = reflected[shared]
+        go = np.zeros(n, dtype=bool)
+        go[rows[~total_internal]] = True
+        go = self._worth_tracing(go, weight * kt)
+        if go.size:
+            self.counts.refraction += go.size
+            local = np.searchsorted(rows, go)
+            transmitted[go] = self.shade(point[go] - offset[go] * normal[go], through[local], level + 1,
+                                         after.subset(local), weight[go] * kt[go])
+        bounce = self._worth_tracing(tir & ~shared, weight * kt)
+        if bounce.size:  # total internal reflection: the light stays in the medium it came from
+            transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
+                                                  level, media.subset(bounce), weight[bounce] * kt[bounce])
+        return kr[:, None] * reflected, kt[:, None] * transmitted
 
-    def _reflected(self, point, normal, direction, offset, level, media) -> np.ndarray:
+    def _reflected(self, point, normal, direction, offset, level, media, weight) -> np.ndarray:
         r = reflect(direction, normal)
         self.counts.reflection += point.shape[0]
-        return self.shade(point + offset * normal, r, level + 1, media)
-
-    def _refraction(self, point, normal, direction, mat, offset, level, media, entering, obj) -> np.ndarray:
-        settings = self.scene.settings
-        mats = self.scene.materials
-        k = mats.transparency[mat]
-        rows = np.nonzero((k >= settings.min_transparency) & (k > 0.0))[0]
-        out = np.zeros_like(point)
-        if rows.size == 0:
-            return out
-        point, normal, direction, offset = point[rows], normal[rows], direction[rows], offset[rows]
-        media, entering, obj, k, mat = media.subset(rows), entering[rows], obj[rows], k[rows], mat[rows]
-        c1 = media.current_speed()
-        inside = media.entered(obj, mats.speed_of_light[mat])
-        outside = media.left(obj)
-        after = Media(np.where(entering[:, None], inside.objects, outside.objects),
-                      np.where(entering[:, None], inside.speeds, outside.speeds),
-                      np.where(entering, inside.depth, outside.depth))
-        c2 = np.where(entering, mats.speed_of_light[mat], outside.current_speed())
-        transmitted, total_internal = refract(direction, normal, c2 / c1)
-        result = np.zeros_like(point)
-        tr = np.nonzero(~total_internal)[0]
-        if tr.size:
-            self.counts.refraction += tr.size
-            result[tr] = self.shade(point[tr] - offset[tr] * normal[tr], transmitted[tr], level + 1,
-                                    after.subset(tr))
-        tir = np.nonzero(total_internal)[0]
-        if tir.size:  # total internal reflection: the light stays in the medium it came from
-            result[tir] = self._reflected(point[tir], normal[tir], direction[tir], offset[tir], level,
-                                          media.subset(tir))
-        out[rows] = k[:, None] * result
-        return out
+        return self.shade(point + offset * normal, r, level + 1, media, weight)

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+from .errors import SceneError
+
 _EPSILON = np.finfo(np.float64).eps
 
 
@@ -23,7 +25,7 @@ def rotation(angle_degrees: float, ux: float, uy: float, uz: float) -> np.ndarra
     axis = np.array([ux, uy, uz], dtype=np.float64)
     length = float(np.linalg.norm(axis))
     if length == 0.0 or not math.isfinite(length):
-        raise ValueError("rotation axis must be a non-zero finite vector")
+        raise SceneError("rotation axis must be a non-zero finite vector")
     x, y, z = axis / length
     a = math.radians(angle_degrees)
     c, s = math.cos(a), math.sin(a)

@@ -44,6 +44,7 @@ from itertools import combinations
 
 import numpy as np
 
+from ..errors import SceneError
 from ..model import POLYHEDRON_KINDS, MeshData
 
 _PHI = (1.0 + 5.0 ** 0.5) / 2.0
@@ -198,7 +199,7 @@ def _hull_faces(points: np.ndarray, tol: float = 1e-9):
 @lru_cache(maxsize=None)
 def _build(kind: str):
     if kind not in _BUILDERS:
-        raise ValueError(f"unknown polyhedron {kind!r}; expected one of {', '.join(POLYHEDRON_KINDS)}")
+        raise SceneError(f"unknown polyhedron {kind!r}; expected one of {', '.join(POLYHEDRON_KINDS)}")
     vertices = _BUILDERS[kind]()
     faces = _hull_faces(vertices)
     if len({i for f, _, _ in faces for i in f}) != len(vertices):  # pragma: no cover - construction check

@@ -41,6 +41,7 @@ from itertools import product
 
 import numpy as np
 
+from ..errors import SceneError
 from ..model import MeshData
 
 #: GLUT's teapot control points (x, y, z), data frame (z up).
@@ -258,7 +259,7 @@ def teapot_mesh(divisions: int = 8) -> MeshData:
     See the module docstring for the frame and the bounding box.
     """
     if isinstance(divisions, bool) or not isinstance(divisions, (int, np.integer)) or divisions < 1:
-        raise ValueError(f"teapot divisions must be a positive integer, not {divisions!r}")
+        raise SceneError(f"teapot divisions must be a positive integer, not {divisions!r}")
     vertices, normals, tris = _build(int(divisions))
     faces = [(t, t) for t in map(tuple, tris.tolist())]
     return MeshData(vertices=vertices.copy(), normals=normals.copy(), faces=faces, origin="built-in:teapot")

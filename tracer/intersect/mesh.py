@@ -8,8 +8,11 @@ overhead is therefore per node, not per ray, which is what makes coherent batche
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from ..errors import SceneError
 from ..model import MeshData
 from .hits import HitArrays
 
@@ -39,6 +42,39 @@ DEDUPE_RELATIVE_ADJACENT = 1e-9
 #: Node boxes are grown by this fraction of the mesh's size (plus its distance from the origin), so
 #: that rounding in the slab test can never cull a triangle that Möller–Trumbore, with its slack, hits.
 BOX_PADDING = 1e-9
+
+
+@dataclass(frozen=True)
+class MeshArrays:
+    """A :class:`TriangleMesh`'s BVH and per-triangle tables, as the C core walks them (views, no copies).
+
+    Named as their SceneDesc fields (tracer/native/contract.py).  Leaf order (row i is triangle
+    ``tri_order[i]``): ``tri_p0``, ``tri_e1``, ``tri_e2``, ``tri_flip``, ``tri_edge_scale`` (|e1| |e2|),
+    ``tri_radius`` (largest vertex norm), ``tri_slack1`` (|e2| + radius), ``tri_slack2`` (|e1| + radius),
+    ``tri_welded`` (vertex ids after welding equal positions).  Original order: ``tri_geometric`` (unit
+    geometric normals), ``tri_corners`` (three unit corner normals each), ``tri_has_normals``."""
+
+    node_lo: np.ndarray
+    node_hi: np.ndarray
+    node_left: np.ndarray
+    node_right: np.ndarray
+    node_first: np.ndarray
+    node_count: np.ndarray
+    node_axis: np.ndarray
+    tri_order: np.ndarray
+    tri_p0: np.ndarray
+    tri_e1: np.ndarray
+    tri_e2: np.ndarray
+    tri_flip: np.ndarray
+    tri_edge_scale: np.ndarray
+    tri_radius: np.ndarray
+    tri_slack1: np.ndarray
+    tri_slack2: np.ndarray
+    tri_welded: np.ndarray
+    tri_geometric: np.ndarray
+    tri_corners: np.ndarray
+    tri_has_normals: np.ndarray
+    extent: float
 
 
 class TriangleMesh:
@@ -82,9 +118,9 @@ class TriangleMesh:
         vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(mesh.normals, dtype=np.float64).reshape(-1, 3)
         if tri_v.size and (tri_v.min() < 0 or tri_v.max() >= len(vertices)):
-            raise ValueError(f"mesh {mesh.origin!r}: a face uses a vertex index out of range")
+            raise SceneError(f"mesh {mesh.origin!r}: a face uses a vertex index out of range")
         if (tri_n >= len(normals)).any():
-            raise ValueError(f"mesh {mesh.origin!r}: a face uses a normal index out of range")
+            raise SceneError(f"mesh {mesh.origin!r}: a face uses a normal index out of range")
         self.triangle_count = len(tri_v)
 
         p = vertices[tri_v]  # (T, 3 corners, 3)
@@ -254,6 +290,17 @@ class TriangleMesh:
     @property
     def node_total(self) -> int:
         return len(self.node_count)
+
+    def arrays(self) -> MeshArrays:
+        """The tables another tracer needs to walk this mesh exactly as the queries below do."""
+        return MeshArrays(
+            node_lo=self.node_lo, node_hi=self.node_hi, node_left=self.node_left, node_right=self.node_right,
+            node_first=self.node_first, node_count=self.node_count, node_axis=self.node_axis,
+            tri_order=self.tri_order, tri_p0=self.tri_p0, tri_e1=self.tri_e1, tri_e2=self.tri_e2,
+            tri_flip=self.tri_flip, tri_edge_scale=self._edge_scale, tri_radius=self._radius,
+            tri_slack1=self._slack1, tri_slack2=self._slack2, tri_welded=self._tri_welded,
+            tri_geometric=self._geometric_normal, tri_corners=self._corner_normals,
+            tri_has_normals=self._has_normals, extent=self.extent)
 
     # ------------------------------------------------------------------ queries
 

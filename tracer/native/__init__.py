@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+from dataclasses import fields
 from typing import Optional
 
 import numpy as np
@@ -20,8 +21,9 @@ import numpy as np
 from ..compile import CompiledScene
 from ..errors import TracerError
 from ..intersect.hits import HitArrays
+from ..savings import RaySavings, sealed_lights
 from ..trace import RayCounts
-from . import flatten
+from . import contract, flatten
 from . import build as _builder
 from .build import BuildError
 
@@ -32,6 +34,7 @@ _dp = ctypes.POINTER(ctypes.c_double)
 _i8p = ctypes.POINTER(ctypes.c_int8)
 _i32p = ctypes.POINTER(ctypes.c_int32)
 _i64p = ctypes.POINTER(ctypes.c_int64)
+_u8p = ctypes.POINTER(ctypes.c_uint8)
 
 
 def _load() -> ctypes.CDLL:
@@ -39,9 +42,11 @@ def _load() -> ctypes.CDLL:
     lib.rt_desc_size.restype = ctypes.c_int64
     lib.rt_desc_size.argtypes = []
     lib.rt_create.restype = ctypes.c_void_p
-    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc)]
+    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_char_p, ctypes.c_int64]
     lib.rt_destroy.restype = None
     lib.rt_destroy.argtypes = [ctypes.c_void_p]
+    lib.rt_set_savings.restype = ctypes.c_int
+    lib.rt_set_savings.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_int64, _u8p]
     lib.rt_trace.restype = ctypes.c_int
     lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64]
     lib.rt_first_hits.restype = ctypes.c_int
@@ -59,15 +64,48 @@ def _load() -> ctypes.CDLL:
     lib.rt_build_mesh_bvh.restype = ctypes.c_int64
     lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, _i64p, _dp, _dp,
                                       _i64p, _i64p, _i64p, _i64p, _i8p]
-    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
-        raise BuildError("the C core's SceneDesc does not match flatten.py's")
+    lib.rt_desc_layout.restype = ctypes.c_int64
+    lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
+    lib.rt_contract_digest.restype = ctypes.c_char_p
+    lib.rt_contract_digest.argtypes = []
+    mismatch = layout_mismatch(lib)
+    if mismatch:
+        raise BuildError(mismatch)
     return lib
 
 
-try:
-    _lib = _load()
-except (BuildError, OSError) as err:
-    load_error = str(err) or type(err).__name__
+def c_layout(lib: ctypes.CDLL) -> list[tuple[int, int]]:
+    """(offset, size) of every SceneDesc field as the C compiler laid it out, in contract.py's order."""
+    capacity = len(contract.SCENE_DESC)
+    offsets, sizes = np.zeros(capacity, np.int64), np.zeros(capacity, np.int64)
+    count = lib.rt_desc_layout(_ptr(offsets, ctypes.c_int64), _ptr(sizes, ctypes.c_int64), capacity)
+    if count != capacity:
+        return [(-1, -1)] * int(count)
+    return list(zip(offsets.tolist(), sizes.tolist()))
+
+
+def ctypes_layout() -> list[tuple[int, int]]:
+    """(offset, size) of every field of flatten.SceneDesc, the ctypes mirror."""
+    return [(getattr(flatten.SceneDesc, f.name).offset, getattr(flatten.SceneDesc, f.name).size)
+            for f in contract.SCENE_DESC]
+
+
+def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
+    """None if the library was built from this contract and lays SceneDesc out as ctypes does, else why not."""
+    built_from = lib.rt_contract_digest().decode()
+    if built_from != contract.digest():
+        return (f"the C core was built from another contract ({built_from}, not {contract.digest()}): "
+                "regenerate contract.h (python -m tracer.native.contract) and rebuild")
+    c, py = c_layout(lib), ctypes_layout()
+    if len(c) != len(py):
+        return f"the C core's SceneDesc has {len(c)} fields, contract.py {len(py)}"
+    for f, (c_off, c_size), (py_off, py_size) in zip(contract.SCENE_DESC, c, py):
+        if (c_off, c_size) != (py_off, py_size):
+            return (f"SceneDesc.{f.name} is at offset {c_off} ({c_size} bytes) in C but {py_off} ({py_size} bytes) "
+                    "in ctypes")
+    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
+        return "the C core's SceneDesc size differs from flatten.py's"
+    return None
 
 
 def default_threads() -> int:
@@ -134,17 +172,25 @@ def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
 
 def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
     """The FlatScene of a compiled scene, made once per compiled scene and kept on it (a second render of
-    it flattens nothing), again only when the solver tolerances it reads have changed (tracer.accuracy)."""
+    it flattens nothing), again only when the module constants it reads have changed (tracer.accuracy
+    varies the solver tolerances)."""
     from .. import numerics
-    from ..intersect import torus
+    from ..intersect import mesh as mesh_module, torus
 
-    key = (numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS)
+    key = (numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS,
+           tuple(getattr(mesh_module, name, None) for name in flatten.MESH_CONSTANTS))
     cached = getattr(compiled, "_flat_cache", None)
     if cached is not None and cached[0] == key:
         return cached[1]
     flat = flatten.FlatScene(compiled)
     compiled._flat_cache = (key, flat)
     return flat
+
+
+try:
+    _lib = _load()
+except (BuildError, OSError) as err:
+    load_error = str(err) or type(err).__name__
 
 
 class NativeTracer:
@@ -159,17 +205,32 @@ class NativeTracer:
             return f"the C core is not available: {load_error}"
         return flatten.unsupported_reason(compiled)
 
-    def __init__(self, compiled: CompiledScene, threads: Optional[int] = None):
-        reason = self.unsupported(compiled)
+    def __init__(self, compiled: CompiledScene, threads: Optional[int] = None,
+                 savings: Optional[RaySavings] = None):
+        if _lib is None:
+            raise TracerError(f"the C core is not available: {load_error}")
+        reason = flatten.unsupported_reason(compiled)
         if reason is not None:
             raise TracerError(f"the C core cannot trace this scene: {reason}")
         self.scene = compiled
         self.counts = RayCounts()
         self.threads = threads or default_threads()
         self._flat = _flat_scene(compiled)  # owns the arrays the C side points into
-        self._handle = _lib.rt_create(ctypes.byref(self._flat.desc))
+        message = ctypes.create_string_buffer(256)
+        self._handle = _lib.rt_create(ctypes.byref(self._flat.desc), message, len(message))
         if not self._handle:
-            raise TracerError("the C core rejected the scene description (out of memory or inconsistent)")
+            reason = message.value.decode(errors="replace") or "no reason given"
+            raise TracerError(f"the C core refused the scene description: {reason}")
+        self.savings = RaySavings() if savings is None else savings
+        effects = compiled.effects
+        sealed = (sealed_lights(compiled) if self.savings.inside_shadows and "shadows" in effects
+                  else np.zeros((len(compiled.objects), len(compiled.light_positions)), dtype=bool))
+        sealed = np.ascontiguousarray(sealed, dtype=np.uint8).reshape(-1)
+        if sealed.size == 0:
+            sealed = np.zeros(1, dtype=np.uint8)
+        if _lib.rt_set_savings(self._handle, float(self.savings.cutoff), self.savings.flags(),
+                               _ptr(sealed, ctypes.c_uint8)) != 0:
+            raise MemoryError("the C core ran out of memory")
 
     def close(self) -> None:
         handle, self._handle = getattr(self, "_handle", None), None
@@ -182,7 +243,7 @@ class NativeTracer:
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         o, d = _rays(origins, directions)
         colors = np.empty_like(o)
-        counts = np.zeros(4, dtype=np.int64)
+        counts = np.zeros(len(fields(RayCounts)), dtype=np.int64)
         if _lib.rt_trace(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
                          _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads) != 0:
             raise MemoryError("the C core ran out of memory")

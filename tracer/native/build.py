@@ -22,8 +22,8 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SOURCES = ("core.c", "core.h", "numeric.h", "shapes.h", "mesh.h", "csg.h", "texture.h", "shade.h", "scan.h",
-           "bvh_build.h")
+SOURCES = ("core.c", "core.h", "contract.h", "numeric.h", "shapes.h", "mesh.h", "csg.h", "texture.h", "shade.h",
+           "scan.h", "bvh_build.h")
 LIBRARY_NAME = "_core.so"
 MARKER_PREFIX = b"RT_SOURCE_HASH="
 

@@ -8,6 +8,8 @@
 #define _POSIX_C_SOURCE 200809L
 
 #include <pthread.h>
+#include <stddef.h>
+#include <stdio.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -33,6 +35,24 @@ const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
 const char *rt_build_id(void) { return rt_build_marker; }
 
 int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
+
+/* Offset and size of every SceneDesc field in contract.py's order, for the loader to compare with ctypes';
+ * returns the number of fields (nothing is written when capacity is smaller). */
+int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity)
+{
+    if (capacity < RT_SCENE_DESC_FIELD_COUNT)
+        return RT_SCENE_DESC_FIELD_COUNT;
+    int64_t k = 0;
+#define RT_FIELD_LAYOUT(name)                                  \
+    offsets[k] = (int64_t)offsetof(SceneDesc, name);           \
+    sizes[k] = (int64_t)sizeof(((const SceneDesc *)0)->name);  \
+    k++;
+    RT_SCENE_DESC_FIELDS(RT_FIELD_LAYOUT)
+#undef RT_FIELD_LAYOUT
+    return k;
+}
+
+const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 
 /* ------------------------------------------------------------------------------------------------------
  * The scene at run time */
@@ -72,9 +92,12 @@ typedef struct {
     int64_t n_unbounded;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
+    /* tracer.savings: which useless rays are skipped (rt_set_savings) */
+    double cutoff;        /* a secondary ray of smaller cumulative weight is not traced */
+    int64_t savings;      /* SAVE_* bits */
+    uint8_t *sealed;      /* objects x lights: a feeler from inside the object to the light is blocked */
 } Scene;
 
-#define MEDIA_DEPTH 8
 #define SHADOW_CACHE 16
 
 typedef struct {
@@ -89,7 +112,7 @@ typedef struct {
     RawBuffer raw;
     int64_t *mesh_stack;
     TreeEntry *tree_stack;
-    int64_t counts[4];
+    int64_t counts[N_COUNTS];
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
     int oom;
 } Work;
@@ -593,9 +616,9 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
  * textures (shadows and Cook-Torrance only ever come with lighting, see tracer.compile.live_effects). */
 #define SHADE_VARIANT(NAME, L, SH, CT, RL, RR, TX)                                                          \
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
-                     const Media *media, double *out)                                                      \
+                     const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, out, L, SH, CT, RL, RR, TX, NAME);                            \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, NAME);                    \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -961,42 +984,63 @@ void rt_destroy(void *handle)
     free(S->pairs);
     free(S->items);
     free(S->unbounded);
+    free(S->sealed);
     free(S);
 }
 
-void *rt_create(const SceneDesc *desc)
+/* Writes what rt_create refused into the caller's buffer (when it gave one) and fails. */
+#define REFUSE(...)                                              \
+    do {                                                         \
+        if (error && capacity > 0)                               \
+            snprintf(error, (size_t)capacity, __VA_ARGS__);      \
+        goto fail;                                               \
+    } while (0)
+
+void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
 {
+    if (error && capacity > 0)
+        error[0] = '\0';
     Scene *S = (Scene *)calloc(1, sizeof(Scene));
-    if (!S)
+    if (!S) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
         return NULL;
+    }
     S->d = *desc;
     const SceneDesc *D = &S->d;
     /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
     for (int64_t p = 0; p < D->n_prims; p++) {
         int kind = D->prim_kind[p];
-        if (kind < K_SPHERE || kind > K_MESH || D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
-            goto fail;
+        if (kind < 0 || kind >= K_COUNT)
+            REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
+        if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
+            REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
+                   (long long)D->n_materials);
         if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
-            goto fail;
+            REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
+                   (long long)D->n_meshes);
     }
     if (D->effects & FX_TEXTURES) {
         for (int64_t m = 0; m < D->n_materials; m++) {
             int32_t texture = D->mat_texture[m];
             int64_t image = D->mat_tex_image[m];
             if (texture < -3 || (texture > 0 && (image < 0 || image >= D->n_images)))
-                goto fail;
+                REFUSE("material %lld has texture %d (image %lld of %lld)", (long long)m, (int)texture,
+                       (long long)image, (long long)D->n_images);
         }
         for (int64_t i = 0; i < D->n_images; i++)
             if (D->image_info[2 * i] < 1 || D->image_info[2 * i + 1] < 1 || !D->image_data[i])
-                goto fail;
+                REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
+                       (long long)D->image_info[2 * i + 1]);
     }
     for (int64_t c = 0; c < D->n_csg; c++)
         if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
             !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
-            goto fail;
+            REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
+                   (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
     for (int64_t i = 0; i < D->n_objects; i++)
         if (!ref_ok(D, D->object_ref[i]))
-            goto fail;
+            REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
     for (int64_t i = 0; i < D->n_objects; i++) {
         int64_t depth = csg_depth_of(D, D->object_ref[i], 0);
         if (depth > S->csg_depth)
@@ -1004,7 +1048,7 @@ void *rt_create(const SceneDesc *desc)
     }
     S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
     if (!S->meshes)
-        goto fail;
+        REFUSE("out of memory");
     for (int64_t k = 0; k < D->n_meshes; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         int64_t nb = info[0], tb = info[2];
@@ -1039,19 +1083,38 @@ void *rt_create(const SceneDesc *desc)
         m->extent = D->mesh_extent[k];
         for (int64_t i = 0; i < m->n_tris; i++)
             if (m->order[i] < 0 || m->order[i] >= m->n_tris)
-                goto fail;
+                REFUSE("mesh %lld: triangle order entry %lld is out of range", (long long)k, (long long)i);
         m->depth = mesh_check_depth(m);
         if (m->depth < 0)
-            goto fail;
+            REFUSE("mesh %lld: inconsistent hierarchy (or out of memory)", (long long)k);
         if (m->depth > S->mesh_depth)
             S->mesh_depth = m->depth;
     }
     if (!build_tree(S))
-        goto fail;
+        REFUSE("out of memory (or more than 2^31 bounded objects) building the object hierarchy");
     return S;
 fail:
     rt_destroy(S);
     return NULL;
+}
+#undef REFUSE
+
+/* Which useless rays to skip (see tracer.savings); `sealed` has n_objects x n_lights entries, copied.
+ * 0 on success, -1 out of memory. */
+int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed)
+{
+    Scene *S = (Scene *)scene;
+    size_t n = (size_t)(S->d.n_objects * S->d.n_lights);
+    uint8_t *copy = (uint8_t *)malloc(n ? n : 1);
+    if (!copy)
+        return -1;
+    if (n)
+        memcpy(copy, sealed, n);
+    free(S->sealed);
+    S->sealed = copy;
+    S->cutoff = cutoff;
+    S->savings = flags;
+    return 0;
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -1075,7 +1138,7 @@ typedef struct {
 
 typedef struct {
     Job *job;
-    int64_t counts[4];
+    int64_t counts[N_COUNTS];
     int failed;
 } Worker;
 
@@ -1101,7 +1164,7 @@ static void *run_worker(void *arg)
         for (int64_t i = start; i < end; i++) {
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
-                job->shade(S, &w, o, d, 0, &air, job->colors + 3 * i);
+                job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
                 int64_t obj;
@@ -1160,7 +1223,7 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
             pthread_join(ids[k], NULL);
         failed |= workers[k].failed;
         if (counts)
-            for (int c = 0; c < 4; c++)
+            for (int c = 0; c < N_COUNTS; c++)
                 counts[c] += workers[k].counts[c];
     }
     return failed ? -1 : 0;

@@ -19,75 +19,28 @@ import numpy as np
 from .. import numerics
 from ..compile import CompiledScene, CSGNode, Primitive
 from ..intersect import torus
-from ..model import POLYHEDRON_KINDS, SHAPE_KINDS
+from ..intersect.mesh import MeshArrays
+from ..model import SHAPE_KINDS
+from . import contract
+from .contract import EFFECT_BITS, KIND, KIND_CODES, OP_CODES
 
-KIND_CODES = {"sphere": 0, "cube": 1, "square": 2, "plane": 3, "taperedCylinder": 4, "cylinder": 4, "cone": 4,
-              "torus": 5, **{k: 6 for k in POLYHEDRON_KINDS}, "teapot": 7, "mesh": 7}
-OP_CODES = {"union": 0, "intersection": 1, "difference": 2}
-EFFECT_BITS = {"lighting": 1, "shadows": 2, "reflection": 4, "refraction": 8, "cook-torrance": 16, "textures": 32}
 #: Effects the C core implements; any other live effect sends the scene to the NumPy path.
 HANDLED_EFFECTS = frozenset(EFFECT_BITS) | {"csg"} | {f"shape:{kind}" for kind in KIND_CODES}
 #: Relative padding of the objects' world boxes: far above the rounding of any hit, and of the shapes'
 #: own edge tolerances (1e-12 of their size), far below anything that costs time.
 BOX_PADDING = 1e-8
 
-#: The TriangleMesh attributes the C core walks (see tracer.intersect.mesh.TriangleMesh).
-MESH_ATTRIBUTES = ("node_lo", "node_hi", "node_left", "node_right", "node_first", "node_count", "node_axis",
-                   "tri_order", "tri_p0", "tri_e1", "tri_e2", "tri_flip", "_edge_scale", "_radius", "_slack1",
-                   "_slack2", "_tri_welded", "_geometric_normal", "_corner_normals", "_has_normals", "extent")
+#: The tracer.intersect.mesh constants the C core reads (SceneDesc.mesh_constants, in this order).
 MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILON", "DEDUPE_RELATIVE",
                   "DEDUPE_RELATIVE_ADJACENT")
-
-_P = ctypes.POINTER
-_D, _I8, _U8, _I32, _I64 = ctypes.c_double, ctypes.c_int8, ctypes.c_uint8, ctypes.c_int32, ctypes.c_int64
-
-# (name, ctypes type, numpy dtype for pointer fields); the order is core.h's SceneDesc.
-_LAYOUT = [
-    ("n_prims", _I64, None), ("prim_kind", _P(_I32), np.int32), ("prim_inverse", _P(_D), np.float64),
-    ("prim_sphere", _P(_D), np.float64), ("prim_param", _P(_D), np.float64), ("prim_aux", _P(_I64), np.int64),
-    ("prim_material", _P(_I32), np.int32),
-    ("planes", _P(_D), np.float64),
-    ("n_meshes", _I64, None), ("mesh_info", _P(_I64), np.int64), ("mesh_extent", _P(_D), np.float64),
-    ("mesh_constants", _D * 5, None),
-    ("node_lo", _P(_D), np.float64), ("node_hi", _P(_D), np.float64), ("node_left", _P(_I64), np.int64),
-    ("node_right", _P(_I64), np.int64), ("node_first", _P(_I64), np.int64), ("node_count", _P(_I64), np.int64),
-    ("node_axis", _P(_I8), np.int8),
-    ("tri_order", _P(_I64), np.int64), ("tri_p0", _P(_D), np.float64), ("tri_e1", _P(_D), np.float64),
-    ("tri_e2", _P(_D), np.float64), ("tri_flip", _P(_U8), np.uint8), ("tri_edge_scale", _P(_D), np.float64),
-    ("tri_radius", _P(_D), np.float64), ("tri_slack1", _P(_D), np.float64), ("tri_slack2", _P(_D), np.float64),
-    ("tri_welded", _P(_I64), np.int64), ("tri_geometric", _P(_D), np.float64),
-    ("tri_corners", _P(_D), np.float64), ("tri_has_normals", _P(_U8), np.uint8),
-    ("n_csg", _I64, None), ("csg_op", _P(_I32), np.int32), ("csg_left", _P(_I64), np.int64),
-    ("csg_right", _P(_I64), np.int64),
-    ("n_objects", _I64, None), ("object_ref", _P(_I64), np.int64), ("object_box", _P(_D), np.float64),
-    ("object_bounded", _P(_U8), np.uint8),
-    ("n_materials", _I64, None), ("mat_ambient", _P(_D), np.float64), ("mat_diffuse", _P(_D), np.float64),
-    ("mat_specular", _P(_D), np.float64), ("mat_emissive", _P(_D), np.float64),
-    ("mat_exponent", _P(_D), np.float64), ("mat_reflectivity", _P(_D), np.float64),
-    ("mat_transparency", _P(_D), np.float64), ("mat_speed", _P(_D), np.float64),
-    ("mat_specular_fraction", _P(_D), np.float64), ("mat_roughness", _P(_D), np.float64),
-    ("n_lights", _I64, None), ("light_pos", _P(_D), np.float64), ("light_color", _P(_D), np.float64),
-    ("background", _D * 3, None), ("global_ambient", _D * 3, None), ("min_reflectivity", _D, None),
-    ("min_transparency", _D, None), ("max_depth", _I64, None), ("effects", _I64, None),
-    ("mat_texture", _P(_I32), np.int32), ("mat_tex_param", _P(_D), np.float64), ("mat_tex_image", _P(_I64), np.int64),
-    ("n_images", _I64, None), ("image_info", _P(_I64), np.int64), ("image_data", _P(_P(_D)), np.uintp),
-    ("noise_perm", _P(_I64), np.int64), ("noise_gradients", _P(_D), np.float64),
-    ("relative_epsilon", _D, None), ("torus_newton_steps", _I64, None),
-]
-#: Parameter slots per material in mat_tex_param (texture.h's TEX_PARAMS): the longest defaults (marble).
-TEX_PARAMS = 9
+#: Per-mesh tables: the MeshArrays fields that are SceneDesc fields too (all but the scalar extent).
+MESH_TABLES = tuple(name for name in MeshArrays.__dataclass_fields__ if name != "extent")
+_SHARED = contract.constant_values()
+TEX_PARAMS = _SHARED["TEX_PARAMS"]
 
 
 class SceneDesc(ctypes.Structure):
-    _fields_ = [(name, ctype) for name, ctype, _ in _LAYOUT]
-
-
-def _mesh_of(prim: Primitive):
-    return getattr(prim, "_mesh", None)
-
-
-def _planes_of(prim: Primitive):
-    return getattr(prim, "_planes", None)
+    _fields_ = contract.ctypes_fields()
 
 
 def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
@@ -108,23 +61,20 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
             return f"unknown scene node {type(node).__name__}"
         if node.kind not in KIND_CODES:
             return f"not implemented in C: shape {node.kind}"
-        if KIND_CODES[node.kind] == 6 and _planes_of(node) is None:
+        if KIND_CODES[node.kind] == KIND["POLYHEDRON"] and node.face_planes is None:
             return f"{node.kind} has no face planes"
-        if KIND_CODES[node.kind] == 7:
-            mesh = _mesh_of(node)
-            missing = [a for a in MESH_ATTRIBUTES if mesh is None or not hasattr(mesh, a)]
-            if missing:
-                return f"mesh layout not understood by the C core (no {', '.join(missing)})"
+        if KIND_CODES[node.kind] == KIND["MESH"] and node.triangle_mesh is None:
+            return f"{node.kind} has no triangle mesh"
         return None
 
-    plain = {kind for kind, code in KIND_CODES.items() if code not in (6, 7)}  # nothing more to check
+    plain = {kind for kind, code in KIND_CODES.items() if code not in (KIND["POLYHEDRON"], KIND["MESH"])}  # nothing more to check
     for obj in compiled.objects:
         if type(obj) is Primitive and obj.kind in plain:  # the common case, without a call
             continue
         reason = check(obj)
         if reason:
             return reason
-    if any(_mesh_of(p) is not None for p in compiled.primitives):
+    if any(p.triangle_mesh is not None for p in compiled.primitives):
         from ..intersect import mesh as mesh_module
         missing = [c for c in MESH_CONSTANTS if not hasattr(mesh_module, c)]
         if missing:
@@ -134,8 +84,9 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
 
 #: Generic boxes (centre, half extents) that hold each closed-form shape; tapered cylinders get theirs
 #: from their small radius, meshes and polyhedra from their vertices.
+_TORUS_OUTER = _SHARED["TORUS_RING"] + _SHARED["TORUS_TUBE"]
 _GENERIC_BOX = {"sphere": ((0, 0, 0), (1, 1, 1)), "cube": ((0, 0, 0), (1, 1, 1)), "square": ((0, 0, 0), (1, 1, 0)),
-                "torus": ((0, 0, 0), (1.2, 1.2, 0.2))}
+                "torus": ((0, 0, 0), (_TORUS_OUTER, _TORUS_OUTER, _SHARED["TORUS_TUBE"]))}
 
 
 def _generic_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -155,7 +106,7 @@ def _generic_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         p, kind = prims[i], kinds[i]
         if kind == "plane":
             bounded[i] = False
-        elif KIND_CODES[kind] == 4:
+        elif KIND_CODES[kind] == KIND["TAPERED"]:
             r = max(1.0, float(p.shape.small_radius))
             centre[i], half[i] = (0.0, 0.0, 0.5), (r, r, 0.5)
         else:
@@ -218,7 +169,7 @@ class FlatScene:
         if centred:
             sphere[centred, :3] = np.stack([prims[k].center for k in centred]).astype(np.float64, copy=False)
         a["prim_sphere"] = sphere
-        a["prim_param"] = [float(prims[k].shape.small_radius) if code == 4 else 0.0
+        a["prim_param"] = [float(prims[k].shape.small_radius) if code == KIND["TAPERED"] else 0.0
                            for k, code in enumerate(codes.tolist())]
         a["prim_material"] = [p.material_id for p in prims]
 
@@ -226,15 +177,15 @@ class FlatScene:
         planes, aux = [], []
         meshes, mesh_index = [], {}
         for p, code in zip(prims, codes.tolist()):
-            if code == 6:
-                normals, offsets = _planes_of(p)
+            if code == KIND["POLYHEDRON"]:
+                normals, offsets = p.face_planes
                 aux.append((sum(len(x) for x in planes), len(offsets)))
                 planes.append(np.c_[np.asarray(normals, dtype=np.float64), np.asarray(offsets, dtype=np.float64)])
-            elif code == 7:
-                mesh = _mesh_of(p)
+            elif code == KIND["MESH"]:
+                mesh = p.triangle_mesh
                 if id(mesh) not in mesh_index:
                     mesh_index[id(mesh)] = len(meshes)
-                    meshes.append(mesh)
+                    meshes.append(mesh.arrays())
                 aux.append((mesh_index[id(mesh)], 0))
             else:
                 aux.append((0, 0))
@@ -299,16 +250,16 @@ class FlatScene:
                        relative_epsilon=float(numerics.RELATIVE_EPSILON),
                        torus_newton_steps=int(torus.NEWTON_STEPS))
         self.desc = SceneDesc()
-        for name, ctype, dtype in _LAYOUT:
-            if dtype is None:
-                value = counts[name] if name in counts else scalars[name]
-                setattr(self.desc, name, ctype(*value) if isinstance(value, tuple) else value)
+        for f in contract.SCENE_DESC:
+            if not f.is_pointer:
+                value = counts[f.name] if f.name in counts else scalars[f.name]
+                setattr(self.desc, f.name, f.ctype(*value) if isinstance(value, tuple) else value)
                 continue
-            array = np.ascontiguousarray(np.asarray(a.get(name, ()), dtype=dtype).reshape(-1))
+            array = np.ascontiguousarray(np.asarray(a.get(f.name, ()), dtype=f.dtype).reshape(-1))
             if array.size == 0:  # a valid pointer even for empty tables
-                array = np.zeros(1, dtype=dtype)
-            a[name] = array
-            setattr(self.desc, name, array.ctypes.data_as(ctype))
+                array = np.zeros(1, dtype=f.dtype)
+            a[f.name] = array
+            setattr(self.desc, f.name, array.ctypes.data_as(f.ctype))
 
     def _flatten_textures(self, compiled: CompiledScene) -> int:
         """Per-material texture numbers, parameters (defaults filled in as tracer.textures does) and image
@@ -353,35 +304,17 @@ class FlatScene:
         from ..intersect import mesh as mesh_module
         return tuple(float(getattr(mesh_module, name)) for name in MESH_CONSTANTS)
 
-    def _flatten_meshes(self, meshes) -> None:
+    def _flatten_meshes(self, meshes: list[MeshArrays]) -> None:
+        """The meshes' tables one after the other (each flattened; SceneDesc.mesh_info says where each starts)."""
         a = self.arrays
-        info, extent = [], []
-        columns: dict[str, list] = {name: [] for name in MESH_ATTRIBUTES if name != "extent"}
-        node_base = tri_base = 0
+        info, node_base, tri_base = [], 0, 0
         for mesh in meshes:
             n_nodes, n_tris = len(mesh.node_count), len(mesh.tri_order)
             info.append((node_base, n_nodes, tri_base, n_tris))
-            extent.append(float(mesh.extent))
-            for name in columns:
-                columns[name].append(np.asarray(getattr(mesh, name)))
             node_base += n_nodes
             tri_base += n_tris
         a["mesh_info"] = info
-        a["mesh_extent"] = extent
-
-        def joined(name, width):
-            parts = [np.asarray(x).reshape(-1, width) if width > 1 else np.asarray(x).reshape(-1)
-                     for x in columns[name]]
-            return np.concatenate(parts) if parts else np.zeros((0, width) if width > 1 else 0)
-
-        for target, name, width in (("node_lo", "node_lo", 3), ("node_hi", "node_hi", 3),
-                                    ("node_left", "node_left", 1), ("node_right", "node_right", 1),
-                                    ("node_first", "node_first", 1), ("node_count", "node_count", 1),
-                                    ("node_axis", "node_axis", 1), ("tri_order", "tri_order", 1),
-                                    ("tri_p0", "tri_p0", 3), ("tri_e1", "tri_e1", 3), ("tri_e2", "tri_e2", 3),
-                                    ("tri_flip", "tri_flip", 1), ("tri_edge_scale", "_edge_scale", 1),
-                                    ("tri_radius", "_radius", 1), ("tri_slack1", "_slack1", 1),
-                                    ("tri_slack2", "_slack2", 1), ("tri_welded", "_tri_welded", 3),
-                                    ("tri_geometric", "_geometric_normal", 3),
-                                    ("tri_corners", "_corner_normals", 9), ("tri_has_normals", "_has_normals", 1)):
-            a[target] = joined(name, width)
+        a["mesh_extent"] = [float(mesh.extent) for mesh in meshes]
+        for name in MESH_TABLES:
+            parts = [np.asarray(getattr(mesh, name)).reshape(-1) for mesh in meshes]
+            a[name] = np.concatenate(parts) if parts else ()

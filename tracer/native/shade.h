@@ -6,7 +6,41 @@
  * and dead effects cost nothing per ray; `self` is that function, for the recursion.
  * Included by core.c after the scene queries it uses. */
 
-typedef void (*ShadeFn)(const Scene *, Work *, const double *, const double *, int64_t, const Media *, double *);
+typedef void (*ShadeFn)(const Scene *, Work *, const double *, const double *, int64_t, const Media *, double,
+                        double *);
+
+/* tracer.savings, the shadow feelers: whether the feeler from a hit on material `mat` towards light `l`
+ * need not be cast (counted per reason; the light then adds nothing).  `inside_of`: the object the ray
+ * was inside when it hit (it left that object there), or -1. */
+static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t inside_of, int64_t l,
+                              const int use_cook_torrance)
+{
+    const SceneDesc *D = &S->d;
+    if (S->savings & SAVE_DARK_MATERIALS) {
+        const double *diffuse = D->mat_diffuse + 3 * mat, *specular = D->mat_specular + 3 * mat;
+        int dark = diffuse[0] == 0.0 && diffuse[1] == 0.0 && diffuse[2] == 0.0 && specular[0] == 0.0 &&
+                   specular[1] == 0.0 && specular[2] == 0.0 &&
+                   (!use_cook_torrance || D->mat_specular_fraction[mat] == 0.0);
+        if (dark) {
+            w->counts[SKIP_DARK_MATERIAL]++;
+            return 1;
+        }
+    }
+    if ((S->savings & SAVE_INSIDE_SHADOWS) && inside_of >= 0 && S->sealed[inside_of * D->n_lights + l]) {
+        w->counts[SKIP_INSIDE_SHADOW]++;
+        return 1;
+    }
+    return 0;
+}
+
+/* tracer.savings, the contribution cutoff: whether a secondary ray of this cumulative weight is traced. */
+static inline int worth_tracing(const Scene *S, Work *w, double weight)
+{
+    if (weight >= S->cutoff)
+        return 1;
+    w->counts[SKIP_CUTOFF]++;
+    return 0;
+}
 
 /* Cook-Torrance specular per unit light colour, times cos(theta_light), for one colour channel set. */
 static inline void cook_torrance(const double *normal, const double *to_light, const double *to_eye,
@@ -37,7 +71,8 @@ static inline void cook_torrance(const double *normal, const double *to_light, c
 }
 
 static inline __attribute__((always_inline)) void
-shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t level, const Media *media, double *out,
+shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t level, const Media *media,
+           double weight, double *out,
            const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
            const int use_refraction, const int use_textures, ShadeFn self)
 {
@@ -97,6 +132,8 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
             if (!(lambert > 0.0))  /* a light behind the surface does not reach it */
                 continue;
             if (use_shadows) {
+                if (skip_feeler(S, w, mat, h.entering ? -1 : obj, l, use_cook_torrance))
+                    continue;
                 w->counts[RAY_SHADOW]++;
                 double to_light[3] = {lp[0] - feeler[0], lp[1] - feeler[1], lp[2] - feeler[2]};
                 if (scene_occluded(S, w, feeler, to_light, 1.0, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
@@ -127,45 +164,62 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
             color[c] += total[c];
     }
     if ((use_reflection || use_refraction) && level < D->max_depth) {
-        if (use_reflection) {
-            double k = D->mat_reflectivity[mat];
-            if (k >= D->min_reflectivity && k > 0.0) {
-                double r[3], start[3], c[3];
-                double dn = 2.0 * dot3(d, facing);
-                for (int i = 0; i < 3; i++) {
-                    r[i] = d[i] - dn * facing[i];
-                    start[i] = point[i] + offset * facing[i];
-                }
-                w->counts[RAY_REFLECTION]++;
-                self(S, w, start, r, level + 1, media, c);
-                for (int i = 0; i < 3; i++)
-                    color[i] += k * c[i];
-            }
+        double kr = D->mat_reflectivity[mat], kt = D->mat_transparency[mat];
+        int reflects = use_reflection && kr >= D->min_reflectivity && kr > 0.0;
+        int transmits = use_refraction && kt >= D->min_transparency && kt > 0.0;
+        /* Snell's law first: under total internal reflection the transmitted ray is the mirror ray. */
+        Media after;
+        double ratio = 1.0, cos1 = 0.0, cos2_squared = 0.0, unit[3] = {0.0, 0.0, 0.0};
+        if (transmits) {
+            double c1 = media_speed(media), speed = D->mat_speed[mat];
+            after = *media;
+            if (h.entering)
+                media_enter(&after, obj, speed);
+            else
+                media_leave(&after, obj);
+            double c2 = h.entering ? speed : media_speed(&after);
+            ratio = c2 / c1;
+            double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            unit[0] = d[0] / length;
+            unit[1] = d[1] / length;
+            unit[2] = d[2] / length;
+            cos1 = -dot3(unit, facing);
+            cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1);
         }
-        if (use_refraction) {
-            double k = D->mat_transparency[mat];
-            if (k >= D->min_transparency && k > 0.0) {
-                double c1 = media_speed(media), speed = D->mat_speed[mat];
-                Media after = *media;
-                if (h.entering)
-                    media_enter(&after, obj, speed);
-                else
-                    media_leave(&after, obj);
-                double c2 = h.entering ? speed : media_speed(&after);
-                double ratio = c2 / c1;
-                double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-                double unit[3] = {d[0] / length, d[1] / length, d[2] / length};
-                double cos1 = -dot3(unit, facing);
-                double cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1);
-                double next[3], start[3], c[3];
-                if (cos2_squared < 0.0) {  /* total internal reflection: stays in the medium it came from */
+        int total_internal = transmits && cos2_squared < 0.0;
+        int shared = total_internal && reflects && (S->savings & SAVE_SHARED_TIR);
+        double mirrored[3] = {0.0, 0.0, 0.0};
+        if (shared)
+            w->counts[SKIP_SHARED_TIR]++;
+        if (reflects && worth_tracing(S, w, weight * (shared ? kr + kt : kr))) {
+            double r[3], start[3];
+            double dn = 2.0 * dot3(d, facing);
+            for (int i = 0; i < 3; i++) {
+                r[i] = d[i] - dn * facing[i];
+                start[i] = point[i] + offset * facing[i];
+            }
+            w->counts[RAY_REFLECTION]++;
+            self(S, w, start, r, level + 1, media, weight * (shared ? kr + kt : kr), mirrored);
+        }
+        if (reflects)
+            for (int i = 0; i < 3; i++)
+                color[i] += kr * mirrored[i];
+        if (transmits) {
+            double c[3] = {0.0, 0.0, 0.0};
+            if (shared) {
+                c[0] = mirrored[0];
+                c[1] = mirrored[1];
+                c[2] = mirrored[2];
+            } else if (worth_tracing(S, w, weight * kt)) {
+                double next[3], start[3];
+                if (total_internal) {  /* total internal reflection: stays in the medium it came from */
                     double dn = 2.0 * dot3(d, facing);
                     for (int i = 0; i < 3; i++) {
                         next[i] = d[i] - dn * facing[i];
                         start[i] = point[i] + offset * facing[i];
                     }
                     w->counts[RAY_REFLECTION]++;
-                    self(S, w, start, next, level + 1, media, c);
+                    self(S, w, start, next, level + 1, media, weight * kt, c);
                 } else {
                     double along = ratio * cos1 - sqrt(cos2_squared);
                     for (int i = 0; i < 3; i++) {
@@ -173,11 +227,11 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                         start[i] = point[i] - offset * facing[i];
                     }
                     w->counts[RAY_REFRACTION]++;
-                    self(S, w, start, next, level + 1, &after, c);
+                    self(S, w, start, next, level + 1, &after, weight * kt, c);
                 }
-                for (int i = 0; i < 3; i++)
-                    color[i] += k * c[i];
             }
+            for (int i = 0; i < 3; i++)
+                color[i] += kt * c[i];
         }
     }
     out[0] = color[0];

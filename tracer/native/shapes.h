@@ -10,10 +10,7 @@
 #include "core.h"
 #include "numeric.h"
 
-#define EDGE_TOLERANCE 1e-12
-#define TORUS_RING 1.0
-#define TORUS_TUBE 0.2
-#define TORUS_IMAG_TOLERANCE 1e-6
+/* EDGE_TOLERANCE, TORUS_RING, TORUS_TUBE and TORUS_IMAG_TOLERANCE come from contract.h (via core.h). */
 
 static inline void set_hit(Hit *h, double t, int entering, double nx, double ny, double nz, int part)
 {

@@ -15,8 +15,6 @@
 #ifndef RT_TEXTURE_H
 #define RT_TEXTURE_H
 
-#define TEX_PARAMS 9 /* parameter slots per material (marble has the most: 9) */
-
 /* np.mod for floats (Python's rule: the result takes the divisor's sign; a zero result is +0 for b > 0). */
 static inline double np_mod(double a, double b)
 {

@@ -21,6 +21,7 @@ from typing import Iterator, Optional, Union
 import numpy as np
 
 from .. import transforms
+from ..errors import WriteError
 from ..meshio import write_3vn, write_text_atomic
 from ..model import CSG, Material, MeshData, Scene, SceneObject, Shape
 from .parser import COLOR_MATERIAL, FLOAT_MATERIAL, KEYWORDS, is_singular
@@ -37,7 +38,7 @@ def fmt(x: float) -> str:
     """A number as SDL text that reads back as exactly the same float ('2' rather than '2.0')."""
     x = float(x)
     if not math.isfinite(x):
-        raise ValueError(f"SDL has no way to write the number {x!r}")
+        raise WriteError(f"SDL has no way to write the number {x!r}")
     return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
 
 
@@ -47,7 +48,7 @@ def _fmt_all(values) -> str:
 
 def _whole(x: float, what: str) -> str:
     if not float(x).is_integer():
-        raise ValueError(f"{what} must be a whole number, not {x!r}")
+        raise WriteError(f"{what} must be a whole number, not {x!r}")
     return str(int(x))
 
 
@@ -57,7 +58,7 @@ _BAD_NAME = re.compile(r"[\s{}!]")
 def _name(name: str, what: str) -> str:
     """A file name as one SDL token; names the lexer would split or misread cannot be written."""
     if not name or _BAD_NAME.search(name) or name in KEYWORDS:
-        raise ValueError(f"{what} {name!r} cannot be written in SDL (no spaces, braces, '!' or keywords)")
+        raise WriteError(f"{what} {name!r} cannot be written in SDL (no spaces, braces, '!' or keywords)")
     return name
 
 
@@ -178,9 +179,9 @@ def transform_statements(matrix: np.ndarray) -> list[Statement]:
     """SDL transform statements that rebuild an affine ``matrix`` when applied after ``identityAffine``."""
     m = np.asarray(matrix, dtype=np.float64).reshape(4, 4)
     if not np.all(np.isfinite(m)):
-        raise ValueError("cannot write a transform with non-finite entries")
+        raise WriteError("cannot write a transform with non-finite entries")
     if not np.array_equal(m[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError("cannot write a projective (non-affine) transform in SDL")
+        raise WriteError("cannot write a projective (non-affine) transform in SDL")
     linear, offset = m[:3, :3], m[:3, 3]
     head: list[Statement] = [("translate", tuple(offset))] if np.any(offset) else []
 
@@ -264,7 +265,7 @@ def _shape_keyword(shape: Shape, mesh_names: dict[int, str]) -> str:
     if shape.kind == "mesh":
         name = mesh_names.get(id(shape), shape.mesh_file)
         if name is None:
-            raise ValueError("a mesh shape has no file name; save_sdl writes its mesh beside the scene")
+            raise WriteError("a mesh shape has no file name; save_sdl writes its mesh beside the scene")
         return f"mesh {_name(name, 'mesh file')}"
     return shape.kind  # the analytic shapes, the polyhedra and the teapot are keywords
 
@@ -302,7 +303,7 @@ def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str
         if is_singular(obj.matrix):
             # The reader refuses such a shape, so writing it would only move the error to the next load.
             where = f" ({obj.source})" if obj.source else ""
-            raise ValueError(f"cannot write the {obj.kind}{where}: its transform is singular (a scale of 0?)")
+            raise WriteError(f"cannot write the {obj.kind}{where}: its transform is singular (a scale of 0?)")
         lines += [indent + statement for statement in material_statements(material, obj.material)]
         material = obj.material
         lines.append(f"{indent}{_transform_text(obj.matrix)} {_shape_keyword(obj, mesh_names)}")
@@ -343,7 +344,7 @@ def save_sdl(scene: Scene, path: PathLike) -> None:
             continue
         if shape.mesh_file is None:
             if shape.mesh is None:
-                raise ValueError("a mesh shape has neither a file name nor mesh data")
+                raise WriteError("a mesh shape has neither a file name nor mesh data")
             if id(shape.mesh) not in new_meshes:
                 name = f"{_safe_stem(path)}_mesh{len(new_meshes) + 1}.3vn"
                 new_meshes[id(shape.mesh)] = (shape.mesh, folder / name)

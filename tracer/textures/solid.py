@@ -54,3 +54,5 @@ def marble(points: np.ndarray, parameters: tuple = ()) -> np.ndarray:
 SOLID_TEXTURES = {-1: checkerboard, -2: wood, -3: marble}
 #: Each solid texture's parameter defaults, by texture number (the C core fills them in from here too).
 SOLID_DEFAULTS = {-1: CHECKER_DEFAULTS, -2: WOOD_DEFAULTS, -3: MARBLE_DEFAULTS}
+#: The most parameters a texture reads (marble's defaults; an image reads 2): the C core's slots per material.
+MAX_PARAMETERS = max(len(defaults) for defaults in SOLID_DEFAULTS.values())

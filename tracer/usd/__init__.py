@@ -13,10 +13,11 @@ def save_usd(scene, path) -> None:
     save(scene, path)
 
 
-def load_usd(path, strict: bool = True):
-    """Read a USD file into a :class:`tracer.model.Scene` (see :func:`tracer.usd.reader.load_usd`)."""
+def load_usd(path, strict: bool = True, time=None):
+    """Read a USD file into a :class:`tracer.model.Scene` at time code ``time`` (a frame; default: the start
+    frame), see :func:`tracer.usd.reader.load_usd`."""
     from .reader import load_usd as load
-    return load(path, strict=strict)
+    return load(path, strict=strict, time=time)
 
 
 __all__ = ["USD_EXTENSIONS", "load_usd", "save_usd"]

@@ -9,6 +9,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..errors import SceneError
 from ..model import MeshData
 from . import common as C
 
@@ -33,7 +34,7 @@ def sdl_mesh(reader, prim) -> Optional[MeshData]:
         at += n
     if any(not 0 <= v < len(vertices) for f in faces for v in f[0]) or \
             any(not 0 <= i < len(normals) for f in faces for i in f[1]):
-        raise ValueError("a face index is out of range")
+        raise SceneError("a face index is out of range")
     return MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>")
 
 

@@ -55,14 +55,14 @@ class _Group:
 
 
 class _Reader:
-    def __init__(self, stage, file: str, strict: bool = True):
+    def __init__(self, stage, file: str, strict: bool = True, time: Optional[float] = None):
         pxr = C.pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = pxr.Gf, pxr.Sdf, pxr.Usd, pxr.UsdGeom
         self.UsdLux, self.UsdShade = pxr.UsdLux, pxr.UsdShade
         self.stage = stage
         self.file = file
         self.strict = strict
-        self.time = _time_code(pxr.Usd, stage)
+        self.time = _time_code(pxr.Usd, stage) if time is None else pxr.Usd.TimeCode(float(time))
         self.xforms = self.UsdGeom.XformCache(self.time)
         # SDL's world is y-up: a z-up stage is turned so that its up becomes +y (see common.to_y_up).
         self.up = C.to_y_up(str(self.UsdGeom.GetStageUpAxis(stage)))
@@ -514,14 +514,23 @@ def _time_code(Usd, stage):
     return Usd.TimeCode.EarliestTime()
 
 
-def load_usd(path: PathLike, strict: bool = True) -> Scene:
-    """Read a USD file into a Scene.
+def time_range(path: PathLike) -> Optional[tuple[float, float]]:
+    """The stage's authored (start, end) time codes, or None when it has no time code range."""
+    stage, _ = open_stage(path)
+    if not stage.HasAuthoredTimeCodeRange():
+        return None
+    return float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())
+
+
+def load_usd(path: PathLike, strict: bool = True, time: Optional[float] = None) -> Scene:
+    """Read a USD file into a Scene, at time code ``time`` (a frame; default: the stage's start frame, else
+    each value's earliest sample).
 
     Strict (the default), anything that cannot be read -- an unsupported prim or light, a broken mesh, a
     reference to a missing file -- raises a TracerError naming the file and prim.  With ``strict=False``
     each becomes one message in ``scene.warnings`` and the rest is read.  Approximations (a rect light read
     as a point light, a material that is not a UsdPreviewSurface) are warnings either way."""
     stage, composition_errors = open_stage(path)
-    scene = _Reader(stage, os.fspath(path), strict).read(composition_errors)
+    scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
     scene.source = Path(path)
     return scene

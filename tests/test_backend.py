@@ -1,0 +1,103 @@
+"""Choosing the backend: "auto" never falls back to NumPy silently, the C core says what it refused, and the
+CLI prints both as one line (and exits 130 on a cancel)."""
+from __future__ import annotations
+
+import ctypes
+import importlib
+import warnings
+
+import pytest
+
+import tracer
+from tracer import cli, native
+from tracer.backend import make_tracer
+from tracer.compile import compile_scene
+from tracer.errors import FallbackWarning, RenderCancelled, TracerError
+
+requires_core = pytest.mark.skipif(native.load_error is not None,
+                                   reason=f"C core not available: {native.load_error}")
+SCENE = "light 1 2 3 1 1 1  sphere"
+
+
+def _compiled():
+    return compile_scene(tracer.parse_sdl(SCENE))
+
+
+@requires_core
+def test_auto_takes_the_c_core_without_a_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert make_tracer(_compiled(), "auto").name == "c"
+
+
+def test_auto_without_the_core_warns_with_the_reason(monkeypatch):
+    monkeypatch.setattr(native, "_lib", None)
+    monkeypatch.setattr(native, "load_error", "no C compiler found (install gcc or set CC)")
+    with pytest.warns(FallbackWarning, match="no C compiler found"):
+        assert make_tracer(_compiled(), "auto").name == "numpy"
+    with pytest.raises(TracerError, match="no C compiler found"):
+        make_tracer(_compiled(), "c")
+
+
+@requires_core
+def test_a_scene_the_core_refuses_warns_with_the_reason():
+    compiled = _compiled()
+    compiled.effects = compiled.effects | {"something new"}
+    with pytest.warns(FallbackWarning, match="something new"):
+        assert make_tracer(compiled, "auto").name == "numpy"
+
+
+@requires_core
+@pytest.mark.parametrize("corrupt, fragment", [
+    (lambda d: setattr(d, "n_materials", 0), "primitive 0 has material 0 of 0"),
+    (lambda d: d.prim_kind.__setitem__(0, 99), "primitive 0 has unknown shape kind 99"),
+    (lambda d: d.object_ref.__setitem__(0, 5), "object 0 refers to nothing (5)"),
+])
+def test_rt_create_names_what_it_refused(corrupt, fragment):
+    flat = native.flatten.FlatScene(_compiled())
+    corrupt(flat.desc)
+    message = ctypes.create_string_buffer(256)
+    assert not native._lib.rt_create(ctypes.byref(flat.desc), message, len(message))
+    assert message.value.decode() == fragment
+
+
+@requires_core
+def test_a_refused_description_reaches_the_user(monkeypatch):
+    class Corrupt(native.flatten.FlatScene):
+        def __init__(self, compiled):
+            super().__init__(compiled)
+            self.desc.n_materials = 0
+
+    monkeypatch.setattr(native.flatten, "FlatScene", Corrupt)
+    with pytest.raises(TracerError, match="refused the scene description: primitive 0 has material 0 of 0"):
+        make_tracer(_compiled(), "c")
+    with pytest.warns(FallbackWarning, match="primitive 0 has material"):
+        assert make_tracer(_compiled(), "auto").name == "numpy"
+
+
+def _cli(tmp_path, capsys, *extra):
+    path = tmp_path / "s.sdl"
+    path.write_text(SCENE)
+    code = cli.main(["render", str(path), "-o", str(tmp_path / "s.png"), "--width", "8", "--height", "6",
+                     "--quiet", *extra])
+    return code, capsys.readouterr().err
+
+
+def test_cli_prints_the_fallback_as_one_warning_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(native, "_lib", None)
+    monkeypatch.setattr(native, "load_error", "compiling the C core failed: boom")
+    code, err = _cli(tmp_path, capsys)
+    assert code == 0
+    assert err.splitlines() == ["warning: the C core is not available: compiling the C core failed: boom; "
+                                "using the slower NumPy path"]
+
+
+def test_cli_cancel_exits_130(tmp_path, capsys, monkeypatch):
+    def cancelled(*args, **kwargs):
+        raise RenderCancelled("render cancelled")
+
+    monkeypatch.setattr(importlib.import_module("tracer.render"), "render", cancelled)
+    code, err = _cli(tmp_path, capsys)
+    assert code == cli.EXIT_INTERRUPTED == 130
+    assert err.strip() == "error: cancelled"
+    assert not (tmp_path / "s.png").exists()

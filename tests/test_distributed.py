@@ -1,0 +1,248 @@
+"""Rendering on a Dask cluster (tracer.distributed, ``render --scheduler``), on loopback only: the same bytes as
+the local render, a worker killed mid-render, an unreachable scheduler, a scene a worker cannot read, a
+USD frame sequence.  Images are small; one two-worker LocalCluster serves the library-level tests."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+from PIL import Image
+
+import tracer
+from tracer import distributed as dist
+from tracer.errors import TracerError
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ROOT / "scenes"
+#: Bounds a hang, never a speed: connecting to nothing waits for Dask's connect timeout (set to 3 s here).
+PROCESS_LIMIT = 120
+
+
+def _children() -> list:
+    """This process's children, less multiprocessing's resource tracker (started with the first spawned
+    process, it lives as long as this process does and leaks nothing)."""
+    found = []
+    for child in psutil.Process().children(recursive=True):
+        try:
+            if "resource_tracker" not in " ".join(child.cmdline()):
+                found.append(child)
+        except psutil.NoSuchProcess:
+            pass
+    return found
+
+
+@pytest.fixture(scope="module")
+def client():
+    """A LocalCluster of two worker processes; afterwards no process of it may be left behind."""
+    before = {p.pid for p in _children()}
+    with dist.connect("local:2") as c:
+        c.wait_for_workers(2, timeout=60)
+        yield c
+    deadline = time.monotonic() + 30
+    while {p.pid for p in _children()} - before and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert {p.pid for p in _children()} - before == set()
+
+
+def _cluster_render(client, path, job, times=(None,), on_tile=None):
+    scene = dist.read_scene(path, time=times[0])
+    frames = {}
+    dist.render_frames(client, dist.SceneBundle.of(path, scene), job, list(times),
+                       lambda i, image, rays, backend: frames.__setitem__(i, (image, rays)), on_tile)
+    return [frames[i] for i in range(len(times))]
+
+
+def _local_render(path, job, time=None):
+    return tracer.render(dist.read_scene(path, time=time), job.width, job.height, block_size=job.block_size,
+                         progressive=job.progressive, tile=job.tile, samples=job.samples,
+                         sampling_mode=job.sampling_mode, threshold=job.threshold, seed=job.seed)
+
+
+@pytest.mark.parametrize("job", [
+    dist.Job(64, 48, samples=4, tile=16),  # jittered
+    dist.Job(64, 48, samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),
+    dist.Job(50, 30, block_size=8, progressive=True, tile=16),
+])
+def test_cluster_render_equals_local_bytes(client, job):
+    [(image, rays)] = _cluster_render(client, SCENES / "glass.sdl", job)
+    local = _local_render(SCENES / "glass.sdl", job)
+    assert image.any() and np.array_equal(image, local.image)
+    assert rays.as_dict() == local.rays.as_dict()  # each pixel traced once: no tile was lost or doubled
+
+
+def test_every_file_the_scene_reads_goes_to_the_workers(client, tmp_path):
+    """textures.sdl reads pixmaps (and a copy of the scene elsewhere still finds them through the bundle)."""
+    job = dist.Job(40, 30, samples=1, tile=16)
+    scene = tracer.load(SCENES / "textures.sdl")
+    bundle = dist.SceneBundle.of(SCENES / "textures.sdl", scene)
+    assert bundle.scene == "textures.sdl" and len(bundle.files) == 1 + len(set(scene.pixmaps.values()))
+    [(image, _)] = _cluster_render(client, SCENES / "textures.sdl", job)
+    assert np.array_equal(image, _local_render(SCENES / "textures.sdl", job).image)
+
+
+def test_a_worker_killed_mid_render_loses_nothing(client):
+    job = dist.Job(96, 72, samples=16, tile=8)
+    pids = client.run(os.getpid)
+    victim = sorted(pids.values())[0]
+    arrived_after_kill = []
+
+    def on_tile(update):
+        if arrived_after_kill or update.tiles_done == 1:
+            if not arrived_after_kill:
+                os.kill(victim, signal.SIGKILL)
+            arrived_after_kill.append(update.tiles_done)
+
+    [(image, rays)] = _cluster_render(client, SCENES / "glass.sdl", job, on_tile=on_tile)
+    local = _local_render(SCENES / "glass.sdl", job)
+    assert len(arrived_after_kill) > 10  # the render went on after the kill, for most of its tiles
+    assert not psutil.pid_exists(victim) or psutil.Process(victim).status() == psutil.STATUS_ZOMBIE
+    assert np.array_equal(image, local.image)
+    assert rays.camera == local.rays.camera
+
+
+def test_a_scene_a_worker_cannot_read_is_reported_once(client):
+    path = SCENES / "glass.sdl"
+    bundle = dist.SceneBundle.of(path, tracer.load(path))
+    broken = dataclasses.replace(bundle, files={**bundle.files, bundle.scene: b"sphere sphere 12 {"},
+                                 digest="broken-" + bundle.digest)
+    with pytest.raises(TracerError) as caught:
+        dist.render_frames(client, broken, dist.Job(32, 24, tile=8), [None], lambda *a: None)
+    message = str(caught.value)
+    assert message.startswith("worker tcp://127.0.0.1:") and "glass.sdl:1:" in message
+    assert "\n" not in message and "sdl-scene-" not in message  # the user's file name, not the worker's copy
+    assert client.submit(sum, [1, 2]).result(timeout=30) == 3  # the cluster is not left jammed
+
+
+def _run(*args, env=None):
+    return subprocess.run([sys.executable, "-m", "tracer", *map(str, args)], capture_output=True, text=True,
+                          timeout=PROCESS_LIMIT, env={**os.environ, **(env or {})}, cwd=ROOT)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_unreachable_scheduler_is_one_line_and_exit_2(tmp_path):
+    out = tmp_path / "x.png"
+    done = _run("render", SCENES / "lecture.sdl", "-o", out, "--width", 16, "--height", 12,
+                "--scheduler", f"tcp://127.0.0.1:{_free_port()}",
+                env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "3s"})
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("error: --scheduler tcp://127.0.0.1:") and done.stderr.count("\n") == 1
+    assert "cannot reach the scheduler" in done.stderr and not out.exists()
+
+
+@pytest.mark.parametrize("address, what", [("local:0", "local:N"), ("nonsense", "tcp://HOST:8786")])
+def test_bad_scheduler_addresses(tmp_path, address, what):
+    done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--scheduler", address)
+    assert done.returncode == 2 and done.stderr.startswith("error: --scheduler") and what in done.stderr
+
+
+def test_without_dask_scheduler_says_how_to_install_it(tmp_path):
+    code = ("import sys; sys.modules['distributed'] = None\n"  # what an environment without it gives
+            "from tracer.cli import main\n"
+            f"sys.exit(main(['render', {str(SCENES / 'lecture.sdl')!r}, '-o', {str(tmp_path / 'x.png')!r}, "
+            "'--scheduler', 'local:2']))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=PROCESS_LIMIT)
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and "pip install 'sdl-raytracer[distributed]'" in done.stderr
+
+
+ANIMATED_STAGE = """#usda 1.0
+(
+    defaultPrim = "World"
+    upAxis = "Y"
+    subLayers = [@motion.usda@]
+    startTimeCode = 1
+    endTimeCode = 3
+)
+
+def Xform "World"
+{
+    def Sphere "Ball"
+    {
+        double radius = 0.5
+        color3f[] primvars:displayColor = [(0.9, 0.3, 0.1)]
+    }
+
+    def Cube "Box"
+    {
+        double size = 1
+        double3 xformOp:translate = (-1.2, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+
+    def SphereLight "Lamp"
+    {
+        float inputs:intensity = 1
+        double3 xformOp:translate = (3, 4, 5)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+
+    def Camera "Camera"
+    {
+        float focalLength = 35
+        float verticalAperture = 24
+        double3 xformOp:translate = (0, 0.5, 6)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+}
+"""
+
+MOTION_LAYER = """#usda 1.0
+
+over "World"
+{
+    over "Ball"
+    {
+        double3 xformOp:translate.timeSamples = {
+            1: (0.5, 0, 0),
+            3: (1.5, 1, 0),
+        }
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+}
+"""
+
+
+def test_a_frame_sequence_on_the_cluster_equals_the_local_frames(tmp_path):
+    """--frames on a stage whose motion is in a sublayer: one image per frame, the ball moves, and the
+    cluster (which gets the sublayer in the bundle) writes the local bytes."""
+    stage = tmp_path / "stage" / "shot.usda"
+    stage.parent.mkdir()
+    stage.write_text(ANIMATED_STAGE)
+    (stage.parent / "motion.usda").write_text(MOTION_LAYER)
+    assert sorted(dist.SceneBundle.of(stage, dist.read_scene(stage)).files) == ["motion.usda", "shot.usda"]
+    (tmp_path / "local").mkdir()
+    (tmp_path / "cluster").mkdir()
+    common = ["--width", 40, "--height", 30, "--samples", 4, "--frames", "1-3", "-q"]
+    local = _run("render", stage, "-o", tmp_path / "local" / "f.png", *common)
+    assert local.returncode == 0, local.stderr
+    cluster = _run("render", stage, "-o", tmp_path / "cluster" / "f.png", *common, "--scheduler", "local:2")
+    assert cluster.returncode == 0, cluster.stderr
+    names = ["f_0001.png", "f_0002.png", "f_0003.png"]
+    assert sorted(p.name for p in (tmp_path / "local").iterdir()) == names
+    assert sorted(p.name for p in (tmp_path / "cluster").iterdir()) == names
+    images = [np.asarray(Image.open(tmp_path / "local" / n)) for n in names]
+    for name in names:
+        assert (tmp_path / "local" / name).read_bytes() == (tmp_path / "cluster" / name).read_bytes()
+    assert np.abs(images[0].astype(int) - images[2]).max() > 100  # the ball moved between frames 1 and 3
+    assert not np.array_equal(images[0], images[1]) and not np.array_equal(images[1], images[2])
+
+
+def test_frames_need_a_usd_stage(tmp_path):
+    done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--frames", "1-2")
+    assert done.returncode == 2 and "frames need a USD stage" in done.stderr and done.stderr.count("\n") == 1
+    done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--frames", "3-1")
+    assert done.returncode == 2 and "--frames 3-1" in done.stderr

@@ -1,0 +1,113 @@
+"""The tile scheduler (tracer.tiles): one plan of passes and tiles for the command line, a cluster and the
+add-on; sub-pixel samples keyed by pixel, so that any cut into tiles, in any order, gives the same bytes."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tracer
+from tracer import sampling, tiles
+from tracer.backend import make_tracer
+from tracer.camera import CameraFrame
+from tracer.compile import compile_scene
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+WIDTH, HEIGHT = 45, 34  # not multiples of any tile size: tiles at the edges are cut short
+
+
+@pytest.fixture(scope="module")
+def compiled():
+    return compile_scene(tracer.load(SCENES / "glass.sdl"))
+
+
+def _shade(compiled, plan):
+    frame = CameraFrame.from_camera(compiled.scene.camera, plan.width / plan.height)
+    return tiles.PixelTracer(plan, make_tracer(compiled), tiles.camera_rays_for(frame, plan.width, plan.height))
+
+
+def test_pixel_offsets_depend_on_the_pixel_alone():
+    rows, cols = np.arange(40) // 8, np.arange(40) % 8
+    dy, dx = sampling.offsets(9, True, rows, cols, seed=3)
+    pick = [31, 2, 17]  # the same pixels drawn alone, in another order
+    dy_alone, dx_alone = sampling.offsets(9, True, rows[pick], cols[pick], seed=3)
+    assert np.array_equal(dy[pick], dy_alone) and np.array_equal(dx[pick], dx_alone)
+    other_seed, _ = sampling.offsets(9, True, rows, cols, seed=4)
+    assert not np.any(other_seed == dy)
+    # Each of a pixel's samples stays in its own stratum, and neighbouring pixels differ.
+    assert np.all(np.floor(dy * 3) == np.repeat(np.arange(3), 3)) and np.all(np.floor(dx * 3) == np.tile(np.arange(3), 3))
+    assert len({tuple(row) for row in np.round(dx, 12)}) == 40
+
+
+def test_uniforms_are_spread_evenly():
+    u, v = sampling.pixel_uniforms(np.arange(20000) // 200, np.arange(20000) % 200, 2, seed=0)
+    for values in (u.ravel(), v.ravel()):
+        counts, _ = np.histogram(values, bins=10, range=(0, 1))
+        assert counts.min() > 0.9 * values.size / 10 and counts.max() < 1.1 * values.size / 10
+    assert abs(np.corrcoef(u[:, 0], v[:, 0])[0, 1]) < 0.05
+
+
+@pytest.mark.parametrize("settings", [
+    dict(samples=4, sampling_mode="jittered"),
+    dict(samples=4, sampling_mode="adaptive", threshold=0.02),
+    dict(samples=1, block_size=8, progressive=True),
+    dict(samples=4, block_size=4, progressive=True, sampling_mode="jittered"),
+])
+def test_any_tile_size_gives_the_same_bytes(compiled, settings):
+    images = [tracer.render(compiled, WIDTH, HEIGHT, tile=size, **settings).image for size in (8, 16, 64)]
+    assert images[0].any()
+    for image in images[1:]:
+        assert np.array_equal(image, images[0])
+
+
+def test_tiles_of_a_pass_in_any_order_and_whole_tiles_at_once_give_the_same_film(compiled):
+    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=4, progressive=True, tile=16, samples=4,
+                          sampling_mode="adaptive", threshold=0.02)
+    shade = _shade(compiled, plan)
+    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=4, progressive=True, tile=16, samples=4,
+                             sampling_mode="adaptive", threshold=0.02).image[::-1]
+    # Pass by pass, each pass's tiles in reverse order.
+    film = np.zeros((HEIGHT, WIDTH, 3), np.float32)
+    refine = None
+    for p in range(plan.pass_count):
+        for item in reversed(plan.pass_items(p)):
+            if plan.is_refinement(item) and refine is None:
+                refine = plan.refine_mask(film)
+            tiles.trace_tile(plan, item, film, shade, refine)
+    assert np.array_equal(film, expected)
+    # Tile by tile, every block pass of a tile at once into a window of its own (as a cluster worker does),
+    # then the refinement pass on the assembled film.
+    film = np.zeros((HEIGHT, WIDTH, 3), np.float32)
+    for r0, c0, r1, c1 in reversed(plan.rects):
+        film[r0:r1, c0:c1] = tiles.trace_rect(plan, (r0, c0, r1, c1), shade)
+    refine = plan.refine_mask(film)
+    assert refine.any() and not refine.all()
+    for item in plan.pass_items(len(plan.passes)):
+        tiles.trace_tile(plan, item, film, shade, refine)
+    assert np.array_equal(film, expected)
+
+
+def test_plan_cuts_tiles_on_every_stride():
+    plan = tiles.TilePlan(100, 50, block_size=6, progressive=True, tile=10)
+    assert plan.passes == [4, 2, 1] and plan.tile == 8 and plan.pass_count == 3
+    covered = np.zeros((50, 100), int)
+    for r0, c0, r1, c1 in plan.rects:
+        assert r0 % 4 == 0 and c0 % 4 == 0
+        covered[r0:r1, c0:c1] += 1
+    assert np.all(covered == 1)
+    assert len(plan.items) == 3 * len(plan.rects)
+    assert [item.pass_index for item in plan.items] == sorted(item.pass_index for item in plan.items)
+    adaptive = tiles.TilePlan(100, 50, samples=4, sampling_mode="adaptive")
+    assert adaptive.pass_count == 2 and adaptive.per_pixel == 1 and adaptive.is_refinement(adaptive.items[-1])
+
+
+def test_the_addon_traces_the_same_pixels_as_the_command_line(compiled):
+    """addon/blocks.py schedules with tracer.tiles: jittered samples give the command line's bytes."""
+    from addon import blocks  # (imports bpy, pinned in requirements-dev.txt)
+    frame = CameraFrame.from_camera(compiled.scene.camera, WIDTH / HEIGHT)
+    renderer = blocks.BlockRenderer(compiled, tiles.camera_rays_for(frame, WIDTH, HEIGHT), WIDTH, HEIGHT,
+                                    block_size=4, progressive=True, tile=16, samples=4, seed=7, chunk=100)
+    renderer.run()
+    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=4, progressive=True, samples=4, seed=7).image
+    assert np.array_equal(renderer.color, expected[::-1])

@@ -1,0 +1,381 @@
+"""Rendering on a Dask cluster (``python -m tracer render SCENE -o OUT --scheduler ADDRESS``).
+
+The engine is Dask distributed: a scheduler that hands out tasks, restarts the tasks of a worker that died
+and reaches Slurm, PBS or Kubernetes through dask-jobqueue and dask-kubernetes.  What is ours:
+
+* :class:`SceneBundle`: the scene file and every file it reads (.3vn meshes, pixmaps, USD layers and
+  assets), as bytes.  It is scattered to every worker once; each worker process unpacks it into a
+  folder of its own, reads and compiles it once per frame and keeps the compiled scene (and one backend
+  tracer per worker thread) while tiles arrive.
+* Tasks are tiles of :mod:`tracer.tiles`: one task traces every block pass of one tile of one frame; with
+  adaptive sampling a second task per tile traces the refinement pass once its frame's film is whole (the
+  refinement mask crosses tile borders).  Sub-pixel samples are keyed by pixel, so the image is the local
+  render's, byte for byte, whichever worker traces which tile and however often a tile is traced again.
+* The client assembles tiles as they complete and hands each finished frame back.
+
+``--scheduler local:N`` starts a LocalCluster of N worker processes on this machine, one thread each, whose
+C cores share this machine's cores.  Dask is optional: ``pip install sdl-raytracer[distributed]``.
+"""
+from __future__ import annotations
+
+import contextlib
+import copy
+import hashlib
+import os
+import re
+import tempfile
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterator, Optional, Sequence
+
+import numpy as np
+
+from .errors import TracerError
+from .model import Scene
+from .trace import RayCounts
+
+INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
+LOCAL_PREFIX = "local:"
+
+
+def require_dask():
+    """The ``distributed`` module, or a TracerError that says how to install it."""
+    try:
+        import distributed
+    except ImportError:
+        raise TracerError(f"--scheduler needs Dask distributed, which is not installed: {INSTALL_HINT}") from None
+    return distributed
+
+
+# -- the scene and its files -------------------------------------------------------------------------------
+
+
+def scene_files(path: str | os.PathLike, scene: Scene) -> list[Path]:
+    """The files reading ``path`` (already read into ``scene``) opens: the scene file, its pixmaps and .3vn
+    meshes, and for USD every layer and asset the stage depends on."""
+    path = Path(path)
+    files = [path]
+    files += [Path(name) for name in scene.pixmaps.values()]
+    files += [path.parent / shape.mesh_file for shape in scene.shapes() if shape.mesh_file]
+    if path.suffix.lower() in (".usd", ".usda", ".usdc"):
+        from .usd.common import pxr
+        pxr()  # (a TracerError saying how to install usd-core, where it is missing)
+        from pxr import UsdUtils
+        layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(os.fspath(path))
+        files += [Path(layer.realPath) for layer in layers if layer.realPath]
+        files += [Path(asset) for asset in assets]
+    unique: dict[str, Path] = {}
+    for file in files:
+        if file.is_file():
+            unique.setdefault(os.path.realpath(file), file)
+    return [Path(real) for real in unique]
+
+
+@dataclass(frozen=True)
+class SceneBundle:
+    """A scene file and the files it reads, by path relative to their common folder."""
+
+    scene: str  # the scene file, relative
+    files: dict[str, bytes]
+    origin: str  # the common folder on the client (for messages)
+    lenient: bool = False
+    digest: str = ""  # names the bundle in workers' caches
+
+    @classmethod
+    def of(cls, path: str | os.PathLike, scene: Scene, lenient: bool = False) -> "SceneBundle":
+        paths = scene_files(path, scene)
+        root = Path(os.path.commonpath([os.path.dirname(p) for p in paths]))
+        files = {}
+        for p in paths:
+            try:
+                files[p.relative_to(root).as_posix()] = p.read_bytes()
+            except OSError as err:
+                raise TracerError(f"{p}: cannot read ({err.strerror or err})") from None
+        scene_rel = Path(os.path.realpath(path)).relative_to(root).as_posix()
+        h = hashlib.sha256(f"{scene_rel}\0{lenient}".encode())
+        for name in sorted(files):
+            h.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
+        return cls(scene_rel, files, str(root), lenient, h.hexdigest())
+
+    def unpack(self, folder: Path) -> Path:
+        """Write the files under ``folder``; the scene file's path there."""
+        for name, data in self.files.items():
+            target = folder / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(data)
+        return folder / self.scene
+
+
+def read_scene(path: str | os.PathLike, lenient: bool = False, time: Optional[float] = None) -> Scene:
+    """SDL or USD by extension (USD at time code ``time``)."""
+    from .usd.common import USD_EXTENSIONS
+
+    if Path(path).suffix.lower() in USD_EXTENSIONS:
+        from .usd import load_usd
+        return load_usd(path, strict=not lenient, time=time)
+    if time is not None:
+        raise TracerError(f"{path}: frames need a USD stage with time samples (an SDL file has no time)")
+    from .sdl.parser import load
+    return load(path, strict=not lenient)
+
+
+# -- what a tile needs besides the scene ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Job:
+    """The settings of a render: image size, passes, sampling, backend."""
+
+    width: int
+    height: int
+    block_size: int = 1
+    progressive: bool = False
+    tile: int = 64
+    samples: int = 1
+    sampling_mode: str = "jittered"
+    threshold: float = 0.05
+    seed: int = 0
+    backend: str = "auto"
+    threads: Optional[int] = None  # the C core's threads in each worker (None: the worker's default)
+    max_depth: Optional[int] = None
+
+    def plan(self):
+        from .tiles import TilePlan
+        return TilePlan(self.width, self.height, block_size=self.block_size, progressive=self.progressive,
+                        tile=self.tile, samples=self.samples, sampling_mode=self.sampling_mode,
+                        threshold=self.threshold, seed=self.seed)
+
+
+# -- the worker side -----------------------------------------------------------------------------------------
+
+_lock = threading.Lock()
+_folders: dict[str, tempfile.TemporaryDirectory] = {}  # bundle digest -> unpacked files
+_scenes: dict[tuple, object] = {}  # (digest, time, max depth) -> compiled scene
+_local = threading.local()  # per worker thread: {(scene key, backend, threads): tracer}
+
+
+def _where() -> str:
+    try:
+        from distributed import get_worker
+        return f"worker {get_worker().address}"
+    except (ImportError, ValueError):
+        return "worker"
+
+
+def _compiled(bundle: SceneBundle, time: Optional[float], max_depth: Optional[int]):
+    """The compiled scene of a bundle at a time: read and compiled once per worker process."""
+    from .compile import compile_scene
+    from .errors import SDLError
+
+    key = (bundle.digest, time, max_depth)
+    with _lock:
+        if key not in _scenes:
+            folder = _folders.get(bundle.digest)
+            if folder is None:  # (removed when the worker process ends)
+                folder = _folders[bundle.digest] = tempfile.TemporaryDirectory(prefix="sdl-scene-")
+                bundle.unpack(Path(folder.name))
+            scene_path = Path(folder.name) / bundle.scene
+            try:
+                scene = read_scene(scene_path, bundle.lenient, time)
+                if max_depth is not None:
+                    scene.settings.max_recursion_depth = max_depth
+                _scenes[key] = compile_scene(scene)
+            except (SDLError, TracerError, OSError, ValueError) as err:
+                # One line naming the file as the user knows it, not the worker's copy.
+                message = str(err).replace(folder.name, bundle.origin)
+                raise TracerError(f"{_where()}: {message}") from None
+        return _scenes[key]
+
+
+def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
+    from .backend import make_tracer
+
+    compiled = _compiled(bundle, time, job.max_depth)
+    tracers = getattr(_local, "tracers", None)
+    if tracers is None:
+        tracers = _local.tracers = {}
+    key = (bundle.digest, time, job.max_depth, job.backend, job.threads)
+    if key not in tracers:
+        tracers[key] = make_tracer(compiled, job.backend, job.threads)
+    return compiled, tracers[key]
+
+
+def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: tuple[int, int, int, int],
+                    refine: Optional[np.ndarray] = None):
+    """A task: every block pass of one tile (or, given its window of the refinement mask, the refinement
+    pass).  Returns (the tile's film, bottom row first; the rays it cast; the backend's name)."""
+    from .camera import CameraFrame, scene_camera
+    from .tiles import PixelTracer, Tile, camera_rays_for, trace_rect, trace_tile
+
+    compiled, tracer = _tracer(bundle, job, time)
+    plan = job.plan()
+    aspect = job.width / job.height
+    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, aspect), aspect)
+    before = copy.copy(tracer.counts)
+    shade = PixelTracer(plan, tracer, camera_rays_for(frame, job.width, job.height))
+    if refine is None:
+        window = trace_rect(plan, rect, shade)
+    else:
+        r0, c0, r1, c1 = rect
+        window = np.zeros((r1 - r0, c1 - c0, 3), dtype=np.float32)
+        trace_tile(plan, Tile(len(plan.passes), 1, *rect), window, shade, refine, at=(r0, c0))
+    rays = RayCounts(**{k: v - getattr(before, k) for k, v in tracer.counts.as_dict().items()})
+    return window, rays, tracer.name
+
+
+# -- the client side -----------------------------------------------------------------------------------------
+
+
+def parse_address(address: str) -> Optional[int]:
+    """N for ``local:N`` (worker processes of a LocalCluster), None for a scheduler's address."""
+    if address.startswith(LOCAL_PREFIX):
+        text = address[len(LOCAL_PREFIX):]
+        if not text.isdigit() or not 1 <= int(text) <= 256:
+            raise TracerError(f"--scheduler {address}: expected local:N with N worker processes from 1 to 256")
+        return int(text)
+    if "://" not in address and ":" not in address:
+        raise TracerError(f"--scheduler {address}: expected an address such as tcp://HOST:8786 or local:N")
+    return None
+
+
+@contextlib.contextmanager
+def connect(address: str, threads: Optional[int] = None) -> Iterator[object]:
+    """A Dask client for ``address`` (closed, with any cluster it started, when the block ends).
+
+    ``tls://`` addresses use Dask's own security settings (``distributed.comm.tls.*`` in Dask's
+    configuration).  Connecting waits at most Dask's ``distributed.comm.timeouts.connect``."""
+    workers = parse_address(address)
+    distributed = require_dask()
+    import dask
+
+    cluster = None
+    timeout = dask.config.get("distributed.comm.timeouts.connect")
+    try:
+        if workers is not None:
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, silence_logs=40)
+            client = distributed.Client(cluster, timeout=timeout)
+        else:
+            client = distributed.Client(address, timeout=timeout)
+    except (OSError, TimeoutError) as err:
+        if cluster is not None:
+            cluster.close()
+        reason = " ".join(str(err).split()) or type(err).__name__
+        raise TracerError(f"--scheduler {address}: cannot reach the scheduler ({reason})") from None
+    except ValueError as err:  # a malformed address, an unknown protocol
+        raise TracerError(f"--scheduler {address}: {err}") from None
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def local_threads(address: str) -> Optional[int]:
+    """C-core threads per worker for ``local:N``: this machine's cores shared out (None for a remote
+    scheduler: each worker uses its own machine's default)."""
+    workers = parse_address(address)
+    if workers is None:
+        return None
+    from .native import default_threads
+    return max(1, default_threads() // workers)
+
+
+@dataclass
+class _Frame:
+    """A frame being assembled on the client."""
+
+    index: int
+    time: Optional[float]
+    film: np.ndarray
+    waiting: int
+    refining: bool = False
+    rays: RayCounts = field(default_factory=RayCounts)
+
+
+def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optional[float]],
+                  on_frame: Callable[[int, np.ndarray, RayCounts, str], None],
+                  on_tile: Optional[Callable] = None) -> None:
+    """Render the frames at ``times`` (None: the scene as read) on the cluster.  Each finished frame goes to
+    ``on_frame(index, image, rays, backend)`` (image top row first, float32), in order of completion;
+    ``on_tile`` gets a :class:`tracer.render.TileUpdate` as each tile arrives (image: that frame so far)."""
+    distributed = require_dask()
+    from .render import TileUpdate
+
+    plan = job.plan()
+    [bundle_future] = client.scatter([bundle], broadcast=True, hash=False)
+    frames = [_Frame(i, t, np.zeros((job.height, job.width, 3), np.float32), len(plan.rects))
+              for i, t in enumerate(times)]
+    total = len(frames) * len(plan.rects) * (1 + plan.adaptive)
+    meta: dict = {}
+    tasks = distributed.as_completed()
+
+    def submit(frame: _Frame, rect, refine=None):
+        future = client.submit(trace_tile_task, bundle_future, job, frame.time, rect, refine, pure=False,
+                               priority=-frame.index)  # earlier frames first: they are written sooner
+        meta[future.key] = (frame, rect, refine)
+        tasks.add(future)
+
+    for frame in frames:
+        for rect in plan.rects:
+            submit(frame, rect)
+    done = 0
+    backend = ""
+    try:
+        for future in tasks:
+            frame, rect, refine = meta.pop(future.key)
+            try:
+                window, rays, backend = future.result()
+            except TracerError:
+                raise
+            except Exception as err:  # noqa: BLE001 - a worker's failure becomes one line for the user
+                raise TracerError(f"a tile failed on the cluster: {type(err).__name__}: {err}") from None
+            r0, c0, r1, c1 = rect
+            if refine is None:
+                frame.film[r0:r1, c0:c1] = window
+            else:
+                frame.film[r0:r1, c0:c1][refine] = window[refine]
+            frame.rays.add(rays)
+            frame.waiting -= 1
+            done += 1
+            if on_tile is not None:
+                on_tile(TileUpdate(x0=c0, y0=job.height - r1, x1=c1, y1=job.height - r0, block_size=1,
+                                   pass_index=plan.pass_count - 1 if refine is not None else 0,
+                                   pass_count=plan.pass_count, tiles_done=done, tiles_total=total,
+                                   image=frame.film[::-1]))
+            if frame.waiting:
+                continue
+            if plan.adaptive and not frame.refining:
+                frame.refining = True
+                mask = plan.refine_mask(frame.film)
+                frame.waiting = len(plan.rects)
+                for r0, c0, r1, c1 in plan.rects:
+                    submit(frame, (r0, c0, r1, c1), np.ascontiguousarray(mask[r0:r1, c0:c1]))
+                continue
+            on_frame(frame.index, np.ascontiguousarray(frame.film[::-1]), frame.rays, backend)
+            frame.film = np.empty((0, 0, 3), np.float32)  # (a long sequence keeps no finished films)
+    finally:
+        for future in list(tasks.futures):
+            future.cancel()
+        client.cancel([bundle_future])
+
+
+def frame_times(text: str) -> list[float]:
+    """``A-B`` (or ``A``): the frames A, A+1, ..., B as USD time codes."""
+    found = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
+    first, last = (int(found.group(1)), int(found.group(2) or found.group(1))) if found else (0, -1)
+    if first > last or last - first >= 100000:
+        raise TracerError(f"--frames {text}: expected A-B, whole numbers with A <= B (or one frame A)")
+    return [float(f) for f in range(first, last + 1)]
+
+
+def frame_path(output: str, frame: float) -> str:
+    """OUT.png -> OUT_0001.png for frame 1."""
+    stem, suffix = os.path.splitext(output)
+    return f"{stem}_{int(frame):04d}{suffix}"
+
+
+__all__ = ["INSTALL_HINT", "Job", "SceneBundle", "connect", "frame_path", "frame_times", "local_threads",
+           "read_scene", "render_frames", "require_dask", "scene_files"]

@@ -1,0 +1,345 @@
+"""The contract between the NumPy reference and the C core, written once.
+
+This table is the single source of what both sides must agree on:
+
+* the codes of the shape kinds, CSG operations, effect bits and ray kinds;
+* the constants the C core needs from the NumPy modules (each names the module attribute that holds its
+  value, so the NumPy code keeps reading its own constant and the header is generated from it);
+* the layout of ``SceneDesc``, the struct of pointers into flat arrays that flatten.py fills.
+
+``python -m tracer.native.contract`` writes ``contract.h`` (checked in; tests/test_contract.py fails when it
+is stale).  flatten.py builds its ctypes struct from :data:`SCENE_DESC`, and the C core exports every
+field's offset and size (``rt_desc_layout``), which the loader compares with ctypes' before using the
+library.  How to add a field: docs/contributing.md.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import importlib
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from .. import savings as _savings
+from ..model import MESH_KINDS, POLYHEDRON_KINDS
+
+HEADER = Path(__file__).resolve().parent / "contract.h"
+
+# ------------------------------------------------------------------------------------------------ codes
+
+#: C shape kinds in code order, each with the SDL kinds it traces.
+SHAPE_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("SPHERE", ("sphere",)),
+    ("CUBE", ("cube",)),
+    ("SQUARE", ("square",)),
+    ("PLANE", ("plane",)),
+    ("TAPERED", ("taperedCylinder", "cylinder", "cone")),
+    ("TORUS", ("torus",)),
+    ("POLYHEDRON", POLYHEDRON_KINDS),
+    ("MESH", MESH_KINDS),
+)
+CSG_OPS = ("union", "intersection", "difference")
+#: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
+EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures")
+#: Ray kinds in the order of the C core's counters (tracer.trace.RAY_KINDS is the NumPy side).
+RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
+#: After the ray kinds, the counters of rays not cast, per reason (SKIP_*); and the bits of
+#: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
+SKIP_REASONS = _savings.SKIP_REASONS
+SAVINGS_SWITCHES = _savings.SWITCHES
+
+
+def c_name(name: str) -> str:
+    """'cook-torrance' -> 'COOK_TORRANCE'."""
+    return name.upper().replace("-", "_")
+
+
+KIND = {c_name(kind): code for code, (kind, _) in enumerate(SHAPE_KINDS)}
+#: SDL kind -> C kind code.
+KIND_CODES = {sdl: code for code, (_, sdl_kinds) in enumerate(SHAPE_KINDS) for sdl in sdl_kinds}
+OP_CODES = {op: code for code, op in enumerate(CSG_OPS)}
+EFFECT_BITS = {name: 1 << bit for bit, name in enumerate(EFFECTS)}
+
+# ------------------------------------------------------------------------------------------------ constants
+
+
+@dataclass(frozen=True)
+class Constant:
+    """A number both sides use; its value is ``source`` ("module:attribute"), read when the header is made."""
+
+    name: str
+    source: str
+    kind: str  # "double" or "int"
+    doc: str
+
+    def value(self):
+        module, attribute = self.source.split(":")
+        value = getattr(importlib.import_module(module), attribute)
+        return float(value) if self.kind == "double" else int(value)
+
+
+CONSTANTS = (
+    Constant("EDGE_TOLERANCE", "tracer.intersect.analytic:EDGE_TOLERANCE", "double",
+             "points this close (relative) to a rim still count as on the shape"),
+    Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
+    Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
+    Constant("TORUS_IMAG_TOLERANCE", "tracer.intersect.torus:IMAG_TOLERANCE", "double",
+             "quartic roots this close to the real axis count as real"),
+    Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
+             "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
+)
+
+
+def constant_values() -> dict[str, float | int]:
+    return {c.name: c.value() for c in CONSTANTS}
+
+
+# ------------------------------------------------------------------------------------------------ SceneDesc
+
+_P = ctypes.POINTER
+#: Element types: C spelling, ctypes type, NumPy dtype.
+SCALARS = {
+    "i8": ("int8_t", ctypes.c_int8, np.int8),
+    "u8": ("uint8_t", ctypes.c_uint8, np.uint8),
+    "i32": ("int32_t", ctypes.c_int32, np.int32),
+    "i64": ("int64_t", ctypes.c_int64, np.int64),
+    "f64": ("double", ctypes.c_double, np.float64),
+}
+
+
+@dataclass(frozen=True)
+class Field:
+    """One SceneDesc member.
+
+    ``type`` is a scalar code (``"i64"``), a pointer to an array of them (``"*f64"``: flatten fills it from a
+    NumPy array of that dtype) or ``"**f64"`` (an array of addresses of float64 arrays).  ``length`` makes a
+    scalar an inline array (``double background[3]``).  ``section`` starts a commented group in the header."""
+
+    name: str
+    type: str
+    doc: str = ""
+    length: int = 0
+    section: str = ""
+
+    @property
+    def is_pointer(self) -> bool:
+        return self.type.startswith("*")
+
+    @property
+    def scalar(self) -> str:
+        return self.type.lstrip("*")
+
+    @property
+    def ctype(self):
+        base = SCALARS[self.scalar][1]
+        if self.type.startswith("**"):
+            return _P(_P(base))
+        if self.is_pointer:
+            return _P(base)
+        return base * self.length if self.length else base
+
+    @property
+    def dtype(self):
+        """The NumPy dtype of the array a pointer field points into (None for values)."""
+        if self.type.startswith("**"):
+            return np.uintp
+        return SCALARS[self.scalar][2] if self.is_pointer else None
+
+    def c_declaration(self) -> str:
+        base = SCALARS[self.scalar][0]
+        if self.type.startswith("**"):
+            return f"const {base} *const *{self.name};"
+        if self.is_pointer:
+            return f"const {base} *{self.name};"
+        return f"{base} {self.name}[{self.length}];" if self.length else f"{base} {self.name};"
+
+
+F = Field
+SCENE_DESC: tuple[Field, ...] = (
+    F("n_prims", "i64", section="primitives"),
+    F("prim_kind", "*i32", "K_* per primitive"),
+    F("prim_inverse", "*f64", "16 per primitive"),
+    F("prim_sphere", "*f64", "4: bounding-sphere centre, radius (inf: unbounded)"),
+    F("prim_param", "*f64", "1: tapered cylinder's small radius"),
+    F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
+    F("prim_material", "*i32"),
+    F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
+    F("n_meshes", "i64",
+      section="triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local)"),
+    F("mesh_info", "*i64", "4 per mesh: node base, node count, triangle base, triangle count"),
+    F("mesh_extent", "*f64"),
+    F("mesh_constants", "f64", "tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, "
+      "PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT", length=5),
+    F("node_lo", "*f64", "3 per node"),
+    F("node_hi", "*f64"),
+    F("node_left", "*i64"),
+    F("node_right", "*i64"),
+    F("node_first", "*i64"),
+    F("node_count", "*i64"),
+    F("node_axis", "*i8"),
+    F("tri_order", "*i64", "leaf order -> original triangle"),
+    F("tri_p0", "*f64", "leaf order, 3 each"),
+    F("tri_e1", "*f64"),
+    F("tri_e2", "*f64"),
+    F("tri_flip", "*u8"),
+    F("tri_edge_scale", "*f64"),
+    F("tri_radius", "*f64", "leaf order: largest vertex norm"),
+    F("tri_slack1", "*f64", "leaf order: |e2| + radius"),
+    F("tri_slack2", "*f64", "leaf order: |e1| + radius"),
+    F("tri_welded", "*i64", "leaf order, 3 each: vertex ids after welding equal positions"),
+    F("tri_geometric", "*f64", "original order, 3 each"),
+    F("tri_corners", "*f64", "original order, 9 each (three unit corner normals)"),
+    F("tri_has_normals", "*u8"),
+    F("n_csg", "i64", section="CSG"),
+    F("csg_op", "*i32", "OP_* per node"),
+    F("csg_left", "*i64"),
+    F("csg_right", "*i64"),
+    F("n_objects", "i64", section="top-level objects"),
+    F("object_ref", "*i64"),
+    F("object_box", "*f64", "6: lo, hi (padded); ignored when not bounded"),
+    F("object_bounded", "*u8"),
+    F("n_materials", "i64", section="materials"),
+    F("mat_ambient", "*f64", "3 each"),
+    F("mat_diffuse", "*f64"),
+    F("mat_specular", "*f64"),
+    F("mat_emissive", "*f64"),
+    F("mat_exponent", "*f64", "1 each"),
+    F("mat_reflectivity", "*f64"),
+    F("mat_transparency", "*f64"),
+    F("mat_speed", "*f64"),
+    F("mat_specular_fraction", "*f64"),
+    F("mat_roughness", "*f64"),
+    F("n_lights", "i64", section="lights"),
+    F("light_pos", "*f64", "3 each"),
+    F("light_color", "*f64"),
+    F("background", "f64", length=3, section="settings"),
+    F("global_ambient", "f64", length=3),
+    F("min_reflectivity", "f64"),
+    F("min_transparency", "f64"),
+    F("max_depth", "i64"),
+    F("effects", "i64", "FX_* bits"),
+    F("mat_texture", "*i32", "per material: 0 none, -1/-2/-3 solid, i > 0 the image makePixmap i",
+      section="textures (tracer.textures; see texture.h)"),
+    F("mat_tex_param", "*f64", "TEX_PARAMS per material: the texture's parameters, defaults filled in"),
+    F("mat_tex_image", "*i64", "per material: index into image_data, -1 for none"),
+    F("n_images", "i64"),
+    F("image_info", "*i64", "2 per image: width, height"),
+    F("image_data", "**f64", "per image: height x width x 3 floats in [0, 1], row 0 at the bottom"),
+    F("noise_perm", "*i64", "512: tracer.textures.noise.PERM"),
+    F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
+    F("relative_epsilon", "f64", "tracer.numerics.RELATIVE_EPSILON",
+      section="tolerances read when the scene is flattened (so that a measurement can change them)"),
+    F("torus_newton_steps", "i64", "tracer.intersect.torus.NEWTON_STEPS"),
+)
+del F
+
+
+def field(name: str) -> Field:
+    for f in SCENE_DESC:
+        if f.name == name:
+            return f
+    raise KeyError(name)
+
+
+def ctypes_fields() -> list[tuple[str, object]]:
+    """``_fields_`` of the ctypes mirror of SceneDesc."""
+    return [(f.name, f.ctype) for f in SCENE_DESC]
+
+
+# ------------------------------------------------------------------------------------------------ the header
+
+
+def _enum(prefix: str, names, values) -> str:
+    items = [f"{prefix}_{c_name(n)} = {v}" for n, v in zip(names, values)]
+    lines, line = [], "enum {"
+    for k, item in enumerate(items):
+        piece = f" {item}" + ("," if k < len(items) - 1 else " };")
+        if len(line) + len(piece) > 110:
+            lines.append(line)
+            line = "      "
+        line += piece
+    lines.append(line)
+    return "\n".join(lines)
+
+
+def _double(value: float) -> str:
+    text = repr(float(value))
+    return text if any(c in text for c in ".en") else text + ".0"
+
+
+def header_text() -> str:
+    """The C header, as generated from the tables above (and the constants' current values)."""
+    out = ["/* GENERATED by `python -m tracer.native.contract` from tracer/native/contract.py: do not edit.",
+           " * The codes, constants and SceneDesc layout shared by the C core and flatten.py. */",
+           "#ifndef RT_CONTRACT_H", "#define RT_CONTRACT_H", "", "#include <stdint.h>", ""]
+    out.append(_enum("K", [k for k, _ in SHAPE_KINDS], range(len(SHAPE_KINDS))))
+    out.append(_enum("OP", CSG_OPS, range(len(CSG_OPS))))
+    out.append(_enum("FX", EFFECTS, [EFFECT_BITS[e] for e in EFFECTS]))
+    out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
+    out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
+    out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
+    out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
+    out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")
+    out.append(f"#define N_COUNTS {len(RAY_KINDS) + len(SKIP_REASONS)}  /* rays cast per kind, then skipped per reason */")
+    out.append("")
+    for c in CONSTANTS:
+        value = c.value()
+        text = _double(value) if c.kind == "double" else str(value)
+        out.append(f"/* {c.doc} ({c.source}) */")
+        out.append(f"#define {c.name} {text}")
+    out += ["", "typedef struct {"]
+    for f in SCENE_DESC:
+        if f.section:
+            out.append(f"    /* {f.section} */")
+        declaration = f"    {f.c_declaration()}"
+        if f.doc:
+            declaration = f"{declaration:<44} /* {f.doc} */"
+        out.append(declaration)
+    out.append("} SceneDesc;")
+    out += ["", "/* X-macro over the fields in table order: rt_desc_layout() reports offsetof and sizeof of each. */",
+            "#define RT_SCENE_DESC_FIELDS(X) \\"]
+    out += [f"    X({f.name}) \\" for f in SCENE_DESC]
+    out[-1] = out[-1][:-2]
+    out.append(f"#define RT_SCENE_DESC_FIELD_COUNT {len(SCENE_DESC)}")
+    body = "\n".join(out)
+    # A fingerprint of everything above: the loader refuses a library built from another contract.
+    stamp = hashlib.sha256(body.encode()).hexdigest()[:16]
+    return f"{body}\n#define RT_CONTRACT_DIGEST \"{stamp}\"\n\n#endif\n"
+
+
+def stale_reason(path: Path = HEADER) -> Optional[str]:
+    """None if ``path`` holds what :func:`header_text` generates now, else why not."""
+    try:
+        current = path.read_text()
+    except OSError as err:
+        return f"cannot read {path}: {err.strerror or err}"
+    return None if current == header_text() else f"{path.name} is stale: run python -m tracer.native.contract"
+
+
+def digest() -> str:
+    """The RT_CONTRACT_DIGEST that :func:`header_text` writes."""
+    return header_text().split('RT_CONTRACT_DIGEST "')[1].split('"')[0]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if "--check" in args:
+        reason = stale_reason()
+        if reason:
+            print(f"error: {reason}", file=sys.stderr)
+            return 1
+        return 0
+    text = header_text()
+    if not HEADER.exists() or HEADER.read_text() != text:
+        HEADER.write_text(text)
+        print(f"wrote {HEADER}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,95 @@
+"""Rays that cannot change the image, and the switches that skip them (both backends honour them).
+
+* ``cutoff``: a reflected or transmitted ray whose cumulative weight (the product of the reflectivities
+  and transparencies on its way from the eye) is below this is not traced; it adds nothing.  A ray that
+  would bring back colour c adds weight * c, so with c <= 1 the change is below the cutoff.
+* ``inside_shadows``: a surface hit from inside a closed object (its ray was inside the solid) lights its
+  shadow feeler from inside that solid; when the light is outside the solid, the feeler must cross the
+  surface and is blocked, so it is not cast.
+* ``shared_tir``: under total internal reflection the "transmitted" ray is the mirror ray that the
+  material's reflectivity already traces; it is traced once and weighted by both coefficients.
+* ``dark_materials``: a material with no diffuse and no specular colour (and no Cook-Torrance part) takes
+  nothing from a light, so it casts no shadow feelers.
+
+Each skipped ray is counted per reason (``RayCounts.skipped()``, ``--stats``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .compile import CompiledScene, CSGNode
+
+#: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
+SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
+#: The on/off switches, in the bit order of RaySavings.flags() (the C core's SAVE_* bits).
+SWITCHES = ("inside_shadows", "shared_tir", "dark_materials")
+DEFAULT_CUTOFF = 1.0 / 512.0
+#: Shapes that bound a solid (every ray into one comes out again): not the square (a sheet) nor meshes
+#: (which may be open).  The plane is the half-space below it.
+CLOSED_KINDS = frozenset({"sphere", "cube", "plane", "taperedCylinder", "cylinder", "cone", "torus",
+                          "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond"})
+#: A direction for the point-in-solid test that no bundled shape's faces are parallel to.
+_PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
+
+
+@dataclass(frozen=True)
+class RaySavings:
+    cutoff: float = DEFAULT_CUTOFF
+    inside_shadows: bool = True
+    shared_tir: bool = True
+    dark_materials: bool = True
+
+    @classmethod
+    def none(cls) -> "RaySavings":
+        """Trace every ray, as the lecture's recursion does (for measuring what the savings change)."""
+        return cls(cutoff=0.0, inside_shadows=False, shared_tir=False, dark_materials=False)
+
+    def flags(self) -> int:
+        """The switches that are on, as bits in the order of SWITCHES (for the C core)."""
+        return sum(1 << k for k, name in enumerate(SWITCHES) if getattr(self, name))
+
+
+def dark_materials(compiled: CompiledScene) -> np.ndarray:
+    """Per material: takes nothing from a light (zero diffuse, zero specular, no Cook-Torrance share)."""
+    mats = compiled.materials
+    dark = ~(mats.diffuse != 0).any(axis=1) & ~(mats.specular != 0).any(axis=1)
+    if "cook-torrance" in compiled.effects:  # Schlick's Fresnel is not zero where the specular colour is
+        dark &= mats.specular_fraction == 0
+    return dark
+
+
+def _closed(node) -> bool:
+    if isinstance(node, CSGNode):
+        return _closed(node.left) and _closed(node.right)
+    return node.kind in CLOSED_KINDS
+
+
+def _contains(node, point: np.ndarray) -> bool | None:
+    """Whether ``point`` is inside the solid; None when it lies on (or too near) the surface to say."""
+    hits = node.intersect(point[None, :], _PROBE_DIRECTION)
+    t = hits.t[0]
+    finite = np.isfinite(t)
+    if np.any(np.abs(t[finite]) < 1e-9 * (1.0 + np.max(np.abs(point)))):
+        return None
+    before = np.nonzero(finite & (t < 0.0))[0]
+    if before.size == 0:
+        return bool(hits.inside_at_start[0])
+    return bool(hits.entering[0, before[-1]])
+
+
+def sealed_lights(compiled: CompiledScene) -> np.ndarray:
+    """(objects, lights) bool: a feeler from inside the object towards the light is certainly blocked
+    (the object is a closed solid and the light outside it).  Only objects with some transparent material
+    are examined: rays get inside solids through them."""
+    n_lights = len(compiled.light_positions)
+    sealed = np.zeros((len(compiled.objects), n_lights), dtype=bool)
+    transparent = compiled.materials.transparency > 0
+    for index, obj in enumerate(compiled.objects):
+        leaves = obj.leaves() if isinstance(obj, CSGNode) else [obj]
+        if not any(transparent[p.material_id] for p in leaves) or not _closed(obj):
+            continue
+        for light in range(n_lights):
+            sealed[index, light] = _contains(obj, compiled.light_positions[light]) is False
+    return sealed

@@ -1,0 +1,224 @@
+"""The tile scheduler: which pixels are traced in which order, for every way of running a render.
+
+The lecture's ``raytrace(scn, blockSize)``: in a pass of stride B one ray is traced per B x B block of
+pixels, through the block's lower-left pixel, and the whole block takes its colour.  Progressive rendering
+runs passes B, B/2, ..., 1 and each pass traces only the pixels that are *new at its stride* (those not on
+the grid of the pass before), so every earlier sample is reused.  With adaptive sampling the block passes
+trace one ray per pixel and a last *refinement* pass traces ``samples`` jittered rays in the pixels whose
+colour differs from a neighbour's by more than a threshold, judged on the whole finished film.
+
+The image is cut into square tiles whose side is a multiple of every stride, so a tile's passes read and
+write only that tile: the tiles of a pass can be traced in any order, by any number of threads or machines.
+A :class:`TilePlan` holds the passes and tiles; :func:`trace_tile` traces one tile of one pass into a film
+(or a window of it) through a :class:`PixelTracer`, which shoots a pixel's rays and averages them.  The
+random sub-pixel offsets depend on (seed, pixel) alone (:func:`tracer.sampling.pixel_uniforms`), so any
+schedule gives identical bytes.
+
+Used by :func:`tracer.render.render` (the command line), ``tracer.distributed`` (a Dask cluster) and the
+Blender add-on (``addon/blocks.py``).  Films are stored bottom row first, as the lecture counts rows.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from . import sampling
+from .errors import TracerError
+
+DEFAULT_TILE = 64
+
+#: ``rays_for(rows, cols, dy, dx) -> (origins, directions)``: the rays through film pixels (row 0 at the
+#: bottom) at (dx, dy) inside each pixel; dy and dx are arrays (one per ray) or the scalar 0.5 (the centre).
+RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]
+#: ``shade(rows, cols, per_pixel) -> (N, channels)``: the mean of ``per_pixel`` rays in each given pixel.
+Shade = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
+
+
+def block_passes(block_size: int, progressive: bool) -> list[int]:
+    """Strides of the passes: [B] or [B, B/2, ..., 1] (B rounded down to a power of two when progressive)."""
+    if block_size < 1:
+        raise TracerError(f"block size must be at least 1, not {block_size}")
+    if not progressive:
+        return [block_size]
+    top = 1 << (int(block_size).bit_length() - 1)
+    passes = []
+    while top >= 1:
+        passes.append(top)
+        top //= 2
+    return passes
+
+
+@dataclass(frozen=True)
+class Tile:
+    """One tile of one pass: pixel rows r0..r1-1 (counted from the bottom) and columns c0..c1-1."""
+
+    pass_index: int
+    stride: int
+    r0: int
+    c0: int
+    r1: int
+    c1: int
+
+    @property
+    def rect(self) -> tuple[int, int, int, int]:
+        return self.r0, self.c0, self.r1, self.c1
+
+    def positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The sample positions of this tile at its stride (rows, columns), and which are new in this pass."""
+        rows = np.arange(self.r0, self.r1, self.stride)
+        cols = np.arange(self.c0, self.c1, self.stride)
+        grid_r, grid_c = np.meshgrid(rows, cols, indexing="ij")
+        if self.pass_index == 0:
+            new = np.ones(grid_r.shape, dtype=bool)
+        else:  # on the grid of the pass before (stride 2s) means traced already
+            new = (grid_r % (2 * self.stride) != 0) | (grid_c % (2 * self.stride) != 0)
+        return grid_r, grid_c, new
+
+
+class TilePlan:
+    """The passes and tiles of a ``width`` x ``height`` render, and how its pixels are sampled.
+
+    ``items`` lists every tile of every pass in the order a single-threaded render traces them: pass by pass
+    (so that an interactive display refines the whole image coarse to fine), the refinement pass last.
+    """
+
+    def __init__(self, width: int, height: int, *, block_size: int = 1, progressive: bool = False,
+                 tile: int = DEFAULT_TILE, samples: int = 1, sampling_mode: str = "jittered",
+                 threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0):
+        sampling.check(int(samples), sampling_mode, float(threshold))
+        self.width, self.height = int(width), int(height)
+        self.passes = block_passes(int(block_size), bool(progressive))
+        self.samples, self.sampling_mode = int(samples), sampling_mode
+        self.threshold, self.seed = float(threshold), int(seed)
+        self.adaptive = sampling_mode == "adaptive" and self.samples > 1
+        top = self.passes[0]
+        size = max(int(tile), top)
+        self.tile = size - size % top  # tiles start on multiples of every stride
+        self.rects = [(r, c, min(r + self.tile, self.height), min(c + self.tile, self.width))
+                      for r in range(0, self.height, self.tile) for c in range(0, self.width, self.tile)]
+        self.items = [Tile(p, stride, *rect) for p, stride in enumerate(self.passes) for rect in self.rects]
+        if self.adaptive:
+            self.items += [Tile(len(self.passes), 1, *rect) for rect in self.rects]
+
+    @property
+    def pass_count(self) -> int:
+        return len(self.passes) + self.adaptive
+
+    @property
+    def per_pixel(self) -> int:
+        """Rays per pixel in the block passes (one when a refinement pass adds the rest)."""
+        return 1 if self.adaptive else self.samples
+
+    def is_refinement(self, item: Tile) -> bool:
+        return item.pass_index >= len(self.passes)
+
+    def pass_items(self, pass_index: int) -> list[Tile]:
+        return [item for item in self.items if item.pass_index == pass_index]
+
+    def rect_items(self, rect: tuple[int, int, int, int]) -> list[Tile]:
+        """The block passes' tiles over one rectangle, coarse to fine (a tile traced start to finish)."""
+        return [Tile(p, stride, *rect) for p, stride in enumerate(self.passes)]
+
+    def refine_mask(self, film: np.ndarray) -> np.ndarray:
+        """The pixels the refinement pass traces again, judged on the colour of the film after the block
+        passes (which crosses tile borders, so the whole film is needed)."""
+        return sampling.contrast_mask(film[..., :3], self.threshold)
+
+    def sample_positions(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int):
+        """(rows, cols, dy, dx) of every ray of the given pixels, ``per_pixel`` consecutive rays per pixel."""
+        if per_pixel == 1:
+            return rows, cols, 0.5, 0.5
+        dy, dx = sampling.offsets(per_pixel, self.sampling_mode != "regular", rows, cols, self.seed)
+        return np.repeat(rows, per_pixel), np.repeat(cols, per_pixel), dy.ravel(), dx.ravel()
+
+
+def trace_tile(plan: TilePlan, item: Tile, film: np.ndarray, shade: Shade,
+               refine: Optional[np.ndarray] = None, at: tuple[int, int] = (0, 0)) -> None:
+    """Trace one tile of one pass into ``film`` (rows from the bottom, any number of channels).
+
+    ``film`` may be a window of the image whose pixel (0, 0) is image pixel ``at`` (row, column); it must
+    cover the tile.  A refinement tile needs ``refine``, the mask of :meth:`TilePlan.refine_mask`, indexed
+    like ``film``.
+    """
+    r0, c0 = item.r0 - at[0], item.c0 - at[1]
+    r1, c1 = item.r1 - at[0], item.c1 - at[1]
+    if plan.is_refinement(item):
+        if refine is None:
+            raise ValueError("a refinement tile needs the refinement mask")
+        rr, cc = np.nonzero(refine[r0:r1, c0:c1])
+        if rr.size:
+            film[rr + r0, cc + c0] = shade(rr + item.r0, cc + item.c0, plan.samples)
+        return
+    if item.stride == 1 and item.pass_index == 0:  # every pixel new: no earlier samples to keep
+        rows, cols = np.arange(item.r0, item.r1), np.arange(item.c0, item.c1)
+        values = shade(np.repeat(rows, cols.size), np.tile(cols, rows.size), plan.per_pixel)
+        film[r0:r1, c0:c1] = values.reshape(rows.size, cols.size, -1)
+        return
+    grid_r, grid_c, new = item.positions()
+    values = film[grid_r - at[0], grid_c - at[1]]  # earlier passes' samples keep their value
+    if new.any():
+        values[new] = shade(grid_r[new], grid_c[new], plan.per_pixel)
+    s = item.stride
+    block = np.repeat(np.repeat(values, s, axis=0), s, axis=1)
+    film[r0:r1, c0:c1] = block[: r1 - r0, : c1 - c0]
+
+
+def trace_rect(plan: TilePlan, rect: tuple[int, int, int, int], shade: Shade, channels: int = 3) -> np.ndarray:
+    """Every block pass over one rectangle, coarse to fine: the rectangle's film (rows from the bottom,
+    float32).  What a tile is worth to a worker that traces whole tiles (no refinement: see trace_tile)."""
+    r0, c0, r1, c1 = rect
+    window = np.zeros((r1 - r0, c1 - c0, channels), dtype=np.float32)
+    for item in plan.rect_items(rect):
+        trace_tile(plan, item, window, shade, at=(r0, c0))
+    return window
+
+
+class PixelTracer:
+    """Traces pixels of a plan with a backend tracer (``camera_rays(origins, directions)``): the mean colour
+    of each pixel's rays.  Rays go ``chunk`` at a time with ``checkpoint()`` called before each chunk (it
+    raises to stop); ``alpha`` adds a fourth channel, the share of each pixel's rays that hit something (and
+    the rays that miss count as black)."""
+
+    def __init__(self, plan: TilePlan, tracer, rays_for: RaysFor, *, chunk: Optional[int] = None,
+                 checkpoint: Optional[Callable[[], None]] = None, alpha: bool = False,
+                 first_hits: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None):
+        self.plan, self.tracer, self.rays_for = plan, tracer, rays_for
+        self.chunk = chunk
+        self.checkpoint = checkpoint
+        self.alpha = alpha
+        self.first_hits = first_hits  # (origins, directions) -> bool per ray; needed with alpha
+
+    def __call__(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int) -> np.ndarray:
+        out = np.empty((rows.size, 4 if self.alpha else 3), dtype=np.float64)
+        step = rows.size if not self.chunk else max(1, self.chunk // per_pixel)
+        for start in range(0, rows.size, max(step, 1)):
+            if self.checkpoint is not None:
+                self.checkpoint()
+            stop = min(start + step, rows.size)
+            r, c, dy, dx = self.plan.sample_positions(rows[start:stop], cols[start:stop], per_pixel)
+            origins, directions = self.rays_for(r, c, dy, dx)
+            origins = np.ascontiguousarray(origins, dtype=np.float64)
+            directions = np.ascontiguousarray(directions, dtype=np.float64)
+            colors = np.asarray(self.tracer.camera_rays(origins, directions), dtype=np.float64)
+            if self.alpha:
+                hit = self.first_hits(origins, directions)
+                colors = np.where(hit[:, None], colors, 0.0)
+                out[start:stop, 3] = hit.reshape(-1, per_pixel).mean(axis=1)
+            out[start:stop, :3] = colors if per_pixel == 1 else colors.reshape(-1, per_pixel, 3).mean(axis=1)
+        return out
+
+
+def camera_rays_for(frame, width: int, height: int) -> RaysFor:
+    """The rays of a :class:`tracer.camera.CameraFrame` for a ``width`` x ``height`` film (every ray starts at
+    the eye; the repeated eye is kept between calls rather than made again for every batch)."""
+    eye_rows = [np.empty((0, 3))]
+
+    def rays_for(rows, cols, dy=0.5, dx=0.5):
+        directions = frame.directions(rows, cols, height, width, dy=dy, dx=dx)
+        if len(eye_rows[0]) < len(directions):
+            eye_rows[0] = np.ascontiguousarray(np.broadcast_to(frame.eye, directions.shape))
+        return eye_rows[0][:len(directions)], directions
+
+    return rays_for

@@ -24,9 +24,9 @@ def counted(monkeypatch):
     counts = {"compile": 0, "mesh": 0}
     real_compile, real_init = compile_module._compile, mesh_module.TriangleMesh.__init__
 
-    def counting_compile(scene):
+    def counting_compile(scene, *args):
         counts["compile"] += 1
-        return real_compile(scene)
+        return real_compile(scene, *args)
 
     def counting_init(self, *args, **kwargs):
         counts["mesh"] += 1

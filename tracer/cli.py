@@ -14,7 +14,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .blas import one_blas_thread
+from .bulk import one_blas_thread
 from .errors import RenderCancelled, SDLError, TracerError, warnings_as_lines
 
 EXIT_USAGE = 2

@@ -16,7 +16,7 @@ from typing import Optional, Union
 
 import numpy as np
 
-from .blas import one_blas_thread
+from .bulk import collector_paused, one_blas_thread
 from .errors import TracerError
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
@@ -75,6 +75,10 @@ for _constant in (_CORNERS, _SQUARE_CORNERS, _TORUS_CORNERS, _DISC_BOX):
     _constant.setflags(write=False)
 
 
+#: The kinds whose generic points do not depend on the shape.
+_SHARED_POINTS = {"sphere": _CORNERS, "cube": _CORNERS, "square": _SQUARE_CORNERS, "torus": _TORUS_CORNERS}
+
+
 def _analytic_generic_points(shape: Shape) -> Optional[np.ndarray]:
     """Points whose hull holds a closed-form shape's generic solid (8 of them), or None for the plane,
     polyhedra and meshes."""
@@ -99,17 +103,23 @@ def _sphere_around(world: np.ndarray):
     return center, float(np.linalg.norm(hi - lo) * 0.5) * (1 + 1e-9)
 
 
-def _batched_inverses(shapes: list[Shape]) -> Optional[np.ndarray]:
-    """The inverses of all the shapes' matrices from one (N, 4, 4) np.linalg.inv call, which gives each
-    matrix the same LAPACK solve as a call of its own.  None if any matrix would
-    fail _checked_inverse's checks (or is not a float64 4x4): then each shape is checked on its own, in
-    order, so that the error names the first bad shape exactly as before."""
-    if not shapes:
-        return np.zeros((0, 4, 4))
+def _stacked_matrices(shapes: list[Shape]) -> Optional[np.ndarray]:
+    """The shapes' matrices as one (N, 4, 4) array, or None if any is not a float64 4x4 array."""
     matrices = [s.matrix for s in shapes]
     if not all(isinstance(m, np.ndarray) and m.dtype == np.float64 and m.shape == (4, 4) for m in matrices):
         return None
-    stack = np.stack(matrices)
+    return np.stack(matrices) if matrices else np.zeros((0, 4, 4))
+
+
+def _batched_inverses(stack: Optional[np.ndarray]) -> Optional[np.ndarray]:
+    """The inverses of all the shapes' matrices (``stack``, see _stacked_matrices) from one (N, 4, 4)
+    np.linalg.inv call, which gives each matrix the same LAPACK solve as a call of its own.  None if any
+    matrix would fail _checked_inverse's checks (or is not a float64 4x4): then each shape is checked on its
+    own, in order, so that the error names the first bad shape exactly as before."""
+    if stack is None:
+        return None
+    if not len(stack):
+        return np.zeros((0, 4, 4))
     if not (np.isfinite(stack).all() and (stack[:, 3] == (0, 0, 0, 1)).all()):
         return None
     try:
@@ -119,27 +129,36 @@ def _batched_inverses(shapes: list[Shape]) -> Optional[np.ndarray]:
     return inverses if np.isfinite(inverses).all() else None
 
 
-def _batched_bounds(shapes: list[Shape]) -> list[Optional[tuple]]:
+def _batched_bounds(shapes: list[Shape], stack: np.ndarray) -> list[Optional[tuple]]:
     """Bounding spheres of the closed-form shapes (None for the others), their corners carried to the world
-    by one stacked matrix product: what transform_points computes, to rounding in the last place (which
-    the radius's 1e-9 padding covers)."""
+    by one stacked matrix product: what transform_points and _sphere_around compute, to rounding in the
+    last place (which the radius's 1e-9 padding covers)."""
     out: list[Optional[tuple]] = [None] * len(shapes)
-    rows, points = [], []
+    # Shapes whose generic points are one shared constant go in one group per constant (no per-shape copy
+    # of the points); the others (tapered cylinders) in one group of their own points.
+    groups: dict[int, tuple[np.ndarray, list[int]]] = {}
+    varied_rows, varied_points = [], []
     for i, s in enumerate(shapes):
+        pts = _SHARED_POINTS.get(s.kind)
+        if pts is not None:
+            groups.setdefault(id(pts), (pts, []))[1].append(i)
+            continue
         pts = _analytic_generic_points(s)
-        if pts is not None and isinstance(s.matrix, np.ndarray) and s.matrix.dtype == np.float64:
-            rows.append(i)
-            points.append(pts)
-    if not rows:
-        return out
-    m = np.stack([shapes[i].matrix for i in rows])
-    world = np.stack(points) @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
-    lo, hi = world.min(axis=1), world.max(axis=1)
-    center = 0.5 * (lo + hi)
-    extent = hi - lo
-    for k, i in enumerate(rows):
-        # np.linalg.norm row by row: a vectorised norm may sum in another order.
-        out[i] = (center[k], float(np.linalg.norm(extent[k]) * 0.5) * (1 + 1e-9))
+        if pts is not None:
+            varied_rows.append(i)
+            varied_points.append(pts)
+    batches = list(groups.values())
+    if varied_rows:
+        batches.append((np.stack(varied_points), varied_rows))
+    for pts, rows in batches:
+        m = stack[rows]
+        world = pts @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
+        lo, hi = world.min(axis=1), world.max(axis=1)
+        centers = list(0.5 * (lo + hi))
+        extent = hi - lo
+        radius = (np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)).tolist()
+        for i, center, r in zip(rows, centers, radius):
+            out[i] = (center, r)
     return out
 
 
@@ -441,6 +460,11 @@ def shared_triangle_mesh(mesh: MeshData):
 
 
 def content_key(scene: Scene) -> tuple:
+    """Everything compile_scene reads from a scene, in a form that compares quickly (see _content)."""
+    return _content(scene)[0]
+
+
+def _content(scene: Scene) -> tuple:
     """Everything compile_scene reads from a scene, in a form that compares quickly: two scenes (or one
     scene at two times) with equal keys compile to the same thing.
 
@@ -448,7 +472,8 @@ def content_key(scene: Scene) -> tuple:
     matrix, mesh content; a boolean's operation and operands), so replacing, reordering or editing any of
     them, even a matrix changed in place, gives another key.  Pixmap files count with their size and
     modification time.  The key holds no object: ids stay meaningful because the cached entry keeps the
-    objects alive (see compile_scene)."""
+    objects alive (see compile_scene).  Returns (key, nodes, shapes, matrices): the nodes to keep alive, and
+    the shapes in iter_shapes order with their stacked matrices, for _compile."""
     nodes, shapes, structure = [], [], []
     todo = list(reversed(scene.objects))
     while todo:
@@ -459,9 +484,12 @@ def content_key(scene: Scene) -> tuple:
             todo += (node.right, node.left)
         else:
             shapes.append(node)
+    stack = _stacked_matrices(shapes)
     matrices = hashlib.blake2b(digest_size=20)
-    if shapes:
-        matrices.update(np.stack([np.asarray(s.matrix, dtype=np.float64) for s in shapes]).tobytes())
+    if stack is not None:
+        matrices.update(stack.tobytes())
+    else:  # (a matrix that is not a float64 4x4: compiling will say which)
+        matrices.update(repr([np.asarray(s.matrix).tolist() for s in shapes]).encode())
     meshes = {id(s.mesh): s.mesh for s in shapes if s.mesh is not None}
     pixmaps = []
     for number, path in sorted(scene.pixmaps.items()):
@@ -473,18 +501,19 @@ def content_key(scene: Scene) -> tuple:
     fields = (tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius"))
     return (tuple(map(id, nodes)), tuple(structure), *fields, tuple(id(s.mesh) for s in shapes),
             tuple((k, mesh_digest(m)) for k, m in meshes.items()),
-            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps)), nodes
+            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps)), \
+        nodes, shapes, stack
 
 
 def compile_scene(scene: Scene) -> CompiledScene:
     """The scene ready to trace.  Compiled once: the result is kept on the scene with its content_key, and
     returned again for as long as the scene's content has not changed."""
-    with one_blas_thread():
-        key, nodes = content_key(scene)
+    with one_blas_thread(), collector_paused():
+        key, nodes, shapes, stack = _content(scene)
         cached = getattr(scene, _CACHE_ATTRIBUTE, None)
         if cached is not None and cached[0] == key:
             return cached[1]
-        compiled = _compile(scene)
+        compiled = _compile(scene, shapes, stack)
     # (the nodes are kept so that the ids in the key cannot be reused by new objects while it is cached)
     setattr(scene, _CACHE_ATTRIBUTE, (key, compiled, nodes))
     return compiled
@@ -495,18 +524,22 @@ def compile_scene(scene: Scene) -> CompiledScene:
 _CACHE_ATTRIBUTE = "_compiled_cache"
 
 
-def _compile(scene: Scene) -> CompiledScene:
+def _compile(scene: Scene, shapes: Optional[list[Shape]] = None, stack: Optional[np.ndarray] = None) -> CompiledScene:
+    """Compile ``scene``; ``shapes`` (in iter_shapes order) and their ``stack`` of matrices may be passed
+    in when the caller has them already (compile_scene's content key does)."""
     primitives: list[Primitive] = []
     material_ids: dict[Material, int] = {}
     mesh_cache: dict = {}
     # Inverses and bounding spheres for all shapes at once (iter_shapes visits them in the order
     # _compile_object numbers them): a scene of 10,000 spheres would otherwise spend most of its compile time
     # in 10,000 small NumPy calls of each kind.
-    shapes = [s for obj in scene.objects for s in iter_shapes(obj)]
-    inverses = _batched_inverses(shapes)
+    if shapes is None:
+        shapes = [s for obj in scene.objects for s in iter_shapes(obj)]
+        stack = _stacked_matrices(shapes)
+    inverses = _batched_inverses(stack)
     # Only with every matrix checked (finite, affine, invertible): otherwise the shapes are compiled one by
     # one as before, and the first bad one raises.
-    bounds = _batched_bounds(shapes) if inverses is not None else None
+    bounds = _batched_bounds(shapes, stack) if inverses is not None else None
     objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights

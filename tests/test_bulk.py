@@ -1,7 +1,7 @@
-"""tracer.blas.one_blas_thread: OpenBLAS on one thread inside the block, the caller's setting after it."""
+"""tracer.bulk: OpenBLAS on one thread and the collector paused inside a block, the caller's settings after it."""
 import pytest
 
-from tracer.blas import _openblas, one_blas_thread
+from tracer.bulk import _openblas, one_blas_thread
 
 
 def test_one_thread_inside_and_the_old_count_after():
@@ -21,3 +21,20 @@ def test_one_thread_inside_and_the_old_count_after():
         assert getter() == 2
     finally:
         setter(before)
+
+
+def test_collector_paused_inside_and_restored_after():
+    import gc
+
+    from tracer.bulk import collector_paused
+    assert gc.isenabled()
+    with collector_paused():
+        assert not gc.isenabled()
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with collector_paused():
+            pass
+        assert not gc.isenabled()  # a caller's own choice is kept
+    finally:
+        gc.enable()

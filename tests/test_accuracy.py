@@ -25,7 +25,7 @@ def test_accuracy_bench_writes_csv_and_plot(tmp_path):
         table = list(csv.DictReader(handle))
     assert [r["setting"] for r in table] == [r["setting"] for r in rows]
     by = {r["setting"]: r for r in rows}
-    assert {"B=16", "1 ray/pixel", "regular 16", "depth 0", "newton 0", "epsilon 0.001"} <= set(by)
+    assert {"B=16", "1 ray/pixel", "regular 16", "depth 0", "newton 0", "ulps 1e+08"} <= set(by)
     assert by["B=16"]["rmse"] > by["B=4"]["rmse"] > by["1 ray/pixel"]["rmse"]
     assert by["regular 16"]["rmse"] < by["1 ray/pixel"]["rmse"]
     assert by["depth 0"]["rmse"] > by["1 ray/pixel"]["rmse"]  # the mirror sphere needs its reflections

@@ -13,7 +13,7 @@ import ctypes
 import numpy as np
 import pytest
 
-from tracer import model, native
+from tracer import model, native, numerics
 from tracer.native import contract, flatten
 from tracer.trace import RAY_KINDS
 
@@ -37,12 +37,13 @@ def test_a_changed_table_makes_the_header_stale(tmp_path, monkeypatch):
 
 def test_the_header_carries_the_numpy_constants():
     text = contract.header_text()
-    from tracer.intersect import analytic, torus
     from tracer.textures.solid import SOLID_DEFAULTS
     from tracer.trace import MEDIA_DEPTH
-    assert f"#define EDGE_TOLERANCE {analytic.EDGE_TOLERANCE!r}\n" in text
     assert f"#define TORUS_TUBE {model.TORUS_TUBE_RADIUS!r}\n" in text
-    assert f"#define TORUS_IMAG_TOLERANCE {torus.IMAG_TOLERANCE!r}\n" in text
+    # Tolerances are the compiled scene's (tracer.numerics.Tolerances), fields of SceneDesc, not constants.
+    assert "TOLERANCE" not in text.split("typedef struct")[0]
+    tolerance_fields = {f"tol_{name}" for name in numerics.Tolerances.__dataclass_fields__}
+    assert tolerance_fields <= {f.name for f in contract.SCENE_DESC}
     assert f"#define MEDIA_DEPTH {MEDIA_DEPTH}\n" in text
     assert f"#define TEX_PARAMS {max(len(d) for d in SOLID_DEFAULTS.values())}\n" in text
 

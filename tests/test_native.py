@@ -694,14 +694,14 @@ def test_textured_shapes_images(offset, picture):
 
 @pytest.mark.parametrize("scene_name", ["glass", "shapes"])
 def test_changed_tolerances_reach_the_c_core(scene_name):
-    """tracer.accuracy varies the relative epsilon and the torus's Newton steps: the C core reads them when
-    the scene is flattened, so it renders what the NumPy path renders with the same values, and a coarse
-    epsilon changes what is traced (glass: rays through near-coincident surfaces; shapes: shadow edges)."""
+    """tracer.accuracy varies the hit-error ulps and the torus's Newton steps: the C core reads them from the
+    compiled scene, so it renders what the NumPy path renders with the same values, and coarse bounds
+    change what is traced (glass: rays through near-coincident surfaces; shapes: shadow edges)."""
     from tracer.accuracy import Setting, solver_tolerances
 
     scene = tracer.load(ROOT / "scenes" / f"{scene_name}.sdl")
     default_c = render(scene, 64, 48, backend="c")
-    coarse = Setting("tolerances", "coarse", offset_epsilon=1e-2, newton_steps=0)
+    coarse = Setting("tolerances", "coarse", hit_ulps=1e14, newton_steps=0)
     with solver_tolerances(coarse):
         c = render(scene, 64, 48, backend="c")
         reference = render(scene, 64, 48, backend="numpy")

@@ -17,7 +17,6 @@ from typing import Iterator
 import numpy as np
 
 from . import numerics
-from .intersect import torus
 from .model import Scene
 from .render import render
 
@@ -32,8 +31,8 @@ class Setting:
     samples: int = 1
     mode: str = "jittered"
     depth: int | None = None  # None: the scene's own maxRecursionDepth
-    #: numerics.RELATIVE_EPSILON: sets the self-intersection offset and the CSG "same time" tolerance
-    offset_epsilon: float | None = None
+    #: numerics.Tolerances.hit_ulps: scales the hit-error bounds behind ray offsets and CSG merging
+    hit_ulps: float | None = None
     newton_steps: int | None = None  # torus root polishing
 
 
@@ -46,7 +45,7 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
             for mode in ("regular", "jittered", "adaptive") for n in (4, 16)]
     if effects & {"reflection", "refraction"}:
         out += [Setting("recursion depth", f"depth {d}", depth=d) for d in sorted({0, 1, 2, scene_depth, 6})]
-    out += [Setting("relative epsilon", f"epsilon {e:g}", offset_epsilon=e) for e in (1e-15, 1e-12, 1e-6, 1e-3)]
+    out += [Setting("hit error ulps", f"ulps {e:g}", hit_ulps=e) for e in (1, 4, 64, 1e4, 1e8)]
     if "shape:torus" in effects:
         out += [Setting("torus Newton steps", f"newton {n}", newton_steps=n) for n in (0, 1)]
     return out
@@ -54,17 +53,17 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
 
 @contextlib.contextmanager
 def solver_tolerances(setting: Setting) -> Iterator[None]:
-    """Temporarily use a setting's tolerances: module-level constants that the NumPy path reads at call time
-    and the C core when a render flattens the scene."""
-    saved = numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS
+    """Temporarily use a setting's tolerances: numerics.TOLERANCES, which compile_scene copies into the
+    scenes it compiles (and flatten hands to the C core)."""
+    saved = numerics.TOLERANCES
     try:
-        if setting.offset_epsilon is not None:
-            numerics.RELATIVE_EPSILON = setting.offset_epsilon
+        if setting.hit_ulps is not None:
+            numerics.TOLERANCES = replace(numerics.TOLERANCES, hit_ulps=setting.hit_ulps)
         if setting.newton_steps is not None:
-            torus.NEWTON_STEPS = setting.newton_steps
+            numerics.TOLERANCES = replace(numerics.TOLERANCES, torus_newton_steps=setting.newton_steps)
         yield
     finally:
-        numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS = saved
+        numerics.TOLERANCES = saved
 
 
 def _with_depth(scene: Scene, depth: int | None) -> Scene:

@@ -11,11 +11,13 @@ import hashlib
 import os
 import weakref
 from dataclasses import astuple, dataclass, field
+from functools import cached_property
 from operator import attrgetter
 from typing import Optional, Union
 
 import numpy as np
 
+from . import numerics
 from .bulk import collector_paused, one_blas_thread
 from .errors import TracerError
 from .intersect import analytic
@@ -39,9 +41,17 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
     return np.einsum("ij,ij->i", perp, perp) <= radius * radius
 
 
+#: Closed shapes whose normals must agree with their entering flags (the square is a sheet, meshes keep
+#: their triangles' orientation, the plane's normal and flag come from one sign).
+SOLID_ANALYTIC_KINDS = ("sphere", "cube", "taperedCylinder", "cylinder", "cone", "torus")
+
+
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
-    """The first hit per ray with t_min < t < t_max (K = 1; t = inf where there is none)."""
-    valid = (hits.t > t_min[:, None]) & (hits.t < t_max[:, None])
+    """The first hit per ray with t_min < t < t_max (K = 1; t = inf where there is none).
+
+    A hit is after t_min only when its whole error interval is: a ray leaving a surface never finds that
+    surface again at a t that rounding put just after its start."""
+    valid = (hits.t - hits.error > t_min[:, None]) & (hits.t < t_max[:, None])
     if hits.slots == 0:
         return HitArrays.empty(hits.count, 1)
     first = np.argmax(valid, axis=1)[:, None]
@@ -180,6 +190,7 @@ class Primitive:
         self.normal_matrix = self.inverse[:3, :3]
         self.thin = shape.kind == "square"
         self.bounded = shape.kind != "plane"
+        self.tolerances = numerics.TOLERANCES
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
@@ -215,6 +226,32 @@ class Primitive:
             return None, np.inf
         return _sphere_around(transform_points(self.matrix, pts))
 
+    @cached_property
+    def generic_size(self) -> float:
+        """The generic shape's extent (its hit points' coordinates are of this size)."""
+        if self.kind == "torus":
+            return 1.0 + TORUS_TUBE_RADIUS
+        pts = self._generic_points() if self.kind not in ("sphere", "cube", "square", "plane") else None
+        return float(np.max(np.abs(pts))) if pts is not None and pts.size else 1.0
+
+    @cached_property
+    def rounding(self) -> float:
+        """Relative rounding of this primitive's generic hit points: the hit computation's gamma plus the
+        error of the inverse matrix itself, its residual inverse @ matrix - I relative to the products'
+        magnitudes |inverse| @ |matrix| (it grows with the matrix's condition number)."""
+        residual = np.abs(self.inverse @ self.matrix - np.eye(4))
+        magnitude = np.abs(self.inverse) @ np.abs(self.matrix)
+        relative = np.max(np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0))
+        return numerics.gamma(self.tolerances.hit_ulps) + float(relative)
+
+    def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
+        """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
+        linear = np.abs(self.inverse[:3, :3])
+        raw_scale = np.max(np.abs(origins) @ linear.T + np.abs(self.inverse[:3, 3]), axis=1)
+        # (plus the shape's own root error, where it has one: the torus)
+        return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
+                                                        self.generic_size, self.rounding)
+
     def world_corners(self) -> Optional[np.ndarray]:
         pts = self._generic_points()
         return None if pts is None else transform_points(self.matrix, pts)
@@ -226,13 +263,13 @@ class Primitive:
         if kind == "cube":
             return analytic.intersect_cube(o, d)
         if kind == "square":
-            return analytic.intersect_square(o, d)
+            return analytic.intersect_square(o, d, self.tolerances.square_edge)
         if kind == "plane":
             return analytic.intersect_plane(o, d)
         if kind in ("taperedCylinder", "cylinder", "cone"):
             return analytic.intersect_tapered_cylinder(o, d, self.shape.small_radius)
         if kind == "torus":
-            return intersect_torus(o, d)
+            return intersect_torus(o, d, self.tolerances)
         if self._planes is not None:
             return analytic.intersect_convex_polyhedron(o, d, *self._planes)
         return self._mesh.all_hits(o, d)
@@ -248,8 +285,12 @@ class Primitive:
         with np.errstate(invalid="ignore", divide="ignore"):
             shift = -np.einsum("ij,ij->i", o, d) / np.einsum("ij,ij->i", d, d)
         shift = np.where(np.isfinite(shift), shift, 0.0)
-        local = self.generic_hits(o + shift[:, None] * d, d)
+        centred = o + shift[:, None] * d
+        local = self.generic_hits(centred, d)
+        if self.kind in SOLID_ANALYTIC_KINDS or self._planes is not None:
+            analytic.agree_with_crossing(local, d)
         local.t = local.t + shift[:, None]
+        local.error = self.time_errors(origins[idx], centred, d, local)
         local.normal = local.normal @ self.normal_matrix
         local.shape[np.isfinite(local.t)] = self.index
         if self.thin:
@@ -257,7 +298,7 @@ class Primitive:
         if idx.size == n:
             return local
         full = HitArrays.empty(n, local.slots)
-        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start"):
+        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error"):
             getattr(full, name)[idx] = getattr(local, name)
         return full
 
@@ -271,9 +312,10 @@ class Primitive:
         if idx.size:
             o, d = self.to_generic(origins[idx], directions[idx])
             local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
+            local.error = self.time_errors(origins[idx], o, d, local)
             local.normal = local.normal @ self.normal_matrix
             local.shape[np.isfinite(local.t)] = self.index
-            for name in ("t", "entering", "normal", "part", "uv", "shape"):
+            for name in ("t", "entering", "normal", "part", "uv", "shape", "error"):
                 getattr(out, name)[idx] = getattr(local, name)
         return out
 
@@ -328,7 +370,7 @@ class CSGNode:
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
         return combine(self.op, self.left.intersect(origins, directions),
-                       self.right.intersect(origins, directions), origins, directions)
+                       self.right.intersect(origins, directions))
 
 
     def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
@@ -381,6 +423,7 @@ class CompiledScene:
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
     textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
+    tolerances: numerics.Tolerances = field(default_factory=lambda: numerics.TOLERANCES)
 
     @property
     def settings(self):
@@ -501,7 +544,8 @@ def _content(scene: Scene) -> tuple:
     fields = (tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius"))
     return (tuple(map(id, nodes)), tuple(structure), *fields, tuple(id(s.mesh) for s in shapes),
             tuple((k, mesh_digest(m)) for k, m in meshes.items()),
-            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps)), \
+            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps),
+            numerics.TOLERANCES), \
         nodes, shapes, stack
 
 

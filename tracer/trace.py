@@ -55,6 +55,7 @@ class SurfaceHits:
     obj: np.ndarray  # top-level object index
     part: np.ndarray
     uv: np.ndarray
+    error: np.ndarray  # bound on the rounding error of t (tracer.numerics)
 
 
 def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
@@ -63,7 +64,7 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
     t_min = np.broadcast_to(np.asarray(t_min, dtype=float), (n,))
     best = SurfaceHits(hit=np.zeros(n, bool), t=np.full(n, np.inf), normal=np.zeros((n, 3)),
                        entering=np.zeros(n, bool), shape=np.full(n, -1), obj=np.full(n, -1),
-                       part=np.full(n, -1), uv=np.zeros((n, 2)))
+                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n))
     for index, obj in enumerate(scene.objects):
         h = obj.first_hit(origins, directions, t_min, best.t)
         closer = h.t[:, 0] < best.t
@@ -76,6 +77,7 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
         best.obj[closer] = index
         best.part[closer] = h.part[closer, 0]
         best.uv[closer] = h.uv[closer, 0]
+        best.error[closer] = h.error[closer, 0]
     best.hit = np.isfinite(best.t)
     length = np.linalg.norm(best.normal, axis=1, keepdims=True)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
@@ -140,13 +142,6 @@ class Media:
         out.objects[rows, MEDIA_DEPTH - 1] = -1
         out.depth[rows] -= 1
         return out
-
-
-def _offset_scale(points: np.ndarray, origins: np.ndarray) -> np.ndarray:
-    """Distance to move a secondary ray's origin off the surface: relative to the coordinates' size
-    (the hit point and the ray it came from), never a fixed number."""
-    magnitude = np.maximum(np.max(np.abs(points), axis=1), np.max(np.abs(origins), axis=1))
-    return numerics.RELATIVE_EPSILON * (1.0 + magnitude)
 
 
 def _dot(a, b):
@@ -236,7 +231,8 @@ class Tracer:
         facing = np.where((_dot(outward, d) > 0.0)[:, None], -outward, outward)
         mats = self.scene.materials
         mat = self.material_of[hits.shape[idx]]
-        offset = _offset_scale(point, o)[:, None]
+        # Secondary rays start off the surface by the bound on the hit point's rounding error.
+        offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
             texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx])

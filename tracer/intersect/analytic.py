@@ -13,11 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..numerics import TOLERANCES
 from .hits import HitArrays
 from .quadratic import solve_quadratic
-
-# Points this close (relative) to a rim still count as on the shape, so rays through edges do not leak.
-EDGE_TOLERANCE = 1e-12
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -39,19 +37,39 @@ def _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit) -> HitArrays:
 
 
 def intersect_sphere(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+    """The unit sphere: roots ``-b/a -+ sqrt(disc)/a`` about the line's point nearest the centre.
+
+    The caller has moved the origin there, so ``b`` is rounding noise and ``-b/a`` never cancels; the
+    half chord comes from the distance of that point to the centre, ``disc = a (1 - |o_perp|^2)``.  The
+    ``c/q`` form of the general quadratic would divide one noise term by another at tangency.
+    """
     a = _dot(direction, direction)
     b = _dot(origin, direction)
-    c = _dot(origin, origin) - 1.0
-    # b^2 - ac = a (1 - |o_perp|^2), with o_perp the point of the line nearest the centre: no cancellation
-    # when the origin is far away.
     with np.errstate(divide="ignore", invalid="ignore"):
-        perp = origin - (b / a)[:, None] * direction
-    disc = a * (1.0 - _dot(perp, perp))
-    t_lo, t_hi, real = solve_quadratic(a, b, c, disc)
-    hit = real & (a > 0.0)
+        mid = -(b / a)
+        perp = origin + mid[:, None] * direction
+        disc = a * (1.0 - _dot(perp, perp))
+        hit = (disc >= 0.0) & (a > 0.0) & np.isfinite(mid)
+        half = np.sqrt(np.where(hit, disc, 0.0)) / a
+    t_lo = np.where(hit, mid - half, np.nan)
+    t_hi = np.where(hit, mid + half, np.nan)
     p_lo = origin + np.nan_to_num(t_lo)[:, None] * direction
     p_hi = origin + np.nan_to_num(t_hi)[:, None] * direction
     return _two_hits(t_lo, t_hi, p_lo, p_hi, 0, 0, hit)
+
+
+def agree_with_crossing(hits: HitArrays, direction: np.ndarray) -> None:
+    """Make each normal agree with its entering flag (n . d <= 0 entering, >= 0 leaving), in place.
+
+    Where a shape is nearly degenerate (scaled by 1e-9 along one axis) or the ray grazes it, the computed
+    normal can lean, by rounding, to the wrong side of the ray; its component along the ray is then
+    removed, which is the least change that makes it a normal of a grazing crossing.
+    """
+    along = np.einsum("nkj,nj->nk", hits.normal, direction)
+    wrong = np.isfinite(hits.t) & np.where(hits.entering, along > 0.0, along < 0.0)
+    if wrong.any():
+        speed2 = np.einsum("nj,nj->n", direction, direction)
+        hits.normal -= np.where(wrong, along / speed2[:, None], 0.0)[..., None] * direction[:, None, :]
 
 
 def _slab_interval(o: np.ndarray, d: np.ndarray, lo: float, hi: float):
@@ -103,9 +121,10 @@ def _one_hit(t, hit, entering, normal, part=0) -> HitArrays:
     return out
 
 
-def intersect_square(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+def intersect_square(origin: np.ndarray, direction: np.ndarray, edge: float = TOLERANCES.square_edge) -> HitArrays:
+    """``edge``: crossings this close (relative) outside the rim still count, so that edges do not leak."""
     t, crosses, p = _z_plane_crossing(origin, direction)
-    limit = 1.0 + EDGE_TOLERANCE
+    limit = 1.0 + edge
     hit = crosses & (np.abs(p[:, 0]) <= limit) & (np.abs(p[:, 1]) <= limit)
     out = _one_hit(t, hit, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(hit[:, None], p[:, :2], 0.0)
@@ -145,6 +164,39 @@ def tapered_cylinder_normal(points: np.ndarray, small_radius: float) -> np.ndarr
     return normal
 
 
+def _wall_interval(a, b, c, slab_lo, slab_hi):
+    """Where the line is inside the wall's double cone ``a t^2 + 2 b t + c <= 0``, clipped to the slab.
+
+    The solid is this set intersected with the slab 0 <= z <= 1 (the other nappe of a cone meets the
+    slab only at the apex), so entry and exit come from one interval test: a cap counts exactly where the
+    wall's own inequality holds, and a line that is nearly a generator keeps its exit however its
+    ill-conditioned wall root rounds.  Returns the clipped interval's ends (NaN where empty).
+    """
+    t_lo, t_hi, real = solve_quadratic(a, b, c)
+    linear = a == 0.0
+    # a >= 0 (a = 0: one root and +-inf from the quadratic's q/a): inside between the roots.
+    lo = np.where(real, t_lo, np.nan)
+    hi = np.where(real, t_hi, np.nan)
+    flat = linear & (b == 0.0)  # no t at all: inside everywhere or nowhere
+    lo = np.where(flat, np.where(c <= 0.0, -np.inf, np.nan), lo)
+    hi = np.where(flat, np.where(c <= 0.0, np.inf, np.nan), hi)
+    inner_lo, inner_hi = np.maximum(lo, slab_lo), np.minimum(hi, slab_hi)  # NaN (empty) wins
+    # a < 0: inside outside the roots (both nappes), or everywhere when there are none.
+    lower_hi = np.where(real, np.minimum(t_lo, slab_hi), slab_hi)
+    upper_lo = np.where(real, np.maximum(t_hi, slab_lo), slab_lo)
+    lower_len = lower_hi - slab_lo
+    upper_len = slab_hi - upper_lo
+    take_upper = real & (upper_len > lower_len) | ~real
+    outer_lo = np.where(take_upper, upper_lo, slab_lo)
+    outer_hi = np.where(take_upper, slab_hi, lower_hi)
+    negative = a < 0.0
+    start = np.where(negative, outer_lo, inner_lo)
+    end = np.where(negative, outer_hi, inner_hi)
+    with np.errstate(invalid="ignore"):
+        empty = ~(start <= end)
+    return np.where(empty, np.nan, start), np.where(empty, np.nan, end)
+
+
 def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_radius: float) -> HitArrays:
     """Parts: 0 wall, 1 base disc (z = 0), 2 cap disc (z = 1)."""
     k = small_radius - 1.0
@@ -154,27 +206,30 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
     a = dx * dx + dy * dy - k * k * dz * dz
     b = ox * dx + oy * dy - k * dz * r0
     c = ox * ox + oy * oy - r0 * r0
-    t_lo, t_hi, real = solve_quadratic(a, b, c)
-    n = origin.shape[0]
-    ts = np.full((n, 4), np.nan)
-    normals = np.zeros((n, 4, 3))
-    valid = np.zeros((n, 4), dtype=bool)
-    for slot, t_wall in enumerate((t_lo, t_hi)):
-        finite = real & np.isfinite(t_wall)
-        p = origin + np.where(finite, t_wall, 0.0)[:, None] * direction
-        on_wall = finite & (p[:, 2] >= -EDGE_TOLERANCE) & (p[:, 2] <= 1.0 + EDGE_TOLERANCE)
-        ts[:, slot] = t_wall
-        normals[:, slot] = tapered_cylinder_normal(p, small_radius)
-        valid[:, slot] = on_wall
-    for slot, (z, radius, nz) in ((2, (0.0, 1.0, -1.0)), (3, (1.0, small_radius, 1.0))):
-        t, crosses, p = _z_plane_crossing(origin, direction, z)
-        inside = p[:, 0] ** 2 + p[:, 1] ** 2 <= radius * radius * (1.0 + EDGE_TOLERANCE)
-        ts[:, slot] = t
-        normals[:, slot] = (0.0, 0.0, nz)
-        valid[:, slot] = crosses & inside & (radius > 0.0)
-    hits = _convex_hits(ts, normals, valid)
-    hits.part = np.where(hits.part >= 2, hits.part - 1, np.where(hits.part >= 0, 0, -1)).astype(np.int32)
-    return hits
+    # The slab 0 <= z <= 1: which cap bounds it on each side.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_base = (0.0 - oz) / dz
+        t_cap = (1.0 - oz) / dz
+    parallel = dz == 0.0
+    in_slab = (oz >= 0.0) & (oz <= 1.0)
+    rising = dz > 0.0
+    slab_lo = np.where(parallel, np.where(in_slab, -np.inf, np.nan), np.where(rising, t_base, t_cap))
+    slab_hi = np.where(parallel, np.where(in_slab, np.inf, np.nan), np.where(rising, t_cap, t_base))
+    t_in, t_out = _wall_interval(a, b, c, slab_lo, slab_hi)
+    hit = np.isfinite(t_in) & np.isfinite(t_out)
+    # An end on the slab's boundary is a cap (ties too: the apex of a cone is the cap's point).
+    cap_in = t_in <= slab_lo
+    cap_out = t_out >= slab_hi
+    part_in = np.where(cap_in, np.where(rising, 1, 2), 0)
+    part_out = np.where(cap_out, np.where(rising, 2, 1), 0)
+    cap_normal = {1: np.array([0.0, 0.0, -1.0]), 2: np.array([0.0, 0.0, 1.0])}
+
+    def normal_at(t, part):
+        p = origin + np.where(hit, t, 0.0)[:, None] * direction
+        wall = tapered_cylinder_normal(p, small_radius)
+        return np.where((part == 1)[:, None], cap_normal[1], np.where((part == 2)[:, None], cap_normal[2], wall))
+
+    return _two_hits(t_in, t_out, normal_at(t_in, part_in), normal_at(t_out, part_out), part_in, part_out, hit)
 
 
 def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,

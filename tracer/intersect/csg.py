@@ -3,9 +3,11 @@ where the combined inside/outside value changes.
 
 Robustness, the part the lecture leaves out:
 
-* Hits of the two children closer than the time tolerance are one *event group*: coincident faces
-  (a difference that shares a face, the union of two identical spheres) are decided by the states before
-  and after the whole group, so they leave neither a spurious sheet nor a hole.
+* Hits whose error intervals ``t +- error`` (tracer.numerics) overlap are one *event group*: coincident
+  faces (a difference that shares a face, the union of two identical spheres) are decided by the states
+  before and after the whole group, so they leave neither a spurious sheet nor a hole.  Nothing else
+  merges: how far apart two distinct surfaces may be is set by how well their hits are known, not by the
+  coordinates' size.
 * A child entered and left within one group is a zero-thickness sheet (the square, which has no inside):
   it is kept where the boolean would show it, as an enter/exit pair at the same time.
 """
@@ -13,7 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..numerics import time_tolerance
 from .hits import HitArrays
 
 OPERATIONS = {
@@ -33,7 +34,7 @@ def sheet_to_pairs(hits: HitArrays) -> HitArrays:
     return pairs
 
 
-def combine(op: str, left: HitArrays, right: HitArrays, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
+def combine(op: str, left: HitArrays, right: HitArrays) -> HitArrays:
     """The hits of ``left op right`` for the same N rays (both children sorted, whole-line hits)."""
     combine_states = OPERATIONS[op]
     n = left.count
@@ -51,14 +52,14 @@ def combine(op: str, left: HitArrays, right: HitArrays, origins: np.ndarray, dir
     part = np.concatenate([left.part, right.part], axis=1)[rows, order]
     uv = np.concatenate([left.uv, right.uv], axis=1)[rows, order]
     shape = np.concatenate([left.shape, right.shape], axis=1)[rows, order]
+    error = np.concatenate([left.error, right.error], axis=1)[rows, order]
 
-    tol = time_tolerance(origins, directions, t)
     finite = np.isfinite(t)
-    # A slot ends its group when the next slot is far enough away (or absent).
+    # A slot ends its group when the next slot's error interval does not overlap its own (or is absent).
     ends_group = np.ones((n, k), dtype=bool)
     with np.errstate(invalid="ignore"):
         gap = np.diff(t, axis=1)  # inf - inf between unused slots is NaN: not "the same time"
-        ends_group[:, :-1] = ~(gap <= np.maximum(tol[:, :-1], tol[:, 1:]))
+        ends_group[:, :-1] = ~(gap <= error[:, :-1] + error[:, 1:])
 
     out = HitArrays.empty(n, 2 * k)
     state = [left.inside_at_start.copy(), right.inside_at_start.copy()]
@@ -97,6 +98,7 @@ def combine(op: str, left: HitArrays, right: HitArrays, origins: np.ndarray, dir
             out.part[idx, slot] = part[idx, r[idx]]
             out.uv[idx, slot] = uv[idx, r[idx]]
             out.shape[idx, slot] = shape[idx, r[idx]]
+            out.error[idx, slot] = error[idx, r[idx]]
         # The next group starts from here.
         for child in (0, 1):
             before[child] = np.where(done, state[child], before[child])

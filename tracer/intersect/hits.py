@@ -25,6 +25,8 @@ class HitArrays:
       plane's half-space, can say True).
     * ``shape`` (N, K) int32: which primitive of the compiled scene was hit (-1 for none); shape routines
       leave it -1 and the scene fills it in.
+    * ``error`` (N, K): a bound on the rounding error of ``t`` (tracer.numerics); shape routines leave it 0
+      and the scene fills it in.
     """
 
     t: np.ndarray
@@ -34,10 +36,13 @@ class HitArrays:
     uv: np.ndarray
     inside_at_start: np.ndarray
     shape: Optional[np.ndarray] = None
+    error: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.shape is None:
             self.shape = np.full(self.t.shape, -1, dtype=np.int32)
+        if self.error is None:
+            self.error = np.zeros(self.t.shape)
 
     @property
     def count(self) -> int:
@@ -67,13 +72,13 @@ class HitArrays:
         return HitArrays(t=self.t[rows, order], entering=self.entering[rows, order],
                          normal=self.normal[rows, order], part=self.part[rows, order],
                          uv=self.uv[rows, order], inside_at_start=self.inside_at_start.copy(),
-                         shape=self.shape[rows, order])
+                         shape=self.shape[rows, order], error=self.error[rows, order])
 
     def subset(self, rows: np.ndarray) -> "HitArrays":
         """Only some rays (a boolean mask or index array over N)."""
         return HitArrays(t=self.t[rows], entering=self.entering[rows], normal=self.normal[rows],
                          part=self.part[rows], uv=self.uv[rows], inside_at_start=self.inside_at_start[rows],
-                         shape=self.shape[rows])
+                         shape=self.shape[rows], error=self.error[rows])
 
     def trimmed(self) -> "HitArrays":
         """Drop trailing slots that no ray uses."""
@@ -90,4 +95,5 @@ def concatenate(a: HitArrays, b: HitArrays) -> HitArrays:
                      part=np.concatenate([a.part, b.part], axis=1),
                      uv=np.concatenate([a.uv, b.uv], axis=1),
                      inside_at_start=a.inside_at_start | b.inside_at_start,
-                     shape=np.concatenate([a.shape, b.shape], axis=1))
+                     shape=np.concatenate([a.shape, b.shape], axis=1),
+                     error=np.concatenate([a.error, b.error], axis=1))

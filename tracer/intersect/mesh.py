@@ -37,7 +37,7 @@ PARALLEL_EPSILON = 1e-12
 DEDUPE_RELATIVE = 1e-12
 #: The same, for two triangles that share a vertex (by position): rounding in a hit time grows with
 #: the coordinates and with 1/cos of the angle of incidence, so a neighbour's double can stray further
-#: than 1e-12; this is the project's "same place" (tracer.numerics.RELATIVE_EPSILON).
+#: than 1e-12 (about 10^6 ulps: far above any rounding, far below any feature).
 DEDUPE_RELATIVE_ADJACENT = 1e-9
 #: Node boxes are grown by this fraction of the mesh's size (plus its distance from the origin), so
 #: that rounding in the slab test can never cull a triangle that Möller–Trumbore, with its slack, hits.

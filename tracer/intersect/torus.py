@@ -7,20 +7,24 @@ form (Ferrari) lose many digits for nearly double roots, so we:
 2. write the quartic in the arc length ``s`` from the point of the line closest to the centre (the
    caller already moved the origin there), so coefficients are O(1) however far away the eye is;
 3. take the eigenvalues of its companion matrix (backward stable; NumPy batches them);
-4. keep the (nearly) real ones and polish each with Newton steps on the quartic itself.
+4. keep the real ones and polish each with Newton steps on the quartic itself.  A complex pair is a
+   near-double root: it counts (as two roots, or one touching pair) only where the quartic's extremum
+   next to it is zero within the rounding bound of evaluating the quartic there; and a real pair that the
+   quartic does not go below zero between is a rounding artefact of a miss and is dropped.  The bound,
+   ``Tolerances.torus_residual_ulps`` machine epsilons (the coefficients take up to 6 operations each and
+   Horner's rule 8 more) times the quartic's terms taken in absolute value, scales with
+   the coefficients, so the test is as tight at 1e-8 as at 1e8.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..model import TORUS_TUBE_RADIUS
+from ..numerics import TOLERANCES, Tolerances
 from .hits import HitArrays
 
 RING_RADIUS = 1.0
-# Eigenvalues of a double root split into a complex pair of size ~sqrt(machine eps) ~ 1e-8; anything
-# within this of the real axis is treated as a (grazing) real root.
-IMAG_TOLERANCE = 1e-6
-NEWTON_STEPS = 4
+EPSILON = np.finfo(float).eps
 
 
 def quartic_coefficients(origin: np.ndarray, unit_dir: np.ndarray, tube: float = TORUS_TUBE_RADIUS):
@@ -37,10 +41,47 @@ def quartic_coefficients(origin: np.ndarray, unit_dir: np.ndarray, tube: float =
     return c3, c2, c1, c0
 
 
-def _polish(s: np.ndarray, coeffs) -> np.ndarray:
+def coefficient_magnitudes(origin: np.ndarray, unit_dir: np.ndarray, tube: float = TORUS_TUBE_RADIUS):
+    """The coefficients of :func:`quartic_coefficients` with every term taken in absolute value."""
+    R2 = RING_RADIUS * RING_RADIUS
+    ox, oy, oz = origin[:, 0], origin[:, 1], origin[:, 2]
+    dx, dy = unit_dir[:, 0], unit_dir[:, 1]
+    f = np.abs(np.einsum("ij,ij->i", origin, unit_dir))
+    e = ox * ox + oy * oy + oz * oz + R2 + tube * tube
+    m3 = 4.0 * f
+    m2 = 4.0 * f * f + 2.0 * e + 4.0 * R2 * (dx * dx + dy * dy)
+    m1 = 4.0 * e * f + 8.0 * R2 * (np.abs(ox * dx) + np.abs(oy * dy))
+    m0 = e * e + 4.0 * R2 * (ox * ox + oy * oy)
+    return m3, m2, m1, m0
+
+
+def quartic_at(s: np.ndarray, coeffs) -> np.ndarray:
+    c3, c2, c1, c0 = coeffs
+    return (((s + c3) * s + c2) * s + c1) * s + c0
+
+
+def residual_bound(s: np.ndarray, magnitudes, ulps: float) -> np.ndarray:
+    """How far from zero a computed quartic value at s can be when the exact one is zero."""
+    a = np.abs(s)
+    return ulps * EPSILON * quartic_at(a, magnitudes)
+
+
+def _minimum_near(s: np.ndarray, coeffs, steps: int) -> np.ndarray:
+    """Newton steps on the quartic's derivative from s: the local extremum a complex pair sits over."""
+    c3, c2, c1, c0 = coeffs
+    for _ in range(steps):
+        d1 = ((4.0 * s + 3.0 * c3) * s + 2.0 * c2) * s + c1
+        d2 = (12.0 * s + 6.0 * c3) * s + 2.0 * c2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            candidate = s - d1 / d2
+        s = np.where(np.isfinite(candidate) & (d2 > 0.0), candidate, s)
+    return s
+
+
+def _polish(s: np.ndarray, coeffs, steps: int) -> np.ndarray:
     """Newton steps on the monic quartic, each kept only where it reduces the residual."""
     c3, c2, c1, c0 = (c[:, None] for c in coeffs)
-    for _ in range(NEWTON_STEPS):
+    for _ in range(steps):
         p = (((s + c3) * s + c2) * s + c1) * s + c0
         dp = ((4.0 * s + 3.0 * c3) * s + 2.0 * c2) * s + c1
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -48,6 +89,41 @@ def _polish(s: np.ndarray, coeffs) -> np.ndarray:
         p_new = (((candidate + c3) * candidate + c2) * candidate + c1) * candidate + c0
         better = np.isfinite(candidate) & (np.abs(p_new) < np.abs(p))
         s = np.where(better, candidate, s)
+    return s
+
+
+def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> np.ndarray:
+    """Sorted real roots (M, 4) from the companion eigenvalues, +inf in unused slots (see module doc)."""
+    col = [c[:, None] for c in coeffs]
+    mag = [m[:, None] for m in magnitudes]
+    ulps, steps = tol.torus_residual_ulps, tol.torus_newton_steps
+    real = roots.imag == 0.0
+    # A complex pair: both members start Newton from the same real part, so they find the same extremum.
+    centre = _minimum_near(roots.real.copy(), col, steps)
+    depth = quartic_at(centre, col)
+    curvature = (12.0 * centre + 6.0 * col[0]) * centre + 2.0 * col[1]
+    # Only a double root within rounding (|p| at the extremum below the bound): a deep minimum is one
+    # between two real roots, which Newton can wander to from a far complex pair.
+    near_double = ~real & (np.abs(depth) <= residual_bound(centre, mag, ulps)) & (curvature > 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        half = np.sqrt(np.maximum(-depth, 0.0) / (0.5 * curvature))
+    split = np.where(roots.imag > 0.0, centre - half, centre + half)
+    s = _polish(np.where(real, roots.real, np.where(near_double, split, 0.0)), coeffs, steps)
+    s = np.where(real | near_double, s, np.inf)
+    s.sort(axis=1)
+    # Between an entry and its exit the quartic is negative (inside the tube), between an exit and the
+    # next entry positive: a pair for which it is not, beyond rounding, is no crossing at all.
+    finite = np.isfinite(s)
+    for first, second, inside in ((0, 1, True), (2, 3, True), (1, 2, False)):
+        both = finite[:, first] & finite[:, second]
+        mid = 0.5 * (np.where(both, s[:, first], 0.0) + np.where(both, s[:, second], 0.0))
+        value = quartic_at(mid[:, None], col)[:, 0]
+        bound = residual_bound(mid[:, None], mag, ulps)[:, 0]
+        wrong = both & ((value > bound) if inside else (value < -bound))
+        s[wrong, first] = np.inf
+        s[wrong, second] = np.inf
+        finite = np.isfinite(s)
+    s.sort(axis=1)
     return s
 
 
@@ -60,7 +136,7 @@ def torus_normal(points: np.ndarray, tube: float = TORUS_TUBE_RADIUS) -> np.ndar
     return grad
 
 
-def intersect_torus(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances = TOLERANCES) -> HitArrays:
     """All hits of the lines origin + t * direction with the generic torus (K = 4 slots)."""
     n = origin.shape[0]
     hits = HitArrays.empty(n, 4)
@@ -84,10 +160,8 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     companion[:, 0, :] = -np.stack(coeffs, axis=1)
     companion[:, 1, 0] = companion[:, 2, 1] = companion[:, 3, 2] = 1.0
     roots = np.linalg.eigvals(companion)
-    real = np.abs(roots.imag) <= IMAG_TOLERANCE * (1.0 + np.abs(roots.real))
-    s = _polish(np.where(real, roots.real, 0.0), coeffs)
-    s = np.where(real, s, np.inf)
-    s.sort(axis=1)
+    magnitudes = coefficient_magnitudes(o, u)
+    s = _accepted_roots(roots, coeffs, magnitudes, tol)
     points = o[:, None, :] + np.where(np.isfinite(s), s, 0.0)[..., None] * u[:, None, :]
     normal = torus_normal(points)
     t = np.where(np.isfinite(s), (s + shift[:, None]) / speed[idx, None], np.inf)
@@ -97,4 +171,17 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     # hits alternate in, out, in, out; parity is exact even where a grazing hit's normal is ambiguous.
     hits.entering[idx] = np.isfinite(t) & (np.arange(4) % 2 == 0)
     hits.part[idx] = np.where(np.isfinite(t), 0, -1)
+    hits.error[idx] = np.where(np.isfinite(t), root_error(s, coeffs, magnitudes, tol) / speed[idx, None], 0.0)
     return hits
+
+
+def root_error(s: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> np.ndarray:
+    """How far (M, 4) roots s can be from the exact ones: the residual bound over the slope, or, near a
+    double root where the slope vanishes, over the curvature (|p| ~ p''/2 delta^2)."""
+    col = [c[:, None] for c in coeffs]
+    x = np.where(np.isfinite(s), s, 0.0)
+    bound = residual_bound(x, [m[:, None] for m in magnitudes], tol.torus_residual_ulps)
+    slope = np.abs(((4.0 * x + 3.0 * col[0]) * x + 2.0 * col[1]) * x + col[2])
+    curvature = np.abs((12.0 * x + 6.0 * col[0]) * x + 2.0 * col[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.fmin(bound / slope, np.sqrt(2.0 * bound / curvature))

@@ -172,13 +172,11 @@ def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
 
 def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
     """The FlatScene of a compiled scene, made once per compiled scene and kept on it (a second render of
-    it flattens nothing), again only when the module constants it reads have changed (tracer.accuracy
-    varies the solver tolerances)."""
-    from .. import numerics
-    from ..intersect import mesh as mesh_module, torus
+    it flattens nothing), again only when the mesh constants it reads have changed.  (The tolerances it
+    passes on are the compiled scene's own: compile_scene compiles again when they change.)"""
+    from ..intersect import mesh as mesh_module
 
-    key = (numerics.RELATIVE_EPSILON, torus.NEWTON_STEPS,
-           tuple(getattr(mesh_module, name, None) for name in flatten.MESH_CONSTANTS))
+    key = tuple(getattr(mesh_module, name, None) for name in flatten.MESH_CONSTANTS)
     cached = getattr(compiled, "_flat_cache", None)
     if cached is not None and cached[0] == key:
         return cached[1]

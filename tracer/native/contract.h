@@ -17,14 +17,10 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
-/* points this close (relative) to a rim still count as on the shape (tracer.intersect.analytic:EDGE_TOLERANCE) */
-#define EDGE_TOLERANCE 1e-12
 /* the generic torus' ring radius (tracer.intersect.torus:RING_RADIUS) */
 #define TORUS_RING 1.0
 /* the generic torus' tube radius (tracer.model:TORUS_TUBE_RADIUS) */
 #define TORUS_TUBE 0.2
-/* quartic roots this close to the real axis count as real (tracer.intersect.torus:IMAG_TOLERANCE) */
-#define TORUS_IMAG_TOLERANCE 1e-06
 /* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
@@ -39,6 +35,7 @@ typedef struct {
     const double *prim_param;                /* 1: tapered cylinder's small radius */
     const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
+    const double *prim_rounding;             /* 2: relative rounding of generic hit points, generic size (tracer.numerics) */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
     /* triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local) */
@@ -108,9 +105,12 @@ typedef struct {
     const double *const *image_data;         /* per image: height x width x 3 floats in [0, 1], row 0 at the bottom */
     const int64_t *noise_perm;               /* 512: tracer.textures.noise.PERM */
     const double *noise_gradients;           /* 12 x 3: tracer.textures.noise.GRADIENTS */
-    /* tolerances read when the scene is flattened (so that a measurement can change them) */
-    double relative_epsilon;                 /* tracer.numerics.RELATIVE_EPSILON */
-    int64_t torus_newton_steps;              /* tracer.intersect.torus.NEWTON_STEPS */
+    /* tolerances: the compiled scene's, not constants (a measurement varies them) */
+    double tol_hit_ulps;                     /* CompiledScene.tolerances (tracer.numerics.Tolerances), field for field */
+    double tol_offset_ulps;
+    double tol_torus_residual_ulps;
+    int64_t tol_torus_newton_steps;
+    double tol_square_edge;
 } SceneDesc;
 
 /* X-macro over the fields in table order: rt_desc_layout() reports offsetof and sizeof of each. */
@@ -122,6 +122,7 @@ typedef struct {
     X(prim_param) \
     X(prim_aux) \
     X(prim_material) \
+    X(prim_rounding) \
     X(planes) \
     X(n_meshes) \
     X(mesh_info) \
@@ -183,9 +184,12 @@ typedef struct {
     X(image_data) \
     X(noise_perm) \
     X(noise_gradients) \
-    X(relative_epsilon) \
-    X(torus_newton_steps)
-#define RT_SCENE_DESC_FIELD_COUNT 70
-#define RT_CONTRACT_DIGEST "0461e9f47e312111"
+    X(tol_hit_ulps) \
+    X(tol_offset_ulps) \
+    X(tol_torus_residual_ulps) \
+    X(tol_torus_newton_steps) \
+    X(tol_square_edge)
+#define RT_SCENE_DESC_FIELD_COUNT 74
+#define RT_CONTRACT_DIGEST "6e4dded2a61b2ff4"
 
 #endif

@@ -83,12 +83,8 @@ class Constant:
 
 
 CONSTANTS = (
-    Constant("EDGE_TOLERANCE", "tracer.intersect.analytic:EDGE_TOLERANCE", "double",
-             "points this close (relative) to a rim still count as on the shape"),
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
-    Constant("TORUS_IMAG_TOLERANCE", "tracer.intersect.torus:IMAG_TOLERANCE", "double",
-             "quartic roots this close to the real axis count as real"),
     Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
              "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
@@ -168,6 +164,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_param", "*f64", "1: tapered cylinder's small radius"),
     F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
+    F("prim_rounding", "*f64", "2: relative rounding of generic hit points, generic size (tracer.numerics)"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64",
       section="triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local)"),
@@ -232,9 +229,12 @@ SCENE_DESC: tuple[Field, ...] = (
     F("image_data", "**f64", "per image: height x width x 3 floats in [0, 1], row 0 at the bottom"),
     F("noise_perm", "*i64", "512: tracer.textures.noise.PERM"),
     F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
-    F("relative_epsilon", "f64", "tracer.numerics.RELATIVE_EPSILON",
-      section="tolerances read when the scene is flattened (so that a measurement can change them)"),
-    F("torus_newton_steps", "i64", "tracer.intersect.torus.NEWTON_STEPS"),
+    F("tol_hit_ulps", "f64", "CompiledScene.tolerances (tracer.numerics.Tolerances), field for field",
+      section="tolerances: the compiled scene's, not constants (a measurement varies them)"),
+    F("tol_offset_ulps", "f64"),
+    F("tol_torus_residual_ulps", "f64"),
+    F("tol_torus_newton_steps", "i64"),
+    F("tol_square_edge", "f64"),
 )
 del F
 

@@ -215,7 +215,7 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
     case K_CUBE: return hits_cube(o, d, out);
     case K_SQUARE: {
         /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
-        int n = hits_z_plane(o, d, out, 1);
+        int n = hits_z_plane(o, d, out, 1, D->tol_square_edge);
         if (n) {
             out[1] = out[0];
             out[0].entering = 1;
@@ -225,15 +225,21 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
     }
     case K_PLANE:
         *inside = plane_inside_at_start(o, d);
-        return hits_z_plane(o, d, out, 0);
+        return hits_z_plane(o, d, out, 0, D->tol_square_edge);
     case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS: return hits_torus(o, d, D->torus_newton_steps, out);
+    case K_TORUS: return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, out);
     case K_POLYHEDRON: {
         const int64_t *aux = D->prim_aux + 2 * p;
         return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
     }
     }
     return 0;
+}
+
+/* Closed analytic shapes: their normals must agree with their entering flags (compile.SOLID_ANALYTIC_KINDS). */
+static inline int solid_analytic(int32_t kind)
+{
+    return kind == K_SPHERE || kind == K_CUBE || kind == K_TAPERED || kind == K_TORUS || kind == K_POLYHEDRON;
 }
 
 /* World ray -> generic origin moved to the line's point nearest the generic centre (returns the shift). */
@@ -273,10 +279,18 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
         if (!list_reserve(w, out, 8))
             return 0;
         n = analytic_hits(S, p, og, dg, out->h, &out->inside);
+        if (solid_analytic(D->prim_kind[p]))
+            for (int64_t i = 0; i < n; i++)
+                agree_with_crossing(&out->h[i], dg);
     }
+    const double *rounding = D->prim_rounding + 2 * p;
+    double raw_scale = affine_point_scale(inv, o);
     for (int64_t i = 0; i < n; i++) {
-        out->h[i].t += shift;
-        out->h[i].shape = (int32_t)p;
+        Hit *h = &out->h[i];
+        h->t += shift;
+        h->shape = (int32_t)p;
+        /* (plus the shape's own root error, where it has one: the torus) */
+        h->err += generic_time_error(h->t, raw_scale, og, dg, h->n, rounding[1], rounding[0]);
     }
     out->n = n;
     return 1;
@@ -297,6 +311,8 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, out))
             return 0;
         out->shape = (int32_t)p;
+        const double *rounding = D->prim_rounding + 2 * p;
+        out->err = generic_time_error(out->t, affine_point_scale(inv, o), og, dg, out->n, rounding[1], rounding[0]);
         return 1;
     }
     double og[3], dg[3];
@@ -305,11 +321,22 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     int inside;
     /* (spheres, the common case, without the call) */
     int n = D->prim_kind[p] == K_SPHERE ? hits_sphere(og, dg, buf) : analytic_hits(S, p, og, dg, buf, &inside);
+    double raw_scale = -1.0;
     for (int i = 0; i < n; i++) {
         double t = buf[i].t + shift;
-        if (t > t_min && t < t_max) {
+        if (!(t > t_min && t < t_max))
+            continue;
+        /* after t_min with its whole error interval (compiled.first_after) */
+        const double *rounding = D->prim_rounding + 2 * p;
+        if (raw_scale < 0.0)
+            raw_scale = affine_point_scale(inv, o);
+        if (solid_analytic(D->prim_kind[p]))
+            agree_with_crossing(&buf[i], dg);
+        double err = buf[i].err + generic_time_error(t, raw_scale, og, dg, buf[i].n, rounding[1], rounding[0]);
+        if (t - err > t_min) {
             *out = buf[i];
             out->t = t;
+            out->err = err;
             out->shape = (int32_t)p;
             return 1;
         }
@@ -338,27 +365,21 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
 /* ------------------------------------------------------------------------------------------------------
  * Objects: a primitive or a CSG tree (ref < 0) */
 
-static int object_hits(const Scene *S, Work *w, int64_t ref, const double *o, const double *d, double scale_over_speed,
-                       int64_t level, HitList *out)
+static int object_hits(const Scene *S, Work *w, int64_t ref, const double *o, const double *d, int64_t level,
+                       HitList *out)
 {
     if (ref >= 0)
         return prim_hits(S, w, ref, o, d, out);
     int64_t node = -ref - 1;
     HitList *left = &w->lists[2 * level], *right = &w->lists[2 * level + 1];
-    if (!object_hits(S, w, S->d.csg_left[node], o, d, scale_over_speed, level + 1, left))
+    if (!object_hits(S, w, S->d.csg_left[node], o, d, level + 1, left))
         return 0;
-    if (!object_hits(S, w, S->d.csg_right[node], o, d, scale_over_speed, level + 1, right))
+    if (!object_hits(S, w, S->d.csg_right[node], o, d, level + 1, right))
         return 0;
     if (!list_reserve(w, out, 2 * (left->n + right->n) + 1))
         return 0;
-    out->n = csg_combine(S->d.csg_op[node], left, right, scale_over_speed, S->d.relative_epsilon, out->h,
-                         &out->inside);
+    out->n = csg_combine(S->d.csg_op[node], left, right, out->h, &out->inside);
     return 1;
-}
-
-static inline double ray_scale_over_speed(const double *o, const double *d)
-{
-    return (1.0 + max_abs3(o)) / sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
 }
 
 static int object_first(const Scene *S, Work *w, int64_t ref, const double *o, const double *d, double t_min,
@@ -367,10 +388,10 @@ static int object_first(const Scene *S, Work *w, int64_t ref, const double *o, c
     if (ref >= 0)
         return prim_first(S, w, ref, o, d, t_min, t_max, out);
     HitList *top = &w->lists[w->n_lists - 1];
-    if (!object_hits(S, w, ref, o, d, ray_scale_over_speed(o, d), 0, top))
+    if (!object_hits(S, w, ref, o, d, 0, top))
         return 0;
     for (int64_t i = 0; i < top->n; i++) {
-        if (top->h[i].t > t_min && top->h[i].t < t_max) {
+        if (top->h[i].t - top->h[i].err > t_min && top->h[i].t < t_max) {
             *out = top->h[i];
             return 1;
         }
@@ -1292,8 +1313,7 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
     if (!work_init(&w, S))
         return -1;
     HitList *top = &w.lists[w.n_lists - 1];
-    int ok = object_hits(S, &w, S->d.object_ref[object], origin, direction, ray_scale_over_speed(origin, direction),
-                         0, top);
+    int ok = object_hits(S, &w, S->d.object_ref[object], origin, direction, 0, top);
     int64_t n = ok && !w.oom ? top->n : -1;
     for (int64_t i = 0; i < n && i < capacity; i++) {
         const Hit *h = &top->h[i];

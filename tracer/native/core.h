@@ -32,6 +32,7 @@ typedef struct {
     int32_t shape;
     int32_t entering;
     int32_t pad;
+    double err;         /* bound on the rounding error of t (tracer.numerics) */
 } Hit;
 
 int64_t rt_desc_size(void);

@@ -1,7 +1,7 @@
 /* Booleans of whole-line hit lists: the C form of tracer/intersect/csg.py's combine, one ray at a time.
  *
- * The two children's sorted hits are merged (left first on equal times); hits closer than the time
- * tolerance form one event group, decided by the inside/outside states before and after the whole group;
+ * The two children's sorted hits are merged (left first on equal times); hits whose error
+ * intervals t +- err overlap form one event group, decided by the inside/outside states before and after the whole group;
  * a child entered and left within one group (a zero-thickness sheet) is kept, as an enter/exit pair at
  * the same time, where the boolean would show it. */
 #ifndef RT_CSG_H
@@ -25,19 +25,8 @@ static inline int csg_state(int op, int left, int right)
     }
 }
 
-/* tracer.numerics.time_tolerance for one ray: scale_over_speed = (1 + max|o|) / |d|, eps the relative epsilon. */
-/* np.maximum (NaN wins) */
-static inline double nan_max2(double a, double b) { return (a != a || b != b) ? NAN : (a > b ? a : b); }
-
-static inline double time_tol(double eps, double scale_over_speed, double t)
-{
-    return eps * (scale_over_speed + fabs(t));
-}
-
 /* `out` needs room for 2 (left->n + right->n) hits.  Returns the number written; sets *inside. */
-static int64_t csg_combine(int op, const HitList *left, const HitList *right, double scale_over_speed, double eps,
-                           Hit *out,
-                           int *inside)
+static int64_t csg_combine(int op, const HitList *left, const HitList *right, Hit *out, int *inside)
 {
     int state[2] = {left->inside, right->inside};
     int before[2] = {state[0], state[1]};
@@ -56,8 +45,8 @@ static int64_t csg_combine(int op, const HitList *left, const HitList *right, do
         }
         int ends_group = 1;
         if (i < nl || j < nr) {
-            double next = (i < nl && (j >= nr || left->h[i].t <= right->h[j].t)) ? left->h[i].t : right->h[j].t;
-            ends_group = !(next - cur.t <= nan_max2(time_tol(eps, scale_over_speed, cur.t), time_tol(eps, scale_over_speed, next)));
+            const Hit *next = (i < nl && (j >= nr || left->h[i].t <= right->h[j].t)) ? &left->h[i] : &right->h[j];
+            ends_group = !(next->t - cur.t <= cur.err + next->err);  /* error intervals apart */
         }
         int c = from_right;
         if (cur.entering) {

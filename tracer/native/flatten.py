@@ -16,9 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-from .. import numerics
 from ..compile import CompiledScene, CSGNode, Primitive
-from ..intersect import torus
 from ..intersect.mesh import MeshArrays
 from ..model import SHAPE_KINDS
 from . import contract
@@ -172,6 +170,7 @@ class FlatScene:
         a["prim_param"] = [float(prims[k].shape.small_radius) if code == KIND["TAPERED"] else 0.0
                            for k, code in enumerate(codes.tolist())]
         a["prim_material"] = [p.material_id for p in prims]
+        a["prim_rounding"] = np.array([(p.rounding, p.generic_size) for p in prims], dtype=np.float64).reshape(-1, 2)
 
         # Polyhedra planes and meshes (instances share one mesh).
         planes, aux = [], []
@@ -245,10 +244,11 @@ class FlatScene:
                        min_reflectivity=float(settings.min_reflectivity),
                        min_transparency=float(settings.min_transparency),
                        max_depth=int(settings.max_recursion_depth), effects=effects,
-                       mesh_constants=self._mesh_constants(meshes),
-                       # read now, not compiled in: tracer.accuracy varies them
-                       relative_epsilon=float(numerics.RELATIVE_EPSILON),
-                       torus_newton_steps=int(torus.NEWTON_STEPS))
+                       mesh_constants=self._mesh_constants(meshes))
+        tol = compiled.tolerances
+        scalars.update(tol_hit_ulps=float(tol.hit_ulps), tol_offset_ulps=float(tol.offset_ulps),
+                       tol_torus_residual_ulps=float(tol.torus_residual_ulps),
+                       tol_torus_newton_steps=int(tol.torus_newton_steps), tol_square_edge=float(tol.square_edge))
         self.desc = SceneDesc()
         for f in contract.SCENE_DESC:
             if not f.is_pointer:

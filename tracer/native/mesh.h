@@ -139,6 +139,7 @@ static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, doub
     h->part = (int32_t)tri;
     h->shape = -1;
     h->entering = entering;
+    h->err = 0.0;  /* the primitive adds the bound on t's rounding (core.c, tracer.numerics) */
 }
 
 /* The first hit with lower < t < upper (nearer child first, by the ray's own direction). */

@@ -16,6 +16,10 @@
 static inline double fmin_nan(double a, double b) { return (a < b || b != b) ? a : b; }
 static inline double fmax_nan(double a, double b) { return (a > b || b != b) ? a : b; }
 
+/* np.maximum / np.minimum: a NaN argument wins */
+static inline double nan_max2(double a, double b) { return (a != a || b != b) ? NAN : (a > b ? a : b); }
+static inline double nan_min2(double a, double b) { return (a != a || b != b) ? NAN : (a < b ? a : b); }
+
 static inline double clip(double x, double lo, double hi)  /* np.clip: NaN stays NaN */
 {
     return x < lo ? lo : (x > hi ? hi : x);
@@ -57,6 +61,42 @@ static inline void normal_to_world(const double *inv, const double *n, double *o
 {
     for (int j = 0; j < 3; j++)
         out[j] = n[0] * inv[j] + n[1] * inv[4 + j] + n[2] * inv[8 + j];
+}
+
+/* max_i sum_j |m_ij| |p_j| + |m_i3|: the size of an affine image of p before any cancellation */
+static inline double affine_point_scale(const double *m, const double *p)
+{
+    double best = 0.0;
+    for (int i = 0; i < 3; i++) {
+        double s = fabs(p[0]) * fabs(m[4 * i]) + fabs(p[1]) * fabs(m[4 * i + 1]) + fabs(p[2]) * fabs(m[4 * i + 2]) +
+                   fabs(m[4 * i + 3]);
+        if (s > best)
+            best = s;
+    }
+    return best;
+}
+
+/* tracer.numerics.generic_time_error for one hit: a bound on the rounding error of its t. */
+static inline double generic_time_error(double t, double raw_scale, const double *og, const double *dg, const double *n,
+                                        double size, double rounding)
+{
+    double speed = sqrt(dot3(dg, dg));
+    double reach = (isfinite(t) ? fabs(t) : 0.0) * max_abs3(dg);
+    double scale = raw_scale + max_abs3(og) + reach + size;
+    double error = rounding * scale / size;
+    double cosine = fabs(dot3(n, dg)) / (sqrt(dot3(n, n)) * speed);
+    if (!isfinite(cosine))
+        cosine = 0.0;
+    double floor = sqrt(error);
+    return size * error / (speed * (cosine > floor ? cosine : floor));
+}
+
+/* tracer.numerics.offset_distance: how far a secondary ray starts from a hit, along the unit normal. */
+static inline double offset_distance(double t, double t_error, const double *o, const double *d, double offset_ulps)
+{
+    double u = DBL_EPSILON / 2.0, g = offset_ulps * u / (1.0 - offset_ulps * u);
+    double speed = sqrt(dot3(d, d));
+    return t_error * speed + g * (max_abs3(o) + fabs(t) * max_abs3(d));
 }
 
 /* Roots of a t^2 + 2 b t + c = 0 given disc = b^2 - a c, as tracer.intersect.quadratic.solve_quadratic:

@@ -94,8 +94,8 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
         facing[2] = -facing[2];
     }
     int64_t mat = D->prim_material[h.shape];
-    double mp = max_abs3(point), mo = max_abs3(o);
-    double offset = D->relative_epsilon * (1.0 + (mp > mo ? mp : mo));
+    /* secondary rays start off the surface by the bound on the hit point's rounding error */
+    double offset = offset_distance(h.t, h.err, o, d, D->tol_offset_ulps);
     const double *ambient = D->mat_ambient + 3 * mat, *emissive = D->mat_emissive + 3 * mat;
     const double *diffuse = D->mat_diffuse + 3 * mat;
     double textured_ambient[3], textured_diffuse[3];

@@ -10,7 +10,19 @@
 #include "core.h"
 #include "numeric.h"
 
-/* EDGE_TOLERANCE, TORUS_RING, TORUS_TUBE and TORUS_IMAG_TOLERANCE come from contract.h (via core.h). */
+/* TORUS_RING and TORUS_TUBE come from contract.h (via core.h). */
+
+/* analytic.agree_with_crossing for one hit: a normal on the wrong side of the ray loses its component
+ * along the ray. */
+static inline void agree_with_crossing(Hit *h, const double *d)
+{
+    double along = dot3(h->n, d);
+    if (h->entering ? along > 0.0 : along < 0.0) {
+        double k = along / dot3(d, d);
+        for (int i = 0; i < 3; i++)
+            h->n[i] -= k * d[i];
+    }
+}
 
 static inline void set_hit(Hit *h, double t, int entering, double nx, double ny, double nz, int part)
 {
@@ -22,19 +34,20 @@ static inline void set_hit(Hit *h, double t, int entering, double nx, double ny,
     h->part = part;
     h->shape = -1;
     h->entering = entering;
+    h->err = 0.0;
 }
 
+/* Roots -b/a -+ sqrt(disc)/a about the line's point nearest the centre (analytic.intersect_sphere). */
 static int hits_sphere(const double *o, const double *d, Hit *out)
 {
-    double a = dot3(d, d), b = dot3(o, d), c = dot3(o, o) - 1.0;
-    double ba = b / a;
-    double perp[3] = {o[0] - ba * d[0], o[1] - ba * d[1], o[2] - ba * d[2]};
+    double a = dot3(d, d), b = dot3(o, d);
+    double mid = -(b / a);
+    double perp[3] = {o[0] + mid * d[0], o[1] + mid * d[1], o[2] + mid * d[2]};
     double disc = a * (1.0 - dot3(perp, perp));
-    double lo, hi;
-    if (!solve_quadratic(a, b, c, disc, &lo, &hi) || !(a > 0.0))
+    if (!(disc >= 0.0) || !(a > 0.0) || !isfinite(mid))
         return 0;
-    if (!isfinite(lo) || !isfinite(hi))
-        return 0;
+    double half = sqrt(disc) / a;
+    double lo = mid - half, hi = mid + half;
     set_hit(&out[0], lo, 1, o[0] + lo * d[0], o[1] + lo * d[1], o[2] + lo * d[2], 0);
     set_hit(&out[1], hi, 0, o[0] + hi * d[0], o[1] + hi * d[1], o[2] + hi * d[2], 0);
     return 2;
@@ -73,14 +86,14 @@ static int hits_cube(const double *o, const double *d, Hit *out)
 }
 
 /* The square (thin: the caller turns its crossing into an enter/exit pair) and the plane z = 0. */
-static int hits_z_plane(const double *o, const double *d, Hit *out, int bounded)
+static int hits_z_plane(const double *o, const double *d, Hit *out, int bounded, double edge)
 {
     if (d[2] == 0.0)
         return 0;
     double t = (0.0 - o[2]) / d[2];
     double px = o[0] + t * d[0], py = o[1] + t * d[1];
     if (bounded) {
-        double limit = 1.0 + EDGE_TOLERANCE;
+        double limit = 1.0 + edge;
         if (!(fabs(px) <= limit && fabs(py) <= limit))
             return 0;
     }
@@ -111,7 +124,38 @@ static inline void tapered_normal(const double *p, double k, double *n)
     }
 }
 
-/* Tapered cylinder with top radius s: wall, base disc z = 0 (part 1), cap disc z = 1 (part 2). */
+/* Where the line is inside the wall's double cone a t^2 + 2 b t + c <= 0, clipped to the slab
+ * [slab_lo, slab_hi] (analytic._wall_interval).  Returns 0 where that is empty. */
+static int wall_interval(double a, double b, double c, double slab_lo, double slab_hi, double *start, double *end)
+{
+    double lo = NAN, hi = NAN;
+    int real = solve_quadratic(a, b, c, b * b - a * c, &lo, &hi);
+    double s, e;
+    if (a < 0.0) {  /* inside outside the roots (both nappes), or everywhere when there are none */
+        double lower_hi = real ? nan_min2(lo, slab_hi) : slab_hi;
+        double upper_lo = real ? nan_max2(hi, slab_lo) : slab_lo;
+        int take_upper = !real || (slab_hi - upper_lo > lower_hi - slab_lo);
+        s = take_upper ? upper_lo : slab_lo;
+        e = take_upper ? slab_hi : lower_hi;
+    } else {
+        if (!real) {
+            lo = hi = NAN;
+        }
+        if (a == 0.0 && b == 0.0) {  /* no t at all: inside everywhere or nowhere */
+            lo = c <= 0.0 ? -INFINITY : NAN;
+            hi = c <= 0.0 ? INFINITY : NAN;
+        }
+        s = nan_max2(lo, slab_lo);
+        e = nan_min2(hi, slab_hi);
+    }
+    if (!(s <= e))
+        return 0;
+    *start = s;
+    *end = e;
+    return 1;
+}
+
+/* Tapered cylinder with top radius s: wall (part 0), base disc z = 0 (part 1), cap disc z = 1 (part 2). */
 static int hits_tapered(const double *o, const double *d, double s, Hit *out)
 {
     double k = s - 1.0;
@@ -119,43 +163,37 @@ static int hits_tapered(const double *o, const double *d, double s, Hit *out)
     double a = d[0] * d[0] + d[1] * d[1] - k * k * d[2] * d[2];
     double b = o[0] * d[0] + o[1] * d[1] - k * d[2] * r0;
     double c = o[0] * o[0] + o[1] * o[1] - r0 * r0;
-    double ts[4], ns[4][3];
-    int valid[4] = {0, 0, 0, 0};
-    double lo = NAN, hi = NAN;
-    int real = solve_quadratic(a, b, c, b * b - a * c, &lo, &hi);
-    for (int slot = 0; slot < 2; slot++) {
-        double tw = slot ? hi : lo;
-        int finite = real && isfinite(tw);
-        double tt = finite ? tw : 0.0;
-        double p[3] = {o[0] + tt * d[0], o[1] + tt * d[1], o[2] + tt * d[2]};
-        ts[slot] = tw;
-        tapered_normal(p, k, ns[slot]);
-        valid[slot] = finite && p[2] >= -EDGE_TOLERANCE && p[2] <= 1.0 + EDGE_TOLERANCE;
+    double t_base = (0.0 - o[2]) / d[2], t_cap = (1.0 - o[2]) / d[2];
+    int rising = d[2] > 0.0;
+    double slab_lo, slab_hi;
+    if (d[2] == 0.0) {
+        int in_slab = o[2] >= 0.0 && o[2] <= 1.0;
+        slab_lo = in_slab ? -INFINITY : NAN;
+        slab_hi = in_slab ? INFINITY : NAN;
+    } else {
+        slab_lo = rising ? t_base : t_cap;
+        slab_hi = rising ? t_cap : t_base;
     }
-    for (int slot = 2; slot < 4; slot++) {
-        double z = slot == 2 ? 0.0 : 1.0, radius = slot == 2 ? 1.0 : s;
-        int crosses = d[2] != 0.0;
-        double t = (z - o[2]) / d[2];
-        double tt = crosses ? t : 0.0;
-        double px = o[0] + tt * d[0], py = o[1] + tt * d[1];
-        ts[slot] = t;
-        ns[slot][0] = 0.0;
-        ns[slot][1] = 0.0;
-        ns[slot][2] = slot == 2 ? -1.0 : 1.0;
-        valid[slot] = crosses && (px * px + py * py <= radius * radius * (1.0 + EDGE_TOLERANCE)) && radius > 0.0;
-    }
-    int i_in = 0, i_out = 0, any = 0;
-    double t_in = INFINITY, t_out = -INFINITY;
-    for (int slot = 0; slot < 4; slot++) {
-        double tmin = valid[slot] ? ts[slot] : INFINITY, tmax = valid[slot] ? ts[slot] : -INFINITY;
-        any |= valid[slot];
-        if (slot == 0 || tmin < t_in) { t_in = tmin; i_in = slot; }    /* first minimum, as argmin */
-        if (slot == 0 || tmax > t_out) { t_out = tmax; i_out = slot; }  /* first maximum, as argmax */
-    }
-    if (!any || !isfinite(t_in) || !isfinite(t_out))
+    double t_in, t_out;
+    if (!wall_interval(a, b, c, slab_lo, slab_hi, &t_in, &t_out) || !isfinite(t_in) || !isfinite(t_out))
         return 0;
-    set_hit(&out[0], t_in, 1, ns[i_in][0], ns[i_in][1], ns[i_in][2], i_in >= 2 ? i_in - 1 : 0);
-    set_hit(&out[1], t_out, 0, ns[i_out][0], ns[i_out][1], ns[i_out][2], i_out >= 2 ? i_out - 1 : 0);
+    /* An end on the slab's boundary is a cap (ties too: a cone's apex is its cap's point). */
+    int part_in = t_in <= slab_lo ? (rising ? 1 : 2) : 0;
+    int part_out = t_out >= slab_hi ? (rising ? 2 : 1) : 0;
+    for (int end = 0; end < 2; end++) {
+        double t = end ? t_out : t_in;
+        int part = end ? part_out : part_in;
+        double n[3];
+        if (part == 0) {
+            double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+            tapered_normal(p, k, n);
+        } else {
+            n[0] = 0.0;
+            n[1] = 0.0;
+            n[2] = part == 1 ? -1.0 : 1.0;
+        }
+        set_hit(&out[end], t, !end, n[0], n[1], n[2], part);
+    }
     return 2;
 }
 
@@ -208,7 +246,26 @@ static double torus_polish(double s, const double *c, int64_t steps)
     return s;
 }
 
-static int hits_torus(const double *o, const double *d, int64_t newton_steps, Hit *out)
+/* Newton steps on the quartic's derivative: the extremum a complex pair of roots sits over. */
+static double torus_minimum_near(double s, const double *c, int64_t steps)
+{
+    for (int64_t step = 0; step < steps; step++) {
+        double d1 = ((4.0 * s + 3.0 * c[0]) * s + 2.0 * c[1]) * s + c[2];
+        double d2 = (12.0 * s + 6.0 * c[0]) * s + 2.0 * c[1];
+        double candidate = s - d1 / d2;
+        if (isfinite(candidate) && d2 > 0.0)
+            s = candidate;
+    }
+    return s;
+}
+
+/* torus.residual_bound: how far from zero a computed quartic value at s can be where the exact one is 0. */
+static inline double torus_residual_bound(double s, const double *magnitudes, double ulps)
+{
+    return ulps * DBL_EPSILON * quartic_at(fabs(s), magnitudes);
+}
+
+static int hits_torus(const double *o, const double *d, int64_t newton_steps, double residual_ulps, Hit *out)
 {
     double speed = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     if (!(speed > 0.0))
@@ -228,21 +285,59 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, Hi
     c[1] = 4.0 * f * f + 2.0 * e - 4.0 * R2 * (u[0] * u[0] + u[1] * u[1]);
     c[2] = 4.0 * e * f - 8.0 * R2 * (q[0] * u[0] + q[1] * u[1]);
     c[3] = e * e - 4.0 * R2 * (q[0] * q[0] + q[1] * q[1]);
+    /* torus.coefficient_magnitudes: the same terms in absolute value */
+    double fa = fabs(f), ea = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + R2 + tube2, m[4];
+    m[0] = 4.0 * fa;
+    m[1] = 4.0 * fa * fa + 2.0 * ea + 4.0 * R2 * (u[0] * u[0] + u[1] * u[1]);
+    m[2] = 4.0 * ea * fa + 8.0 * R2 * (fabs(q[0] * u[0]) + fabs(q[1] * u[1]));
+    m[3] = ea * ea + 4.0 * R2 * (q[0] * q[0] + q[1] * q[1]);
     double h[4][4] = {{-c[0], -c[1], -c[2], -c[3]}, {1.0, 0.0, 0.0, 0.0}, {0.0, 1.0, 0.0, 0.0}, {0.0, 0.0, 1.0, 0.0}};
     double wr[4], wi[4];
     if (hessenberg_eigenvalues(h, 4, wr, wi) != 0)
         return 0;
+    /* Real eigenvalues count; a complex pair only where the quartic's minimum next to it is below the
+     * rounding bound (then as its two nearby roots, or a touching pair). See tracer/intersect/torus.py. */
     double s[4];
-    int m = 0;
-    for (int i = 0; i < 4; i++)
-        if (fabs(wi[i]) <= TORUS_IMAG_TOLERANCE * (1.0 + fabs(wr[i])))
-            s[m++] = torus_polish(wr[i], c, newton_steps);
-    for (int i = 1; i < m; i++)  /* insertion sort */
+    int m_count = 0;
+    for (int i = 0; i < 4; i++) {
+        double start;
+        if (wi[i] == 0.0) {
+            start = wr[i];
+        } else {
+            double centre = torus_minimum_near(wr[i], c, newton_steps);
+            double depth = quartic_at(centre, c);
+            double curvature = (12.0 * centre + 6.0 * c[0]) * centre + 2.0 * c[1];
+            if (!(fabs(depth) <= torus_residual_bound(centre, m, residual_ulps)) || !(curvature > 0.0))
+                continue;
+            double half = sqrt((depth < 0.0 ? -depth : 0.0) / (0.5 * curvature));
+            start = wi[i] > 0.0 ? centre - half : centre + half;
+        }
+        s[m_count++] = torus_polish(start, c, newton_steps);
+    }
+    for (int i = 1; i < m_count; i++)  /* insertion sort */
+        for (int j = i; j > 0 && s[j] < s[j - 1]; j--) {
+            double x = s[j]; s[j] = s[j - 1]; s[j - 1] = x;
+        }
+    for (int i = m_count; i < 4; i++)
+        s[i] = INFINITY;
+    /* Inside the tube between an entry and its exit, outside between an exit and the next entry: a pair
+     * the quartic's sign (beyond rounding) disagrees with is no crossing. */
+    static const int pairs[3][3] = {{0, 1, 1}, {2, 3, 1}, {1, 2, 0}};
+    for (int k = 0; k < 3; k++) {
+        int first = pairs[k][0], second = pairs[k][1];
+        if (!isfinite(s[first]) || !isfinite(s[second]))
+            continue;
+        double mid = 0.5 * (s[first] + s[second]);
+        double value = quartic_at(mid, c), limit = torus_residual_bound(mid, m, residual_ulps);
+        if (pairs[k][2] ? value > limit : value < -limit)
+            s[first] = s[second] = INFINITY;
+    }
+    for (int i = 1; i < 4; i++)
         for (int j = i; j > 0 && s[j] < s[j - 1]; j--) {
             double x = s[j]; s[j] = s[j - 1]; s[j - 1] = x;
         }
     int n = 0;
-    for (int i = 0; i < m; i++) {
+    for (int i = 0; i < 4; i++) {
         if (!isfinite(s[i]))
             continue;
         double p[3] = {q[0] + s[i] * u[0], q[1] + s[i] * u[1], q[2] + s[i] * u[2]};
@@ -253,7 +348,12 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, Hi
         g[1] -= 8.0 * TORUS_RING * TORUS_RING * p[1];
         double t = (s[i] + shift) / speed;
         /* Hits alternate in, out, in, out along the line (it starts outside the bounded torus). */
-        set_hit(&out[n], t, (i % 2) == 0, g[0], g[1], g[2], 0);
+        set_hit(&out[n], t, (n % 2) == 0, g[0], g[1], g[2], 0);
+        /* torus.root_error: residual bound over the slope, or near a double root over the curvature */
+        double limit = torus_residual_bound(s[i], m, residual_ulps);
+        double slope = fabs(((4.0 * s[i] + 3.0 * c[0]) * s[i] + 2.0 * c[1]) * s[i] + c[2]);
+        double curvature = fabs((12.0 * s[i] + 6.0 * c[0]) * s[i] + 2.0 * c[1]);
+        out[n].err = fmin_nan(limit / slope, sqrt(2.0 * limit / curvature)) / speed;
         n++;
     }
     return n;

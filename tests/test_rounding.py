@@ -1,0 +1,311 @@
+"""Single rays at the numerical extremes, against a 50-digit oracle, on both backends.
+
+* Rays within 1e-8 ... 1e-16 (of the shape's size) of tangency to the sphere, the cylinder's and cone's
+  walls and the torus's tube: every hit lies on the surface to 1e-9 of the size, and where the ray is
+  1e-10 or more from tangency the number of hits is the exact one (no spurious touching pairs, no lost
+  pairs).
+* The defects an audit found (issue 12): the sphere's second root at tangency, the cone's exit for a ray
+  along a generator near the apex, the cylinder's caps 1e-14 outside the rim, torus touching pairs 1e-12
+  off tangency, normals of shapes 1e-9 thin.
+* pbrt's re-intersection property: a ray spawned from a hit (offset by the hit's error bound, tracer.numerics)
+  toward either side never finds that surface again: its first hit leaves the solid when it was spawned
+  inward and enters it when spawned outward.  Over random shapes, affine maps with condition numbers up
+  to 1e8 and scales 1e-8 ... 1e8.
+"""
+from __future__ import annotations
+
+import math
+
+import mpmath
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from helpers import scaling, scene_of, shape, translation
+from tracer import native, numerics
+from tracer.compile import compile_scene
+from tracer.trace import first_hits
+
+mpmath.mp.dps = 50
+BANDS = [1e-8, 1e-10, 1e-12, 1e-14, 1e-16]
+#: From this distance to tangency on, the hit count must be exact.
+DECIDED = 1e-10
+BACKENDS = ["numpy"] + (["c"] if native.load_error is None else [])
+
+
+def _hits(kind, origin, direction, backend, matrix=None):
+    """(t, entering, unit normal) of every crossing of the whole line with one shape."""
+    compiled = compile_scene(scene_of(shape(kind, matrix)))
+    o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
+    if backend == "c":
+        h = native.NativeTracer(compiled).object_hits(0, o, d)
+    else:
+        h = compiled.objects[0].intersect(o[None], d[None])
+    keep = np.isfinite(h.t[0])
+    normals = h.normal[0][keep]
+    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return list(zip(h.t[0][keep].tolist(), h.entering[0][keep].tolist(), normals))
+
+
+# ------------------------------------------------------------------------------------------------ the oracle
+
+def _mp(v):
+    return [mpmath.mpf(float(x)) for x in v]
+
+
+def _crossings(inside, candidates):
+    """Exact (t, entering) of a solid given by an exact inside test and its candidate crossing times."""
+    ts = sorted(t for t in candidates if mpmath.isfinite(t))
+    out = []
+    for k, t in enumerate(ts):
+        before = inside((ts[k - 1] + t) / 2 if k > 0 else t - 1)
+        after = inside((t + ts[k + 1]) / 2 if k + 1 < len(ts) else t + 1)
+        if before != after:
+            out.append((t, after))
+    return out
+
+
+def _quadratic_roots(a, b, c):
+    disc = b * b - a * c
+    if disc < 0:
+        return []
+    if a == 0:
+        return [-c / (2 * b)] if b != 0 else []
+    r = mpmath.sqrt(disc)
+    return [(-b - r) / a, (-b + r) / a]
+
+
+def exact_hits(kind, origin, direction):
+    """(t, entering) of the line with a generic shape, to 50 digits."""
+    o, d = _mp(origin), _mp(direction)
+
+    def at(t):
+        return [o[i] + t * d[i] for i in range(3)]
+
+    if kind == "sphere":
+        roots = _quadratic_roots(sum(x * x for x in d), sum(o[i] * d[i] for i in range(3)),
+                                 sum(x * x for x in o) - 1)
+
+        def inside(t):
+            return sum(x * x for x in at(t)) <= 1
+        return _crossings(inside, roots)
+    if kind in ("cylinder", "cone"):
+        k = 0 if kind == "cylinder" else -1
+        r0 = 1 + k * o[2]
+        a = d[0] ** 2 + d[1] ** 2 - k * k * d[2] ** 2
+        b = o[0] * d[0] + o[1] * d[1] - k * d[2] * r0
+        c = o[0] ** 2 + o[1] ** 2 - r0 * r0
+        candidates = _quadratic_roots(a, b, c)
+        if d[2] != 0:
+            candidates += [(0 - o[2]) / d[2], (1 - o[2]) / d[2]]
+
+        def inside(t):
+            x, y, z = at(t)
+            return 0 <= z <= 1 and x * x + y * y <= (1 + k * z) ** 2
+        return _crossings(inside, candidates)
+    if kind == "torus":
+        R2, r2 = 1, mpmath.mpf(0.2) ** 2
+
+        def f(t):
+            x, y, z = at(t)
+            s = x * x + y * y + z * z
+            return (s + R2 - r2) ** 2 - 4 * R2 * (x * x + y * y)
+        # The quartic's coefficients from five exact samples, its roots to 50 digits.
+        ts = [mpmath.mpf(j) for j in range(5)]
+        coeffs = mpmath.lu_solve(mpmath.matrix([[t ** j for j in range(5)] for t in ts]),
+                                 mpmath.matrix([f(t) for t in ts]))
+        roots = mpmath.polyroots([coeffs[j] for j in range(5)], maxsteps=400, extraprec=400, asc=True)
+        real = [mpmath.re(z) for z in roots if abs(mpmath.im(z)) < mpmath.mpf(10) ** -40]
+        return _crossings(lambda t: f(t) <= 0, real)
+    raise ValueError(kind)
+
+
+def surface_residual(kind, point):
+    """Distance-like residual of a generic point from the generic surface, to 50 digits."""
+    x, y, z = _mp(point)
+    if kind == "sphere":
+        return abs(mpmath.sqrt(x * x + y * y + z * z) - 1)
+    if kind in ("cylinder", "cone"):
+        k = 0 if kind == "cylinder" else -1
+        wall = abs(mpmath.sqrt(x * x + y * y) - (1 + k * z)) / mpmath.sqrt(1 + k * k)
+        cap = min(abs(z), abs(z - 1))
+        return min(wall, cap) if -1e-9 <= z <= 1 + 1e-9 else abs(z)
+    if kind == "torus":
+        ring = mpmath.sqrt(x * x + y * y) - 1
+        return abs(mpmath.sqrt(ring * ring + z * z) - mpmath.mpf(0.2))
+    raise ValueError(kind)
+
+
+def tangent_ray(kind, gap, rng):
+    """A line ``gap`` outside (gap > 0) or inside (gap < 0) of tangency to the generic shape, with the
+    point of (near) tangency inside the shape's extent, and a start a few units away."""
+    if kind == "sphere":
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        d = rng.normal(size=3)
+        d -= d.dot(n) * n
+        d /= np.linalg.norm(d)
+        return (1 + gap) * n - rng.uniform(2, 6) * d, d
+    if kind in ("cylinder", "cone"):
+        phi = rng.uniform(0, 2 * math.pi)
+        z = rng.uniform(0.3, 0.7)
+        radius = 1.0 if kind == "cylinder" else 1.0 - z
+        n = np.array([math.cos(phi), math.sin(phi), 0.0])
+        along = np.array([-math.sin(phi), math.cos(phi), 0.0])  # horizontal: tangent to the wall's circle
+        p = (radius + gap) * n + np.array([0.0, 0.0, z])
+        return p - rng.uniform(2, 6) * along, along
+    if kind == "torus":
+        # Over the top of the tube (z = 0.2), horizontally, tangent to the circle x^2 + y^2 = 1 there.
+        phi = rng.uniform(0, 2 * math.pi)
+        n = np.array([math.cos(phi), math.sin(phi), 0.0])
+        along = np.array([-math.sin(phi), math.cos(phi), 0.0])
+        p = n + np.array([0.0, 0.0, 0.2 + gap])
+        return p - rng.uniform(2, 6) * along, along
+    raise ValueError(kind)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("kind", ["sphere", "cylinder", "cone", "torus"])
+@pytest.mark.parametrize("band", BANDS)
+def test_near_tangent_rays_against_the_oracle(kind, band, backend):
+    rng = np.random.default_rng(int(band ** -0.25) * 7 + len(kind))
+    for trial in range(12):
+        gap = band * rng.uniform(0.5, 1.0) * (1 if trial % 2 else -1)
+        origin, direction = tangent_ray(kind, gap, rng)
+        got = _hits(kind, origin, direction, backend)
+        for t, _, _ in got:
+            point = origin + t * direction
+            assert surface_residual(kind, point) <= 1e-9, f"{kind} gap {gap:g}: hit at t={t!r} is off the surface"
+        if band >= DECIDED:
+            exact = exact_hits(kind, origin, direction)
+            assert [e for _, e, _ in got] == [e for _, e in exact], \
+                f"{kind} gap {gap:g}: {[(t, e) for t, e, _ in got]} vs exact {[(float(t), e) for t, e in exact]}"
+            assert [t for t, _, _ in got] == pytest.approx([float(t) for t, _ in exact], abs=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------ the defects
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_sphere_second_root_at_tangency_is_on_the_surface(backend):
+    # Within 1e-16 of tangency, c/q divided one rounding residue by another: hits 0.1 units off.
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        origin, direction = tangent_ray("sphere", -1e-16 * rng.uniform(0, 1), rng)
+        for t, _, _ in _hits("sphere", origin, direction, backend):
+            assert abs(np.linalg.norm(origin + t * direction) - 1.0) <= 1e-12
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("offset", [1e-3, 1e-6, 2e-9, 1e-12])
+def test_cone_ray_along_a_generator_near_the_apex_exits_at_the_base(backend, offset):
+    # The line through (-offset along the generator's azimuth) at the apex height, parallel to the
+    # generator: it enters just below the apex and leaves through the base disc.
+    rng = np.random.default_rng(int(1 / offset) % 1000)
+    for _ in range(20):
+        phi = rng.uniform(0, 2 * math.pi)
+        radial = np.array([math.cos(phi), math.sin(phi), 0.0])
+        generator = (radial - np.array([0.0, 0.0, 1.0])) / math.sqrt(2.0)
+        origin = np.array([0.0, 0.0, 1.0]) - offset * radial - 2.0 * generator
+        exact = exact_hits("cone", origin, generator)
+        got = _hits("cone", origin, generator, backend)
+        assert [e for _, e, _ in got] == [True, False]
+        # The entry is as ill-conditioned as the line is close to the surface: rounding of the line
+        # (1e-16) over the angle between them (~ offset).
+        assert got[0][0] == pytest.approx(float(exact[0][0]), abs=max(1e-8, 1e-14 / offset))
+        assert got[1][0] == pytest.approx(float(exact[1][0]), abs=1e-12)  # the base, 2 + sqrt(2)
+        assert got[1][2] == pytest.approx((0, 0, -1))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_cylinder_caps_agree_with_the_wall(backend):
+    # 1e-14 outside the rim: the wall misses, and so must the caps (they used a 1e-12 allowance).
+    for direction in [(0, 0, -1), (0, 1e-3, -1), (1e-9, 0, -1)]:
+        assert _hits("cylinder", (1 + 1e-14, 0, 5), direction, backend) == []
+    inside = _hits("cylinder", (1 - 1e-14, 0, 5), (0, 0, -1), backend)
+    assert [(round(t, 12), e) for t, e, _ in inside] == [(4.0, True), (5.0, False)]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("gap, count", [(1e-12, 0), (-1e-12, 4), (1e-11, 0), (-1e-11, 4)])
+def test_torus_has_no_spurious_touching_pairs(backend, gap, count):
+    # Over the tube top (z = 0.2) along x: within 1e-12 of tangency the 1e-6 imaginary-part allowance
+    # turned a miss into two touching pairs.
+    hits = _hits("torus", (-5, 0, 0.2 + gap), (1, 0, 0), backend)
+    assert len(hits) == count
+    assert [e for _, e, _ in hits] == [True, False] * (count // 2)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("kind", ["sphere", "cube", "cylinder", "cone", "torus"])
+def test_normals_of_nearly_flat_shapes_agree_with_entering(backend, kind):
+    rng = np.random.default_rng(11)
+    matrix = scaling(1, 1, 1e-9)
+    for _ in range(150):
+        d = rng.normal(size=3)
+        d[2] *= 10.0 ** rng.uniform(-12, 0)
+        d /= np.linalg.norm(d)
+        phi = rng.uniform(0, 2 * math.pi)
+        target = (1 - 10.0 ** rng.uniform(-12, -2)) * np.array([math.cos(phi), math.sin(phi), 0.0])
+        for t, entering, normal in _hits(kind, target - 3 * d, d, backend, matrix):
+            along = float(normal @ d)
+            assert (along <= 1e-9) if entering else (along >= -1e-9), f"{kind}: n.d = {along} entering={entering}"
+
+
+# ------------------------------------------------------------------------------------------------ re-intersection
+
+def _affine(seed, condition, size):
+    """A random rotation times axis scales spanning ``condition``, times ``size``, and a translation."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    scales = size * np.array([1.0, condition ** rng.uniform(0, 1), condition])
+    rng.shuffle(scales)
+    m = np.eye(4)
+    m[:3, :3] = q @ np.diag(scales)
+    m[:3, 3] = rng.uniform(-1, 1, 3) * size * 10.0
+    return m
+
+
+SOLIDS = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus"]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(kind=st.sampled_from(SOLIDS), seed=st.integers(0, 2 ** 31),
+       log_condition=st.floats(0, 8), log_size=st.floats(-8, 8))
+def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, log_size):
+    size = 10.0 ** log_size
+    matrix = _affine(seed, 10.0 ** log_condition, size)
+    solid = shape(kind, matrix)
+    if kind == "taperedCylinder":
+        solid.tapered_radius = 0.5
+    compiled = compile_scene(scene_of(solid))
+    core = native.NativeTracer(compiled) if native.load_error is None else None
+    rng = np.random.default_rng(seed)
+    # Rays from outside toward random points of the generic shape's extent.
+    n = 64
+    targets = np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(0, 1, (n, 1))] @ matrix[:3, :3].T + matrix[:3, 3]
+    away = rng.normal(size=(n, 3))
+    origins = targets + 4.0 * size * 10.0 ** log_condition * away / np.linalg.norm(away, axis=1, keepdims=True)
+    directions = targets - origins
+    hit = first_hits(compiled, origins, directions)
+    rows = np.nonzero(hit.hit)[0]
+    if rows.size == 0:
+        return
+    o, d, t = origins[rows], directions[rows], hit.t[rows]
+    normal = hit.normal[rows]
+    point = o + t[:, None] * d
+    offset = numerics.offset_distance(t, hit.error[rows], o, d, compiled.tolerances)[:, None]
+    for side in (1.0, -1.0):  # outward, then inward
+        w = rng.normal(size=(rows.size, 3))
+        w = np.where((np.einsum("ij,ij->i", w, normal) * side < 0)[:, None], -w, w)
+        # Keep away from grazing directions, where "the other side" is ambiguous even exactly.
+        w += side * 0.2 * normal * np.linalg.norm(w, axis=1, keepdims=True)
+        start = point + side * offset * normal
+        again = first_hits(compiled, start, w)
+        spawned_inward = side < 0
+        # Inward, the first hit leaves the solid; outward, any hit enters it (never the surface just left).
+        assert not np.any(again.hit & (again.entering == spawned_inward)), \
+            f"{kind}: a spawned ray found its own surface again (side {side:+})"
+        if core is not None:
+            c = core.first_hits(start, w)
+            found = np.isfinite(c["t"])
+            assert not np.any(found & (c["entering"] == spawned_inward)), f"{kind}: C core, side {side:+}"

@@ -1,0 +1,139 @@
+"""The extreme cases of docs/tracer.md ("Rounding error"): one scene moved, scaled or seen from far away,
+rendered and compared with its plain render, pixel by pixel.
+
+A similarity map (scale and translation) applied to every shape, light and the camera leaves the image
+unchanged in exact arithmetic, and so does moving the eye back along its line of sight while narrowing the
+view angle to keep the framing (except for the perspective, which is why the telephoto cases compare with
+the same view from 10^4 away, where rounding is harmless).  What differs is rounding error.
+
+``python -m tracer.extremes [WIDTH HEIGHT]`` prints the table (percent of pixels that differ by more than
+1/255 from the reference, per backend).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .model import CSG, Camera, Light, Material, Scene, SceneObject, Settings, Shape
+from .render import render
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+#: How far back the telephoto reference stands: far enough that the remaining perspective is < 0.1 pixel.
+TELEPHOTO_REFERENCE = 1e4
+
+
+def _point(matrix: np.ndarray, p) -> tuple:
+    return tuple((matrix[:3, :3] @ np.asarray(p, dtype=float) + matrix[:3, 3]).tolist())
+
+
+def _mapped_object(obj: SceneObject, matrix: np.ndarray) -> SceneObject:
+    if isinstance(obj, CSG):
+        return replace(obj, left=_mapped_object(obj.left, matrix), right=_mapped_object(obj.right, matrix))
+    return replace(obj, matrix=matrix @ obj.matrix)
+
+
+def mapped(scene: Scene, matrix: np.ndarray) -> Scene:
+    """The scene with every shape, light and the camera moved by the similarity ``matrix``."""
+    camera = scene.camera
+    if camera is not None:
+        up = tuple((matrix[:3, :3] @ np.asarray(camera.up, dtype=float)).tolist())
+        camera = replace(camera, eye=_point(matrix, camera.eye), look=_point(matrix, camera.look), up=up)
+    lights = [replace(light, position=_point(matrix, light.position)) for light in scene.lights]
+    return replace(scene, objects=[_mapped_object(o, matrix) for o in scene.objects], lights=lights,
+                   camera=camera)
+
+
+def moved(scene: Scene, offset) -> Scene:
+    m = np.eye(4)
+    m[:3, 3] = offset
+    return mapped(scene, m)
+
+
+def scaled(scene: Scene, factor: float) -> Scene:
+    return mapped(scene, np.diag([factor, factor, factor, 1.0]))
+
+
+def telephoto(scene: Scene, farther: float) -> Scene:
+    """The eye ``farther`` units further back along its line of sight, the view angle narrowed to keep
+    the framing at the point looked at."""
+    cam = scene.camera
+    eye, look = np.asarray(cam.eye, dtype=float), np.asarray(cam.look, dtype=float)
+    distance = float(np.linalg.norm(eye - look))
+    new_eye = look + (eye - look) * (distance + farther) / distance
+    half = math.radians(cam.view_angle) / 2.0
+    angle = 2.0 * math.degrees(math.atan(math.tan(half) * distance / (distance + farther)))
+    return replace(scene, camera=replace(cam, eye=tuple(new_eye.tolist()), view_angle=angle))
+
+
+def glass_pane(thickness: float = 1e-5) -> Scene:
+    """A thin glass pane at the origin in front of three coloured blocks on a floor, lit from above."""
+    from .transforms import scaling, translation
+
+    glass = Material(ambient=(0, 0, 0), diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9),
+                     specular_exponent=120, transparency=0.9, speed_of_light=0.67, reflectivity=0.1)
+    floor = Shape("plane", translation(0, -1, 0) @ np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0],
+                                                               [0, 0, 0, 1]], dtype=float),
+                  Material(diffuse=(0.6, 0.6, 0.6), specular=(0, 0, 0)))
+    blocks = [Shape("cube", translation(x, -0.5, -3) @ scaling(0.5, 0.5, 0.5), Material(diffuse=color))
+              for x, color in ((-1.5, (0.9, 0.2, 0.2)), (0, (0.2, 0.8, 0.2)), (1.5, (0.2, 0.3, 0.9)))]
+    # The pane faces the camera, tilted so that refraction shifts what is seen through it.
+    tilt = np.array([[1, 0, 0, 0], [0, math.cos(0.4), -math.sin(0.4), 0], [0, math.sin(0.4), math.cos(0.4), 0],
+                     [0, 0, 0, 1]], dtype=float)
+    pane = Shape("cube", tilt @ scaling(1.8, 1.2, thickness / 2.0), glass)
+    return Scene(objects=[floor, *blocks, pane], lights=[Light((3, 6, 5), (1, 1, 1)), Light((-4, 3, 4), (0.4, 0.4, 0.4))],
+                 camera=Camera((0.3, 0.8, 4.0), (0, -0.2, -1), (0, 1, 0), 50),
+                 settings=Settings(global_ambient=(0.15, 0.15, 0.15), background=(0.1, 0.1, 0.15),
+                                   max_recursion_depth=4, min_transparency=0.05, min_reflectivity=0.05))
+
+
+def bundled(name: str) -> Scene:
+    from . import load
+
+    return load(SCENES / f"{name}.sdl")
+
+
+#: name -> (reference scene, extreme scene), each made on demand.
+CASES: dict[str, Callable[[], tuple[Scene, Scene]]] = {
+    "csg: seen from 1e6 farther": lambda: (telephoto(bundled("csg"), TELEPHOTO_REFERENCE), telephoto(bundled("csg"), 1e6)),
+    "csg: seen from 1e8 farther": lambda: (telephoto(bundled("csg"), TELEPHOTO_REFERENCE), telephoto(bundled("csg"), 1e8)),
+    "csg: scaled by 1e-8": lambda: (bundled("csg"), scaled(bundled("csg"), 1e-8)),
+    "csg: scaled by 1e8": lambda: (bundled("csg"), scaled(bundled("csg"), 1e8)),
+    "csg: moved by +1e7": lambda: (bundled("csg"), moved(bundled("csg"), (1e7, 1e7, 1e7))),
+    "csg: moved by -1e7": lambda: (bundled("csg"), moved(bundled("csg"), (-1e7, -1e7, -1e7))),
+    "csg: 1 mm, moved by 1e5": lambda: (bundled("csg"), moved(scaled(bundled("csg"), 1e-3), (1e5, 1e5, 1e5))),
+    "glass: seen from 1e8 farther": lambda: (telephoto(bundled("glass"), TELEPHOTO_REFERENCE),
+                                             telephoto(bundled("glass"), 1e8)),
+    "glass: scaled by 1e-8": lambda: (bundled("glass"), scaled(bundled("glass"), 1e-8)),
+    "glass: moved by +1e7": lambda: (bundled("glass"), moved(bundled("glass"), (1e7, 1e7, 1e7))),
+    "1e-5 glass pane: moved by 1e5": lambda: (glass_pane(), moved(glass_pane(), (1e5, 1e5, 1e5))),
+}
+
+
+def differing_fraction(a: np.ndarray, b: np.ndarray) -> float:
+    """Fraction of pixels whose colour differs by more than 1/255 in some channel."""
+    return float((np.abs(np.clip(a, 0, 1) - np.clip(b, 0, 1)).max(axis=2) > 1.0 / 255.0).mean())
+
+
+def measure(name: str, width: int = 80, height: int = 60, backend: str = "numpy") -> float:
+    reference, extreme = CASES[name]()
+    return differing_fraction(render(reference, width, height, backend=backend).image,
+                              render(extreme, width, height, backend=backend).image)
+
+
+def main(argv: list[str]) -> int:
+    width, height = (int(argv[0]), int(argv[1])) if len(argv) >= 2 else (160, 120)
+    print(f"| case ({width}x{height}) | C: pixels differing | NumPy: pixels differing |")
+    print("|---|---|---|")
+    for name in CASES:
+        c, numpy = (100.0 * measure(name, width, height, backend) for backend in ("c", "numpy"))
+        print(f"| {name} | {c:.2f} % | {numpy:.2f} % |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -41,18 +41,28 @@ from run import machine, sphere_scene  # noqa: E402
 
 
 def measured(command: list[str], env: dict) -> tuple[float, float]:
-    """(wall seconds, peak resident MB) of one child process; raises if it fails."""
-    start = time.perf_counter()
-    with open(os.devnull, "wb") as sink:
-        child = subprocess.Popen(command, env=env, stdout=sink, stderr=subprocess.PIPE)
-        _, status, usage = os.wait4(child.pid, 0)
-        elapsed = time.perf_counter() - start
-        error = child.stderr.read().decode(errors="replace")
-        child.stderr.close()
-        child.returncode = os.waitstatus_to_exitcode(status)
-    if child.returncode != 0:
-        raise RuntimeError(f"{' '.join(command)} failed ({child.returncode}):\n{error[-2000:]}")
-    return elapsed, usage.ru_maxrss / 1024.0  # Linux: kilobytes
+    """(wall seconds, peak resident MB) of one child process; raises if it fails.
+
+    The peak comes from GNU time (/usr/bin/time -f %M) when it is there: a child forked straight from this
+    process would report at least this process's own size (Linux counts the pre-exec copy of the parent
+    in the child's maxrss), and this process has held big scenes.  Without it, wait4's ru_maxrss, which is
+    then an upper bound."""
+    gnu_time = Path("/usr/bin/time").exists()
+    with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss:
+        wrapped = ["/usr/bin/time", "-f", "%M", "-o", rss.name, *command] if gnu_time else command
+        start = time.perf_counter()
+        with open(os.devnull, "wb") as sink:
+            child = subprocess.Popen(wrapped, env=env, stdout=sink, stderr=subprocess.PIPE)
+            _, status, usage = os.wait4(child.pid, 0)
+            elapsed = time.perf_counter() - start
+            error = child.stderr.read().decode(errors="replace")
+            child.stderr.close()
+            child.returncode = os.waitstatus_to_exitcode(status)
+        if child.returncode != 0:
+            raise RuntimeError(f"{' '.join(command)} failed ({child.returncode}):\n{error[-2000:]}")
+        text = rss.read().split()
+    peak_kb = int(text[-1]) if gnu_time and text else usage.ru_maxrss  # Linux: kilobytes
+    return elapsed, peak_kb / 1024.0
 
 
 def write_row_scene(kind: str, count: int, work: Path) -> Path:

@@ -37,14 +37,54 @@ accuracy: setup
 # peak memory of 960x540 to 4K renders in full-frame buffers (bench/results/memory.json). bench/scale.py:
 # 1e4..1e6 triangles and 1e3..1e6 spheres against POV-Ray, time and peak memory, the read/build/trace/write
 # split and Embree's primary-ray rate (bench/results/scale.json, docs/performance-scale.png; tens of minutes).
+# Rendering on a Dask cluster (bench/cluster.py): the 4K glass.sdl table of docs/distributed.md, plain local
+# against --scheduler local:1 and local:2, and the per-tile overhead (bench/results/distributed.json).
+.PHONY: bench-cluster
+bench-cluster: setup
+	$(PY) bench/cluster.py
+
 .PHONY: bench
 bench: setup
 	$(PY) bench/run.py
 	$(PY) bench/memory.py
 	$(PY) bench/scale.py
 
-# The Blender extension zip (Blender 4.2+) and the legacy add-on zip (Blender 3.x/4.1), in dist/.
+# The Blender extension zips in dist/: linux-x64 and windows-x64 with the C core prebuilt (Windows
+# cross-compiled with mingw-w64 and smoke-tested under Wine when installed), one for other platforms
+# (macOS: compiled on first use), and the legacy add-on zip for Blender 3.x/4.1. Needs cmake.
 .PHONY: extension
 extension: setup
-	$(PY) scripts/build_extension.py
-	$(PY) scripts/build_extension.py --legacy
+	$(PY) scripts/build_extension.py --all
+
+# The C core, built by CMake as the wheel builds it (CMakeLists.txt; needs cmake):
+#   make warnings   -Wall -Wextra -Werror with gcc and with clang (apt-get install -y clang)
+#   make sanitize   the C-vs-NumPy tests with the core built under AddressSanitizer and UBSan
+#   make wheel      pip wheel . into dist/, then the packaging tests: the wheel and the extension zips
+#                   render with the prebuilt core where no compiler is on PATH
+CMAKE ?= cmake
+SANITIZED := build/sanitize/_core.so
+SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py
+
+.PHONY: warnings sanitize wheel contract
+warnings:
+	@for cc in gcc clang; do \
+		if ! command -v $$cc >/dev/null; then echo "warning: $$cc not found, not checked" >&2; continue; fi; \
+		$(CMAKE) -S . -B build/warnings-$$cc -DCMAKE_C_COMPILER=$$cc -DRT_WERROR=ON >/dev/null && \
+		$(CMAKE) --build build/warnings-$$cc --clean-first || exit 1; \
+	done
+
+sanitize: setup
+	$(CMAKE) -S . -B build/sanitize -DCMAKE_C_COMPILER=gcc -DRT_SANITIZE=ON -DRT_WERROR=ON >/dev/null
+	$(CMAKE) --build build/sanitize
+	SDL_TRACER_LIBRARY=$(CURDIR)/$(SANITIZED) LD_PRELOAD="$$(gcc -print-file-name=libasan.so)" \
+		ASAN_OPTIONS=detect_leaks=0:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+		$(PY) -m pytest -q -p no:cacheprovider $(SANITIZE_TESTS)
+
+wheel: setup
+	rm -f dist/sdl_raytracer-*.whl
+	$(PY) -m pip wheel -q --no-deps -w dist .
+	SDL_TRACER_WHEEL="$$(ls dist/sdl_raytracer-*.whl)" $(PY) -m pytest -q -m packaging tests/test_packaging.py
+
+# Rewrites tracer/native/contract.h from tracer/native/contract.py (see docs/contributing.md).
+contract: setup
+	$(PY) -W ignore::RuntimeWarning -m tracer.native.contract

@@ -21,7 +21,7 @@ bl_info = {
     "category": "Import-Export",
 }
 
-_MODULES = ("props", "engine", "operators", "ui")
+_MODULES = ("props", "images", "engine", "operators", "ui")
 _registered: list = []
 _exit_hook = False
 

@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # a work item is one tile of one pass
 RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]  # (rows, cols, dy, dx) -> (origins, directions)
 
 DEFAULT_TILE = 64
-DEFAULT_CHUNK = 2048
+DEFAULT_CHUNK = 4096  # rays per call into the tracer: a 64 x 64 tile in one, Esc still within ms
 
 
 def block_passes(block_size: int, progressive: bool) -> list[int]:
@@ -36,6 +36,21 @@ def block_passes(block_size: int, progressive: bool) -> list[int]:
 def resolve_threads(threads: int) -> int:
     """0 means the tracer's default: $SDL_TRACER_THREADS, else every core this process may run on."""
     return int(threads) if threads and threads > 0 else deps.module("native").default_threads()
+
+
+def _work_items(plan) -> list:
+    """The plan's tiles, pass by pass, except that a coarse pass's tiles are ``stride`` times wider: such a
+    pass traces one ray per stride x stride block, so each work item still traces about tile x tile rays
+    (at 1080p with block size 8 this is 700 items instead of 2,040, and a second less in Blender 3.4).
+    Sub-pixel offsets depend on the pixel alone, so the image is the same for any tiling."""
+    tiles = deps.module("tiles")
+    finest = plan.passes[-1]
+    items = []
+    for p, stride in enumerate(plan.passes):
+        side = plan.tile * (stride // finest)
+        items += [tiles.Tile(p, stride, r, c, min(r + side, plan.height), min(c + side, plan.width))
+                  for r in range(0, plan.height, side) for c in range(0, plan.width, side)]
+    return items + [item for item in plan.items if plan.is_refinement(item)]
 
 
 class Cancelled(Exception):
@@ -64,17 +79,19 @@ class BlockRenderer:
         self.width, self.height = self.plan.width, self.plan.height
         self.passes = self.plan.passes
         self.tile = self.plan.tile
-        self.items = self.plan.items
+        self.items = _work_items(self.plan)
         self.pass_count = self.plan.pass_count
         self.threads = resolve_threads(threads)
         self.chunk = max(1, int(DEFAULT_CHUNK if chunk is None else chunk))
         self.want_alpha = alpha
         self.backend = backend
-        # With alpha the coverage is traced as a fourth channel of the same film (views give colour and alpha).
-        self._film = np.zeros((self.height, self.width, 4 if alpha else 3), dtype=np.float32)
+        # One RGBA film, what Blender's render passes and textures take (so handing it over copies nothing);
+        # with alpha the coverage is traced as its fourth channel, else that stays 1.
+        self._film = np.zeros((self.height, self.width, 4), dtype=np.float32)
         self.color = self._film[..., :3]
-        self.alpha = self._film[..., 3] if alpha else np.ones((self.height, self.width), dtype=np.float32)
+        self.alpha = self._film[..., 3]
         self.alpha[...] = 1.0
+        self._traced = self._film if alpha else self.color
         self.done = 0
         self.seconds = 0.0
         self._local = threading.local()
@@ -127,11 +144,11 @@ class BlockRenderer:
             self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint, alpha=self.want_alpha,
             first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
         refine = self._refine_mask() if self.plan.is_refinement(item) else None
-        deps.module("tiles").trace_tile(self.plan, item, self._film, shade, refine)
+        deps.module("tiles").trace_tile(self.plan, item, self._traced, shade, refine)
         return item
 
     def pass_items(self, pass_index: int) -> list[Tile]:
-        return self.plan.pass_items(pass_index)
+        return [item for item in self.items if item.pass_index == pass_index]
 
     def run(self, cancel: Optional[Callable[[], bool]] = None,
             on_item: Optional[Callable[[Tile], None]] = None, poll: float = 0.05) -> None:
@@ -204,11 +221,9 @@ class BlockRenderer:
         return self.items[min(self.done, len(self.items) - 1)].pass_index if self.items else 0
 
     def rgba(self) -> np.ndarray:
-        """(height, width, 4) float32, bottom row first; colour as traced (linear), premultiplied by alpha."""
-        out = np.empty((self.height, self.width, 4), dtype=np.float32)
-        out[..., :3] = self.color
-        out[..., 3] = self.alpha
-        return out
+        """(height, width, 4) float32, bottom row first; colour as traced (linear), premultiplied by alpha.
+        The film itself, not a copy: it changes while tracing goes on."""
+        return self._film
 
     def counts(self):
         total = deps.module("trace").RayCounts()

@@ -28,8 +28,12 @@ ENGINE_ID = "SDL_RAYTRACER"
 LAST_RENDER: dict = {}
 #: Seconds of tracing per viewport redraw.
 VIEWPORT_SLICE = 0.08
-#: Longest pause between two updates of the render result during a final render.
+#: Shortest pause between two updates of the render result during a final render.
 UPDATE_INTERVAL = 0.25
+#: Shortest pause between two progress messages.
+STATUS_INTERVAL = 0.1
+#: Showing the film may take at most this share of a final render's time.
+UPDATE_SHARE = 0.05
 
 
 def render_size(render) -> tuple[int, int]:
@@ -71,12 +75,47 @@ def render_settings(scene) -> dict:
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
 
-def _write_rect(render_pass, rgba: np.ndarray) -> None:
-    flat_rgba = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+def displayed() -> bool:
+    """Whether anyone sees a final render while it is traced: not under ``blender -b`` nor in the bpy module."""
+    return not bpy.app.background
+
+
+def write_pass(render_pass, pixels: np.ndarray) -> None:
+    """Copy a (height, width, channels) float32 film into a render pass at memory speed.
+
+    ``RenderPass.rect`` is a (pixels, channels) float array.  Blender 4.x/5.0 take a flat buffer of every
+    float in ``foreach_set``; Blender 3.x counts the first dimension only and takes the (pixels, channels)
+    array itself.  Both read the NumPy buffer directly; assigning ``rect`` from Python lists instead costs
+    seconds per frame at 1080p."""
+    height, width, channels = pixels.shape
+    rows = np.ascontiguousarray(pixels, dtype=np.float32).reshape(height * width, channels)
     try:
-        render_pass.rect.foreach_set(flat_rgba)
-    except (AttributeError, TypeError):
-        render_pass.rect = flat_rgba.reshape(-1, 4).tolist()
+        render_pass.rect.foreach_set(rows.reshape(-1))
+    except TypeError:  # Blender 3.x: "expected sequence size <pixels>"
+        render_pass.rect.foreach_set(rows)
+
+
+class FilmUpdates:
+    """When a final render shows its film so far: at the end of each pass and every UPDATE_INTERVAL, but
+    spaced so that copying the film (a whole 1080p frame costs tens of milliseconds) stays within
+    UPDATE_SHARE of the time; never without a window to show it in (``blender -b``, the bpy module)."""
+
+    def __init__(self, show, enabled: bool = True):
+        self.show, self.enabled = show, enabled
+        self.last = time.perf_counter()
+        self.cost = 0.0
+
+    def offer(self, pass_done: bool) -> bool:
+        if not self.enabled:
+            return False
+        now = time.perf_counter()
+        since = now - self.last
+        if since < self.cost / UPDATE_SHARE or (since < UPDATE_INTERVAL and not pass_done):
+            return False
+        self.show()
+        self.last = time.perf_counter()
+        self.cost = self.last - now
+        return True
 
 
 class SDLRenderEngine(bpy.types.RenderEngine):
@@ -131,27 +170,34 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             def rays_for(rows, cols, dy=0.5, dx=0.5):
                 return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
 
+            settings = render_settings(scene)
+            if settings["progressive"] and not displayed():
+                # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
+                # the same rays either way, so the image is the same without them.
+                settings["block_size"] = 1
             tracer = blocks.BlockRenderer(compiled, rays_for, width, height, alpha=render.film_transparent,
-                                          seed=scene.frame_current, **render_settings(scene))
-            last = [0.0]
+                                          seed=scene.frame_current, **settings)
+            shown = FilmUpdates(lambda: (write_pass(layer, tracer.rgba()), self.update_result(result)),
+                                enabled=displayed())
+
+            status_shown = [0.0]
 
             def on_item(item):
-                now = time.perf_counter()
                 pass_done = tracer.done == len(tracer.items) or \
                     tracer.items[min(tracer.done, len(tracer.items) - 1)].pass_index != item.pass_index
-                if pass_done or now - last[0] >= UPDATE_INTERVAL:
-                    last[0] = now
-                    _write_rect(layer, tracer.rgba())
-                    self.update_result(result)
-                self.update_progress(tracer.fraction)
-                self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
-                                      f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
+                shown.offer(pass_done)
+                now = time.perf_counter()
+                if pass_done or now - status_shown[0] >= STATUS_INTERVAL:  # (blender -b prints each one)
+                    status_shown[0] = now
+                    self.update_progress(tracer.fraction)
+                    self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
+                                          f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
 
             try:
                 tracer.run(cancel=self.cancelled, on_item=on_item)
             except blocks.Cancelled:
                 LAST_RENDER["cancelled"] = True
-            _write_rect(layer, tracer.rgba())
+            write_pass(layer, tracer.rgba())
             counts = tracer.counts().as_dict()
             LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
                                 "tiles_done": tracer.done, "tiles_total": len(tracer.items),

@@ -208,12 +208,13 @@ class Importer:
 
     # -- the whole scene --------------------------------------------------------------------------------
 
-    def run(self, scene, filepath: str, set_camera: bool = True) -> ImportResult:
+    def run(self, scene, filepath: str, set_camera: bool = True, sdl_colours: bool = True) -> ImportResult:
         ctx = self.context
         bl_scene = ctx.scene
         settings = getattr(bl_scene, "sdl_render", None)
         self._scene_before = (bl_scene.world, bl_scene.camera,
                               settings.max_recursion_depth if settings is not None else None)
+        self._view_before = view_settings(bl_scene)
         self.pixmaps = dict(scene.pixmaps)
         try:
             parent = ctx.view_layer.active_layer_collection.collection if ctx.view_layer else bl_scene.collection
@@ -243,6 +244,8 @@ class Importer:
             bl_scene.world = world
             if settings is not None:
                 settings.max_recursion_depth = int(scene.settings.max_recursion_depth)
+            if sdl_colours:
+                set_view_settings(bl_scene, SDL_VIEW)
             # Hide the cutters in the viewport too, and remember what Blender shows of every transform.
             if ctx.view_layer is not None:
                 ctx.view_layer.update()
@@ -264,13 +267,31 @@ class Importer:
         return self.result
 
     def undo(self) -> None:
-        """Remove what run() made and give the scene back the world, camera and recursion depth it had."""
+        """Remove what run() made and give the scene back the world, camera, recursion depth and colour
+        management it had."""
         bl_scene = self.context.scene
         if self._scene_before:
             bl_scene.world, bl_scene.camera, depth = self._scene_before
             if depth is not None:
                 bl_scene.sdl_render.max_recursion_depth = depth
+            set_view_settings(bl_scene, self._view_before)
         self.created.remove_all()
+
+
+#: The colour management an imported SDL scene gets.  SDL colours are the values a screen shows (the
+#: tracer's PNG holds each traced value times 255, with no transfer curve), and Blender's *Raw* view shows
+#: scene values unchanged, so F12 displays (and saves) what the tracer writes.  *Standard* would apply the
+#: sRGB curve (a background of 0.35 shown as 160/255 instead of 89), Filmic and AgX compress besides.
+SDL_VIEW = {"view_transform": "Raw", "look": "None", "exposure": 0.0, "gamma": 1.0, "use_curve_mapping": False}
+
+
+def view_settings(scene) -> dict:
+    return {name: getattr(scene.view_settings, name) for name in SDL_VIEW}
+
+
+def set_view_settings(scene, values: dict) -> None:
+    for name, value in values.items():
+        setattr(scene.view_settings, name, value)
 
 
 def default_material(created: Optional[_Created] = None):
@@ -288,9 +309,9 @@ def default_material(created: Optional[_Created] = None):
 
 
 def import_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None, strict: bool = False,
-               set_camera: bool = True) -> ImportResult:
+               set_camera: bool = True, sdl_colours: bool = True) -> ImportResult:
     """Read ``filepath`` and build it in ``context.scene``.  Raises the tracer's SDLError (nothing created)
     if the file cannot be read."""
     scene = read_scene(filepath, strict=strict)
     conversion = convert.axis_matrix() if conversion is None else conversion
-    return Importer(context, conversion).run(scene, filepath, set_camera=set_camera)
+    return Importer(context, conversion).run(scene, filepath, set_camera=set_camera, sdl_colours=sdl_colours)

@@ -39,6 +39,10 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                                      "and report the problems)")
     set_camera: BoolProperty(name="Set Scene Camera", default=True,
                              description="Make the file's camera (or a camera framing the scene) the scene camera")
+    sdl_colours: BoolProperty(name="SDL Colours", default=True,
+                              description="Show colours as SDL and the tracer do: the scene's View Transform "
+                                          "becomes Raw (values shown unchanged; Standard, Filmic and AgX "
+                                          "change them)")
 
     def invoke(self, context, event):
         if self.properties.is_property_set("filepath") and hasattr(ImportHelper, "invoke_popup"):
@@ -67,7 +71,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         for path, scene in parsed:
             imp = importer.Importer(context, conversion)
             try:
-                result = imp.run(scene, path, set_camera=self.set_camera)
+                result = imp.run(scene, path, set_camera=self.set_camera, sdl_colours=self.sdl_colours)
             except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
                 for earlier in reversed(done):  # and the files before it: all of them or nothing
                     earlier.undo()
@@ -86,6 +90,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         layout.use_property_split = True
         layout.prop(self, "strict")
         layout.prop(self, "set_camera")
+        layout.prop(self, "sdl_colours")
         layout.prop(self, "axis_forward")
         layout.prop(self, "axis_up")
 

@@ -4,6 +4,7 @@ fine, samples, cancel, hide_render, animation, and the viewport's rays from its 
 from __future__ import annotations
 
 import itertools
+import time
 
 import bpy
 import numpy as np
@@ -78,15 +79,19 @@ def test_render_equals_the_tracers_own_render():
     assert np.all(image[..., 3] == 1.0)
 
 
-def test_blocks_coarse_to_fine_every_pixel_once():
+def test_blocks_coarse_to_fine_every_pixel_once(monkeypatch):
     import_sdl(SCENES / "shapes.sdl")
     set_resolution(96, 72)
     settings = bpy.context.scene.sdl_render
     settings.block_size, settings.progressive = 8, True
-    render_rgba("SDL_RAYTRACER")
+    unseen = render_rgba("SDL_RAYTRACER")  # (the bpy module shows nothing: no coarse passes to watch)
+    assert engine.LAST_RENDER["passes"] == [1] and engine.LAST_RENDER["rays"]["camera"] == 96 * 72
+    monkeypatch.setattr(engine, "displayed", lambda: True)
+    refined = render_rgba("SDL_RAYTRACER")
     stats = engine.LAST_RENDER
     assert stats["passes"] == [8, 4, 2, 1] and stats["tiles_done"] == stats["tiles_total"]
     assert stats["rays"]["camera"] == 96 * 72
+    np.testing.assert_array_equal(refined, unseen)  # the same rays through every pixel
     settings.progressive = False
     coarse = render_rgba("SDL_RAYTRACER")
     assert engine.LAST_RENDER["rays"]["camera"] == 12 * 9  # one ray per 8 x 8 block
@@ -164,7 +169,8 @@ def test_block_renderer_cancel_and_time_slices():
         return np.broadcast_to(cam.eye, d.shape), d
 
     r = blocks.BlockRenderer(compiled, rays_for, 32, 32, block_size=4, progressive=True, tile=16)
-    assert len(r.items) == 3 * 4 and r.pass_count == 3
+    # a coarse pass's tiles are stride times wider (as many rays per item): 64, 32 and 16 pixels here
+    assert [len(r.pass_items(p)) for p in range(3)] == [1, 1, 4] and r.pass_count == 3
     r.run_for(0.0)  # one item per slice at least: the viewport refines while the user waits
     assert r.done >= 1 and not r.finished
     while not r.finished:
@@ -337,3 +343,24 @@ def test_each_imported_file_keeps_its_own_images(tmp_path):
         p = world_to_camera_view(scene, scene.camera, obj.matrix_world.translation)
         colors.append(rgba[int((1.0 - p.y) * 30), int(p.x * 60), :3])
     np.testing.assert_allclose(colors, [(1, 0, 0), (0, 1, 0)], atol=0.02)
+
+
+def test_film_updates_are_spaced_by_what_they_cost():
+    """Showing a 1080p film costs tens of milliseconds: it may take at most UPDATE_SHARE of the render, and
+    nothing is shown without a window (blender -b, the bpy module)."""
+    shown = []
+
+    def show():
+        shown.append(time.perf_counter())
+        time.sleep(0.02)
+
+    updates = engine.FilmUpdates(show)
+    updates.last -= 1.0  # a while into the render
+    started = time.perf_counter()
+    while time.perf_counter() - started < 1.0:
+        updates.offer(pass_done=True)
+    assert 1 <= len(shown) <= 1 + 1.0 / max(engine.UPDATE_INTERVAL, 0.02 / engine.UPDATE_SHARE)
+    assert all(b - a >= 0.02 / engine.UPDATE_SHARE * 0.99 for a, b in zip(shown, shown[1:]))
+    hidden = engine.FilmUpdates(show, enabled=False)
+    hidden.last -= 1.0
+    assert not hidden.offer(pass_done=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -76,7 +77,7 @@ def test_cluster_render_equals_local_bytes(client, job):
     [(image, rays)] = _cluster_render(client, SCENES / "glass.sdl", job)
     local = _local_render(SCENES / "glass.sdl", job)
     assert image.any() and np.array_equal(image, local.image)
-    assert rays.as_dict() == local.rays.as_dict()  # each pixel traced once: no tile was lost or doubled
+    assert rays == local.rays  # each pixel traced once (no tile lost or doubled), the same rays skipped
 
 
 def test_every_file_the_scene_reads_goes_to_the_workers(client, tmp_path):
@@ -141,6 +142,22 @@ def test_an_unreachable_scheduler_is_one_line_and_exit_2(tmp_path):
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith("error: --scheduler tcp://127.0.0.1:") and done.stderr.count("\n") == 1
     assert "cannot reach the scheduler" in done.stderr and not out.exists()
+
+
+def test_a_scheduler_without_workers_is_one_line_not_a_wait(tmp_path):
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", address.rsplit(":", 1)[1], "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--width", 16, "--height", 12,
+                    "--scheduler", address, env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "20s"})
+    finally:
+        scheduler.terminate()
+        scheduler.wait(timeout=30)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f"error: --scheduler {address}: no worker joined the scheduler within 20s\n"
+    assert not (tmp_path / "x.png").exists()
 
 
 @pytest.mark.parametrize("address, what", [("local:0", "local:N"), ("nonsense", "tcp://HOST:8786")])
@@ -246,3 +263,56 @@ def test_frames_need_a_usd_stage(tmp_path):
     assert done.returncode == 2 and "frames need a USD stage" in done.stderr and done.stderr.count("\n") == 1
     done = _run("render", SCENES / "lecture.sdl", "-o", tmp_path / "x.png", "--frames", "3-1")
     assert done.returncode == 2 and "--frames 3-1" in done.stderr
+
+
+def _certificates(folder: Path) -> dict:
+    """A CA and one certificate for 127.0.0.1 signed by it (scheduler, worker and client share it)."""
+    (folder / "ext.cnf").write_text("subjectAltName = IP:127.0.0.1, DNS:localhost\n")
+
+    def openssl(*args):
+        subprocess.run(["openssl", *args], cwd=folder, check=True, capture_output=True, timeout=PROCESS_LIMIT)
+
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "2",
+            "-subj", "/CN=test-ca")
+    openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "node.key", "-out", "node.csr", "-subj", "/CN=localhost")
+    openssl("x509", "-req", "-in", "node.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+            "-out", "node.pem", "-days", "2", "-extfile", "ext.cnf")
+    return {name: str(folder / name) for name in ("ca.pem", "node.pem", "node.key")}
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="makes its certificates with the openssl command")
+def test_tls_scheduler_with_dasks_own_security_settings(tmp_path):
+    """A scheduler and a worker that speak only TLS: render reads the client's certificate from Dask's
+    configuration (here its environment variables) and gets the local bytes; without it, one line."""
+    certs = _certificates(tmp_path)
+    tls = ["--tls-ca-file", certs["ca.pem"], "--tls-cert", certs["node.pem"], "--tls-key", certs["node.key"]]
+    address = f"tls://127.0.0.1:{_free_port()}"
+    port = address.rsplit(":", 1)[1]
+    started = []
+    try:
+        started.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--protocol", "tls",
+                                         "--host", "127.0.0.1", "--port", port, "--no-dashboard", *tls],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        started.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
+                                         "1", "--no-dashboard", *tls],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        settings = {"DASK_DISTRIBUTED__COMM__TLS__CA_FILE": certs["ca.pem"],
+                    "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT": certs["node.pem"],
+                    "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY": certs["node.key"],
+                    "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "60s"}  # (the scheduler may still be starting)
+        args = ["render", SCENES / "glass.sdl", "--width", 40, "--height", 30, "--samples", 4, "-q"]
+        done = _run(*args, "-o", tmp_path / "tls.png", "--scheduler", address, env=settings)
+        assert done.returncode == 0, done.stderr
+        assert _run(*args, "-o", tmp_path / "local.png").returncode == 0
+        assert (tmp_path / "tls.png").read_bytes() == (tmp_path / "local.png").read_bytes()
+        plain = _run(*args, "-o", tmp_path / "x.png", "--scheduler", address)
+        assert plain.returncode == 2 and "TLS needs Dask's TLS settings" in plain.stderr
+        assert plain.stderr.count("\n") == 1 and not (tmp_path / "x.png").exists()
+    finally:
+        for process in reversed(started):
+            process.terminate()
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()

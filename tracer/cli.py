@@ -95,6 +95,9 @@ def _add_cluster_options(r: argparse.ArgumentParser) -> None:
                         "'sdl-raytracer[distributed]'; see docs/distributed.md)")
     r.add_argument("--frames", metavar="A-B",
                    help="a USD stage's frames A to B, written as OUT_####.png (OUT_0001.png for frame 1)")
+    r.add_argument("--tile", type=int, default=None, metavar="N",
+                   help="with --scheduler or --frames: tile side in pixels, one task each (default 256 on a "
+                        "cluster, 64 on this machine); the image does not depend on it")
 
 
 SDL_EXTENSIONS = (".sdl", ".dat")
@@ -210,6 +213,7 @@ def _render_job(args) -> int:
     from . import distributed as dist
     from .imageio import save_image
     from .render import check_size, render
+    from .trace import RayCounts
 
     if args.scheduler is not None:
         dist.parse_address(args.scheduler)
@@ -222,18 +226,22 @@ def _render_job(args) -> int:
     scene = dist.read_scene(args.scene, args.lenient, times[0])
     for message in scene.warnings:
         print(f"warning: {message}", file=sys.stderr)
+    if args.tile is not None and args.tile < 1:
+        raise TracerError(f"--tile must be 1 or more, not {args.tile}")
+    from .tiles import DEFAULT_TILE
+    tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
-                   samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
-                   backend=args.backend, threads=args.threads, max_depth=args.max_depth)
+                   tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
+                   backend=args.backend, threads=args.threads, max_depth=args.max_depth,
+                   savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
     started = time.perf_counter()
-    rays, backends = {}, set()
+    rays, backends = RayCounts(), set()
 
     def write(index, image, counts, backend):
         save_image(image, outputs[index])
         backends.add(backend)
-        for kind, n in counts.as_dict().items():
-            rays[kind] = rays.get(kind, 0) + n
+        rays.add(counts)
 
     progress = _Progress(not args.quiet)
     try:
@@ -244,9 +252,9 @@ def _render_job(args) -> int:
                 if args.max_depth is not None:
                     scene.settings.max_recursion_depth = args.max_depth
                 result = render(scene, args.width, args.height, block_size=args.block_size,
-                                progressive=args.progressive, on_tile=progress, samples=args.samples,
+                                progressive=args.progressive, tile=tile, on_tile=progress, samples=args.samples,
                                 sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                                threads=args.threads)
+                                threads=args.threads, savings=job.savings)
                 write(index, result.image, result.rays, result.backend)
         else:
             bundle = dist.SceneBundle.of(args.scene, scene, args.lenient)
@@ -257,7 +265,8 @@ def _render_job(args) -> int:
     finally:
         progress.close()
     if args.stats:
-        print(json.dumps({"rays": rays, "seconds": round(time.perf_counter() - started, 6),
+        print(json.dumps({"rays": rays.as_dict(), "skipped": rays.skipped(),
+                          "seconds": round(time.perf_counter() - started, 6),
                           "backend": ",".join(sorted(backends)), "width": args.width, "height": args.height,
                           "frames": len(times), "scheduler": args.scheduler}))
     return 0

@@ -18,8 +18,11 @@ C cores share this machine's cores.  Dask is optional: ``pip install sdl-raytrac
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import copy
+import dataclasses
+import functools
 import hashlib
 import os
 import re
@@ -33,9 +36,14 @@ import numpy as np
 
 from .errors import TracerError
 from .model import Scene
+from .savings import RaySavings
 from .trace import RayCounts
 
 INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
+#: Tile side on a cluster.  Each task costs about 5 ms of CPU beyond its tracing (scheduler, transfer,
+#: assembly: bench/cluster.py); a 256 x 256 tile of a 16-sample 4K frame traces for about 0.4 s, so the
+#: overhead stays near 1 %, while a 4K frame still has 135 tiles to spread over the workers.
+CLUSTER_TILE = 256
 LOCAL_PREFIX = "local:"
 
 
@@ -131,14 +139,15 @@ class Job:
     height: int
     block_size: int = 1
     progressive: bool = False
-    tile: int = 64
+    tile: int = CLUSTER_TILE
     samples: int = 1
     sampling_mode: str = "jittered"
     threshold: float = 0.05
     seed: int = 0
     backend: str = "auto"
-    threads: Optional[int] = None  # the C core's threads in each worker (None: the worker's default)
+    threads: Optional[int] = None  # the C core's threads per task (None: the worker's cores / its threads)
     max_depth: Optional[int] = None
+    savings: Optional[RaySavings] = None  # rays not cast (None: tracer.savings' defaults)
 
     def plan(self):
         from .tiles import TilePlan
@@ -149,10 +158,13 @@ class Job:
 
 # -- the worker side -----------------------------------------------------------------------------------------
 
+#: Compiled scenes a worker process keeps (a frame each, for sequences; the oldest go first).
+KEPT_SCENES = 4
+
 _lock = threading.Lock()
-_folders: dict[str, tempfile.TemporaryDirectory] = {}  # bundle digest -> unpacked files
-_scenes: dict[tuple, object] = {}  # (digest, time, max depth) -> compiled scene
-_local = threading.local()  # per worker thread: {(scene key, backend, threads): tracer}
+_folders: dict[str, tempfile.TemporaryDirectory] = {}  # bundle digest -> its unpacked files
+_scenes: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()  # (digest, time, depth) -> compiled
+_local = threading.local()  # per worker thread: the tracer of the scene it traced last
 
 
 def _where() -> str:
@@ -170,35 +182,67 @@ def _compiled(bundle: SceneBundle, time: Optional[float], max_depth: Optional[in
 
     key = (bundle.digest, time, max_depth)
     with _lock:
-        if key not in _scenes:
-            folder = _folders.get(bundle.digest)
-            if folder is None:  # (removed when the worker process ends)
-                folder = _folders[bundle.digest] = tempfile.TemporaryDirectory(prefix="sdl-scene-")
-                bundle.unpack(Path(folder.name))
-            scene_path = Path(folder.name) / bundle.scene
-            try:
-                scene = read_scene(scene_path, bundle.lenient, time)
-                if max_depth is not None:
-                    scene.settings.max_recursion_depth = max_depth
-                _scenes[key] = compile_scene(scene)
-            except (SDLError, TracerError, OSError, ValueError) as err:
-                # One line naming the file as the user knows it, not the worker's copy.
-                message = str(err).replace(folder.name, bundle.origin)
-                raise TracerError(f"{_where()}: {message}") from None
-        return _scenes[key]
+        if key in _scenes:
+            _scenes.move_to_end(key)
+            return _scenes[key]
+        folder = _folders.get(bundle.digest)
+        if folder is None:  # (removed when the worker process ends, or when another bundle arrives)
+            for old in _folders.values():
+                old.cleanup()
+            _folders.clear()
+            folder = _folders[bundle.digest] = tempfile.TemporaryDirectory(prefix="sdl-scene-")
+            bundle.unpack(Path(folder.name))
+        try:
+            scene = read_scene(Path(folder.name) / bundle.scene, bundle.lenient, time)
+            if max_depth is not None:
+                scene.settings.max_recursion_depth = max_depth
+            compiled = compile_scene(scene)
+        except (SDLError, TracerError, OSError, ValueError) as err:
+            # One line naming the file as the user knows it, not the worker's copy.
+            message = str(err).replace(folder.name, bundle.origin)
+            raise TracerError(f"{_where()}: {message}") from None
+        _scenes[key] = compiled
+        while len(_scenes) > KEPT_SCENES:
+            _scenes.popitem(last=False)
+        return compiled
+
+
+def _worker_core_threads() -> int:
+    """C-core threads for each task when the job leaves it open: this machine's cores shared among the
+    worker's task threads (which trace tiles at the same time)."""
+    try:
+        from distributed import get_worker
+        tasks_at_once = get_worker().state.nthreads
+    except (ImportError, ValueError, AttributeError):
+        tasks_at_once = 1
+    return max(1, _machine_threads() // max(1, tasks_at_once))
+
+
+def _machine_threads() -> int:
+    try:
+        from .native import default_threads
+    except ImportError:  # no C core in this installation: the count does not matter
+        return 1
+    return default_threads()
 
 
 def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
     from .backend import make_tracer
 
     compiled = _compiled(bundle, time, job.max_depth)
-    tracers = getattr(_local, "tracers", None)
-    if tracers is None:
-        tracers = _local.tracers = {}
-    key = (bundle.digest, time, job.max_depth, job.backend, job.threads)
-    if key not in tracers:
-        tracers[key] = make_tracer(compiled, job.backend, job.threads)
-    return compiled, tracers[key]
+    key = (bundle.digest, time, job.max_depth, job.backend, job.threads, job.savings)
+    kept = getattr(_local, "kept", None)
+    if kept is None or kept[0] != key:  # a thread keeps one tracer: tiles of one frame come together
+        tracer = make_tracer(compiled, job.backend, job.threads or _worker_core_threads(), job.savings)
+        kept = _local.kept = (key, tracer)
+    return compiled, kept[1]
+
+
+@functools.lru_cache(maxsize=8)
+def _plan(job: Job):
+    """A worker's plan of a job, made once (it lists every tile: making it per task would cost as much as
+    the number of tiles, for every tile)."""
+    return job.plan()
 
 
 def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: tuple[int, int, int, int],
@@ -209,7 +253,7 @@ def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: 
     from .tiles import PixelTracer, Tile, camera_rays_for, trace_rect, trace_tile
 
     compiled, tracer = _tracer(bundle, job, time)
-    plan = job.plan()
+    plan = _plan(job)
     aspect = job.width / job.height
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, aspect), aspect)
     before = copy.copy(tracer.counts)
@@ -220,7 +264,8 @@ def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: 
         r0, c0, r1, c1 = rect
         window = np.zeros((r1 - r0, c1 - c0, 3), dtype=np.float32)
         trace_tile(plan, Tile(len(plan.passes), 1, *rect), window, shade, refine, at=(r0, c0))
-    rays = RayCounts(**{k: v - getattr(before, k) for k, v in tracer.counts.as_dict().items()})
+    rays = RayCounts(**{f.name: getattr(tracer.counts, f.name) - getattr(before, f.name)
+                        for f in dataclasses.fields(RayCounts)})
     return window, rays, tracer.name
 
 
@@ -240,21 +285,30 @@ def parse_address(address: str) -> Optional[int]:
 
 
 @contextlib.contextmanager
-def connect(address: str, threads: Optional[int] = None) -> Iterator[object]:
+def connect(address: str) -> Iterator[object]:
     """A Dask client for ``address`` (closed, with any cluster it started, when the block ends).
 
     ``tls://`` addresses use Dask's own security settings (``distributed.comm.tls.*`` in Dask's
-    configuration).  Connecting waits at most Dask's ``distributed.comm.timeouts.connect``."""
+    configuration).  Connecting, and then waiting for a first worker, take at most Dask's
+    ``distributed.comm.timeouts.connect`` each: a scheduler without workers would leave the render waiting."""
     workers = parse_address(address)
     distributed = require_dask()
     import dask
 
     cluster = None
     timeout = dask.config.get("distributed.comm.timeouts.connect")
+    if address.startswith("tls://") and \
+            distributed.security.Security().get_connection_args("client").get("ssl_context") is None:
+        raise TracerError(f"--scheduler {address}: TLS needs Dask's TLS settings for a client "
+                          "(distributed.comm.tls.ca-file, .client.cert, .client.key in Dask's configuration; "
+                          "see docs/distributed.md)")
     try:
         if workers is not None:
+            # No dashboard; the scheduler's HTTP endpoint on any free loopback port (not a warning when
+            # 8787 is taken by another cluster).
             cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                               dashboard_address=None, silence_logs=40)
+                                               host="127.0.0.1", dashboard_address=None, silence_logs=40,
+                                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
             client = distributed.Client(cluster, timeout=timeout)
         else:
             client = distributed.Client(address, timeout=timeout)
@@ -266,6 +320,10 @@ def connect(address: str, threads: Optional[int] = None) -> Iterator[object]:
     except ValueError as err:  # a malformed address, an unknown protocol
         raise TracerError(f"--scheduler {address}: {err}") from None
     try:
+        try:
+            client.wait_for_workers(1, timeout=dask.utils.parse_timedelta(timeout))
+        except (OSError, TimeoutError):
+            raise TracerError(f"--scheduler {address}: no worker joined the scheduler within {timeout}") from None
         yield client
     finally:
         client.close()
@@ -279,8 +337,7 @@ def local_threads(address: str) -> Optional[int]:
     workers = parse_address(address)
     if workers is None:
         return None
-    from .native import default_threads
-    return max(1, default_threads() // workers)
+    return max(1, _machine_threads() // workers)
 
 
 @dataclass

@@ -2,7 +2,8 @@
 
 ``load_error`` is None when the library is built and loaded, else a short reason (no compiler, a
 compile error...); then :class:`NativeTracer` cannot be made and tracer.backend uses the NumPy path.
-The library is built on first import when missing or out of date (see :mod:`tracer.native.build`).
+An installed package loads the library CMake built for it; a checkout compiles it on first import when
+missing or out of date (see :mod:`tracer.native.build`).
 
 :class:`NativeTracer` is a backend (see tracer.backend): ``name``, ``counts``, ``camera_rays``.  It also
 answers the queries the tests compare with the NumPy path: :meth:`NativeTracer.object_hits` (whole-line
@@ -37,8 +38,31 @@ _i64p = ctypes.POINTER(ctypes.c_int64)
 _u8p = ctypes.POINTER(ctypes.c_uint8)
 
 
+#: A library file to load instead of looking for one ($SDL_TRACER_LIBRARY; make sanitize uses it).
+LIBRARY_OVERRIDE = "SDL_TRACER_LIBRARY"
+
+
 def _load() -> ctypes.CDLL:
-    lib = ctypes.CDLL(str(_builder.build()))
+    """$SDL_TRACER_LIBRARY if set; else the prebuilt library of an installed package if it loads, else the
+    development build."""
+    override = os.environ.get(LIBRARY_OVERRIDE)
+    if override:
+        return _configure(ctypes.CDLL(override))
+    prebuilt = _builder.prebuilt_library()
+    if prebuilt is None:
+        return _configure(ctypes.CDLL(str(_builder.build())))
+    try:
+        return _configure(ctypes.CDLL(str(prebuilt)))
+    except (OSError, BuildError) as err:
+        problem = f"the prebuilt C core {prebuilt} did not load ({err})"
+    try:
+        return _configure(ctypes.CDLL(str(_builder.build())))
+    except (OSError, BuildError) as err:
+        raise BuildError(f"{problem}, and building it failed: {err}") from None
+
+
+def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
+    """Declares the functions' types and checks that the library speaks this contract."""
     lib.rt_desc_size.restype = ctypes.c_int64
     lib.rt_desc_size.argtypes = []
     lib.rt_create.restype = ctypes.c_void_p

@@ -1,12 +1,19 @@
-"""Building the C core: ``cc -O3 -march=x86-64-v2 -fPIC -shared -pthread -lm`` into ``_core.so``.
+"""Finding the C core, and building it in a development checkout.
 
-The library is built on demand (at the first import of :mod:`tracer.native`) when it is missing or was
-built from other sources: a hash of the sources and the compiler flags is compiled into the library as a
-marker string, and the file is rebuilt whenever the marker is not found in it.  A file lock keeps parallel
+An installed package (a wheel from ``pip wheel .``, a Blender extension zip) carries the library prebuilt by
+CMake (CMakeLists.txt), marked ``RT_SOURCE_HASH=prebuilt``: :func:`prebuilt_library` finds it and it is
+loaded as it is (tracer.native still checks that it was built from this contract).
+
+Otherwise, or when the prebuilt library does not load, this is the development fallback: the library is
+compiled on demand (``cc -O3 -march=x86-64-v2 -fPIC -shared -pthread -lm`` into ``_core.so``, at the first
+import of :mod:`tracer.native`) when it is missing or was built from other sources: a hash of the sources
+and the compiler flags is compiled into the library as a marker string, and the file is rebuilt whenever
+the marker is not found in it.  A file lock keeps parallel
 processes (pytest workers, several renders) from building at the same time; the new library is written
 beside the old one and renamed over it, so a reader never sees half a file.
 
-The library goes next to the sources when that folder is writable, else into a per-user cache folder.
+The library goes next to the sources when that folder is writable and holds no prebuilt library (a
+checkout), else into a per-user cache folder (so that ``pip uninstall`` leaves nothing behind).
 ``python -m tracer.native.build`` builds it (or says why it cannot) and prints its path.
 """
 from __future__ import annotations
@@ -24,8 +31,10 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 SOURCES = ("core.c", "core.h", "contract.h", "numeric.h", "shapes.h", "mesh.h", "csg.h", "texture.h", "shade.h",
            "scan.h", "bvh_build.h")
-LIBRARY_NAME = "_core.so"
+#: The library's file name: CMake (see CMakeLists.txt) and this module use the same one.
+LIBRARY_NAME = "_core.dll" if sys.platform == "win32" else "_core.so"
 MARKER_PREFIX = b"RT_SOURCE_HASH="
+PREBUILT_MARKER = MARKER_PREFIX + b"prebuilt;"
 
 
 class BuildError(RuntimeError):
@@ -33,7 +42,8 @@ class BuildError(RuntimeError):
 
 
 def compile_flags() -> list[str]:
-    flags = ["-O3", "-fPIC", "-shared", "-pthread", "-std=c11", "-fno-math-errno"]
+    flags = ["-O3", "-fPIC", "-shared", "-pthread", "-std=c11", "-fno-math-errno", "-ffp-contract=off", "-Wall",
+             "-Wextra"]
     if platform.machine().lower() in ("x86_64", "amd64"):
         flags.insert(1, "-march=x86-64-v2")
     return flags
@@ -69,9 +79,18 @@ def _cache_dir() -> Path:
     return Path(base) / "sdl-tracer" / hashlib.sha256(str(HERE).encode()).hexdigest()[:16]
 
 
+def prebuilt_library() -> Path | None:
+    """The library an installed package carries (built by CMake), if there is one beside this module."""
+    path = HERE / LIBRARY_NAME
+    try:
+        return path if PREBUILT_MARKER in path.read_bytes() else None
+    except OSError:
+        return None
+
+
 def library_path() -> Path:
-    """Where the library lives: beside the sources if that folder is writable, else a cache folder."""
-    if os.access(HERE, os.W_OK):
+    """Where the development build lives: beside the sources in a writable checkout, else a cache folder."""
+    if os.access(HERE, os.W_OK) and prebuilt_library() is None:
         return HERE / LIBRARY_NAME
     return _cache_dir() / LIBRARY_NAME
 

@@ -78,7 +78,10 @@ class Constant:
 
     def value(self):
         module, attribute = self.source.split(":")
-        value = getattr(importlib.import_module(module), attribute)
+        # "tracer.x" names a module of this tracer package, wherever it lives (the Blender add-on vendors
+        # it as sdl_raytracer.tracer, where an absolute "tracer" is not importable)
+        package = __package__.rsplit(".", 1)[0]
+        value = getattr(importlib.import_module(package + module[len("tracer"):]), attribute)
         return float(value) if self.kind == "double" else int(value)
 
 

@@ -7,6 +7,7 @@ along a clamped direction lookups stop at the edge texels, so the poles of a sph
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -16,11 +17,28 @@ from ..errors import TracerError
 MAX_TEXELS = 64 * 1024 * 1024
 
 
+#: ``decode(path) -> (height, width, 3) floats in [0, 1], row 0 at the bottom`` (a TracerError for an unreadable
+#: file), used where Pillow cannot be imported: the Blender add-on sets Blender's own image loading, since
+#: Blender's Python ships without Pillow.
+_fallback_decoder: Optional[Callable[[Path], np.ndarray]] = None
+
+
+def set_fallback_decoder(decode: Optional[Callable[[Path], np.ndarray]]) -> None:
+    """Read textures with ``decode`` when Pillow is not importable (None: no fallback)."""
+    global _fallback_decoder
+    _fallback_decoder = decode
+
+
 def load_image(path: str | Path) -> np.ndarray:
     """(height, width, 3) float64 in [0, 1], row 0 at the *bottom*."""
-    from PIL import Image, UnidentifiedImageError
-
     path = Path(path)
+    try:
+        from PIL import Image, UnidentifiedImageError
+    except ImportError:
+        if _fallback_decoder is None:
+            raise TracerError(f"{path}: reading texture images needs Pillow (pip install Pillow)") from None
+        return np.asarray(_fallback_decoder(path), dtype=np.float64)
+
     try:
         with Image.open(path) as picture:
             if picture.width * picture.height > MAX_TEXELS:

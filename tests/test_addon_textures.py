@@ -1,0 +1,92 @@
+"""Image textures inside Blender, whose Python has no Pillow: the add-on reads them through Blender's own
+image loading (addon/images.py, the tracer's fallback decoder).  The textured scene rendered by F12 with
+Pillow unimportable, under ``blender -b`` (Debian's Blender 3.4 here) and in the bpy module, equals the
+tracer's image made outside Blender with Pillow."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+import tracer
+from addon import images
+from blender_binary import BLENDER, blender_numpy_path
+from tracer.errors import TracerError
+from tracer.textures import images as tracer_images
+
+ROOT = Path(__file__).resolve().parent.parent
+SCRIPT = ROOT / "tests" / "blender_scripts" / "render_without_pillow.py"
+SCENE = ROOT / "scenes" / "textures.sdl"
+WIDTH, HEIGHT = 160, 120
+
+
+def _exr_rgb(path: Path) -> np.ndarray:
+    """An EXR read back through Blender: (height, width, 3), row 0 at the top."""
+    image = bpy.data.images.load(str(path), check_existing=False)
+    try:
+        pixels = np.empty(WIDTH * HEIGHT * 4, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+    finally:
+        bpy.data.images.remove(image)
+    return pixels.reshape(HEIGHT, WIDTH, 4)[::-1, :, :3]
+
+
+def _check(proc, out: Path) -> None:
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
+    assert proc.returncode == 0 and lines, proc.stdout[-4000:] + proc.stderr[-4000:]
+    result = json.loads(lines[-1][len("RESULT "):])
+    assert result["error"] is None and not result["pillow"], result
+    assert result["images_left"] == []  # the decoder's own datablocks are removed again
+    expected = tracer.render(tracer.load(str(SCENE)), WIDTH, HEIGHT).image  # outside Blender: Pillow
+    rendered = _exr_rgb(out)
+    differs = np.abs(rendered - expected).max(axis=2) > 1e-3
+    # (Blender's camera rays equal the tracer's to float rounding, which may move a silhouette's edge pixel)
+    assert differs.sum() <= WIDTH * HEIGHT // 1000, np.argwhere(differs)
+    assert expected.std() > 0.05  # a picture with its textures, not a flat colour
+
+
+@pytest.mark.skipif(BLENDER is None, reason="no blender on PATH")
+def test_textured_scene_without_pillow_under_blender(tmp_path):
+    out = tmp_path / "textures.exr"
+    env = dict(os.environ, PYTHONPATH=blender_numpy_path(BLENDER, tmp_path))
+    proc = subprocess.run([BLENDER, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(SCRIPT),
+                           "--", str(ROOT), str(SCENE), str(WIDTH), str(HEIGHT), str(out)],
+                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    _check(proc, out)
+
+
+def test_textured_scene_without_pillow_in_the_bpy_module(tmp_path):
+    out = tmp_path / "textures.exr"
+    proc = subprocess.run([sys.executable, str(SCRIPT), str(ROOT), str(SCENE), str(WIDTH), str(HEIGHT), str(out)],
+                          capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=""), cwd=tmp_path,
+                          timeout=300)
+    _check(proc, out)
+
+
+def test_blender_decoder_reads_what_pillow_reads():
+    for name in ("uvgrid.bmp", "bricks.png"):
+        path = ROOT / "scenes" / "images" / name
+        np.testing.assert_allclose(images.decode(path), tracer_images.load_image(path), atol=1e-6)
+
+
+def test_unreadable_images_are_one_line_errors(tmp_path):
+    with pytest.raises(TracerError, match="texture image not found"):
+        images.decode(tmp_path / "missing.png")
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not a picture")
+    with pytest.raises(TracerError, match=r"bad\.png: cannot read texture image"):
+        images.decode(bad)
+    assert not [i for i in bpy.data.images if i.filepath.endswith("bad.png")]
+
+
+def test_without_pillow_or_decoder_the_error_names_pillow(monkeypatch):
+    monkeypatch.setitem(sys.modules, "PIL", None)
+    monkeypatch.setattr(tracer_images, "_fallback_decoder", None)  # (restored afterwards)
+    with pytest.raises(TracerError, match="needs Pillow"):
+        tracer_images.load_image(ROOT / "scenes" / "images" / "bricks.png")

@@ -173,3 +173,15 @@ def test_a_second_render_in_c_flattens_nothing(counted, monkeypatch):
     monkeypatch.setattr(numerics, "TOLERANCES", replace(numerics.TOLERANCES, hit_ulps=numerics.TOLERANCES.hit_ulps * 2))
     render(scene, 24, 18, backend="c")
     assert len(made) == 2 and counted["compile"] == 2
+
+
+def test_copies_and_pickles_of_a_rendered_scene_leave_the_compiled_form_behind(counted):
+    import copy
+    import pickle
+    scene = _scene()
+    image = render(scene, 24, 18).image  # (the C core's flattened scene, with its pointers, is cached too)
+    for other in (pickle.loads(pickle.dumps(scene)), copy.deepcopy(scene), copy.copy(scene)):
+        assert np.array_equal(render(other, 24, 18).image, image)
+    # The pickled and the deep copy compiled their own; a shallow copy has the very same objects and content,
+    # so the entry it shares is still right for it.
+    assert counted["compile"] == 3

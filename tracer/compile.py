@@ -574,18 +574,32 @@ def compile_scene(scene: Scene) -> CompiledScene:
     returned again for as long as the scene's content has not changed."""
     with one_blas_thread(), collector_paused():
         key, nodes, shapes, stack = _content(scene)
-        cached = getattr(scene, _CACHE_ATTRIBUTE, None)
+        holder = getattr(scene, _CACHE_ATTRIBUTE, None)
+        cached = holder.entry if isinstance(holder, _CompiledHolder) else None
         if cached is not None and cached[0] == key:
             return cached[1]
         compiled = _compile(scene, shapes, stack)
     # (the nodes are kept so that the ids in the key cannot be reused by new objects while it is cached)
-    setattr(scene, _CACHE_ATTRIBUTE, (key, compiled, nodes))
+    setattr(scene, _CACHE_ATTRIBUTE, _CompiledHolder((key, compiled, nodes)))
     return compiled
 
 
-#: Where compile_scene keeps its result on the Scene (not a dataclass field: copies and replace() of a
-#: scene do not carry it, and it never takes part in comparisons).
+#: Where compile_scene keeps its result on the Scene (not a dataclass field: replace() of a scene does not
+#: carry it, and it never takes part in comparisons).
 _CACHE_ATTRIBUTE = "_compiled_cache"
+
+
+class _CompiledHolder:
+    """compile_scene's entry on a scene, left behind when the scene is copied or pickled: a copy compiles
+    anew, and a pickled scene (sent to a Dask worker) must not drag the C core's pointers along."""
+
+    __slots__ = ("entry",)
+
+    def __init__(self, entry=None):
+        self.entry = entry
+
+    def __reduce__(self):
+        return _CompiledHolder, ()
 
 
 def _compile(scene: Scene, shapes: Optional[list[Shape]] = None, stack: Optional[np.ndarray] = None) -> CompiledScene:

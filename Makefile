@@ -58,12 +58,13 @@ extension: setup
 
 # The C core, built by CMake as the wheel builds it (CMakeLists.txt; needs cmake):
 #   make warnings   -Wall -Wextra -Werror with gcc and with clang (apt-get install -y clang)
-#   make sanitize   the C-vs-NumPy tests with the core built under AddressSanitizer and UBSan
+#   make sanitize   the C-vs-NumPy tests and the fuzz corpus (tests/fuzz; USD cases left out: usd-core aborts
+#                   under a preloaded ASan) with the core built under AddressSanitizer and UBSan
 #   make wheel      pip wheel . into dist/, then the packaging tests: the wheel and the extension zips
 #                   render with the prebuilt core where no compiler is on PATH
 CMAKE ?= cmake
 SANITIZED := build/sanitize/_core.so
-SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py
+SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py tests/fuzz
 
 .PHONY: warnings sanitize wheel contract
 warnings:
@@ -88,3 +89,10 @@ wheel: setup
 # Rewrites tracer/native/contract.h from tracer/native/contract.py (see docs/contributing.md).
 contract: setup
 	$(PY) -W ignore::RuntimeWarning -m tracer.native.contract
+
+# Hostile input (tests/fuzz/): 10,000 mutated scenes, meshes, images and USD stages through the command line,
+# each in its own process; fails on any traceback, signal, hang past 20 s, memory past 2 GB or C != NumPy.
+# Failing inputs are copied to out/fuzz-findings/.  The test suite runs a seeded slice of 300.
+.PHONY: fuzz
+fuzz: setup
+	$(PY) tests/fuzz/fuzz.py --count 10000 --seed $${FUZZ_SEED:-1} --findings out/fuzz-findings

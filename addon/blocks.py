@@ -114,6 +114,10 @@ class BlockRenderer:
                 self.backend_name = getattr(tracer, "name", "numpy")
         return tracer
 
+    def backend_tracer(self):
+        """The backend tracer that shades this film (the calling thread's), for first-hit queries."""
+        return self._tracer()
+
     @property
     def item_threads(self) -> int:
         """Work items traced at once: one with the C core (it is already parallel), else ``threads``."""

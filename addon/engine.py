@@ -12,6 +12,7 @@ image is finished; any change to the scene or the view starts again.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import traceback
@@ -20,7 +21,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import blocks, deps, raycam
+from . import blocks, deps, passes, raycam
 from .scene_build import SceneBuilder, matrix_np
 
 ENGINE_ID = "SDL_RAYTRACER"
@@ -75,6 +76,15 @@ def render_settings(scene) -> dict:
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
 
+def preview_lighting(tracer_scene) -> None:
+    """Blender's preview scene has lights of 10 and 70 W, which as SDL lights (1000 W is colour 1) leave a
+    material preview nearly black: scale them together so that the brightest is white, as SDL scenes are lit."""
+    peak = max((max(light.color) for light in tracer_scene.lights), default=0.0)
+    if peak > 0:
+        tracer_scene.lights = [dataclasses.replace(light, color=tuple(c / peak for c in light.color))
+                               for light in tracer_scene.lights]
+
+
 def displayed() -> bool:
     """Whether anyone sees a final render while it is traced: not under ``blender -b`` nor in the bpy module."""
     return not bpy.app.background
@@ -93,6 +103,35 @@ def write_pass(render_pass, pixels: np.ndarray) -> None:
         render_pass.rect.foreach_set(rows.reshape(-1))
     except TypeError:  # Blender 3.x: "expected sequence size <pixels>"
         render_pass.rect.foreach_set(rows)
+
+
+def write_first_hit_passes(layer, names, tracer, compiled, rays_for, params, scene, chunk: int = 1 << 16) -> None:
+    """Depth, Normal, Diffuse Color, Position and Mist (those in ``names``) of the ray through each pixel's
+    centre, into the render layer's passes (addon/passes.py says what each holds)."""
+    height, width = tracer.height, tracer.width
+    matrix = np.asarray(params.matrix, dtype=np.float64)
+    eye, forward = matrix[:3, 3], -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+    mist = None
+    if scene.world is not None:
+        m = scene.world.mist_settings
+        mist = (float(m.start), float(m.depth), m.falloff)
+    backend = tracer.backend_tracer()
+    films = {}
+    rows_all, cols_all = np.divmod(np.arange(height * width), width)  # film order: bottom row first
+    for start in range(0, height * width, chunk):
+        rows, cols = rows_all[start:start + chunk], cols_all[start:start + chunk]
+        origins, directions = rays_for(rows, cols)
+        origins = np.ascontiguousarray(np.broadcast_to(origins, directions.shape), dtype=np.float64)
+        directions = np.ascontiguousarray(directions, dtype=np.float64)
+        values = passes.compute(names, backend, compiled, origins, directions, eye, forward, mist)
+        for name, value in values.items():
+            film = films.setdefault(name, np.empty((height * width, value.shape[1]), dtype=np.float32))
+            film[start:start + len(value)] = value
+    for name, film in films.items():
+        render_pass = layer.passes.find_pass(name, "") if hasattr(layer.passes, "find_pass") else None
+        render_pass = render_pass or layer.passes.get(name)
+        if render_pass is not None:
+            write_pass(render_pass, film.reshape(height, width, -1))
 
 
 class FilmUpdates:
@@ -121,9 +160,10 @@ class FilmUpdates:
 class SDLRenderEngine(bpy.types.RenderEngine):
     bl_idname = ENGINE_ID
     bl_label = "SDL Ray Tracer"
-    bl_use_preview = False
+    bl_use_preview = True  # material previews traced too (small, one ray per pixel: well under a second)
     bl_use_postprocess = True
     bl_use_eevee_viewport = True  # Material Preview mode draws with EEVEE
+    _draw_seconds = 0.0  # what the last viewport draw took
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -145,10 +185,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                                             (render.border_min_x, render.border_max_x,
                                              render.border_min_y, render.border_max_y))
         width, height = x1 - x0, y1 - y0
-        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False}
+        stats = {"width": width, "height": height, "frame": scene.frame_current, "cancelled": False,
+                 "view_layer": depsgraph.view_layer.name}
         LAST_RENDER.clear()
         LAST_RENDER.update(stats)
-        result = self.begin_result(0, 0, width, height)
+        # Blender calls render() once per view layer, with that layer's depsgraph (its own visible
+        # collections); the result must name the layer, else every layer's image lands in the first.
+        result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         try:
             layer = result.layers[0].passes["Combined"]
             cam_obj = self.camera_override or scene.camera
@@ -162,6 +205,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             params = camera_params(cam_obj, matrix)
             self.update_stats("", "SDL Ray Tracer | building the scene")
             tracer_scene, warnings = build_scene(depsgraph, "RENDER")
+            if self.is_preview:
+                preview_lighting(tracer_scene)
             for message in warnings:
                 self.report({"WARNING"}, message)
             compiled = deps.module("compile").compile_scene(tracer_scene)
@@ -171,6 +216,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
 
             settings = render_settings(scene)
+            if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
+                settings.update(block_size=1, progressive=False, samples=1)
             if settings["progressive"] and not displayed():
                 # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
                 # the same rays either way, so the image is the same without them.
@@ -198,6 +245,11 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             except blocks.Cancelled:
                 LAST_RENDER["cancelled"] = True
             write_pass(layer, tracer.rgba())
+            wanted = passes.enabled(depsgraph.view_layer)
+            if wanted and not LAST_RENDER["cancelled"]:
+                self.update_stats("", "SDL Ray Tracer | passes")
+                write_first_hit_passes(result.layers[0], wanted, tracer, compiled, rays_for, params, scene)
+            LAST_RENDER["passes_written"] = wanted if not LAST_RENDER["cancelled"] else []
             counts = tracer.counts().as_dict()
             LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
                                 "tiles_done": tracer.done, "tiles_total": len(tracer.items),
@@ -212,6 +264,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             traceback.print_exc()
         finally:
             self.end_result(result)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """The passes this engine writes, for the Render Layers node and the render result."""
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        for name in passes.enabled(renderlayer):
+            _, channels, kind = passes.PASSES[name]
+            self.register_pass(scene, renderlayer, name, len(channels), channels, kind)
 
     # -- viewport -------------------------------------------------------------------------------------
 
@@ -244,15 +303,20 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 self._view = (key, renderer)
             renderer = self._view[1]
             if not renderer.finished:
-                renderer.run_for(VIEWPORT_SLICE)
+                # at least as long as drawing takes (slow on software OpenGL), so tracing keeps half the time
+                renderer.run_for(max(VIEWPORT_SLICE, self._draw_seconds))
         except Exception as exc:  # noqa: BLE001
             self.update_stats("", f"SDL Ray Tracer: {exc}")
             return
+        started = time.perf_counter()
         self._draw(depsgraph.scene, renderer.rgba(), width, height)
+        self._draw_seconds = time.perf_counter() - started
         self.update_stats("", "SDL Ray Tracer | " + ("done" if renderer.finished else
                                                      f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
         if not renderer.finished:
             self.tag_redraw()
+            if not bpy.app.timers.is_registered(_redraw_rendered_viewports):
+                bpy.app.timers.register(_redraw_rendered_viewports, first_interval=0.0)
 
     def _draw(self, scene, rgba: np.ndarray, width: int, height: int) -> None:
         import gpu
@@ -268,12 +332,24 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         gpu.state.blend_set("NONE")
 
 
+def _redraw_rendered_viewports() -> None:
+    """Draw the Rendered viewports again, to trace their next slice.  A one-shot timer, because Blender 3.4
+    does not honour ``tag_redraw`` asked from inside ``view_draw``: the image stopped refining there."""
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D" and area.spaces.active.shading.type == "RENDERED":
+                area.tag_redraw()
+    return None
+
+
 def compatible_panels():
     """Blender's own panels that work with this engine (they list the engines they support)."""
     wanted = {"RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output", "RENDER_PT_dimensions",
               "RENDER_PT_stamp", "RENDER_PT_post_processing", "DATA_PT_lens", "DATA_PT_camera",
               "DATA_PT_camera_display", "DATA_PT_context_light", "DATA_PT_light", "DATA_PT_context_camera",
               "MATERIAL_PT_preview", "MATERIAL_PT_context_material", "WORLD_PT_context_world",
+              "EEVEE_MATERIAL_PT_context_material",  # the slot list and New (3.4-5.0 give it this name)
+              "DATA_PT_preview",
               "RENDER_PT_format_presets", "RENDER_PT_film", "OBJECT_PT_visibility",
               "VIEWLAYER_PT_layer", "DATA_PT_camera_dof"}
     found = []
@@ -297,6 +373,8 @@ def register() -> None:
 
 
 def unregister() -> None:
+    if bpy.app.timers.is_registered(_redraw_rendered_viewports):
+        bpy.app.timers.unregister(_redraw_rendered_viewports)
     for cls in _added_to:
         cls.COMPAT_ENGINES.discard(ENGINE_ID)
     _added_to.clear()

@@ -104,12 +104,15 @@ CLASSES = (SDLMaterialSettings, SDLWorldSettings, SDLRenderSettings)
 def register() -> None:
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    bpy.app.handlers.depsgraph_update_post.append(take_material_edits)
     bpy.types.Material.sdl = PointerProperty(type=SDLMaterialSettings)
     bpy.types.World.sdl = PointerProperty(type=SDLWorldSettings)
     bpy.types.Scene.sdl_render = PointerProperty(type=SDLRenderSettings)
 
 
 def unregister() -> None:
+    while take_material_edits in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(take_material_edits)
     for owner, name in ((bpy.types.Scene, "sdl_render"), (bpy.types.World, "sdl"), (bpy.types.Material, "sdl")):
         if hasattr(owner, name):
             delattr(owner, name)
@@ -169,8 +172,44 @@ def _get_input(node, names, default):
     return default
 
 
+#: On a material: the colour apply_principled last gave its Principled Base Color (or, without nodes, its
+#: viewport colour), to tell a user's edit of that colour from the add-on's own.
+BASE_SHOWN = "sdl_base_shown"
+
+
+def _base_color(material) -> tuple:
+    node = _principled(material)
+    if node is not None:
+        return tuple(float(c) for c in _get_input(node, ("Base Color",), (0.8, 0.8, 0.8, 1.0)))[:3]
+    return tuple(float(c) for c in material.diffuse_color)[:3]
+
+
+def edited_base_color(material):
+    """The colour the user sees (Principled Base Color, else the viewport colour) when it was edited since
+    the add-on set it from the SDL diffuse colour; None when it was not."""
+    shown = material.get(BASE_SHOWN)
+    if shown is None:
+        return None
+    base = _base_color(material)
+    return base if max(abs(a - b) for a, b in zip(base, shown)) > 1e-6 else None
+
+
+def take_base_color_edit(material) -> bool:
+    """One colour, whichever way it is edited: a Base Color edited by the user becomes the SDL diffuse
+    colour (shown in the SDL Material panel, traced and exported), rather than being ignored, or overwritten
+    by the SDL colour when SDL Material is ticked or unticked.  True when there was an edit."""
+    base = edited_base_color(material)
+    if base is None:
+        return False
+    material[BASE_SHOWN] = list(base)  # first, so that the update below finds nothing more to take
+    material.sdl.diffuse = base
+    return True
+
+
 def apply_principled(material) -> None:
-    """Make the Principled BSDF and the viewport colour look like the SDL material."""
+    """Make the Principled BSDF and the viewport colour look like the SDL material (after taking a Base
+    Color the user edited into it)."""
+    take_base_color_edit(material)
     s = material.sdl
     diffuse = tuple(s.diffuse)
     material.diffuse_color = (*[min(c, 1.0) for c in diffuse], 1.0)
@@ -178,9 +217,11 @@ def apply_principled(material) -> None:
     material.roughness = roughness
     material.metallic = s.reflectivity
     node = _principled(material)
+    if node is not None:
+        _set_input(node, ("Base Color",), (*diffuse, 1.0))
+    material[BASE_SHOWN] = list(_base_color(material))
     if node is None:
         return
-    _set_input(node, ("Base Color",), (*diffuse, 1.0))
     _set_input(node, ("Emission Color", "Emission"), (*tuple(s.emissive), 1.0))
     _set_input(node, ("Emission Strength",), 1.0)
     _set_input(node, ("Roughness",), roughness)
@@ -216,6 +257,9 @@ def material_to_sdl(material):
     s = material.sdl
     if s.use_sdl:
         values = {name: tuple(exact_field(material, s, name)) for name in COLOR_FIELDS}
+        edited = edited_base_color(material)  # (the handler below takes it in too, where there is a UI)
+        if edited is not None:
+            values["diffuse"] = tuple(convert.shortest32(c) for c in edited)
         values.update({name: exact_field(material, s, name)[0] for name in FLOAT_FIELDS})
         params = exact_field(material, s, "parameters")[: s.parameter_count]
         return Material(texture=int(s.texture), parameters=tuple(params), **values)
@@ -230,6 +274,15 @@ def material_to_sdl(material):
         base = tuple(material.diffuse_color)[:3]
         emissive = (0.0, 0.0, 0.0)
     return Material(diffuse=tuple(convert.shortest32(c) for c in base), emissive=emissive)
+
+
+@bpy.app.handlers.persistent
+def take_material_edits(scene, depsgraph) -> None:
+    """depsgraph_update_post: a Base Color the user edited shows in the SDL Material panel at once."""
+    if any(isinstance(update.id, (bpy.types.Material, bpy.types.NodeTree)) for update in depsgraph.updates):
+        for material in bpy.data.materials:
+            if material.library is None and BASE_SHOWN in material and material.sdl.use_sdl:
+                take_base_color_edit(material)
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Panels: the engine's render settings, and the SDL material, world and shape of the active data."""
+"""Panels: the engine's render settings, and the SDL material, light, world and shape of the active data."""
 from __future__ import annotations
 
 import bpy
@@ -69,6 +69,29 @@ class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
                 row.prop(s, "parameters", index=i, text="")
 
 
+class SDL_PT_light(_PropertiesPanel, bpy.types.Panel):
+    """What the engine uses of a light: its colour times its power, as an SDL point light's colour."""
+    bl_idname = "SDL_PT_light"
+    bl_label = "SDL Light"
+    bl_context = "data"
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
+
+    def draw(self, context):
+        from . import props
+
+        layout = self.layout
+        layout.use_property_split = True
+        light = context.light
+        layout.prop(light, "color")
+        layout.prop(light, "energy", text="Strength" if light.type == "SUN" else "Power")
+        rgb = props.light_color(light)
+        layout.label(text="SDL light colour: " + " ".join(f"{c:g}" for c in rgb), icon="LIGHT")
+
+
 class SDL_PT_world(_PropertiesPanel, bpy.types.Panel):
     bl_idname = "SDL_PT_world"
     bl_label = "SDL World"
@@ -119,7 +142,7 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
             layout.label(text=f"From {obj['sdl_source']}")
 
 
-CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_world, SDL_PT_object)
+CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_light, SDL_PT_world, SDL_PT_object)
 
 
 def register() -> None:

@@ -246,7 +246,7 @@ def test_viewport_refines_while_the_user_waits(monkeypatch):
         region_data = type("RegionView3D", (), {"perspective_matrix": persp})
 
     class Engine:
-        _view, _view_dirty, _view_scene = None, True, None
+        _view, _view_dirty, _view_scene, _draw_seconds = None, True, None, 0.0
         view_draw = engine.SDLRenderEngine.__dict__["view_draw"]
         view_update = engine.SDLRenderEngine.__dict__["view_update"]
 

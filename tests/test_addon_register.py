@@ -63,7 +63,7 @@ def test_register_unregister_twice_leaves_nothing_behind():
     assert len(registered["properties"]) == 3 and registered["engine"]
     assert registered["menus"] == {menu: 1 for menu in MENUS}
     assert "RENDER_PT_format" in registered["compat"]  # Blender's own panels show for the engine
-    assert registered["handlers"] == 4  # the SDL Shape panel's cache (meshes.HANDLERS)
+    assert registered["handlers"] == 5  # the SDL Shape panel's cache (meshes.HANDLERS), Base Color edits
     for _ in range(2):
         addon.unregister()
         gone = _state()
@@ -102,25 +102,7 @@ def test_extension_zip_contents(tmp_path):
     assert legacy == {f"sdl_raytracer/{n}" for n in names}
 
 
-INSTALL_SCRIPT = r"""
-import json, sys, bpy
-zip_path, sdl, out = sys.argv[-3:]
-assert bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default",
-                                                 enable_on_install=True) == {"FINISHED"}
-package = "bl_ext.user_default.sdl_raytracer"
-deps = sys.modules[package + ".deps"]
-for obj in list(bpy.data.objects):
-    bpy.data.objects.remove(obj)
-bpy.ops.import_scene.sdl(filepath=sdl)
-scene = bpy.context.scene
-scene.render.engine = "SDL_RAYTRACER"
-scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 48, 36, 100
-scene.render.filepath = out
-bpy.ops.render.render(write_still=True)
-stats = sys.modules[package + ".engine"].LAST_RENDER
-print("RESULT " + json.dumps({"tracer": deps.TRACER, "tracer_file": sys.modules[deps.TRACER].__file__,
-                              "stats": {k: v for k, v in stats.items() if k != "passes"}}))
-"""
+INSTALL_ZIP = ROOT / "tests" / "blender_scripts" / "install_zip.py"
 
 
 def test_extension_zip_installs_and_renders(tmp_path):
@@ -129,12 +111,10 @@ def test_extension_zip_installs_and_renders(tmp_path):
     import json
 
     zip_path = build_extension.build(tmp_path / "sdl_raytracer.zip")
-    script = tmp_path / "install.py"
-    script.write_text(INSTALL_SCRIPT)
     env = dict(os.environ, BLENDER_USER_EXTENSIONS=str(tmp_path / "ext"), BLENDER_USER_CONFIG=str(tmp_path / "cfg"),
                BLENDER_USER_SCRIPTS=str(tmp_path / "scripts"), PYTHONPATH="")
     out = tmp_path / "render.png"
-    proc = subprocess.run([sys.executable, str(script), str(zip_path), str(ROOT / "scenes" / "csg.sdl"), str(out)],
+    proc = subprocess.run([sys.executable, str(INSTALL_ZIP), str(zip_path), str(ROOT / "scenes" / "csg.sdl"), str(out)],
                           capture_output=True, text=True, env=env, timeout=240, cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
     assert proc.returncode == 0 and lines, proc.stdout[-3000:] + proc.stderr[-3000:]

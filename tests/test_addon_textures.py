@@ -72,7 +72,8 @@ def test_textured_scene_without_pillow_in_the_bpy_module(tmp_path):
 def test_blender_decoder_reads_what_pillow_reads():
     for name in ("uvgrid.bmp", "bricks.png"):
         path = ROOT / "scenes" / "images" / name
-        np.testing.assert_allclose(images.decode(path), tracer_images.load_image(path), atol=1e-6)
+        # (load_image keeps Pillow's 8-bit texels; the decoder gives their values, byte / 255)
+        np.testing.assert_allclose(images.decode(path), tracer_images.load_image(path) / 255.0, atol=1e-6)
 
 
 def test_unreadable_images_are_one_line_errors(tmp_path):

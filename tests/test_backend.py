@@ -101,3 +101,29 @@ def test_cli_cancel_exits_130(tmp_path, capsys, monkeypatch):
     assert code == cli.EXIT_INTERRUPTED == 130
     assert err.strip() == "error: cancelled"
     assert not (tmp_path / "s.png").exists()
+
+
+@requires_core
+def test_a_prebuilt_core_that_does_not_load_gives_way_to_the_development_build(tmp_path, monkeypatch):
+    built = native._builder.build()  # (current already: no compiling here)
+    bogus = tmp_path / "_core.so"
+    bogus.write_bytes(b"not a library, but marked RT_SOURCE_HASH=prebuilt;")
+    monkeypatch.delenv(native.LIBRARY_OVERRIDE, raising=False)
+    monkeypatch.setattr(native._builder, "prebuilt_library", lambda: bogus)
+    monkeypatch.setattr(native._builder, "build", lambda: built)
+    assert native._load()._name == str(built)
+
+    def no_compiler():
+        raise native.BuildError("no C compiler found (install gcc or set CC)")
+
+    monkeypatch.setattr(native._builder, "build", no_compiler)
+    with pytest.raises(native.BuildError, match=r"prebuilt C core .* did not load .*no C compiler found"):
+        native._load()
+
+
+@requires_core
+def test_sdl_tracer_library_names_the_library_to_load(monkeypatch):
+    path = native._builder.build()
+    monkeypatch.setenv(native.LIBRARY_OVERRIDE, str(path))
+    monkeypatch.setattr(native._builder, "build", lambda: pytest.fail("looked for another library"))
+    assert native._load()._name == str(path)

@@ -9,7 +9,7 @@ import pytest
 
 import tracer
 from tracer.compile import compile_scene
-from tracer.model import CSG
+from tracer.model import CSG, MAX_RECURSION_DEPTH
 from tracer.render import render
 from tracer.savings import RaySavings
 from tracer.backend import make_tracer
@@ -250,8 +250,9 @@ def test_total_internal_reflection_in_a_rendered_glass_block():
     assert counts["above"][2] == pytest.approx(0.0)
 
 
-def test_parallel_mirrors_at_depth_100(backend):
-    # Two facing mirrors; a ray bouncing between them adds ambient * r^k for k = 0..100 exactly.
+def test_parallel_mirrors_asked_for_depth_100_go_to_the_deepest_traced(backend):
+    # Two facing mirrors; a ray bouncing between them adds ambient * r^k for k = 0..64 exactly: depth 100
+    # is more than the tracer follows (MAX_RECURSION_DEPTH).
     r, ambient = 0.9, 0.05
     mirror = dict(reflectivity=r, ambient=(ambient,) * 3, diffuse=(0, 0, 0))
     scene = scene_of(shape("square", translation(0, 0, -1) @ scaling(5, 5, 1), **mirror),
@@ -259,8 +260,8 @@ def test_parallel_mirrors_at_depth_100(backend):
                      max_recursion_depth=100, global_ambient=(1, 1, 1), background=(0, 0, 0))
     tr = make_tracer(compile_scene(scene), backend, savings=RaySavings.none())  # every bounce, however little it adds
     color = tr.camera_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]))
-    assert tr.counts.reflection == 100
-    assert color[0, 0] == pytest.approx(ambient * (1 - r ** 101) / (1 - r), rel=1e-12)
+    assert tr.counts.reflection == MAX_RECURSION_DEPTH
+    assert color[0, 0] == pytest.approx(ambient * (1 - r ** (MAX_RECURSION_DEPTH + 1)) / (1 - r), rel=1e-12)
 
 
 @pytest.mark.parametrize("matrix", [scaling(1, 0, 1), np.full((4, 4), np.nan)])

@@ -286,9 +286,11 @@ def test_bulk_reader_leaves_bad_files_to_the_word_reader(tmp_path, text):
     assert str(path) in str(err.value)
 
 
-def test_error_lines_count_lone_carriage_returns_as_line_ends(tmp_path):
-    path = tmp_path / "cr.3vn"
-    path.write_bytes(b"3 0 1\r0 0 0\r1 0 0\r0 1 x\r3 0 1 2\r")
+def test_a_byte_order_mark_is_dropped_and_errors_still_name_the_line(tmp_path):
+    path = tmp_path / "bom.3vn"
+    path.write_bytes(b"\xef\xbb\xbf" + PYRAMID.encode())
+    assert len(read_3vn(path).faces) == 5
+    path.write_bytes(b"\xef\xbb\xbf" + PYRAMID.replace("0 0 1\n", "0 0 x\n", 1).encode())
     with pytest.raises(SDLError) as err:
         read_3vn(path)
-    assert ":4" in str(err.value)
+    assert ":6" in str(err.value)

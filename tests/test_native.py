@@ -29,7 +29,7 @@ from tracer.backend import make_tracer
 from tracer.compile import compile_scene
 from tracer.errors import FallbackWarning, TracerError
 from tracer.meshio import read_3vn
-from tracer.model import CSG, MeshData, Shape, Material
+from tracer.model import CSG, MAX_RECURSION_DEPTH, MeshData, Shape, Material
 from tracer.native.build import find_compiler, is_current, library_path, source_digest
 from tracer.render import render
 from tracer.savings import RaySavings
@@ -405,7 +405,7 @@ def test_glass_with_total_internal_reflection():
 
 
 @requires_core
-def test_parallel_mirrors_at_depth_100():
+def test_parallel_mirrors_asked_for_depth_100_go_to_the_deepest_traced():
     r, ambient = 0.9, 0.05
     mirror = dict(reflectivity=r, ambient=(ambient,) * 3, diffuse=(0, 0, 0))
     scene = scene_of(shape("square", translation(0, 0, -1) @ scaling(5, 5, 1), **mirror),
@@ -413,8 +413,8 @@ def test_parallel_mirrors_at_depth_100():
                      max_recursion_depth=100, global_ambient=(1, 1, 1), background=(0, 0, 0))
     _, core = _core(scene, savings=RaySavings.none())  # every bounce, however little it adds
     color = core.camera_rays(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]))
-    assert core.counts.as_dict() == {"camera": 1, "shadow": 0, "reflection": 100, "refraction": 0}
-    assert color[0, 0] == pytest.approx(ambient * (1 - r ** 101) / (1 - r), rel=1e-12)
+    assert core.counts.as_dict() == {"camera": 1, "shadow": 0, "reflection": MAX_RECURSION_DEPTH, "refraction": 0}
+    assert color[0, 0] == pytest.approx(ambient * (1 - r ** (MAX_RECURSION_DEPTH + 1)) / (1 - r), rel=1e-12)
 
 
 @requires_core

@@ -93,24 +93,7 @@ def test_zips_and_their_files_have_mode_0644(tmp_path):
     assert modes == {0o644}
 
 
-INSTALL_AND_RENDER = r"""
-import json, shutil, sys, bpy
-zip_path, sdl, out = sys.argv[-3:]
-assert shutil.which("cc") is None and shutil.which("gcc") is None, "a compiler is on PATH"
-assert bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default",
-                                                 enable_on_install=True) == {"FINISHED"}
-package = "bl_ext.user_default.sdl_raytracer"
-native = sys.modules[package + ".deps"].module("native")
-bpy.ops.import_scene.sdl(filepath=sdl)
-scene = bpy.context.scene
-scene.render.engine = "SDL_RAYTRACER"
-scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 32, 24, 100
-scene.render.filepath = out
-bpy.ops.render.render(write_still=True)
-stats = sys.modules[package + ".engine"].LAST_RENDER
-print("RESULT " + json.dumps({"backend": stats.get("backend"), "library": native._lib._name,
-                              "load_error": native.load_error}))
-"""
+INSTALL_ZIP = ROOT / "tests" / "blender_scripts" / "install_zip.py"
 
 
 @pytest.mark.packaging
@@ -122,8 +105,6 @@ def test_linux_zip_renders_with_its_prebuilt_core_in_blender_without_a_compiler(
     zip_path = build_extension.build(tmp_path / "linux.zip", platform="linux-x64", libraries=[library])
     with zipfile.ZipFile(zip_path) as zf:
         assert 'platforms = ["linux-x64"]' in zf.read("blender_manifest.toml").decode()
-    script = tmp_path / "install.py"
-    script.write_text(INSTALL_AND_RENDER)
     no_compiler = tmp_path / "bin"
     no_compiler.mkdir()
     env = dict(os.environ, PATH=str(no_compiler), HOME=str(tmp_path), BLENDER_USER_EXTENSIONS=str(tmp_path / "ext"),
@@ -131,13 +112,13 @@ def test_linux_zip_renders_with_its_prebuilt_core_in_blender_without_a_compiler(
                PYTHONPATH="")
     env.pop("CC", None)
     env.pop("SDL_TRACER_LIBRARY", None)
-    proc = subprocess.run([sys.executable, str(script), str(zip_path), str(ROOT / "scenes" / "csg.sdl"),
+    proc = subprocess.run([sys.executable, str(INSTALL_ZIP), str(zip_path), str(ROOT / "scenes" / "csg.sdl"),
                            str(tmp_path / "render.png")], capture_output=True, text=True, env=env, timeout=300,
                           cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("RESULT ")]
     assert proc.returncode == 0 and lines, proc.stdout[-3000:] + proc.stderr[-3000:]
     result = json.loads(lines[-1][len("RESULT "):])
-    assert result["load_error"] is None and result["backend"] == "c"
+    assert result["load_error"] is None and result["stats"]["backend"] == "c"
     assert result["library"].startswith(str(tmp_path / "ext"))  # the zip's own core, not a compiled one
     assert not (tmp_path / ".cache" / "sdl-tracer").exists()
 

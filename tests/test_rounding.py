@@ -1,7 +1,7 @@
 """Single rays at the numerical extremes, against a 50-digit oracle, on both backends.
 
-* Rays within 1e-8 ... 1e-16 (of the shape's size) of tangency to the sphere, the cylinder's and cone's
-  walls and the torus's tube: every hit lies on the surface to 1e-9 of the size, and where the ray is
+* Rays within 1e-8 ... 1e-16 (of the shape's size) of tangency to the sphere, a cube face, the walls of the
+  cylinder, cone and tapered cylinder, and the torus's tube: every hit lies on the surface to 1e-9 of the size, and where the ray is
   1e-10 or more from tangency the number of hits is the exact one (no spurious touching pairs, no lost
   pairs).
 * The defects an audit found (issue 12): the sphere's second root at tangency, the cone's exit for a ray
@@ -33,9 +33,15 @@ DECIDED = 1e-10
 BACKENDS = ["numpy"] + (["c"] if native.load_error is None else [])
 
 
+TAPER = 0.5  # the taperedCylinder of these tests
+
+
 def _hits(kind, origin, direction, backend, matrix=None):
     """(t, entering, unit normal) of every crossing of the whole line with one shape."""
-    compiled = compile_scene(scene_of(shape(kind, matrix)))
+    solid = shape(kind, matrix)
+    if kind == "taperedCylinder":
+        solid.tapered_radius = TAPER
+    compiled = compile_scene(scene_of(solid))
     o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
     if backend == "c":
         h = native.NativeTracer(compiled).object_hits(0, o, d)
@@ -89,8 +95,14 @@ def exact_hits(kind, origin, direction):
         def inside(t):
             return sum(x * x for x in at(t)) <= 1
         return _crossings(inside, roots)
-    if kind in ("cylinder", "cone"):
-        k = 0 if kind == "cylinder" else -1
+    if kind == "cube":
+        candidates = [(s - o[i]) / d[i] for i in range(3) if d[i] != 0 for s in (-1, 1)]
+
+        def inside(t):
+            return all(-1 <= x <= 1 for x in at(t))
+        return _crossings(inside, candidates)
+    if kind in ("cylinder", "cone", "taperedCylinder"):
+        k = {"cylinder": 0, "cone": -1, "taperedCylinder": mpmath.mpf(TAPER) - 1}[kind]
         r0 = 1 + k * o[2]
         a = d[0] ** 2 + d[1] ** 2 - k * k * d[2] ** 2
         b = o[0] * d[0] + o[1] * d[1] - k * d[2] * r0
@@ -125,8 +137,10 @@ def surface_residual(kind, point):
     x, y, z = _mp(point)
     if kind == "sphere":
         return abs(mpmath.sqrt(x * x + y * y + z * z) - 1)
-    if kind in ("cylinder", "cone"):
-        k = 0 if kind == "cylinder" else -1
+    if kind == "cube":
+        return min(abs(abs(c) - 1) for c in (x, y, z))
+    if kind in ("cylinder", "cone", "taperedCylinder"):
+        k = {"cylinder": 0, "cone": -1, "taperedCylinder": mpmath.mpf(TAPER) - 1}[kind]
         wall = abs(mpmath.sqrt(x * x + y * y) - (1 + k * z)) / mpmath.sqrt(1 + k * k)
         cap = min(abs(z), abs(z - 1))
         return min(wall, cap) if -1e-9 <= z <= 1 + 1e-9 else abs(z)
@@ -146,10 +160,19 @@ def tangent_ray(kind, gap, rng):
         d -= d.dot(n) * n
         d /= np.linalg.norm(d)
         return (1 + gap) * n - rng.uniform(2, 6) * d, d
-    if kind in ("cylinder", "cone"):
+    if kind == "cube":
+        # Parallel to a face, across it: the face's plane is the "tangent".
+        axis, other = rng.choice(3, size=2, replace=False)
+        side = rng.choice([-1.0, 1.0])
+        p = rng.uniform(-0.7, 0.7, 3)
+        p[axis] = side * (1 + gap)
+        along = np.zeros(3)
+        along[other] = 1.0
+        return p - rng.uniform(2, 6) * along, along
+    if kind in ("cylinder", "cone", "taperedCylinder"):
         phi = rng.uniform(0, 2 * math.pi)
         z = rng.uniform(0.3, 0.7)
-        radius = 1.0 if kind == "cylinder" else 1.0 - z
+        radius = {"cylinder": 1.0, "cone": 1.0 - z, "taperedCylinder": 1.0 + (TAPER - 1.0) * z}[kind]
         n = np.array([math.cos(phi), math.sin(phi), 0.0])
         along = np.array([-math.sin(phi), math.cos(phi), 0.0])  # horizontal: tangent to the wall's circle
         p = (radius + gap) * n + np.array([0.0, 0.0, z])
@@ -165,7 +188,7 @@ def tangent_ray(kind, gap, rng):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("kind", ["sphere", "cylinder", "cone", "torus"])
+@pytest.mark.parametrize("kind", ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus"])
 @pytest.mark.parametrize("band", BANDS)
 def test_near_tangent_rays_against_the_oracle(kind, band, backend):
     rng = np.random.default_rng(int(band ** -0.25) * 7 + len(kind))

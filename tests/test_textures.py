@@ -91,10 +91,10 @@ def test_texture_moves_with_its_object(backend):
 
 
 def test_image_lookup_seam_and_orientation():
-    image = np.zeros((4, 8, 3))
-    image[0] = (0, 0, 1)  # bottom row (row 0 is the bottom here)
-    image[-1] = (1, 0, 0)
-    image[:, 0, 1] = 1.0  # first column green
+    image = np.zeros((4, 8, 3), dtype=np.uint8)  # 8-bit, as load_image keeps pictures
+    image[0] = (0, 0, 255)  # bottom row (row 0 is the bottom here)
+    image[-1] = (255, 0, 0)
+    image[:, 0, 1] = 255  # first column green
     u = np.array([1e-9, 1 - 1e-9])
     both = sample_bilinear(image, u, np.array([0.5, 0.5]), wrap_u=True, wrap_v=False)
     assert both[0] == pytest.approx(both[1], abs=1e-6)  # no seam at u = 0 / 1
@@ -160,3 +160,17 @@ def test_textured_scene_is_live_only_when_used():
     assert "textures" not in plain.effects and plain.textures is None
     textured = compile_scene(scene_of(shape("sphere", texture=-1), lights=[Light((1, 2, 3), (1, 1, 1))]))
     assert "textures" in textured.effects
+
+
+def test_fallback_decoder_floats_become_the_files_bytes(monkeypatch, tmp_path):
+    # Where Pillow cannot be imported (Blender's Python) a fallback decoder gives floats in [0, 1]; they are
+    # kept as the same 8 bits Pillow would have given.
+    import sys
+
+    from tracer.textures import images
+
+    texels = np.random.default_rng(5).integers(0, 256, (7, 9, 3), dtype=np.uint8)
+    monkeypatch.setitem(sys.modules, "PIL", None)  # import PIL now fails
+    monkeypatch.setattr(images, "_fallback_decoder", lambda path: (texels / 255.0).astype(np.float32))
+    loaded = images.load_image(tmp_path / "any.png")
+    assert loaded.dtype == np.uint8 and np.array_equal(loaded, texels)

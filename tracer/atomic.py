@@ -31,10 +31,19 @@ def replacing(target: PathLike, suffix: str = ".tmp") -> Iterator[Path]:
             break
         except FileExistsError:  # another writer's temporary: draw another name
             continue
+        except OSError as err:
+            raise _naming_target(err, target) from None
     try:
         yield temp
         os.replace(temp, target)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(temp)
+        if isinstance(err, OSError) and err.filename in (None, str(temp), temp):
+            raise _naming_target(err, target) from None
         raise
+
+
+def _naming_target(err: OSError, target: Path) -> OSError:
+    """The same error about the user's file: the temporary file's name means nothing to them."""
+    return type(err)(err.errno, err.strerror or str(err), str(target))

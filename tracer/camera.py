@@ -33,11 +33,11 @@ class CameraFrame:
     @classmethod
     def from_camera(cls, camera: Camera, aspect: float) -> "CameraFrame":
         eye = np.asarray(camera.eye, dtype=float)
-        n = eye - np.asarray(camera.look, dtype=float)
-        if not np.linalg.norm(n) > 0:
+        n = _unit(eye - np.asarray(camera.look, dtype=float))
+        if n is None:
             raise SceneError("camera eye and look-at point coincide")
-        n /= np.linalg.norm(n)
-        u = np.cross(np.asarray(camera.up, dtype=float), n)
+        up = _unit(np.asarray(camera.up, dtype=float))
+        u = np.cross(up if up is not None else np.zeros(3), n)
         if not np.linalg.norm(u) > 1e-12:
             raise SceneError("camera up vector is parallel to the viewing direction")
         u /= np.linalg.norm(u)
@@ -63,6 +63,17 @@ class CameraFrame:
         su = self.half_width * (2.0 * (np.asarray(cols, float) + dx) / n_cols - 1.0)
         sv = self.half_height * (2.0 * (np.asarray(rows, float) + dy) / n_rows - 1.0)
         return -self.n[None, :] + su[:, None] * self.u[None, :] + sv[:, None] * self.v[None, :]
+
+
+def _unit(vector: np.ndarray):
+    """``vector`` scaled to length 1, or None if it is 0 or not finite.  Divided by its largest entry first,
+    so that a vector of 1e308s (a camera far away) has a direction and one of 1e-300s does too."""
+    with np.errstate(all="ignore"):
+        largest = np.max(np.abs(vector))
+        if not (np.isfinite(largest) and largest > 0):
+            return None
+        scaled = vector / largest
+        return scaled / np.linalg.norm(scaled)
 
 
 def focal_length(view_angle: float, film_height: float) -> float:
@@ -93,12 +104,18 @@ def framing_camera(compiled, aspect: float = 4 / 3) -> Camera:
         center, radius = np.zeros(3), 1.0
     else:
         lo, hi = bounds
-        center, radius = 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-9)
+        half = 0.5 * hi - 0.5 * lo  # halved first: hi - lo of a scene reaching +-1e308 would overflow
+        center, radius = 0.5 * lo + 0.5 * hi, max(float(np.linalg.norm(half)), 1e-9)
     half_v = math.radians(DEFAULT_VIEW_ANGLE) / 2.0
     half_h = math.atan(math.tan(half_v) * aspect)
     distance = 1.05 * radius / math.sin(min(half_v, half_h))
     direction = np.asarray(DEFAULT_VIEW_DIRECTION) / np.linalg.norm(DEFAULT_VIEW_DIRECTION)
-    eye = center + distance * direction
+    with np.errstate(over="ignore", invalid="ignore"):
+        eye = center + distance * direction
+    if not (np.all(np.isfinite(eye)) and np.all(np.isfinite(center))):
+        source = getattr(compiled.scene, "source", None)
+        raise SceneError(f"{source or 'scene'}: the scene is too large (about {radius:.3g} across) for an "
+                          f"automatic camera: give one with 'camera'")
     return Camera(tuple(eye), tuple(center), (0.0, 1.0, 0.0), DEFAULT_VIEW_ANGLE)
 
 

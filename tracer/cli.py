@@ -8,14 +8,18 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
+import threading
 from dataclasses import replace
 from typing import Optional, Sequence
 
 import numpy as np
 
 from .bulk import one_blas_thread
-from .errors import RenderCancelled, SDLError, TracerError, warnings_as_lines
+from .errors import RenderCancelled, TracerError, warnings_as_lines
+from .model import MAX_RECURSION_DEPTH, traced_depth
+from .reporting import error_message
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -186,10 +190,18 @@ def _render(args) -> int:
     if args.scheduler is not None or args.frames is not None:
         return _render_job(args)
     scene = _load(args)
+    if args.lenient:
+        from .textures import drop_unreadable_textures
+
+        for message in drop_unreadable_textures(scene):
+            print(f"warning: {message}", file=sys.stderr)
     if args.max_depth is not None:
         if args.max_depth < 0:
             raise TracerError(f"--max-depth must be 0 or more, not {args.max_depth}")
-        scene.settings.max_recursion_depth = args.max_depth
+        if args.max_depth > MAX_RECURSION_DEPTH:
+            print(f"warning: --max-depth {args.max_depth} is more than the tracer follows: "
+                  f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
+        scene.settings.max_recursion_depth = traced_depth(args.max_depth)
     savings = _savings(args)
     progress = _Progress(not args.quiet)
     try:
@@ -274,17 +286,18 @@ def _render_job(args) -> int:
 
 def describe(scene) -> dict:
     """What ``info`` prints: objects, lights, camera, settings and live effects."""
-    from .compile import compile_scene
-    from .model import CSG
+    from .compile import compile_scene, fold_tree
+
+    def shape_info(shape):
+        info = {"shape": shape.kind, "position": [round(float(x), 6) for x in shape.matrix[:3, 3]],
+                "groups": list(shape.groups)}
+        if shape.mesh_file:
+            info["file"] = shape.mesh_file
+        return info
 
     def obj_info(obj):
-        if isinstance(obj, CSG):
-            return {"boolean": obj.op, "groups": list(obj.groups), "children": [obj_info(obj.left), obj_info(obj.right)]}
-        info = {"shape": obj.kind, "position": [round(float(x), 6) for x in obj.matrix[:3, 3]],
-                "groups": list(obj.groups)}
-        if obj.mesh_file:
-            info["file"] = obj.mesh_file
-        return info
+        return fold_tree(obj, shape_info, lambda node, left, right: {
+            "boolean": node.op, "groups": list(node.groups), "children": [left, right]})
 
     compiled = compile_scene(scene)
     camera = scene.camera
@@ -301,19 +314,25 @@ def describe(scene) -> dict:
 def _info(args) -> int:
     info = describe(_load(args))
     if args.json:
-        print(json.dumps(info, indent=2))
+        try:
+            print(json.dumps(info, indent=2))
+        except RecursionError:  # json's encoder recurses per level of nesting
+            raise TracerError(f"{args.scene}: booleans nested too deeply to write as JSON "
+                              f"(use info without --json)") from None
         return 0
 
     def lines(obj, indent):
-        pad = "  " * indent
-        group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
-        if "boolean" in obj:
-            yield f"{pad}{obj['boolean']}{group}"
-            for child in obj["children"]:
-                yield from lines(child, indent + 1)
-        else:
-            extra = f" {obj['file']}" if "file" in obj else ""
-            yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
+        todo = [(obj, indent)]  # without recursion: booleans may nest deeper than Python's stack
+        while todo:
+            obj, indent = todo.pop()
+            pad = "  " * indent
+            group = f"  [{'/'.join(obj['groups'])}]" if obj["groups"] else ""
+            if "boolean" in obj:
+                yield f"{pad}{obj['boolean']}{group}"
+                todo += [(child, indent + 1) for child in reversed(obj["children"])]
+            else:
+                extra = f" {obj['file']}" if "file" in obj else ""
+                yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
 
     print(f"objects: {len(info['objects'])}")
     for obj in info["objects"]:
@@ -345,22 +364,27 @@ def _bench(args) -> int:
     return 0
 
 
+def _terminate_like_interrupt() -> None:
+    """SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is removed."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
+    _terminate_like_interrupt()
+    subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
         with np.errstate(all="ignore"), warnings_as_lines(sys.stderr), one_blas_thread():
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (SDLError, TracerError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return EXIT_USAGE
-    except FileNotFoundError as err:
-        print(f"error: {err.filename or err}: no such file", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as err:
-        print(f"error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
+    except (TracerError, OSError, MemoryError) as err:
+        message = error_message(err, subject)
+        if message is None:
+            raise
+        print(f"error: {message}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)

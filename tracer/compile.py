@@ -13,7 +13,7 @@ import weakref
 from dataclasses import astuple, dataclass, field
 from functools import cached_property
 from operator import attrgetter
-from typing import Optional, Union
+from typing import Callable, Optional, Union
 
 import numpy as np
 
@@ -172,23 +172,7 @@ def _batched_bounds(shapes: list[Shape], stack: np.ndarray) -> list[Optional[tup
     return out
 
 
-def _batched_rounding(primitives: list["Primitive"], stack: np.ndarray, inverses: np.ndarray) -> None:
-    """Primitive.rounding (and generic_size where it is a constant) for all the primitives at once (stacked products instead of a few small NumPy
-    calls per shape, which took seconds for 100,000 spheres), stored where the cached property keeps it.
-    The same formula; a stacked product may round differently in the last place, which this bound on
-    rounding does not feel, and both backends read the stored value."""
-    residual = np.abs(inverses @ stack - np.eye(4))
-    magnitude = np.abs(inverses) @ np.abs(stack)
-    relative = np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0).max(axis=(1, 2))
-    base = numerics.gamma(numerics.TOLERANCES.hit_ulps)
-    for prim, r in zip(primitives, relative.tolist()):
-        if prim.tolerances is numerics.TOLERANCES:
-            prim.__dict__["rounding"] = base + r
-        size = _FIXED_GENERIC_SIZE.get(prim.kind)
-        if size is not None:  # (what Primitive.generic_size gives these kinds, without its property's lock)
-            prim.__dict__["generic_size"] = size
-
-
+#: Primitive.generic_size of the kinds where it is a constant (compile_scene stores it for them).
 _FIXED_GENERIC_SIZE = {"sphere": 1.0, "cube": 1.0, "square": 1.0, "plane": 1.0, "torus": 1.0 + TORUS_TUBE_RADIUS}
 
 
@@ -211,6 +195,8 @@ class Primitive:
         self.thin = shape.kind == "square"
         self.bounded = shape.kind != "plane"
         self.tolerances = numerics.TOLERANCES
+        #: numerics.inverse_rounding of the matrix (compile_scene fills it for all shapes at once)
+        self.inverse_error: Optional[float] = None
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
@@ -254,20 +240,24 @@ class Primitive:
         pts = self._generic_points() if self.kind not in ("sphere", "cube", "square", "plane") else None
         return float(np.max(np.abs(pts))) if pts is not None and pts.size else 1.0
 
-    @cached_property
+    @property
     def rounding(self) -> float:
         """Relative rounding of this primitive's generic hit points: the hit computation's gamma plus the
-        error of the inverse matrix itself, its residual inverse @ matrix - I relative to the products'
-        magnitudes |inverse| @ |matrix| (it grows with the matrix's condition number)."""
-        residual = np.abs(self.inverse @ self.matrix - np.eye(4))
-        magnitude = np.abs(self.inverse) @ np.abs(self.matrix)
-        relative = np.max(np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0))
-        return numerics.gamma(self.tolerances.hit_ulps) + float(relative)
+        error of the inverse matrix itself."""
+        if self.inverse_error is None:
+            self.inverse_error = float(numerics.inverse_rounding(self.inverse[None], self.matrix[None])[0])
+        return numerics.gamma(self.tolerances.hit_ulps) + self.inverse_error
+
+    @cached_property
+    def inverse_norms(self) -> tuple[float, float]:
+        """(max row sum of |inverse[:3, :3]|, max |inverse[:3, 3]|): bound the size of a transformed origin,
+        before any cancellation, as ``first * max|o| + second``."""
+        return (float(np.max(np.abs(self.inverse[:3, :3]).sum(axis=1))), float(np.max(np.abs(self.inverse[:3, 3]))))
 
     def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
         """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
-        linear = np.abs(self.inverse[:3, :3])
-        raw_scale = np.max(np.abs(origins) @ linear.T + np.abs(self.inverse[:3, 3]), axis=1)
+        linear, translation = self.inverse_norms
+        raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
         # (plus the shape's own root error, where it has one: the torus)
         return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
                                                         self.generic_size, self.rounding)
@@ -379,18 +369,22 @@ class CSGNode:
         return self.left.center, self.left.radius
 
     def leaves(self):
-        for child in (self.left, self.right):
-            if isinstance(child, CSGNode):
-                yield from child.leaves()
+        """The primitives under this node, left to right (without recursion, as everywhere a tree is walked:
+        booleans read from a file may nest deeper than Python's stack)."""
+        todo = [self.right, self.left]
+        while todo:
+            node = todo.pop()
+            if isinstance(node, CSGNode):
+                todo += (node.right, node.left)
             else:
-                yield child
+                yield node
 
     def may_hit(self, origins, directions):
         return lines_near_sphere(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
-        return combine(self.op, self.left.intersect(origins, directions),
-                       self.right.intersect(origins, directions))
+        return fold_tree(self, lambda prim: prim.intersect(origins, directions),
+                         lambda node, left, right: combine(node.op, left, right))
 
 
     def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
@@ -401,6 +395,26 @@ class CSGNode:
 
 
 Node = Union[Primitive, CSGNode]
+
+
+def fold_tree(root, leaf: Callable, join: Callable):
+    """Evaluate a tree of booleans bottom-up without recursion: ``leaf(primitive)`` for each leaf, left to
+    right, and ``join(node, left_value, right_value)`` for each boolean once its children are done.  Works
+    for compiled trees (CSGNode) and for the model's (tracer.model.CSG) alike."""
+    if not isinstance(root, (CSG, CSGNode)):
+        return leaf(root)
+    values: list = []
+    todo: list = [(root, False)]
+    while todo:
+        node, children_done = todo.pop()
+        if not isinstance(node, (CSG, CSGNode)):
+            values.append(leaf(node))
+        elif children_done:
+            right = values.pop()
+            values.append(join(node, values.pop(), right))
+        else:
+            todo += ((node, True), (node.right, False), (node.left, False))
+    return values[0]
 
 
 @dataclass
@@ -452,15 +466,15 @@ class CompiledScene:
 
 def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict,
                     inverses: Optional[np.ndarray] = None, bounds: Optional[list] = None) -> Node:
-    if isinstance(obj, CSG):
-        return CSGNode(obj.op, _compile_object(obj.left, primitives, material_ids, mesh_cache, inverses, bounds),
-                       _compile_object(obj.right, primitives, material_ids, mesh_cache, inverses, bounds))
-    mat_id = material_ids.setdefault(obj.material, len(material_ids))
-    index = len(primitives)
-    prim = Primitive(obj, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
-                     bounds=None if bounds is None else bounds[index])
-    primitives.append(prim)
-    return prim
+    def leaf(shape: Shape) -> Primitive:
+        mat_id = material_ids.setdefault(shape.material, len(material_ids))
+        index = len(primitives)
+        prim = Primitive(shape, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
+                         bounds=None if bounds is None else bounds[index])
+        primitives.append(prim)
+        return prim
+
+    return fold_tree(obj, leaf, lambda node, left, right: CSGNode(node.op, left, right))
 
 
 def live_effects(scene: Scene) -> frozenset[str]:
@@ -619,8 +633,13 @@ def _compile(scene: Scene, shapes: Optional[list[Shape]] = None, stack: Optional
     # one as before, and the first bad one raises.
     bounds = _batched_bounds(shapes, stack) if inverses is not None else None
     objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
-    if inverses is not None and len(primitives):
-        _batched_rounding(primitives, stack, inverses)
+    if inverses is not None and primitives:
+        errors = numerics.inverse_rounding(inverses, stack)
+        for prim, error in zip(primitives, errors.tolist()):
+            prim.inverse_error = error
+            size = _FIXED_GENERIC_SIZE.get(prim.kind)
+            if size is not None:  # (what generic_size gives these kinds, without its cached property's lock)
+                prim.__dict__["generic_size"] = size
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
     effects = live_effects(scene)

@@ -36,11 +36,19 @@ class SDLError(TracerError):
     def __str__(self) -> str:
         text = f"{self.where}: {self.message}"
         if self.token is not None:
-            text += f" (found {self.token!r}"
+            text += f" (found {_cut(self.token)!r}"
             text += f", expected {self.expected})" if self.expected else ")"
         elif self.expected:
             text += f" (expected {self.expected})"
         return text
+
+
+#: Longest token quoted whole in a message; a longer one shows its start and its length.
+MAX_QUOTED_TOKEN = 40
+
+
+def _cut(token: str) -> str:
+    return token if len(token) <= MAX_QUOTED_TOKEN else f"{token[:MAX_QUOTED_TOKEN]}... ({len(token)} characters)"
 
 
 class RenderCancelled(TracerError):
@@ -58,16 +66,16 @@ class FallbackWarning(TracerWarning):
 @contextlib.contextmanager
 def warnings_as_lines(stream: Optional[TextIO] = None):
     """Inside: every :class:`TracerWarning` is printed as one ``warning: ...`` line (each time it happens);
-    other warnings as Python shows them."""
+    a library's own warning (one our code did not translate) as one ``warning: Category: ...`` line, not as
+    Python's two lines with a source location."""
     with warnings.catch_warnings():
         warnings.simplefilter("always", TracerWarning)
-        shown = warnings.showwarning
 
         def show(message, category, filename, lineno, file=None, line=None):
-            if issubclass(category, TracerWarning):
-                print(f"warning: {message}", file=stream or sys.stderr)
-            else:
-                shown(message, category, filename, lineno, file, line)
+            text = " ".join(str(message).split())
+            if not issubclass(category, TracerWarning):
+                text = f"{category.__name__}: {text}"
+            print(f"warning: {text}", file=stream or sys.stderr)
 
         warnings.showwarning = show
         yield

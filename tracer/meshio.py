@@ -18,6 +18,7 @@ from .atomic import replacing
 from .errors import SDLError, WriteError
 from .model import FaceList, MeshData
 from .sdl.lexer import to_float
+from .userfiles import open_regular
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -29,16 +30,16 @@ def read_3vn(path: PathLike) -> MeshData:
     the word-by-word reader re-read the file, to name the problem and where it is."""
     name = os.fspath(path)
     try:
-        data = Path(path).read_bytes()
+        with open_regular(path, "mesh file") as handle:
+            data = handle.read()
     except OSError as exc:
         raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
     mesh = _read_in_bulk(data, name)
     if mesh is not None:
         return mesh
-    # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number.  Line
-    # ends are counted as a text-mode read counts them (\r\n and a lone \r are one line end each).
-    text = data.decode("utf-8", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
-    return _read_words(text, name)
+    # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number (as
+    # userfiles.read_text decodes: a byte-order mark dropped).
+    return _read_words(data.decode("utf-8-sig", errors="replace"), name)
 
 
 #: Counts beyond this are certainly corrupt, and would exhaust memory before the check.

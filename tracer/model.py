@@ -239,6 +239,17 @@ class Camera:
     view_angle: float = 45.0
 
 
+#: The deepest reflection/refraction recursion traced.  A deeper maxRecursionDepth is read as this one, with
+#: a warning: each level adds at most 1/2^level-ish light in any physical scene, while an unbounded depth lets
+#: one file run a thread out of stack (the C core recurses about 1 KB per level) or for ever.
+MAX_RECURSION_DEPTH = 64
+
+
+def traced_depth(depth: int) -> int:
+    """The recursion depth the tracers follow for a setting of ``depth``: 0 .. MAX_RECURSION_DEPTH."""
+    return max(0, min(int(depth), MAX_RECURSION_DEPTH))
+
+
 @dataclass
 class Settings:
     """Scene-wide settings; SDL's defaults."""

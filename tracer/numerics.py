@@ -42,6 +42,9 @@ class Tolerances:
     torus_residual_ulps: float = 16.0
     #: Newton steps that polish each torus root.
     torus_newton_steps: int = 4
+    #: Torus: complex root pairs further than this (relative) from the real axis are not searched for a
+    #: double root (a shortcut: the quartic is ~ im^2 there, 10^8 times above its rounding bound).
+    torus_pair_shortcut: float = 1e-4
     #: The square's rim, relative: a crossing this close outside still counts, so that edges do not leak.
     square_edge: float = 1e-12
 
@@ -50,12 +53,22 @@ class Tolerances:
 TOLERANCES = Tolerances()
 
 
+def inverse_rounding(inverses: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """The rounding (N,) of computed inverses (N, 4, 4) of ``matrices``, relative: the largest residual of
+    inverse @ matrix - I against the products' magnitudes |inverse| @ |matrix|, elementwise.  It grows
+    with the matrix's condition number (about 1e-8 at 1e8)."""
+    residual = np.abs(np.einsum("nij,njk->nik", inverses, matrices) - np.eye(4))
+    magnitude = np.einsum("nij,njk->nik", np.abs(inverses), np.abs(matrices))
+    relative = np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0)
+    return relative.reshape(len(relative), -1).max(axis=1) if len(relative) else np.zeros(0)
+
+
 def generic_time_error(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray, direction: np.ndarray,
                        normal: np.ndarray, size: float, rounding: float) -> np.ndarray:
     """Bound on the rounding error of hit times (N, K) found in a shape's generic frame.
 
-    ``raw_scale`` (N,) is ``max_i sum_j |inverse_ij| |o_j|`` plus the translation's size: the magnitude of
-    the transformed origin before cancellation; ``origin`` (N, 3) and ``direction`` (N, 3) are the generic
+    ``raw_scale`` (N,) bounds the transformed origin's size before cancellation (``|inverse| max|o|`` plus
+    the translation's size); ``origin`` (N, 3) and ``direction`` (N, 3) are the generic
     ray the shape solved (origin at the line's point nearest the centre), ``normal`` (N, K, 3) the generic
     normals; ``size`` is the generic shape's extent and ``rounding`` the error of its hit points in units of
     the coordinates involved (gamma of the hit ulps plus the inverse matrix's own rounding).
@@ -63,15 +76,18 @@ def generic_time_error(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray,
     A point error E across the line moves a crossing at angle phi to the normal by E / cos(phi) along it;
     near tangency (cos(phi) < sqrt(E)) the move is at most about sqrt(E) on a unit-curvature surface.
     """
-    speed = np.linalg.norm(direction, axis=1)
     reach = np.abs(np.where(np.isfinite(t), t, 0.0)) * np.max(np.abs(direction), axis=1)[:, None]
     scale = raw_scale[:, None] + np.max(np.abs(origin), axis=1)[:, None] + reach + size
-    error = rounding * scale / size
-    n_len = np.linalg.norm(normal, axis=-1)
+    error = rounding / size * scale
+    # (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2, |d|^2 E |n|^2)):
+    # one square root, one division; a zero normal counts as grazing.
+    along = np.einsum("nkj,nj->nk", normal, direction)
+    nn = np.einsum("nkj,nkj->nk", normal, normal)
+    dd = np.einsum("nj,nj->n", direction, direction)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
-        cosine = np.abs(np.einsum("nkj,nj->nk", normal, direction)) / (n_len * speed[:, None])
-        cosine = np.where(np.isfinite(cosine), cosine, 0.0)
-        return size * error / (speed[:, None] * np.maximum(cosine, np.sqrt(error)))
+        crossing, grazing = along * along, dd * error * nn
+        bound = size * error * np.sqrt(nn / np.where(crossing > grazing, crossing, grazing))
+        return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
 
 
 def offset_distance(t: np.ndarray, t_error: np.ndarray, origins: np.ndarray, directions: np.ndarray,

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compile import CompiledScene, CSGNode
+from .compile import CompiledScene, CSGNode, fold_tree
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
 SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
@@ -61,9 +61,7 @@ def dark_materials(compiled: CompiledScene) -> np.ndarray:
 
 
 def _closed(node) -> bool:
-    if isinstance(node, CSGNode):
-        return _closed(node.left) and _closed(node.right)
-    return node.kind in CLOSED_KINDS
+    return fold_tree(node, lambda prim: prim.kind in CLOSED_KINDS, lambda _, left, right: left and right)
 
 
 def _contains(node, point: np.ndarray) -> bool | None:

@@ -89,7 +89,13 @@ class TilePlan:
                  threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0):
         sampling.check(int(samples), sampling_mode, float(threshold))
         self.width, self.height = int(width), int(height)
-        self.passes = block_passes(int(block_size), bool(progressive))
+        # A block larger than the image traces the same single ray as a block of the image's size, and the
+        # passes above that size trace nothing new: clamped, so that memory follows the image, not the request
+        # (a tile is at least one block: a block of 10^9 asked for a 10^9-square tile).
+        block_size = int(block_size)
+        if block_size > max(self.width, self.height):
+            block_size = max(self.width, self.height)
+        self.passes = block_passes(block_size, bool(progressive))
         self.samples, self.sampling_mode = int(samples), sampling_mode
         self.threshold, self.seed = float(threshold), int(seed)
         self.adaptive = sampling_mode == "adaptive" and self.samples > 1

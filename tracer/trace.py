@@ -12,6 +12,7 @@ import numpy as np
 
 from .compile import CompiledScene
 from . import numerics
+from .model import traced_depth
 from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_lights
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
@@ -242,7 +243,7 @@ class Tracer:
             inside_of = np.where(hits.entering[idx], -1, hits.obj[idx])  # the object the ray was inside
             local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of)
         color[idx] = local
-        if level < self.scene.settings.max_recursion_depth and self.effects & {"reflection", "refraction"}:
+        if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
             reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
                                                      hits.entering[idx], hits.obj[idx], weight[idx])
             color[idx] += reflected

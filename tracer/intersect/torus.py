@@ -103,8 +103,10 @@ def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> n
     depth = quartic_at(centre, col)
     curvature = (12.0 * centre + 6.0 * col[0]) * centre + 2.0 * col[1]
     # Only a double root within rounding (|p| at the extremum below the bound): a deep minimum is one
-    # between two real roots, which Newton can wander to from a far complex pair.
-    near_double = ~real & (np.abs(depth) <= residual_bound(centre, mag, ulps)) & (curvature > 0.0)
+    # between two real roots, which Newton can wander to from a far complex pair.  (Pairs far from the real
+    # axis are not searched: Tolerances.torus_pair_shortcut.)
+    near_double = (~real & (np.abs(roots.imag) <= tol.torus_pair_shortcut * (1.0 + np.abs(roots.real)))
+                   & (np.abs(depth) <= residual_bound(centre, mag, ulps)) & (curvature > 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.sqrt(np.maximum(-depth, 0.0) / (0.5 * curvature))
     split = np.where(roots.imag > 0.0, centre - half, centre + half)

@@ -23,6 +23,10 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define TORUS_TUBE 0.2
 /* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
+/* most octaves of turbulence summed (marble); a larger count is read as this one (tracer.textures.noise:MAX_OCTAVES) */
+#define MAX_OCTAVES 32
+/* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
+#define MAX_RECURSION_DEPTH 64
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
 #define TEX_PARAMS 9
 
@@ -35,7 +39,7 @@ typedef struct {
     const double *prim_param;                /* 1: tapered cylinder's small radius */
     const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
-    const double *prim_rounding;             /* 2: relative rounding of generic hit points, generic size (tracer.numerics) */
+    const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
     /* triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local) */
@@ -102,7 +106,7 @@ typedef struct {
     const int64_t *mat_tex_image;            /* per material: index into image_data, -1 for none */
     int64_t n_images;
     const int64_t *image_info;               /* 2 per image: width, height */
-    const double *const *image_data;         /* per image: height x width x 3 floats in [0, 1], row 0 at the bottom */
+    const uint8_t *const *image_data;        /* per image: height x width x 3 bytes (texel value = byte / 255), row 0 at the bottom */
     const int64_t *noise_perm;               /* 512: tracer.textures.noise.PERM */
     const double *noise_gradients;           /* 12 x 3: tracer.textures.noise.GRADIENTS */
     /* tolerances: the compiled scene's, not constants (a measurement varies them) */
@@ -110,6 +114,7 @@ typedef struct {
     double tol_offset_ulps;
     double tol_torus_residual_ulps;
     int64_t tol_torus_newton_steps;
+    double tol_torus_pair_shortcut;
     double tol_square_edge;
 } SceneDesc;
 
@@ -188,8 +193,9 @@ typedef struct {
     X(tol_offset_ulps) \
     X(tol_torus_residual_ulps) \
     X(tol_torus_newton_steps) \
+    X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 74
-#define RT_CONTRACT_DIGEST "6e4dded2a61b2ff4"
+#define RT_SCENE_DESC_FIELD_COUNT 75
+#define RT_CONTRACT_DIGEST "c7bdc332d9384186"
 
 #endif

@@ -89,6 +89,10 @@ CONSTANTS = (
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
     Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
+             "most octaves of turbulence summed (marble); a larger count is read as this one"),
+    Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
+             "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
              "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
 )
@@ -167,7 +171,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_param", "*f64", "1: tapered cylinder's small radius"),
     F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
-    F("prim_rounding", "*f64", "2: relative rounding of generic hit points, generic size (tracer.numerics)"),
+    F("prim_rounding", "*f64", "4: rounding / generic size, generic size, |inverse| and |translation| (numerics)"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64",
       section="triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local)"),
@@ -229,7 +233,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mat_tex_image", "*i64", "per material: index into image_data, -1 for none"),
     F("n_images", "i64"),
     F("image_info", "*i64", "2 per image: width, height"),
-    F("image_data", "**f64", "per image: height x width x 3 floats in [0, 1], row 0 at the bottom"),
+    F("image_data", "**u8", "per image: height x width x 3 bytes (texel value = byte / 255), row 0 at the bottom"),
     F("noise_perm", "*i64", "512: tracer.textures.noise.PERM"),
     F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
     F("tol_hit_ulps", "f64", "CompiledScene.tolerances (tracer.numerics.Tolerances), field for field",
@@ -237,6 +241,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("tol_offset_ulps", "f64"),
     F("tol_torus_residual_ulps", "f64"),
     F("tol_torus_newton_steps", "i64"),
+    F("tol_torus_pair_shortcut", "f64"),
     F("tol_square_edge", "f64"),
 )
 del F

@@ -227,7 +227,8 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
         *inside = plane_inside_at_start(o, d);
         return hits_z_plane(o, d, out, 0, D->tol_square_edge);
     case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS: return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, out);
+    case K_TORUS:
+        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
     case K_POLYHEDRON: {
         const int64_t *aux = D->prim_aux + 2 * p;
         return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
@@ -283,27 +284,28 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
             for (int64_t i = 0; i < n; i++)
                 agree_with_crossing(&out->h[i], dg);
     }
-    const double *rounding = D->prim_rounding + 2 * p;
-    double raw_scale = affine_point_scale(inv, o);
+    ErrorFrame frame;
+    error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
         h->t += shift;
         h->shape = (int32_t)p;
         /* (plus the shape's own root error, where it has one: the torus) */
-        h->err += generic_time_error(h->t, raw_scale, og, dg, h->n, rounding[1], rounding[0]);
+        h->err += time_error(&frame, point_error(&frame, h->t), dg, h->n);
     }
     out->n = n;
     return 1;
 }
 
-/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit). */
+/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit); with `want_error` its bound on
+ * t's rounding too (a shadow feeler needs only the yes or no). */
 static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
-                      double t_max, Hit *out)
+                      double t_max, Hit *out, int want_error)
 {
     const SceneDesc *D = &S->d;
     if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
         return 0;
-    const double *inv = D->prim_inverse + 16 * p;
+    const double *inv = D->prim_inverse + 16 * p, *rounding = D->prim_rounding + 4 * p;
     if (D->prim_kind[p] == K_MESH) {
         double og[3], dg[3];
         affine_point(inv, o, og);
@@ -311,8 +313,11 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, out))
             return 0;
         out->shape = (int32_t)p;
-        const double *rounding = D->prim_rounding + 2 * p;
-        out->err = generic_time_error(out->t, affine_point_scale(inv, o), og, dg, out->n, rounding[1], rounding[0]);
+        if (want_error) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
+            ErrorFrame frame;
+            error_frame(o, og, dg, rounding, &frame);
+            out->err = time_error(&frame, point_error(&frame, out->t), dg, out->n);
+        }
         return 1;
     }
     double og[3], dg[3];
@@ -321,23 +326,23 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     int inside;
     /* (spheres, the common case, without the call) */
     int n = D->prim_kind[p] == K_SPHERE ? hits_sphere(og, dg, buf) : analytic_hits(S, p, og, dg, buf, &inside);
-    double raw_scale = -1.0;
+    ErrorFrame frame;
+    if (n)
+        error_frame(o, og, dg, rounding, &frame);
     for (int i = 0; i < n; i++) {
         double t = buf[i].t + shift;
         if (!(t > t_min && t < t_max))
             continue;
-        /* after t_min with its whole error interval (compiled.first_after) */
-        const double *rounding = D->prim_rounding + 2 * p;
-        if (raw_scale < 0.0)
-            raw_scale = affine_point_scale(inv, o);
+        /* after t_min with its whole error interval (compiled.first_after), compared without square roots */
         if (solid_analytic(D->prim_kind[p]))
             agree_with_crossing(&buf[i], dg);
-        double err = buf[i].err + generic_time_error(t, raw_scale, og, dg, buf[i].n, rounding[1], rounding[0]);
-        if (t - err > t_min) {
+        double error = point_error(&frame, t);
+        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n)) {
             *out = buf[i];
             out->t = t;
-            out->err = err;
             out->shape = (int32_t)p;
+            if (want_error)  /* (plus the shape's own root error, where it has one: the torus) */
+                out->err = buf[i].err + time_error(&frame, error, dg, buf[i].n);
             return 1;
         }
     }
@@ -359,7 +364,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
         return mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack);
     }
     Hit h;
-    return prim_first(S, w, p, o, d, t_min, t_max, &h);
+    return prim_first(S, w, p, o, d, t_min, t_max, &h, 0);
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -386,7 +391,7 @@ static int object_first(const Scene *S, Work *w, int64_t ref, const double *o, c
                         double t_max, Hit *out)
 {
     if (ref >= 0)
-        return prim_first(S, w, ref, o, d, t_min, t_max, out);
+        return prim_first(S, w, ref, o, d, t_min, t_max, out, 1);
     HitList *top = &w->lists[w->n_lists - 1];
     if (!object_hits(S, w, ref, o, d, 0, top))
         return 0;
@@ -1028,6 +1033,13 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
         return NULL;
     }
     S->d = *desc;
+    /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
+     * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
+     * says; tracer.model.traced_depth applies the same bound to the NumPy path. */
+    if (S->d.max_depth > MAX_RECURSION_DEPTH)
+        S->d.max_depth = MAX_RECURSION_DEPTH;
+    if (S->d.max_depth < 0)
+        S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
     /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
     for (int64_t p = 0; p < D->n_prims; p++) {

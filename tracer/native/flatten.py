@@ -16,9 +16,9 @@ from typing import Optional
 
 import numpy as np
 
-from ..compile import CompiledScene, CSGNode, Primitive
+from ..compile import CompiledScene, CSGNode, Primitive, fold_tree
 from ..intersect.mesh import MeshArrays
-from ..model import SHAPE_KINDS
+from ..model import SHAPE_KINDS, traced_depth
 from . import contract
 from .contract import EFFECT_BITS, KIND, KIND_CODES, OP_CODES
 
@@ -41,6 +41,11 @@ class SceneDesc(ctypes.Structure):
     _fields_ = contract.ctypes_fields()
 
 
+#: The C core evaluates a boolean tree recursively, about 100 bytes of a worker's stack per level: deeper trees
+#: (only ever seen in generated or hostile files) are traced by the NumPy path, which walks them iteratively.
+MAX_CSG_DEPTH = 2000
+
+
 def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     """None if the C core traces this scene exactly as the NumPy path does, else why not."""
     unknown = sorted(e for e in compiled.effects if e not in HANDLED_EFFECTS)
@@ -50,11 +55,10 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
         if kind not in KIND_CODES:
             return f"not implemented in C: shape {kind}"
 
+    def check_boolean(node, left: Optional[str], right: Optional[str]) -> Optional[str]:
+        return (None if node.op in OP_CODES else f"unknown boolean {node.op!r}") or left or right
+
     def check(node) -> Optional[str]:
-        if isinstance(node, CSGNode):
-            if node.op not in OP_CODES:
-                return f"unknown boolean {node.op!r}"
-            return check(node.left) or check(node.right)
         if not isinstance(node, Primitive):
             return f"unknown scene node {type(node).__name__}"
         if node.kind not in KIND_CODES:
@@ -69,9 +73,11 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     for obj in compiled.objects:
         if type(obj) is Primitive and obj.kind in plain:  # the common case, without a call
             continue
-        reason = check(obj)
+        reason = fold_tree(obj, check, check_boolean)
         if reason:
             return reason
+        if isinstance(obj, CSGNode) and fold_tree(obj, lambda _: 0, lambda _, l, r: 1 + max(l, r)) > MAX_CSG_DEPTH:
+            return f"booleans nested more than {MAX_CSG_DEPTH} deep"
     if any(p.triangle_mesh is not None for p in compiled.primitives):
         from ..intersect import mesh as mesh_module
         missing = [c for c in MESH_CONSTANTS if not hasattr(mesh_module, c)]
@@ -135,18 +141,23 @@ def _world_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _box(node, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
     """World box (lo, hi) that holds every surface point of the node's solid, or None if unbounded."""
-    if isinstance(node, CSGNode):
-        left, right = _box(node.left, lo, hi, bounded), _box(node.right, lo, hi, bounded)
-        if node.op == "union":
-            return None if left is None or right is None else (np.minimum(left[0], right[0]),
-                                                               np.maximum(left[1], right[1]))
-        if node.op == "intersection":
-            if left is None or right is None:
-                return left if right is None else right
-            return np.maximum(left[0], right[0]), np.minimum(left[1], right[1])
-        return left  # difference: inside the left solid
-    i = node.index
+    return fold_tree(node, lambda prim: _primitive_box(prim, lo, hi, bounded), _boolean_box)
+
+
+def _primitive_box(prim, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
+    i = prim.index
     return (lo[i], hi[i]) if bounded[i] else None
+
+
+def _boolean_box(node, left, right):
+    if node.op == "union":
+        return None if left is None or right is None else (np.minimum(left[0], right[0]),
+                                                           np.maximum(left[1], right[1]))
+    if node.op == "intersection":
+        if left is None or right is None:
+            return left if right is None else right
+        return np.maximum(left[0], right[0]), np.minimum(left[1], right[1])
+    return left  # difference: inside the left solid
 
 
 class FlatScene:
@@ -170,7 +181,8 @@ class FlatScene:
         a["prim_param"] = [float(prims[k].shape.small_radius) if code == KIND["TAPERED"] else 0.0
                            for k, code in enumerate(codes.tolist())]
         a["prim_material"] = [p.material_id for p in prims]
-        a["prim_rounding"] = np.array([(p.rounding, p.generic_size) for p in prims], dtype=np.float64).reshape(-1, 2)
+        a["prim_rounding"] = np.array([(p.rounding / p.generic_size, p.generic_size, *p.inverse_norms) for p in prims],
+                                      dtype=np.float64).reshape(-1, 4)
 
         # Polyhedra planes and meshes (instances share one mesh).
         planes, aux = [], []
@@ -195,14 +207,14 @@ class FlatScene:
         # CSG nodes and top-level objects.
         csg_op, csg_left, csg_right = [], [], []
 
+        def boolean_ref(node, left: int, right: int) -> int:
+            csg_op.append(OP_CODES[node.op])
+            csg_left.append(left)
+            csg_right.append(right)
+            return -len(csg_op)  # node k is ref -k - 1
+
         def ref(node) -> int:
-            if isinstance(node, CSGNode):
-                left, right = ref(node.left), ref(node.right)
-                csg_op.append(OP_CODES[node.op])
-                csg_left.append(left)
-                csg_right.append(right)
-                return -len(csg_op)  # node k is ref -k - 1
-            return node.index
+            return fold_tree(node, lambda prim: prim.index, boolean_ref)
 
         prim_lo, prim_hi, prim_bounded = _world_boxes(prims)
         object_ref = [ref(obj) for obj in compiled.objects]
@@ -243,12 +255,13 @@ class FlatScene:
         scalars = dict(background=tuple(settings.background), global_ambient=tuple(settings.global_ambient),
                        min_reflectivity=float(settings.min_reflectivity),
                        min_transparency=float(settings.min_transparency),
-                       max_depth=int(settings.max_recursion_depth), effects=effects,
+                       max_depth=traced_depth(settings.max_recursion_depth), effects=effects,
                        mesh_constants=self._mesh_constants(meshes))
         tol = compiled.tolerances
         scalars.update(tol_hit_ulps=float(tol.hit_ulps), tol_offset_ulps=float(tol.offset_ulps),
                        tol_torus_residual_ulps=float(tol.torus_residual_ulps),
-                       tol_torus_newton_steps=int(tol.torus_newton_steps), tol_square_edge=float(tol.square_edge))
+                       tol_torus_newton_steps=int(tol.torus_newton_steps),
+                       tol_torus_pair_shortcut=float(tol.torus_pair_shortcut), tol_square_edge=float(tol.square_edge))
         self.desc = SceneDesc()
         for f in contract.SCENE_DESC:
             if not f.is_pointer:
@@ -274,7 +287,7 @@ class FlatScene:
             return 0
         images = getattr(compiled.textures, "images", None) or {}
         numbers = sorted(images)
-        pictures = [np.ascontiguousarray(images[k], dtype=np.float64) for k in numbers]
+        pictures = [np.ascontiguousarray(images[k], dtype=np.uint8) for k in numbers]  # 8-bit, as loaded
         materials = compiled.materials.materials
         texture = np.zeros(len(materials), dtype=np.int32)
         params = np.zeros((len(materials), TEX_PARAMS))

@@ -63,32 +63,54 @@ static inline void normal_to_world(const double *inv, const double *n, double *o
         out[j] = n[0] * inv[j] + n[1] * inv[4 + j] + n[2] * inv[8 + j];
 }
 
-/* max_i sum_j |m_ij| |p_j| + |m_i3|: the size of an affine image of p before any cancellation */
-static inline double affine_point_scale(const double *m, const double *p)
+/* tracer.numerics.generic_time_error for the hits of one generic ray, its per-ray parts computed once.
+ * `r` is the primitive's prim_rounding: rounding / size, size, |inverse|, |translation|. */
+typedef struct {
+    double base;   /* the transformed origin's size before cancellation + |centred origin| + size */
+    double reach;  /* max |d_generic| */
+    double dd;     /* |d_generic|^2 */
+    double rate;   /* rounding / size */
+    double size;
+} ErrorFrame;
+
+static inline void error_frame(const double *o, const double *og, const double *dg, const double *r, ErrorFrame *f)
 {
-    double best = 0.0;
-    for (int i = 0; i < 3; i++) {
-        double s = fabs(p[0]) * fabs(m[4 * i]) + fabs(p[1]) * fabs(m[4 * i + 1]) + fabs(p[2]) * fabs(m[4 * i + 2]) +
-                   fabs(m[4 * i + 3]);
-        if (s > best)
-            best = s;
-    }
-    return best;
+    f->base = r[2] * max_abs3(o) + r[3] + max_abs3(og) + r[1];
+    f->reach = max_abs3(dg);
+    f->dd = dot3(dg, dg);
+    f->rate = r[0];
+    f->size = r[1];
 }
 
-/* tracer.numerics.generic_time_error for one hit: a bound on the rounding error of its t. */
-static inline double generic_time_error(double t, double raw_scale, const double *og, const double *dg, const double *n,
-                                        double size, double rounding)
+/* The relative point error E of a hit at t. */
+static inline double point_error(const ErrorFrame *f, double t)
 {
-    double speed = sqrt(dot3(dg, dg));
-    double reach = (isfinite(t) ? fabs(t) : 0.0) * max_abs3(dg);
-    double scale = raw_scale + max_abs3(og) + reach + size;
-    double error = rounding * scale / size;
-    double cosine = fabs(dot3(n, dg)) / (sqrt(dot3(n, n)) * speed);
-    if (!isfinite(cosine))
-        cosine = 0.0;
-    double floor = sqrt(error);
-    return size * error / (speed * (cosine > floor ? cosine : floor));
+    return f->rate * (f->base + (isfinite(t) ? fabs(t) : 0.0) * f->reach);
+}
+
+/* The bound on t's error from E and the generic normal: size E / (|d| max(cos phi, sqrt E)), with one square
+ * root and one division: (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2,
+ * |d|^2 E |n|^2)); a zero normal counts as grazing. */
+static inline double time_error(const ErrorFrame *f, double error, const double *dg, const double *n)
+{
+    double along = dot3(n, dg), nn = dot3(n, n);
+    if (!(nn > 0.0))
+        return f->size * sqrt(error / f->dd);
+    double crossing = along * along, grazing = f->dd * error * nn;
+    return f->size * error * sqrt(nn / (crossing > grazing ? crossing : grazing));
+}
+
+/* Is delta > time_error(f, error, dg, n)?  The same test without the square root, for the many candidate
+ * hits whose bound is only compared: delta |d| max(cos, sqrt E) > size E. */
+static inline int exceeds_time_error(const ErrorFrame *f, double delta, double error, const double *dg, const double *n)
+{
+    if (!(delta > 0.0))
+        return 0;
+    double limit = f->size * error;
+    if (delta * delta * f->dd > f->size * limit)
+        return 1;  /* delta |d| sqrt(E) > size E: the usual case, a hit far from where the ray starts */
+    double along = dot3(n, dg);
+    return delta * delta * (along * along) > limit * limit * dot3(n, n);  /* delta |n.d| / |n| > size E */
 }
 
 /* tracer.numerics.offset_distance: how far a secondary ray starts from a hit, along the unit normal. */

@@ -265,7 +265,8 @@ static inline double torus_residual_bound(double s, const double *magnitudes, do
     return ulps * DBL_EPSILON * quartic_at(fabs(s), magnitudes);
 }
 
-static int hits_torus(const double *o, const double *d, int64_t newton_steps, double residual_ulps, Hit *out)
+static int hits_torus(const double *o, const double *d, int64_t newton_steps, double residual_ulps,
+                      double pair_shortcut, Hit *out)
 {
     double speed = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     if (!(speed > 0.0))
@@ -303,6 +304,8 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
         double start;
         if (wi[i] == 0.0) {
             start = wr[i];
+        } else if (fabs(wi[i]) > pair_shortcut * (1.0 + fabs(wr[i]))) {
+            continue;  /* far from the real axis: no near-double root (Tolerances.torus_pair_shortcut) */
         } else {
             double centre = torus_minimum_near(wr[i], c, newton_steps);
             double depth = quartic_at(centre, c);

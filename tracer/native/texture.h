@@ -129,7 +129,8 @@ static void tex_wood(const int64_t *perm, const double *grad, const double *q, c
 static void tex_marble(const int64_t *perm, const double *grad, const double *q, const double *p, double *out)
 {
     double stripes = q[0], strength = q[1];
-    int64_t octaves = np_to_int64(q[2]);  /* int(octaves): truncation (turbulence3 keeps at least 1) */
+    /* int(min(octaves, MAX_OCTAVES)): truncation (turbulence3 keeps at least 1) */
+    int64_t octaves = q[2] >= MAX_OCTAVES ? MAX_OCTAVES : np_to_int64(q[2]);
     double doubled[3] = {p[0] * 2.0, p[1] * 2.0, p[2] * 2.0};
     double wave = sin(stripes * M_PI_VALUE * p[0] + strength * turbulence3(perm, grad, doubled, octaves));
     double vein = pow(1.0 - fabs(wave), 3.0);
@@ -226,8 +227,8 @@ static inline void bilinear_axis(double coord, int64_t size, int wrap, int64_t *
     *i1 = b;
 }
 
-/* image: height x width x 3, row 0 at the bottom. */
-static void sample_bilinear(const double *image, int64_t width, int64_t height, double u, double v, int wrap_u,
+/* image: height x width x 3 bytes, row 0 at the bottom; a texel's value is its byte / 255, as in images.py. */
+static void sample_bilinear(const uint8_t *image, int64_t width, int64_t height, double u, double v, int wrap_u,
                             int wrap_v, double *out)
 {
     if (!isfinite(u))
@@ -238,11 +239,11 @@ static void sample_bilinear(const double *image, int64_t width, int64_t height, 
     double fx, fy;
     bilinear_axis(u, width, wrap_u, &x0, &x1, &fx);
     bilinear_axis(v, height, wrap_v, &y0, &y1, &fy);
-    const double *a = image + 3 * (y1 * width + x0), *b = image + 3 * (y1 * width + x1);
-    const double *c = image + 3 * (y0 * width + x0), *e = image + 3 * (y0 * width + x1);
+    const uint8_t *a = image + 3 * (y1 * width + x0), *b = image + 3 * (y1 * width + x1);
+    const uint8_t *c = image + 3 * (y0 * width + x0), *e = image + 3 * (y0 * width + x1);
     for (int k = 0; k < 3; k++) {
-        double top = a[k] * (1 - fx) + b[k] * fx;
-        double bottom = c[k] * (1 - fx) + e[k] * fx;
+        double top = a[k] / 255.0 * (1 - fx) + b[k] / 255.0 * fx;
+        double bottom = c[k] / 255.0 * (1 - fx) + e[k] / 255.0 * fx;
         out[k] = bottom * (1 - fy) + top * fy;
     }
 }

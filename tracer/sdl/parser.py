@@ -32,8 +32,9 @@ from .. import transforms
 from ..bulk import collector_paused
 from ..errors import SDLError
 from ..meshio import read_3vn
-from ..model import (ANALYTIC_KINDS, CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene,
-                     SceneObject, Shape, SourceLocation)
+from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, Camera, Light, Material,
+                     MeshData, Scene, SceneObject, Shape, SourceLocation)
+from ..userfiles import read_text
 from .lexer import Token, tokenize, to_float
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -107,9 +108,19 @@ class _Frame:
 
 
 class _TokenSource:
+    """The tokens to read next: the file's, with the bodies of the macros being expanded spliced in.
+
+    The names of the open macros are kept alongside the frames (a list, a count per name and the tuple
+    handed out as a shape's groups, rebuilt only when a macro opens or closes), so that asking for them, or
+    whether a name is open, costs the same at any nesting depth: a chain of 20,000 macros each using the
+    next reads in linear time."""
+
     def __init__(self, tokens: list[Token]):
         self._frames = [_Frame(tokens, None)]
         self._spliced = 0
+        self._names: list[str] = []
+        self._open: dict[str, int] = {}
+        self._groups: Optional[tuple[str, ...]] = ()
 
     def _settle(self) -> None:
         # A finished macro frame is dropped only when the *next* token is wanted, so that right after reading
@@ -117,7 +128,10 @@ class _TokenSource:
         # being expanded: the shape is in its group, and ``use`` sees the whole chain.
         frames = self._frames
         while len(frames) > 1 and frames[-1].done:
-            frames.pop()
+            name = frames.pop().macro
+            self._names.pop()
+            self._open[name] -= 1
+            self._groups = None
 
     def peek(self) -> Optional[Token]:
         # The common case first: the top frame has tokens left, so there is nothing to settle (a scene of
@@ -149,17 +163,30 @@ class _TokenSource:
 
     def macros(self) -> tuple[str, ...]:
         """Names of the macros being expanded, outermost first."""
-        if len(self._frames) == 1:  # no macro open: the common case, asked once per statement
-            return ()
-        return tuple(f.macro for f in self._frames[1:] if f.macro is not None)
+        if self._groups is None:
+            self._groups = tuple(self._names)
+        return self._groups
 
-    def splice(self, name: str, body: list[Token]) -> bool:
-        """Read ``body`` next; False if that would pass the expansion budget."""
+    def is_open(self, name: str) -> bool:
+        """Whether macro ``name`` is being expanded (then using it again would never end)."""
+        return self._open.get(name, 0) > 0
+
+    def chain_from(self, name: str) -> tuple[str, ...]:
+        """The open macros from the outermost ``name`` inwards."""
+        return tuple(self._names[self._names.index(name):])
+
+    @property
+    def spliced(self) -> int:
+        """Tokens spliced in so far."""
+        return self._spliced
+
+    def splice(self, name: str, body: list[Token]) -> None:
+        """Read ``body`` next (the caller has checked the expansion budget)."""
         self._spliced += len(body)
-        if self._spliced > MAX_SPLICED_TOKENS:
-            return False
         self._frames.append(_Frame(body, name))
-        return True
+        self._names.append(name)
+        self._open[name] = self._open.get(name, 0) + 1
+        self._groups = None
 
 
 @dataclass
@@ -189,6 +216,7 @@ class _Reader:
         self.material = Material()
         self.stack: list[np.ndarray] = [np.eye(4)]
         self.macros: dict[str, _Macro] = {}
+        self.macro_sizes: dict[str, int] = {}  # tokens a use of each macro splices (see _expanded_size)
         self.pending: list[_PendingBoolean] = []
         self.mesh_cache: dict[str, MeshData] = {}
         self.reported: set[str] = set()
@@ -233,8 +261,12 @@ class _Reader:
         """Strict: raise.  Lenient: keep the message and let the caller carry on."""
         if self.strict:
             raise error
+        self._note(error)
+
+    def _note(self, error: SDLError) -> None:
+        """Something read, but not as written (a value beyond a limit): a warning, strict or not.  The same
+        message met again (a typo inside a macro used ten times) is still one problem."""
         message = str(error)
-        # The same mistake met again (a typo inside a macro used ten times) is still one problem.
         if message not in self.reported:
             self.reported.add(message)
             self.scene.warnings.append(message)
@@ -344,6 +376,10 @@ class _Reader:
         value, token = self._number_token(keyword)
         if not value.is_integer() or value < 0:
             return self._report(self._error(token, "maxRecursionDepth must be a whole number >= 0"))
+        if value > MAX_RECURSION_DEPTH:  # read, in strict mode too: a deep setting is no mistake
+            self._note(self._error(token, f"maxRecursionDepth is more than the tracer follows: "
+                                          f"{MAX_RECURSION_DEPTH} used"))
+            value = MAX_RECURSION_DEPTH
         self.scene.settings.max_recursion_depth = int(value)
 
     def _make_pixmap(self, keyword: Token, groups) -> None:
@@ -553,6 +589,7 @@ class _Reader:
     def _define(self, name: Token, body: list[Token]) -> None:
         earlier = self.macros.get(name.text)
         self.macros[name.text] = _Macro(body, name)  # lenient mode: the later definition wins
+        self.macro_sizes.clear()  # sizes of macros that use this name may change
         if earlier is not None:
             self._report(self._error(name, f"macro '{name.text}' is already defined "
                                            f"(line {earlier.where.line})"))
@@ -564,12 +601,71 @@ class _Reader:
             close = difflib.get_close_matches(name.text, sorted(self.macros), n=1, cutoff=0.7)
             hint = f", did you mean '{close[0]}'?" if close else ""
             raise self._error(name, f"undefined macro{hint}", expected="a name given by an earlier def")
-        active = self.source.macros()
-        if name.text in active:
-            chain = active[active.index(name.text):] + (name.text,)
-            raise self._error(name, f"macro '{name.text}' uses itself: {' -> '.join(chain)}")
-        if not self.source.splice(name.text, macro.body):
-            raise self._error(name, f"macros expand to more than {MAX_SPLICED_TOKENS} tokens")
+        if self.source.is_open(name.text):
+            chain = self.source.chain_from(name.text) + (name.text,)
+            raise self._error(name, f"macro '{name.text}' uses itself: {_chain(chain)}")
+        size = self._expanded_size(name.text)
+        if self.source.spliced + size > MAX_SPLICED_TOKENS:
+            chain = self.source.macros() + self._growth(name.text)
+            raise self._error(name, f"'use {_cut_name(name.text)}' would splice {size:,} tokens "
+                                    f"({_chain(chain)}), more than the {MAX_SPLICED_TOKENS:,} that macros "
+                                    f"may expand to in one file", show_token=False)
+        self.source.splice(name.text, macro.body)
+
+    def _growth(self, name: str) -> tuple[str, ...]:
+        """``name`` and, from it down, the macro each one uses that expands to the most: where a budget went."""
+        chain, seen = [name], {name}
+        while (macro := self.macros.get(chain[-1])) is not None:
+            used = [t.text for prev, t in zip(macro.body, macro.body[1:]) if prev.text == "use"]
+            used = [u for u in used if u not in seen and u in self.macros]
+            if not used:
+                break
+            chain.append(max(used, key=self._expanded_size))
+            seen.add(chain[-1])
+        return tuple(chain)
+
+    def _expanded_size(self, name: str) -> int:
+        """How many tokens ``use name`` splices in all, its macros' macros included: computed before
+        anything is expanded, from the bodies (memoised per definition; without recursion, so a chain of any
+        length is fine).  A macro that uses itself counts once here; expanding it is an error anyway."""
+        sizes = self.macro_sizes
+        if name in sizes:
+            return sizes[name]
+        stack, visiting = [name], set()
+        while stack:
+            current = stack[-1]
+            if current in sizes:
+                stack.pop()
+                continue
+            macro = self.macros.get(current)
+            if macro is None:
+                sizes[current] = 0
+                stack.pop()
+                continue
+            used = [t.text for prev, t in zip(macro.body, macro.body[1:]) if prev.text == "use"]
+            pending = [u for u in used if u not in sizes and u not in visiting and u in self.macros]
+            if current not in visiting and pending:
+                visiting.add(current)
+                stack.extend(pending)
+                continue
+            visiting.discard(current)
+            # A self-use still unknown counts as nothing; the size saturates far above any budget.
+            total = len(macro.body) + sum(sizes.get(u, 0) for u in used)
+            sizes[current] = min(total, 1 << 62)
+            stack.pop()
+        return sizes[name]
+
+
+def _cut_name(name: str) -> str:
+    return name if len(name) <= 40 else name[:40] + "..."
+
+
+def _chain(names: tuple[str, ...], shown: int = 6) -> str:
+    """A chain of macro names for a message; a long one shows its two ends."""
+    names = tuple(_cut_name(n) for n in names)
+    if len(names) > shown:
+        names = names[:shown // 2] + (f"... {len(names) - shown} more ...",) + names[-(shown // 2):]
+    return " -> ".join(names)
 
 
 def _clearly_invertible(matrix: np.ndarray) -> bool:
@@ -636,7 +732,7 @@ def load(path: PathLike, strict: bool = True) -> Scene:
     path = Path(path)
     try:
         # utf-8-sig drops a byte-order mark; a stray byte in a comment must not stop the read.
-        text = path.read_text(encoding="utf-8-sig", errors="replace")
+        text = read_text(path, "scene file")
     except OSError as exc:
         raise SDLError(f"cannot read scene file: {exc.strerror or exc}", file=str(path)) from exc
     scene = parse_sdl(text, base_dir=path.parent, file=str(path), strict=strict)

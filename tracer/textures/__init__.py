@@ -20,20 +20,65 @@ def image_repeats(parameters) -> tuple[float, float]:
     return repeat_u, repeat_v
 
 
+def drop_unreadable_textures(scene) -> list[str]:
+    """For lenient reading: every texture that cannot be used (a picture that cannot be read, a missing
+    makePixmap, an unknown solid texture) is taken off the shapes that use it, which are then drawn with their
+    material's own colours.  Returns one message per problem, naming the file."""
+    from dataclasses import replace
+
+    shapes = scene.shapes()
+    problems: dict[int, str] = {}
+    for number in sorted({s.material.texture for s in shapes}):
+        problem = _texture_problem(scene, shapes, number)
+        if problem is None and number > 0:
+            try:
+                load_image(scene.pixmaps[number])
+            except TracerError as err:
+                problem = str(err)
+        if problem:
+            problems[number] = problem
+    for shape in shapes:
+        if shape.material.texture in problems:
+            shape.material = replace(shape.material, texture=0)
+    return [f"{message}: drawn without that texture" for message in dict.fromkeys(problems.values())]
+
+
+def _where_used(scene, shapes, number: int) -> str:
+    """Where texture ``number`` is first used (the shape's file:line:column), for messages."""
+    first = next((s for s in shapes if s.material.texture == number), None)
+    if first is not None and first.source is not None:
+        return str(first.source)
+    return str(scene.source or "scene")
+
+
+def _texture_problem(scene, shapes, number: int) -> str | None:
+    """Why texture ``number`` cannot be used (before any image is read), or None."""
+    if number > 0 and number not in scene.pixmaps:
+        return f"{_where_used(scene, shapes, number)}: texture {number} is used but the scene has no " \
+               f"'makePixmap {number} file'"
+    if number < 0 and number not in SOLID_TEXTURES:
+        return f"{_where_used(scene, shapes, number)}: texture {number} is not a known solid texture " \
+               f"(use -1, -2 or -3)"
+    return None
+
+
 class TextureSet:
     """The textures a compiled scene uses, with its images loaded once."""
 
     def __init__(self, scene, primitives):
         self.primitives = primitives
         self.images: dict[int, np.ndarray] = {}
-        for number in sorted({p.shape.material.texture for p in primitives}):
+        loaded: dict[str, np.ndarray] = {}  # one picture per file, however many numbers name it
+        shapes = [p.shape for p in primitives]
+        for number in sorted({s.material.texture for s in shapes}):
+            problem = _texture_problem(scene, shapes, number)
+            if problem:
+                raise TracerError(problem)
             if number > 0:
-                path = scene.pixmaps.get(number)
-                if path is None:
-                    raise TracerError(f"texture {number} is used but the scene has no 'makePixmap {number} file'")
-                self.images[number] = load_image(path)
-            elif number < 0 and number not in SOLID_TEXTURES:
-                raise TracerError(f"texture {number} is not a known solid texture (use -1, -2 or -3)")
+                path = scene.pixmaps[number]
+                if path not in loaded:
+                    loaded[path] = load_image(path)
+                self.images[number] = loaded[path]
 
     def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:
         """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` (1 where untextured)."""

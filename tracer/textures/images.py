@@ -3,18 +3,29 @@
 Texel centres sit at ((i + 1/2) / width, (j + 1/2) / height); v = 0 is the bottom row of the picture.  Along a
 wrapping direction the last texel blends into the first, so a sphere or cylinder shows no seam at u = 0 / 1;
 along a clamped direction lookups stop at the edge texels, so the poles of a sphere stay finite.
+
+Pictures are kept as 8-bit RGB, as the files hold them: a texel's value is its byte / 255, computed only for
+the texels a lookup reads (the C core does the same), so a picture costs 3 bytes per texel and no float
+copy of it is ever made.  The size a file declares is checked before anything is decoded.
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
 
-from ..errors import TracerError
+from ..errors import TracerError, TracerWarning
+from ..userfiles import open_regular, shown_name
 
-#: Largest picture accepted, in pixels (a 16k x 16k RGB float image is 3 GiB).
-MAX_TEXELS = 64 * 1024 * 1024
+#: Largest picture accepted, in pixels: 8192 x 8192 (192 MiB as 8-bit RGB).  Below Pillow's own
+#: decompression-bomb threshold, so that check never speaks first.
+MAX_TEXELS = 8192 * 8192
+
+
+class ImageWarning(TracerWarning):
+    """Something odd in a picture that did not stop reading it; the message names the file."""
 
 
 #: ``decode(path) -> (height, width, 3) floats in [0, 1], row 0 at the bottom`` (a TracerError for an unreadable
@@ -30,29 +41,67 @@ def set_fallback_decoder(decode: Optional[Callable[[Path], np.ndarray]]) -> None
 
 
 def load_image(path: str | Path) -> np.ndarray:
-    """(height, width, 3) float64 in [0, 1], row 0 at the *bottom*."""
+    """(height, width, 3) uint8, row 0 at the *bottom*.  TracerError naming the file for anything that
+    cannot be read; what the decoder warns about becomes an :class:`ImageWarning` naming the file."""
     path = Path(path)
+    name = shown_name(str(path))
     try:
-        from PIL import Image, UnidentifiedImageError
+        from PIL import Image
     except ImportError:
         if _fallback_decoder is None:
-            raise TracerError(f"{path}: reading texture images needs Pillow (pip install Pillow)") from None
-        return np.asarray(_fallback_decoder(path), dtype=np.float64)
+            raise TracerError(f"{name}: reading texture images needs Pillow (pip install Pillow)") from None
+        return _from_fallback(name, _fallback_decoder(path))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            with open_regular(path, "texture image") as handle, Image.open(handle) as picture:
+                width, height = picture.size  # from the header: nothing decoded yet
+                _check_size(name, width, height)
+                rgb = picture.convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM)
+                texels = np.asarray(rgb, dtype=np.uint8)
+        except FileNotFoundError:
+            raise TracerError(f"{name}: texture image not found") from None
+        except Image.DecompressionBombError:
+            raise TracerError(f"{name}: image too large for a texture (more than {MAX_TEXELS} pixels)") from None
+        except TracerError:
+            raise
+        except OSError as err:
+            raise TracerError(f"{name}: cannot read texture image ({err.strerror or err})") from None
+        # A hostile file can make a decoder fail in many ways besides OSError (ValueError from a PPM header,
+        # SyntaxError from some plugins, struct.error, EOFError, IndexError...): each is this file's fault.
+        except Exception as err:  # noqa: BLE001
+            raise TracerError(f"{name}: cannot read texture image ({type(err).__name__}: {err})") from None
+    for record in caught:
+        if issubclass(record.category, Image.DecompressionBombWarning):
+            continue  # the size check above has already refused such a picture
+        warnings.warn(ImageWarning(f"{name}: {record.message}"), stacklevel=2)
+    return texels
 
-    try:
-        with Image.open(path) as picture:
-            if picture.width * picture.height > MAX_TEXELS:
-                raise TracerError(f"{path}: image of {picture.width}x{picture.height} pixels is too large for a texture")
-            rgb = np.asarray(picture.convert("RGB"), dtype=np.float64) / 255.0
-    except FileNotFoundError:
-        raise TracerError(f"{path}: texture image not found") from None
-    except (UnidentifiedImageError, OSError) as err:
-        raise TracerError(f"{path}: cannot read texture image ({err})") from None
-    return rgb[::-1].copy()
+
+def _from_fallback(name: str, rgb) -> np.ndarray:
+    """The fallback decoder's floats in [0, 1] as 8-bit texels (an 8-bit file's bytes come back exactly)."""
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise TracerError(f"{name}: cannot read texture image (decoded to shape {rgb.shape})")
+    _check_size(name, rgb.shape[1], rgb.shape[0])
+    texels = np.empty(rgb.shape, dtype=np.uint8)
+    for top in range(0, rgb.shape[0], 256):  # a band at a time: no float copy of the whole picture
+        band = np.nan_to_num(rgb[top:top + 256], nan=0.0).astype(np.float32)
+        np.clip(band, 0.0, 1.0, out=band)
+        texels[top:top + 256] = np.rint(band * 255.0)
+    return texels
+
+
+def _check_size(name: str, width: int, height: int) -> None:
+    if width < 1 or height < 1:
+        raise TracerError(f"{name}: image of {width}x{height} pixels has no pixels")
+    if width * height > MAX_TEXELS:
+        raise TracerError(f"{name}: image of {width}x{height} pixels is too large for a texture "
+                          f"(at most {MAX_TEXELS} pixels)")
 
 
 def sample_bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray, wrap_u: bool, wrap_v: bool) -> np.ndarray:
-    """Colours (N, 3) at texture coordinates u, v."""
+    """Colours (N, 3) at texture coordinates u, v of an 8-bit picture from :func:`load_image`."""
     height, width = image.shape[:2]
 
     def axis(coord, size, wrap):
@@ -67,10 +116,13 @@ def sample_bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray, wrap_u: boo
             i0, i1 = np.clip(i0, 0, size - 1), np.clip(i1, 0, size - 1)
         return i0, i1, frac
 
+    def texels(rows, cols):
+        return image[rows, cols] / 255.0
+
     u = np.where(np.isfinite(u), u, 0.0)
     v = np.where(np.isfinite(v), v, 0.0)
     x0, x1, fx = axis(u, width, wrap_u)
     y0, y1, fy = axis(v, height, wrap_v)
-    top = image[y1, x0] * (1 - fx)[:, None] + image[y1, x1] * fx[:, None]
-    bottom = image[y0, x0] * (1 - fx)[:, None] + image[y0, x1] * fx[:, None]
+    top = texels(y1, x0) * (1 - fx)[:, None] + texels(y1, x1) * fx[:, None]
+    bottom = texels(y0, x0) * (1 - fx)[:, None] + texels(y0, x1) * fx[:, None]
     return bottom * (1 - fy)[:, None] + top * fy[:, None]

@@ -53,12 +53,18 @@ def noise(points: np.ndarray) -> np.ndarray:
     return result
 
 
-def turbulence(points: np.ndarray, octaves: int = 5) -> np.ndarray:
-    """Sum of |noise| over octaves of doubling frequency and halving amplitude (>= 0)."""
+#: Octaves beyond this add less than 2^-32 of the first one's amplitude (far below what an 8-bit image shows),
+#: so a larger count is read as this one: a marble with 10^308 octaves would otherwise never finish.
+MAX_OCTAVES = 32
+
+
+def turbulence(points: np.ndarray, octaves: float = 5) -> np.ndarray:
+    """Sum of |noise| over octaves of doubling frequency and halving amplitude (>= 0); ``octaves`` is
+    truncated to a whole number in 1..MAX_OCTAVES."""
     p = np.asarray(points, dtype=np.float64)
     total = np.zeros(p.shape[:-1])
     scale = 1.0
-    for _ in range(max(1, int(octaves))):
+    for _ in range(max(1, int(min(octaves, MAX_OCTAVES)))):
         total += np.abs(noise(p * scale)) / scale
         scale *= 2.0
     return total

@@ -46,7 +46,7 @@ def wood(points: np.ndarray, parameters: tuple = ()) -> np.ndarray:
 def marble(points: np.ndarray, parameters: tuple = ()) -> np.ndarray:
     """Veins: a sine across x made irregular by turbulence (sum of |noise| over octaves)."""
     stripes, strength, octaves, *colours = with_defaults(parameters, MARBLE_DEFAULTS)
-    wave = np.sin(stripes * np.pi * points[:, 0] + strength * turbulence(points * 2.0, int(octaves)))
+    wave = np.sin(stripes * np.pi * points[:, 0] + strength * turbulence(points * 2.0, octaves))
     vein = (1.0 - np.abs(wave)) ** 3  # thin dark veins where the sine crosses zero
     return _mix(colours[:3], colours[3:6], vein)
 

@@ -16,7 +16,9 @@ import sys
 import tempfile
 
 from ..errors import TracerError
+from ..userfiles import check_regular
 from . import common as C
+from .budget import check_prim_budget
 
 #: The message part of one error in a Tf.ErrorException's text: "Error in 'func' at line N in file F : 'what'".
 _ERROR_MESSAGE = re.compile(r"Error in .*? : '(.*)'\s*$", re.DOTALL)
@@ -33,22 +35,29 @@ def usd_error_message(text: str) -> str:
 
 
 @contextlib.contextmanager
-def _held_stderr():
-    """Catch what C++ code prints on file descriptor 2 meanwhile (and drop it: the caller reports the same
-    problems itself).  Where fd 2 cannot be redirected, nothing is held back."""
+def held_stderr():
+    """Catch what C++ code prints on file descriptor 2 meanwhile.  Yields a list that, after the block, holds
+    USD's diagnostics, one line each (``Warning: in F at line N of FILE -- what`` becomes ``what``), for the
+    caller to report its own way or drop.  Where fd 2 cannot be redirected, nothing is held back."""
+    printed: list[str] = []
     try:
         sys.stderr.flush()
         saved = os.dup(2)
     except (OSError, ValueError):
-        yield
+        yield printed
         return
     try:
         with tempfile.TemporaryFile() as sink:
             os.dup2(sink.fileno(), 2)
             try:
-                yield
+                yield printed
             finally:
                 os.dup2(saved, 2)
+                sink.seek(0)
+                text = sink.read().decode("utf-8", "replace")
+                for chunk in re.split(r"\n(?=\S)", text.strip()):
+                    if chunk.strip():
+                        printed.append(" ".join(chunk.split(" -- ", 1)[-1].split()))
     finally:
         os.close(saved)
 
@@ -57,7 +66,7 @@ def open_stage(path) -> tuple[object, list[str]]:
     """(stage, composition errors as messages) for a USD file; FileNotFoundError if it does not exist, a
     TracerError naming it if USD cannot read it."""
     pxr = C.pxr()
-    name = os.fspath(path)
+    name = check_regular(path, "USD file")
     if not os.path.isfile(name):
         if os.path.exists(name):
             raise TracerError(f"{name}: not a file")
@@ -66,9 +75,10 @@ def open_stage(path) -> tuple[object, list[str]]:
     # registry as it was then; read the file as it is now.
     layer = pxr.Sdf.Layer.Find(name)
     try:
-        with _held_stderr():
+        with held_stderr():
             if layer is not None:
                 layer.Reload()
+            check_prim_budget(name)  # before USD composes what may be millions of prims
             stage = pxr.Usd.Stage.Open(name, pxr.Usd.Stage.LoadAll)
     except pxr.Tf.ErrorException as exc:
         message = usd_error_message(str(exc))

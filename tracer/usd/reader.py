@@ -22,13 +22,13 @@ import numpy as np
 
 from ..camera import focal_length, view_angle
 from ..errors import TracerError
-from ..model import (CSG, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene, SceneObject,
-                     Settings, Shape, SourceLocation)
+from ..model import (CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene,
+                     SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
 from .meshes import sdl_mesh, usd_mesh
-from .opening import open_stage
+from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -58,7 +58,7 @@ class _Reader:
     def __init__(self, stage, file: str, strict: bool = True, time: Optional[float] = None):
         pxr = C.pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = pxr.Gf, pxr.Sdf, pxr.Usd, pxr.UsdGeom
-        self.UsdLux, self.UsdShade = pxr.UsdLux, pxr.UsdShade
+        self.UsdLux, self.UsdShade, self.Tf = pxr.UsdLux, pxr.UsdShade, pxr.Tf
         self.stage = stage
         self.file = file
         self.strict = strict
@@ -99,8 +99,12 @@ class _Reader:
         return default if value is None else tuple(float(x) for x in value)
 
     def world(self, prim) -> np.ndarray:
-        """The prim's local-to-world matrix in SDL's y-up world."""
-        return self.up @ C.from_gf(self.xforms.GetLocalToWorldTransform(prim))
+        """The prim's local-to-world matrix in SDL's y-up world.  An xformOp USD cannot evaluate is a
+        ValueError with USD's own words (the prim is then reported as unreadable)."""
+        try:
+            return self.up @ C.from_gf(self.xforms.GetLocalToWorldTransform(prim))
+        except self.Tf.ErrorException as exc:
+            raise ValueError(f"its transform: {usd_error_message(str(exc))}") from None
 
     # -- the whole stage --------------------------------------------------------------------------------
 
@@ -192,6 +196,10 @@ class _Reader:
         except _BAD_VALUE as exc:
             self.problem(root, f"cannot read the scene settings ({exc})", "SDL's defaults used")
             return
+        if s.max_recursion_depth > MAX_RECURSION_DEPTH or s.max_recursion_depth < 0:
+            self.note(root, f"{C.A_MAX_DEPTH} = {s.max_recursion_depth} is outside 0..{MAX_RECURSION_DEPTH}: "
+                            f"{traced_depth(s.max_recursion_depth)} used")
+            s.max_recursion_depth = traced_depth(s.max_recursion_depth)
         self.scene.settings = s
         if len(numbers) != len(files):
             self.problem(root, "sdl:pixmapNumbers and sdl:pixmapFiles differ in length", "pixmaps left out")
@@ -413,7 +421,11 @@ class _Reader:
         exposure = float(self.get(prim, "inputs:exposure", 0.0))
         if light.GetEnableColorTemperatureAttr().Get(self.time):
             self.note(prim, "colour temperature is not supported: the light's colour used")
-        color = tuple(c * intensity * 2.0 ** exposure for c in base)
+        with np.errstate(over="ignore", invalid="ignore"):
+            color = tuple(float(c * intensity * np.exp2(exposure)) for c in base)
+        if not all(np.isfinite(color)):
+            self.problem(prim, f"light brightness out of range (intensity {intensity:g}, exposure {exposure:g})")
+            return
         exact = self.triple(prim, C.A_LIGHT_COLOR)
         # Our exact colour, unless the light was changed in another tool since (its float colour differs).
         if exact is not None and tuple(float(np.float32(c)) for c in exact) == color:
@@ -474,8 +486,12 @@ class _Reader:
             return
         eye = world[:3, 3]
         angle = view_angle(focal, aperture)
+        # The look-at point a unit in front of the eye, or further for an eye so far out that a unit step
+        # would be lost to rounding (half the eye's distance: no overflow even at 1e308).
+        far = float(np.max(np.abs(eye)))
+        step = 1.0 if far < 2.0 ** 40 else 0.5 * far
         self.scene.camera = Camera(tuple(float(x) for x in eye),
-                                   tuple(float(x) for x in eye - back / np.linalg.norm(back)),
+                                   tuple(float(x) for x in eye - step * back / np.linalg.norm(back)),
                                    tuple(float(x) for x in up_axis / np.linalg.norm(up_axis)), angle)
 
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
@@ -531,6 +547,9 @@ def load_usd(path: PathLike, strict: bool = True, time: Optional[float] = None) 
     each becomes one message in ``scene.warnings`` and the rest is read.  Approximations (a rect light read
     as a point light, a material that is not a UsdPreviewSurface) are warnings either way."""
     stage, composition_errors = open_stage(path)
-    scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
+    with held_stderr() as printed:  # what USD says while we read (a binding without its API, say)
+        scene = _Reader(stage, os.fspath(path), strict, time).read(composition_errors)
+    for message in dict.fromkeys(printed):
+        scene.warnings.append(f"{os.fspath(path)}: USD says: {message}")
     scene.source = Path(path)
     return scene

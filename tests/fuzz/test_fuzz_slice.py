@@ -1,0 +1,80 @@
+"""A seeded slice of the fuzz run (``make fuzz`` runs 10^4 inputs), and the library-aware properties it
+relies on: every way a picture or a scene can be bad ends in a TracerError, never in a library's exception."""
+from __future__ import annotations
+
+import errno
+import io
+import json
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from mutate import KINDS, make_case, mutate_bytes, mutate_png, seeds
+from tracer.errors import TracerError
+from tracer.reporting import error_message, user_path
+from tracer.textures.images import MAX_TEXELS, load_image
+
+FUZZ = Path(__file__).with_name("fuzz.py")
+
+
+def test_a_seeded_slice_of_the_fuzz_run_keeps_the_promise():
+    # 300 inputs of every kind: no traceback, signal, hang, memory over 2 GB or stray line; C = NumPy on the
+    # valid scenes among them that are compared.
+    run = subprocess.run([sys.executable, str(FUZZ), "--count", "300", "--seed", "2026", "--jobs", "2",
+                          "--compare-every", "5"], capture_output=True, text=True, timeout=1200)
+    summary = json.loads(run.stdout)
+    assert summary["inputs"] == 300
+    assert summary["failures"] == {}, summary["failed_inputs"]
+    assert summary["mismatches"] == []
+    assert summary["verdicts"].get("image", 0) > 50 and summary["verdicts"].get("error", 0) > 50
+    assert summary["compared"] > 0
+    assert run.returncode == 0
+
+
+def test_cases_are_reproduced_from_their_seed():
+    first, again = make_case(4711), make_case(4711)
+    assert (first.kind, first.files, first.options, first.command) == \
+        (again.kind, again.files, again.options, again.command)
+    assert {make_case(seed).kind for seed in range(200)} == set(KINDS)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(("png", "bmp", "jpeg", "ppm")), st.integers(0, 2**32))
+def test_a_mutated_picture_loads_as_8_bit_or_is_a_tracer_error(tmp_path_factory, kind, seed):
+    rng = random.Random(seed)
+    original = rng.choice(seeds()[kind])
+    data = mutate_png(rng, original) if kind == "png" else mutate_bytes(rng, original)
+    path = tmp_path_factory.mktemp("img") / f"picture.{kind}"
+    path.write_bytes(data)
+    try:
+        texels = load_image(path)
+    except TracerError as err:
+        assert "picture." in str(err)  # names the file
+        return
+    assert texels.dtype == np.uint8 and texels.ndim == 3 and texels.shape[2] == 3
+    assert texels.shape[0] * texels.shape[1] <= MAX_TEXELS
+
+
+def test_a_picture_is_refused_from_its_header_before_decoding(tmp_path):
+    from PIL import Image
+
+    path = tmp_path / "big.png"
+    Image.new("1", (MAX_TEXELS // 4096 + 1, 4096)).save(path)  # a few KB on disk
+    with pytest.raises(TracerError, match="too large for a texture"):
+        load_image(path)
+
+
+def test_the_translation_names_the_users_file():
+    assert user_path("/out/.frame.png.0a1b2c3d.tmp") == "/out/frame.png"
+    assert user_path("/out/frame.png") == "/out/frame.png"
+    too_big = OSError(errno.EFBIG, "File too large", "/out/.frame.png.0a1b2c3d.tmp")
+    assert error_message(too_big) == "/out/frame.png: file too large (the process' file size limit, ulimit -f, " \
+                                     "was reached)"
+    assert error_message(MemoryError(), "scene.sdl").startswith("scene.sdl: not enough memory")
+    assert error_message(ValueError("a bug")) is None  # not the input's fault: left to show itself
+    assert len(error_message(TracerError("x" * 10**6))) < 700

@@ -1,0 +1,135 @@
+"""Every input that once crashed, hung or misreported, run through the command line as a user would.
+
+Each scene in tests/fuzz/regressions/ (``*.sdl``, ``*.usda``; what they reference lies in ``data/``) starts
+with comment lines saying what it once did (``class:``), optional extra options (``args:``) and, where one
+answer is right, what must happen now (``expect: image``, ``expect: image warning`` — an image and at least
+one ``warning:`` line —, or ``expect: error WORD`` — the error line contains WORD).  Without ``expect`` either
+kept promise is fine: an image, or one ``error:`` line naming the file.
+"""
+from __future__ import annotations
+
+import os
+import shlex
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from harness import REPO, SANITIZED, run_cli
+
+REGRESSIONS = Path(__file__).parent / "regressions"
+CASES = sorted(p for p in REGRESSIONS.iterdir() if p.suffix in (".sdl", ".usda"))
+
+
+def directives(path: Path) -> dict:
+    found = {}
+    for raw in path.read_bytes().splitlines()[:6]:
+        line = raw.decode("utf-8", "replace").lstrip("!# ")
+        key, sep, value = line.partition(":")
+        if sep and key in ("class", "args", "expect"):
+            found[key] = value.strip()
+    return found
+
+
+@pytest.mark.parametrize("case", CASES, ids=[p.name for p in CASES])
+def test_regression_case_keeps_the_promise(case, tmp_path):
+    if SANITIZED and case.suffix == ".usda":
+        pytest.skip("under make sanitize: usd-core's C++ exceptions abort with ASan's runtime preloaded")
+    info = directives(case)
+    assert "class" in info, f"{case.name} does not say which crash it covers"
+    output = tmp_path / "out.png"
+    outcome = run_cli(["render", case, "-o", output, "--width", 32, "--height", 24, "-q",
+                       *shlex.split(info.get("args", ""))], output=output,
+                      names=[case.name, "regressions/", "--"])
+    assert outcome.ok, outcome.describe()
+    expect = info.get("expect", "").split()
+    if expect:
+        assert outcome.verdict == expect[0], outcome.describe()
+    if expect[1:] == ["warning"]:
+        assert "warning:" in outcome.stderr, outcome.describe()
+    elif expect[1:]:
+        assert expect[1] in outcome.stderr, outcome.describe()
+    if outcome.verdict == "error":
+        assert not output.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")], "a temporary file was left behind"
+
+
+SPHERE = "camera 0 0 6  0 0 0  0 1 0  40\nlight 2 3 4  1 1 1\nsphere\n"
+
+
+def _scene(tmp_path, text=SPHERE, name="scene.sdl") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_dev_zero_as_scene_is_refused(tmp_path):
+    outcome = run_cli(["render", "/dev/zero", "-o", tmp_path / "o.png"], names=["/dev/zero"])
+    assert outcome.verdict == "error", outcome.describe()
+    assert "regular file" in outcome.stderr
+
+
+def test_fifo_as_scene_or_pixmap_is_refused(tmp_path):
+    fifo = tmp_path / "pipe.sdl"
+    os.mkfifo(fifo)
+    outcome = run_cli(["render", fifo, "-o", tmp_path / "o.png"], names=["pipe.sdl"])
+    assert outcome.verdict == "error", outcome.describe()
+    picture = tmp_path / "pipe.png"
+    os.mkfifo(picture)
+    scene = _scene(tmp_path, SPHERE + "makePixmap 1 pipe.png\npush texture 1 sphere pop\n")
+    outcome = run_cli(["render", scene, "-o", tmp_path / "o.png", "--width", 8, "--height", 8],
+                      names=["pipe.png"])
+    assert outcome.verdict == "error", outcome.describe()
+
+
+def test_unwritable_output_names_the_users_file_not_the_temporary(tmp_path):
+    folder = tmp_path / "locked"
+    folder.mkdir()
+    folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    # root may write into any folder, but not create files in /sys
+    target = folder / "out.png" if not os.access(folder, os.W_OK) else Path("/sys/out.png")
+    try:
+        outcome = run_cli(["render", _scene(tmp_path), "-o", target, "--width", 8, "--height", 8],
+                          names=[str(target)])
+    finally:
+        folder.chmod(stat.S_IRWXU)
+    assert outcome.verdict == "error", outcome.describe()
+    assert "Permission denied" in outcome.stderr and ".tmp" not in outcome.stderr
+
+
+def test_file_size_limit_gives_a_message_naming_the_output(tmp_path):
+    # Under `ulimit -f` a write past the limit fails with EFBIG (SIGXFSZ is ignored by Python).
+    out = tmp_path / "out.png"
+    limit = subprocess.run(
+        ["bash", "-c", f"ulimit -f 1; exec {shlex.quote(sys.executable)} -m tracer render "
+                       f"{shlex.quote(str(_scene(tmp_path)))} -o {shlex.quote(str(out))} --width 400 --height 300 -q"],
+        capture_output=True, text=True, cwd=REPO, timeout=120,
+        env={**os.environ, "PYTHONPATH": str(REPO), "SDL_TRACER_THREADS": "2"})
+    assert limit.returncode == 2, limit.stderr
+    lines = limit.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "out.png" in lines[0], limit.stderr
+    assert "Traceback" not in limit.stderr and ".tmp" not in limit.stderr
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_sigterm_cleans_up_like_sigint(tmp_path):
+    out = tmp_path / "out.png"
+    scene = _scene(tmp_path, "camera 0 0 6  0 0 0  0 1 0  40\nlight 2 3 4 1 1 1\nmaxRecursionDepth 20\n"
+                             "reflectivity 0.9 minReflectivity 0\n" +
+                   "".join(f"push translate {x * 0.3 - 3:g} 0 0 scale 0.2 0.2 0.2 sphere pop\n" for x in range(20)))
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(out),
+                             "--width", "1600", "--height", "1200", "--backend", "numpy", "-q"],
+                            stderr=subprocess.PIPE, text=True, cwd=REPO,
+                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    time.sleep(4)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM or proc.returncode == 130, err
+    assert "Traceback" not in err
+    assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]

@@ -1,0 +1,72 @@
+"""One material truth: the colour a user sees and edits (the Principled BSDF's Base Color, or the SDL
+Material panel's Diffuse) is the colour traced and exported, whichever of the two was edited, and ticking or
+unticking SDL Material overwrites neither."""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from bpy_extras.object_utils import world_to_camera_view
+
+import tracer
+from addon import props
+from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
+
+
+def _red_sphere():
+    obj = next(o for o in shape_objects() if o["sdl_kind"] == "sphere" and o.active_material.sdl.diffuse[0] > 0.5)
+    return obj, obj.active_material
+
+
+def _base(material):
+    node = next(n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    return node.inputs["Base Color"]
+
+
+def _centre_colour(obj) -> np.ndarray:
+    scene = bpy.context.scene
+    rgba = render_rgba("SDL_RAYTRACER")
+    p = world_to_camera_view(scene, scene.camera, obj.matrix_world.translation)
+    height, width = rgba.shape[:2]
+    return rgba[int((1.0 - p.y) * height), int(p.x * width), :3]
+
+
+def test_an_edited_base_color_is_traced_exported_and_shown(tmp_path):
+    fresh()
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(80, 60)
+    obj, material = _red_sphere()
+    before = _centre_colour(obj)
+    _base(material).default_value = (0.1, 0.2, 0.9, 1.0)  # the user makes the red sphere blue
+    assert np.allclose(props.material_to_sdl(material).diffuse, (0.1, 0.2, 0.9), atol=1e-6)
+    after = _centre_colour(obj)
+    assert before[0] > before[2] and after[2] > after[0]  # red before, blue now
+    bpy.context.view_layer.update()  # (the depsgraph handler shows the edit in the SDL Material panel)
+    assert np.allclose(tuple(material.sdl.diffuse), (0.1, 0.2, 0.9), atol=1e-6)
+    out = tmp_path / "edited.sdl"
+    assert bpy.ops.export_scene.sdl(filepath=str(out)) == {"FINISHED"}
+    diffuse = {s.material.diffuse for s in tracer.load(str(out)).shapes()}
+    assert any(np.allclose(d, (0.1, 0.2, 0.9), atol=1e-6) for d in diffuse)
+
+
+def test_ticking_sdl_material_overwrites_nothing():
+    fresh()
+    import_sdl(SCENES / "lecture.sdl")
+    _, material = _red_sphere()
+    _base(material).default_value = (0.3, 0.6, 0.2, 1.0)
+    material.sdl.use_sdl = False  # (this used to write the SDL colour over the edit)
+    assert np.allclose(tuple(_base(material).default_value)[:3], (0.3, 0.6, 0.2), atol=1e-6)
+    material.sdl.use_sdl = True
+    assert np.allclose(tuple(_base(material).default_value)[:3], (0.3, 0.6, 0.2), atol=1e-6)
+    assert np.allclose(props.material_to_sdl(material).diffuse, (0.3, 0.6, 0.2), atol=1e-6)
+
+
+def test_an_edit_in_the_sdl_panel_reaches_the_principled_bsdf_and_the_render():
+    fresh()
+    import_sdl(SCENES / "lecture.sdl")
+    _, material = _red_sphere()
+    before = props.material_to_sdl(material)
+    material.sdl.diffuse = (0.25, 0.5, 0.75)
+    assert np.allclose(tuple(_base(material).default_value)[:3], (0.25, 0.5, 0.75), atol=1e-6)
+    now = props.material_to_sdl(material)
+    assert np.allclose(now.diffuse, (0.25, 0.5, 0.75), atol=1e-6)
+    assert (now.ambient, now.specular) == (before.ambient, before.specular)  # the exact SDL values kept

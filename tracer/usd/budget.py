@@ -1,0 +1,107 @@
+"""How many prims a USD file composes to, estimated from its layers before USD composes it.
+
+References and payloads copy whole subtrees, so a file of a few kilobytes can ask for ten million prims
+(seven levels of ten references), which USD would spend minutes and gigabytes composing.  Counting is
+cheap: each layer is parsed once (USD's layer registry then serves it to the stage), and the number of
+prims under each prim spec is worked out once, with an explicit stack (a chain of references of any length
+is fine) and a stop as soon as the count passes the budget.  The estimate counts a referenced prim's whole
+subtree and every variant, so it is an upper bound: a file under it composes to no more prims than that.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+from ..errors import TracerError
+from . import common as C
+
+#: Most prims (instances expanded) a stage may compose to: ten times the largest scenes we benchmark, and
+#: still read in well under a minute.
+MAX_USD_PRIMS = 50_000
+
+
+class _Counter:
+    def __init__(self, Sdf, budget: int):
+        self.Sdf = Sdf
+        self.budget = budget
+        self.sizes: dict[tuple[str, str], int] = {}
+        self.layers: dict[str, object] = {}
+
+    def layer(self, identifier: str):
+        if identifier not in self.layers:
+            try:
+                self.layers[identifier] = self.Sdf.Layer.FindOrOpen(identifier)
+            except Exception:  # noqa: BLE001 — a layer USD cannot open composes to nothing; open_stage says why
+                self.layers[identifier] = None
+        return self.layers[identifier]
+
+    def _arcs(self, layer, spec) -> list[tuple[str, str]]:
+        """(layer, prim path) of what a prim spec's references and payloads bring in."""
+        found = []
+        for arcs in (spec.referenceList, spec.payloadList):
+            items = list(arcs.explicitItems) + list(arcs.prependedItems) + list(arcs.appendedItems) + \
+                list(arcs.addedItems)
+            for item in items:
+                if item.assetPath:
+                    target = self.layer(layer.ComputeAbsolutePath(item.assetPath))
+                else:
+                    target = layer
+                if target is None:
+                    continue
+                path = str(item.primPath) if not item.primPath.isEmpty else (
+                    f"/{target.defaultPrim}" if target.defaultPrim else "")
+                if path:
+                    found.append((target.identifier, path))
+        return found
+
+    def _parts(self, key: tuple[str, str]) -> list[tuple[str, str]]:
+        """What the prim at ``key`` is made of: its children, its variants' prims and its arcs' targets."""
+        layer = self.layer(key[0])
+        spec = layer.GetPrimAtPath(key[1]) if layer is not None else None
+        if spec is None:
+            return []
+        parts = [(key[0], str(child.path)) for child in spec.nameChildren]
+        for variant_set in spec.variantSets:
+            for variant in variant_set.variants:
+                parts += [(key[0], str(child.path)) for child in variant.primSpec.nameChildren]
+        return parts + self._arcs(layer, spec)
+
+    def size(self, root: tuple[str, str]) -> int:
+        """Prims the prim at ``root`` composes to (saturating just above the budget)."""
+        sizes, stack, open_keys = self.sizes, [root], set()
+        children: dict[tuple[str, str], list] = {}
+        while stack:
+            key = stack[-1]
+            if key in sizes:
+                stack.pop()
+                continue
+            if key not in open_keys:
+                open_keys.add(key)
+                children[key] = self._parts(key)
+                stack += [k for k in children[key] if k not in sizes and k not in open_keys]
+                continue
+            open_keys.discard(key)
+            # A cycle (which USD reports itself) counts once here.
+            total = 1 + sum(sizes.get(k, 0) for k in children.pop(key))
+            sizes[key] = min(total, self.budget + 1)
+            stack.pop()
+        return sizes[root]
+
+
+def check_prim_budget(path: str, budget: Optional[int] = None) -> None:
+    """TracerError naming the file if its stage would compose to more than ``budget`` prims."""
+    budget = MAX_USD_PRIMS if budget is None else budget
+    counter = _Counter(C.pxr().Sdf, budget)
+    root = counter.layer(path)
+    if root is None:
+        return  # opening the stage reports it
+    layers, total = [root], 0
+    for sub in root.subLayerPaths:
+        sublayer = counter.layer(root.ComputeAbsolutePath(sub))
+        if sublayer is not None:
+            layers.append(sublayer)
+    for layer in layers:
+        for prim in layer.rootPrims:
+            total += counter.size((layer.identifier, str(prim.path)))
+            if total > budget:
+                raise TracerError(f"{path}: the stage composes to more than {budget:,} prims (references, "
+                                  f"payloads and instances expanded): too many to read")

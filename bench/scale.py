@@ -212,15 +212,20 @@ def main(argv=None) -> int:
             row["load_average"] = os.getloadavg()
             results["rows"].append(row)
             print(summary(row), flush=True)
+            save(results, Path(args.out))  # after every row: a long run that stops keeps what it measured
             for path in work.glob("*"):  # the big files of this row are not needed any more
                 path.unlink()
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scale.json").write_text(json.dumps(results, indent=1))
+    save(results, out)
     if plot(results, Path(args.plot)):
         print(f"plot: {args.plot}")
     print(f"results: {out / 'scale.json'}")
     return 0
+
+
+def save(results: dict, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scale.json").write_text(json.dumps(results, indent=1))
 
 
 def summary(row: dict) -> str:

@@ -573,7 +573,7 @@ def _content(scene: Scene) -> tuple:
         try:
             stat = os.stat(path)
             pixmaps.append((number, str(path), stat.st_size, stat.st_mtime_ns))
-        except OSError:
+        except (OSError, ValueError):  # (a missing file, a name with a NUL: compiling reports it)
             pixmaps.append((number, str(path), None, None))
     fields = (tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius"))
     return (tuple(map(id, nodes)), tuple(structure), *fields, tuple(id(s.mesh) for s in shapes),

@@ -19,6 +19,7 @@ from .engine import camera_params, render_size
 from .scene_build import SceneBuilder, flat
 
 _UNWRITABLE = re.compile(r"[\s{}!]")
+_SAFE = re.compile(r"[^A-Za-z0-9._-]")  # what a mesh file's name may hold
 
 
 def _to_target(conversion: np.ndarray) -> np.ndarray:
@@ -52,7 +53,8 @@ def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
                   tuple(float(v) for v in rot @ up), float(angle))
 
 
-def build_export_scene(context, conversion: Optional[np.ndarray] = None, use_selection: bool = False):
+def build_export_scene(context, conversion: Optional[np.ndarray] = None, use_selection: bool = False,
+                       mesh_names: Optional[dict] = None):
     """(tracer Scene in SDL axes, warnings) for the objects of the view layer's (viewport) depsgraph that
     render: objects hidden in the viewport are left out as well as those hidden for rendering."""
     conversion = convert.axis_matrix() if conversion is None else np.asarray(conversion, dtype=np.float64)
@@ -65,7 +67,50 @@ def build_export_scene(context, conversion: Optional[np.ndarray] = None, use_sel
         scene.camera = camera_to_sdl(cam_obj.evaluated_get(depsgraph), context.scene.render, to_target)
         if scene.camera is None:
             builder.warnings.append(f"{cam_obj.name}: only perspective cameras can be written to SDL")
+    if mesh_names is not None:
+        mesh_names.update(builder.mesh_object_names)
     return scene, builder.warnings
+
+
+def _write_named_meshes(scene, names: dict, filepath: str) -> list:
+    """Mesh data without a file goes to ``<scene>_<object name>.3vn`` beside the scene (the importer names
+    the object after it again), rather than the writer's ``<scene>_mesh<k>.3vn``.  Returns the files made
+    (new ones), for removal if the scene file cannot be written."""
+    folder = os.path.dirname(os.path.abspath(filepath))
+    stem = _SAFE.sub("_", os.path.splitext(os.path.basename(filepath))[0]) or "scene"
+    by_mesh: dict[int, str] = {}
+    used: set[str] = set()
+    made = []
+    try:
+        for shape in scene.shapes():
+            if shape.kind != "mesh" or shape.mesh_file is not None or shape.mesh is None or id(shape) not in names:
+                continue
+            if id(shape.mesh) not in by_mesh:
+                base = f"{stem}_{_SAFE.sub('_', names[id(shape)])}"
+                name, k = base + ".3vn", 1
+                while name in used:
+                    k += 1
+                    name = f"{base}.{k}.3vn"
+                used.add(name)
+                target = os.path.join(folder, name)
+                existed = os.path.exists(target)
+                deps.module("meshio").write_3vn(shape.mesh, target)
+                if not existed:
+                    made.append(target)
+                by_mesh[id(shape.mesh)] = name
+            shape.mesh_file = by_mesh[id(shape.mesh)]
+    except BaseException:
+        _remove(made)
+        raise
+    return made
+
+
+def _remove(paths) -> None:
+    for path in paths:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
 
 
 def _fix_mesh_files(scene, folder: str) -> None:
@@ -85,8 +130,14 @@ def _fix_mesh_files(scene, folder: str) -> None:
 def export_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None,
                use_selection: bool = False) -> list[str]:
     """Write the scene; returns warnings.  Nothing is left half-written if it fails."""
-    scene, warnings = build_export_scene(context, conversion, use_selection)
+    names: dict = {}
+    scene, warnings = build_export_scene(context, conversion, use_selection, mesh_names=names)
     _fix_mesh_files(scene, os.path.dirname(os.path.abspath(filepath)))
     scene.source = None
-    deps.module("sdl.writer").save_sdl(scene, filepath)
+    made = _write_named_meshes(scene, names, filepath)
+    try:
+        deps.module("sdl.writer").save_sdl(scene, filepath)
+    except BaseException:
+        _remove(made)
+        raise
     return warnings

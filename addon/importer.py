@@ -6,6 +6,7 @@ read leaves the Blender scene as it was; if creating fails half way, what was cr
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -71,6 +72,7 @@ class Importer:
         self.result = ImportResult()
         self.order = 0
         self.pixmaps: dict[int, str] = {}  # the file's makePixmap images, by number
+        self.file_stem = ""  # the SDL file's name without its extension, as the exporter spells it
         self._scene_before: tuple = ()  # (world, camera, recursion depth) before run(): see undo()
 
     # -- collections ------------------------------------------------------------------------------------
@@ -127,13 +129,24 @@ class Importer:
 
     # -- objects ----------------------------------------------------------------------------------------
 
+    def _object_name(self, shape) -> str:
+        """A shape's kind; a mesh's file name, less the ``<scene>_`` the exporter puts before the name of the
+        object it came from (so exported objects come back with their names)."""
+        source = shape.mesh.origin if shape.kind == "mesh" and shape.mesh is not None else None
+        source = source or (shape.mesh_file if shape.kind == "mesh" else None)
+        if not source:
+            return shape.kind
+        name = os.path.splitext(os.path.basename(source))[0]
+        prefix = self.file_stem + "_"
+        return name[len(prefix):] if name.startswith(prefix) and len(name) > len(prefix) else name
+
     def shape_object(self, shape, material=None):
         """A Blender object for a tracer Shape, in the collection of its def/use groups, with ``material``
         (default: a material made from the shape's own)."""
         world = convert.to_blender(shape.matrix, self.conversion)
         object_part, mesh_part = convert.split_shear(world)
         mesh = self._mesh(shape, mesh_part)
-        obj = self.created.add("objects", bpy.data.objects.new(shape.kind, mesh))
+        obj = self.created.add("objects", bpy.data.objects.new(self._object_name(shape), mesh))
         self._collection_for(shape.groups).objects.link(obj)
         obj.matrix_world = Matrix(object_part.tolist())
         if len(obj.material_slots) == 0:
@@ -215,6 +228,7 @@ class Importer:
         self._scene_before = (bl_scene.world, bl_scene.camera,
                               settings.max_recursion_depth if settings is not None else None)
         self._view_before = view_settings(bl_scene)
+        self.file_stem = re.sub(r"[^A-Za-z0-9._-]", "_", os.path.splitext(os.path.basename(filepath))[0])
         self.pixmaps = dict(scene.pixmaps)
         try:
             parent = ctx.view_layer.active_layer_collection.collection if ctx.view_layer else bl_scene.collection

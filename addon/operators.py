@@ -123,9 +123,8 @@ class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
         return {"FINISHED"}
 
 
-SHAPE_ITEMS = [(k, k, f"The generic {k}") for k in
-               ("sphere", "cube", "square", "plane", "cylinder", "cone", "taperedCylinder", "torus",
-                "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond", "teapot")]
+#: The Add menu's shapes: every registered kind that needs no file (tracer/shapes.py).
+SHAPE_ITEMS = [(e.keyword, e.keyword, f"The generic {e.keyword}") for e in deps.module("shapes").REGISTRY if e.addable]
 
 
 class OBJECT_OT_sdl_add_shape(bpy.types.Operator):

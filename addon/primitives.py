@@ -187,6 +187,9 @@ def generic_mesh(kind: str, param: float = 1.0, mesh_data=None) -> GenericMesh:
     the tracer's MeshData for the polyhedra, the teapot and ``mesh`` shapes."""
     if kind in _BUILDERS:
         return _BUILDERS[kind]()
+    entry = deps.module("shapes").KINDS.get(kind)
+    if entry is not None and entry.tessellate is not None:  # any other parameterless registered shape
+        return from_mesh_data(entry.function("tessellate")(), smooth=True)
     if kind == "taperedCylinder":
         return tapered_cylinder(float(param))
     if mesh_data is None:

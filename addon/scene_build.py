@@ -68,6 +68,8 @@ class SceneBuilder:
         self.warnings: list[str] = []
         self._generic_cache: dict = {}
         self._mesh_cache: dict = {}
+        #: id(shape) -> the Blender object's name, for each mesh shape (the exporter names mesh files by it)
+        self.mesh_object_names: dict[int, str] = {}
         self._materials: dict = {}
         self._pixmaps: dict[str, int] = {}  # image file -> its texture number in the built scene
 
@@ -184,6 +186,7 @@ class SceneBuilder:
             elif kind == "mesh" and self.mode == "EXPORT":
                 shape.mesh_file = info.mesh_file
             shape.mesh = data
+            self.mesh_object_names[id(shape)] = original.name
         return shape
 
     def _blender_mesh(self, mesh, polygons: bool) -> dict:
@@ -216,6 +219,8 @@ class SceneBuilder:
             merged = merge_mesh_data([s.mesh for s in shapes], self.model.MeshData)
             shapes = [self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=merged,
                                        material=shapes[0].material)]
+        for shape in shapes:
+            self.mesh_object_names[id(shape)] = obj_eval.original.name
         return shapes
 
     # -- the scene ------------------------------------------------------------------------------------

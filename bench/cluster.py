@@ -1,6 +1,6 @@
 """What rendering on a Dask cluster costs on this machine (docs/distributed.md).
 
-    python3 bench/cluster.py [--quick] [--rounds N] [--out bench/results]
+    python3 bench/cluster.py [--quick] [--rounds N] [--size WxH] [--out bench/results]
 
 (a) The table: ``python -m tracer render scenes/glass.sdl`` at 3840x2160 with 16 samples, whole process
     (interpreter start, reading the scene, the cluster's start-up, writing the PNG), plain local render
@@ -118,11 +118,13 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--out", default=str(ROOT / "bench" / "results"))
     parser.add_argument("--skip-table", action="store_true", help="only the per-tile overhead")
+    parser.add_argument("--size", default="3840x2160", help="the table's image size (default 3840x2160)")
     args = parser.parse_args()
     results = {"cpus": os.cpu_count(), "load_average_at_start": os.getloadavg()}
     results["tile_overhead"] = tile_overhead()
     if not args.skip_table:
-        width, height, rounds = (960, 540, 1) if args.quick else (3840, 2160, args.rounds)
+        width, height = (int(n) for n in args.size.split("x"))
+        width, height, rounds = (960, 540, 1) if args.quick else (width, height, args.rounds)
         with tempfile.TemporaryDirectory() as folder:
             results["table"] = whole_process(width, height, 16, rounds, Path(folder))
         print(json.dumps({k: results["table"][k] for k in ("against_local", "cpu_against_local")}))

@@ -68,7 +68,7 @@ def shoot_viewport():
 def material_tab():
     for area in _areas("PROPERTIES"):
         area.spaces.active.context = "MATERIAL"
-    return 6.0
+    return 15.0  # (selecting restarted the viewport's refinement)
 
 
 def shoot_material():
@@ -89,6 +89,41 @@ def shoot_material():
     return 0.5
 
 
+def passes_render():
+    """F12 with Depth, Normal and Diffuse Color on, in an Image Editor beside a compositor with the
+    Render Layers node (its pass outputs) wired to a Denoise node."""
+    scene = bpy.context.scene
+    layer = bpy.context.view_layer
+    layer.use_pass_z = layer.use_pass_normal = layer.use_pass_diffuse_color = True
+    scene.use_nodes = True
+    tree = scene.node_tree
+    tree.nodes.clear()
+    layers = tree.nodes.new("CompositorNodeRLayers")
+    layers.location = (-300, 0)
+    denoise = tree.nodes.new("CompositorNodeDenoise")
+    composite = tree.nodes.new("CompositorNodeComposite")
+    composite.location = (250, 0)
+    tree.links.new(layers.outputs["Image"], denoise.inputs["Image"])
+    tree.links.new(layers.outputs["Normal"], denoise.inputs["Normal"])
+    tree.links.new(layers.outputs["DiffCol"], denoise.inputs["Albedo"])
+    tree.links.new(denoise.outputs["Image"], composite.inputs["Image"])
+    view3d = _areas("VIEW_3D")[0]
+    view3d.type = "NODE_EDITOR"
+    view3d.spaces.active.tree_type = "CompositorNodeTree"
+    bpy.ops.render.render()
+    report["f12_seconds"] = engine.LAST_RENDER.get("seconds")
+    report["passes_written"] = engine.LAST_RENDER.get("passes_written")
+    return 2.0
+
+
+def shoot_passes():
+    area = _areas("NODE_EDITOR")[0]
+    with bpy.context.temp_override(area=area, region=[r for r in area.regions if r.type == "WINDOW"][0]):
+        bpy.ops.node.view_all()
+    _shot("blender-passes.png")
+    return 0.5
+
+
 def finish():
     with open(os.path.join(OUT, "screenshots.json"), "w") as handle:
         json.dump({k: v for k, v in report.items() if k != "preview_started"}, handle)
@@ -96,7 +131,7 @@ def finish():
     return None
 
 
-STEPS = [setup, viewport, shoot_viewport, material_tab, shoot_material, finish]
+STEPS = [setup, viewport, shoot_viewport, material_tab, shoot_material, passes_render, shoot_passes, finish]
 
 
 def run_steps():

@@ -1,14 +1,26 @@
-"""The accuracy benchmark measures what it says: errors shrink as settings get more accurate."""
+"""The accuracy benchmark measures what it says (errors with spreads, times with IQRs, slopes, Pareto
+fronts), and sampling to an error target stops where its estimate says and keeps its promise."""
 from __future__ import annotations
 
 import csv
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
+import tracer
 from helpers import Camera, Light, rotation, scene_of, shape, translation
-from tracer.accuracy import default_settings, errors, measure
+from tracer.accuracy import (TRADE_GROUPS, BenchConfig, default_settings, errors, fitted_slopes, measure, pareto_front,
+                             plot_targets, reference_image, write_report)
+from tracer.cli import main
+from tracer.render import render
+from tracer.target import FIRST_BATCH, sample_to_error, standard_error
+
+ROOT = Path(__file__).resolve().parent.parent
+TINY = BenchConfig(width=24, height=18, reference_samples=64, seeds=3, sample_counts=(4, 16), targets=(0.05,),
+                   savings_size=(24, 18), savings_runs=3)
 
 
 def _scene():
@@ -18,20 +30,70 @@ def _scene():
                     lights=[Light((3, 5, 4), (1, 1, 1))], camera=Camera((0, 2, 6), (0, 0.8, 0), (0, 1, 0), 45))
 
 
-def test_accuracy_bench_writes_csv_and_plot(tmp_path):
-    rows = measure(_scene(), "tiny", tmp_path, width=32, height=24, reference_samples=16, repeats=1,
-                   progress=lambda _: None)
+def test_accuracy_bench_writes_rows_with_spreads_slopes_and_fronts(tmp_path):
+    summary = measure(_scene(), "tiny", tmp_path, TINY, progress=lambda _: None)
     with open(tmp_path / "tiny.csv") as handle:
         table = list(csv.DictReader(handle))
+    rows = summary["rows"]
     assert [r["setting"] for r in table] == [r["setting"] for r in rows]
     by = {r["setting"]: r for r in rows}
-    assert {"B=16", "1 ray/pixel", "regular 16", "depth 0", "newton 0", "ulps 1e+08"} <= set(by)
-    assert by["B=16"]["rmse"] > by["B=4"]["rmse"] > by["1 ray/pixel"]["rmse"]
-    assert by["regular 16"]["rmse"] < by["1 ray/pixel"]["rmse"]
-    assert by["depth 0"]["rmse"] > by["1 ray/pixel"]["rmse"]  # the mirror sphere needs its reflections
+    assert {"B=16", "1 ray/pixel", "regular 16", "jittered 4", "depth 0", "newton 0", "ulps 1e+08",
+            "all rays traced"} <= set(by)
+    assert all(r["runs"] == 3 for r in rows)
+    # Seeds move jittered samples, not the regular grid: a spread only where there is randomness.
+    assert by["jittered 16"]["rmse_std"] > 1e-6 and by["regular 16"]["rmse_std"] < 1e-12
+    assert by["B=16"]["rmse_mean"] > by["B=4"]["rmse_mean"] > by["1 ray/pixel"]["rmse_mean"]
+    assert by["regular 16"]["rmse_mean"] < by["1 ray/pixel"]["rmse_mean"]
     assert by["regular 16"]["rays"] > 10 * by["1 ray/pixel"]["rays"]
+    assert by["regular 16"]["rays_camera"] == 16 * 24 * 18
+    # Depth rows: their bias against depth 8 shrinks with depth and is 0 at 8.
+    assert by["depth 0"]["depth_bias"] > by["depth 2"]["depth_bias"] >= by["depth 8"]["depth_bias"] == 0
+    depth = _scene().settings.max_recursion_depth
+    assert summary["depth_bias"]["depth"] == depth and summary["reference"]["depth"] == depth
+    # Times: a median and an IQR, split into compiling and tracing.
+    for r in rows:
+        assert r["seconds_iqr"] >= 0 and r["compile_median"] > 0 and r["trace_median"] > 0
+    # The cheapest and the most accurate trade-off settings are on the fronts.
+    trade = [r for r in rows if r["group"] in TRADE_GROUPS]
+    assert min(trade, key=lambda r: r["rays"])["pareto_rays"]
+    assert min(trade, key=lambda r: r["cpu_median"])["pareto_seconds"]  # the time front is on CPU seconds
+    best = min(trade, key=lambda r: r["rmse_mean"])
+    assert best["pareto_rays"] and best["pareto_seconds"]
+    assert not by["depth 0"]["pareto_rays"]  # only trade-off rows are ranked
+    assert set(summary["slopes"]) == {"regular", "jittered", "adaptive"}
+    assert summary["targets"][0]["measured_rmse"] > 0
+    timed = summary["savings"]["timed"]
+    assert timed["rays_all"] > timed["rays_all"] - timed["rays_saved"] > 0 or timed["rays_saved"] == 0
+    assert timed["max_change_8bit"] <= 0.5 and timed["seconds_all"] > 0 and timed["iqr_with"] >= 0
+    assert json.loads((tmp_path / "tiny.json").read_text())["reference"]["samples"] == 64
     with Image.open(tmp_path / "tiny.png") as plot:
-        assert plot.size[0] > 300
+        assert plot.size[0] > 1000
+    plot_targets([summary], tmp_path / "target_error.png")
+    write_report([summary], tmp_path / "report.md")
+    report = (tmp_path / "report.md").read_text()
+    assert "| jittered 16 |" in report and "Slopes of log RMSE" in report and "| 0.05 |" in report
+    assert (tmp_path / "target_error.png").stat().st_size > 1000
+
+
+def test_pareto_front_keeps_exactly_the_unbeaten_points():
+    cost = [1, 2, 3, 4, 5]
+    error = [5, 3, 4, 1, 1]
+    assert pareto_front(cost, error).tolist() == [True, True, False, True, False]
+
+
+def test_fitted_slope_recovers_a_power_law():
+    rows = [{"group": "samples (jittered)", "samples": n, "rmse_mean": 0.3 * n ** -0.75} for n in (4, 16, 64, 256)]
+    rows.append({"group": "samples (jittered)", "samples": 1, "rmse_mean": 1.0})  # N = 1 is not fitted
+    fit = fitted_slopes(rows)["jittered"]
+    assert fit["slope"] == pytest.approx(-0.75) and fit["stderr"] == pytest.approx(0, abs=1e-9)
+
+
+def test_reference_error_estimate_shrinks_with_samples():
+    scene = _scene()
+    _, small, _ = reference_image(scene, BenchConfig(width=24, height=18, reference_samples=8))
+    image, large, _ = reference_image(scene, BenchConfig(width=24, height=18, reference_samples=128))
+    assert 0 < large < small
+    assert image.shape == (18, 24, 3)
 
 
 def test_irrelevant_settings_are_not_swept():
@@ -44,3 +106,74 @@ def test_error_metrics():
     assert errors(a, a)["rmse"] == 0 and errors(a, a)["ssim"] == pytest.approx(1.0)
     b = a + 0.1
     assert errors(b, a)["rmse"] == pytest.approx(0.1) and errors(b, a)["psnr"] == pytest.approx(20.0)
+
+
+# ------------------------------------------------------------------------------------------- error targets
+
+def test_standard_error_of_known_samples():
+    samples = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
+    got = standard_error(samples.sum(axis=0)[None], (samples ** 2).sum(axis=0)[None], np.array([4]))
+    assert got[0] == pytest.approx(np.std([0, 1, 2, 3], ddof=1) / 2)
+
+
+def test_sampling_stops_when_the_estimate_reaches_the_target():
+    """Noise of known sigma: the standard error sigma / sqrt(n) falls below E at the first doubling of
+    FIRST_BATCH past (sigma / E)^2 rays; the noise-free half of the image stops after the first batch,
+    except its column next to the noisy half (a neighbour of uncertain pixels goes on with them)."""
+    sigma, target, width, height = 0.1, 0.01, 6, 4
+    rng = np.random.default_rng(5)
+
+    def camera_rays(origins, directions):
+        noisy = directions[:, 0] >= width / 2  # the right half is noisy
+        return 0.5 + np.where(noisy, 1.0, 0.0)[:, None] * rng.normal(0, sigma, (len(origins), 3))
+
+    def rays_for(rows, cols, dy, dx):
+        return np.zeros((rows.size, 3)), np.c_[cols + dx, rows + dy, np.zeros(rows.size)]
+
+    film, estimate = sample_to_error(camera_rays, rays_for, width, height, target)
+    needed = FIRST_BATCH
+    while sigma / np.sqrt(needed) > target * 0.8:  # the estimate scatters about sigma / sqrt(n)
+        needed *= 2
+    assert set(np.unique(estimate.samples[:, :2])) == {FIRST_BATCH}
+    assert estimate.samples[:, 2:].min() >= needed // 2 and estimate.worst <= target
+    assert np.abs(film - 0.5).max() < 5 * target
+    assert estimate.rms == pytest.approx(np.sqrt(np.mean(estimate.per_pixel ** 2)))
+
+
+@pytest.mark.parametrize("name", ["lecture", "glass"])
+def test_target_error_is_met_against_a_reference(name):
+    scene = tracer.load(ROOT / "scenes" / f"{name}.sdl")
+    target = 0.01
+    reference = np.mean([np.clip(render(scene, 40, 30, samples=256, seed=100 + k).image, 0, 1) for k in range(2)],
+                        axis=0)
+    result = render(scene, 40, 30, target_error=target, seed=3)
+    measured = errors(result.image, reference)["rmse"]
+    assert measured <= target
+    assert result.error_estimate.rms <= target and result.error_estimate.samples_mean > FIRST_BATCH
+
+
+def test_cli_target_error_reports_the_estimate(tmp_path, capsys):
+    out = str(tmp_path / "l.png")
+    assert main(["render", str(ROOT / "scenes" / "lecture.sdl"), "-o", out, "--width", "24", "--height", "18",
+                 "--target-error", "0.02", "--stats"]) == 0
+    captured = capsys.readouterr()
+    stats = json.loads(captured.out)
+    assert stats["error"]["target"] == 0.02 and stats["error"]["estimated_rmse"] <= 0.02
+    assert "estimated error" in captured.err
+    assert main(["render", str(ROOT / "scenes" / "lecture.sdl"), "-o", out, "--target-error", "nan"]) == 2
+    assert "error: the target error" in capsys.readouterr().err
+    assert main(["render", str(ROOT / "scenes" / "lecture.sdl"), "-o", out, "--target-error", "0.01",
+                 "--scheduler", "local:1"]) == 2
+    assert "error: --target-error cannot be combined with --scheduler" in capsys.readouterr().err
+
+
+def test_cli_bench_writes_the_report_and_refuses_too_few_seeds(tmp_path, capsys):
+    lecture = str(ROOT / "scenes" / "lecture.sdl")
+    assert main(["bench", "accuracy", lecture, "-o", str(tmp_path), "--width", "12", "--height", "9",
+                 "--reference-samples", "16", "--seeds", "3"]) == 0
+    assert {"lecture.csv", "lecture.json", "lecture.png", "target_error.png", "report.md"} <= \
+        {p.name for p in tmp_path.iterdir()}
+    assert main(["bench", "accuracy", lecture, "-o", str(tmp_path), "--seeds", "2"]) == 2
+    assert "error: --seeds must be at least 3" in capsys.readouterr().err
+    assert main(["bench", "accuracy", lecture, "-o", str(tmp_path), "--width", "6", "--height", "6"]) == 2
+    assert "error: the accuracy bench needs images of at least 7 x 7" in capsys.readouterr().err

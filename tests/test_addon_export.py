@@ -102,9 +102,9 @@ def test_other_objects_become_3vn_meshes_beside_the_file(tmp_path):
     folder.mkdir()
     exported = export(folder / "scene.sdl")
     files = sorted(os.listdir(folder))
-    assert files == ["scene.sdl", "scene_mesh1.3vn"]
+    assert files == ["scene.sdl", "scene_Suzanne.3vn"]
     (shape,) = exported.shapes()
-    assert shape.kind == "mesh" and shape.mesh_file == "scene_mesh1.3vn"
+    assert shape.kind == "mesh" and shape.mesh_file == "scene_Suzanne.3vn"
     assert len(shape.mesh.vertices) == len(mesh.vertices) and len(shape.mesh.faces) == len(mesh.polygons)
     # the mesh in world space is where Blender has it (SDL axes: Blender (x, y, z) is SDL (x, z, -y))
     world = (shape.matrix @ np.c_[shape.mesh.vertices, np.ones(len(shape.mesh.vertices))].T).T[:, :3]
@@ -189,3 +189,18 @@ def test_each_imported_file_keeps_its_own_images(tmp_path):
     images = [os.path.realpath(exported.pixmaps[s.material.texture]) for s in exported.shapes()]
     assert images == [os.path.realpath(p.parent / "tex.png") for p in paths]
     assert tracer.load(str(paths[0])).shapes()[0].material == exported.shapes()[0].material
+
+
+def test_exported_meshes_come_back_with_their_object_names(tmp_path):
+    """A Blender mesh is written to <scene>_<object name>.3vn; the importer names the object after it."""
+    fresh()
+    bpy.ops.mesh.primitive_monkey_add()
+    bpy.context.object.name = "Suzanne"
+    bpy.ops.mesh.primitive_cube_add(location=(3, 0, 0))
+    bpy.context.object.name = "Crate box"  # (a space cannot be in an SDL file name: written as _)
+    out = tmp_path / "zoo.sdl"
+    assert bpy.ops.export_scene.sdl(filepath=str(out)) == {"FINISHED"}
+    assert sorted(p.name for p in tmp_path.glob("*.3vn")) == ["zoo_Crate_box.3vn", "zoo_Suzanne.3vn"]
+    fresh()
+    import_sdl(out)
+    assert sorted(o.name for o in bpy.data.objects if o.type == "MESH") == ["Crate_box", "Suzanne"]

@@ -20,6 +20,16 @@ from .trace import Tracer
 BACKENDS = ("auto", "c", "numpy")
 
 
+def load_core(backend: str = "auto") -> None:
+    """Load (in a development checkout: build) the C core now, when ``backend`` may use it, so that a caller
+    timing a render does not count a one-off compile as render time.  Problems surface later, in make_tracer."""
+    if backend in ("auto", "c"):
+        try:
+            from . import native  # noqa: F401  (importing loads or builds the library)
+        except ImportError:
+            pass
+
+
 def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optional[int] = None,
                 savings: Optional[RaySavings] = None):
     """``threads``: the C core's worker threads (None: $SDL_TRACER_THREADS, else every core); ``savings``:

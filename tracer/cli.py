@@ -5,6 +5,7 @@ Errors in the user's input end the program with one line on stderr and exit stat
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -58,6 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="threads of the C core (default: $SDL_TRACER_THREADS, else every core)")
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
+    r.add_argument("--target-error", type=float, default=None, metavar="E",
+                   help="sample each pixel until its estimated error (standard error of its mean, linear "
+                        "colour; 1/255 is one 8-bit step) is at most E, and report the estimate "
+                        "(replaces --samples, --sampling and --block-size)")
     r.add_argument("--cutoff", type=float, default=None, metavar="W",
                    help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
                         "(default 1/512; 0 traces them all)")
@@ -74,9 +79,13 @@ def build_parser() -> argparse.ArgumentParser:
     acc = bench.add_parser("accuracy", help="error against a dense reference, and time, for each setting")
     acc.add_argument("scenes", nargs="+", metavar="SCENE", help="SDL scene files")
     acc.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the CSV files and plots")
-    acc.add_argument("--width", type=int, default=160)
-    acc.add_argument("--height", type=int, default=120)
-    acc.add_argument("--reference-samples", type=int, default=64)
+    acc.add_argument("--width", type=int, default=96)
+    acc.add_argument("--height", type=int, default=72)
+    acc.add_argument("--reference-samples", type=int, default=2048, metavar="N",
+                     help="jittered rays per pixel of the reference (default 2048)")
+    acc.add_argument("--seeds", type=int, default=5, metavar="K",
+                     help="runs of each setting, one per seed: error mean and spread, time median and IQR "
+                          "(default 5, at least 3)")
     acc.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto")
     acc.add_argument("--lenient", action="store_true")
 
@@ -184,10 +193,13 @@ def _savings(args):
 
 
 def _render(args) -> int:
+    from .backend import load_core
     from .imageio import save_image
     from .render import render
 
     if args.scheduler is not None or args.frames is not None:
+        if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
+            raise TracerError("--target-error cannot be combined with --scheduler or --frames")
         return _render_job(args)
     scene = _load(args)
     if args.lenient:
@@ -203,15 +215,22 @@ def _render(args) -> int:
                   f"{MAX_RECURSION_DEPTH} used", file=sys.stderr)
         scene.settings.max_recursion_depth = traced_depth(args.max_depth)
     savings = _savings(args)
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     progress = _Progress(not args.quiet)
     try:
         result = render(scene, args.width, args.height, block_size=args.block_size,
                         progressive=args.progressive, on_tile=progress, samples=args.samples,
                         sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                        threads=args.threads, savings=savings)
+                        threads=args.threads, savings=savings, target_error=args.target_error)
     finally:
         progress.close()
     save_image(result.image, args.output)
+    if result.error_estimate is not None and not args.quiet:
+        from .target import MAX_SAMPLES
+        e = result.error_estimate
+        print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g}); "
+              f"{e.samples_mean:.1f} rays per pixel on average, {e.pixels_at_limit} pixels at the "
+              f"{MAX_SAMPLES}-ray limit", file=sys.stderr)
     if args.stats:
         print(json.dumps(result.stats()))
     return 0
@@ -223,6 +242,7 @@ def _render_job(args) -> int:
     import time
 
     from . import distributed as dist
+    from .backend import load_core
     from .imageio import save_image
     from .render import check_size, render
     from .trace import RayCounts
@@ -247,6 +267,7 @@ def _render_job(args) -> int:
                    backend=args.backend, threads=args.threads, max_depth=args.max_depth,
                    savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
+    load_core(args.backend)  # a first-use compile of the C core is not render time
     started = time.perf_counter()
     rays, backends = RayCounts(), set()
 
@@ -352,35 +373,54 @@ def _info(args) -> int:
 def _bench(args) -> int:
     from pathlib import Path
 
-    from .accuracy import measure
+    from .accuracy import BenchConfig, measure, plot_targets, write_report
     from .render import check_size
     from .sdl.parser import load
 
     check_size(args.width, args.height)
-    for path in args.scenes:
-        scene = load(path, strict=not args.lenient)
-        measure(scene, Path(path).stem, Path(args.output), args.width, args.height, args.reference_samples,
-                args.backend, progress=lambda line: print(line, flush=True))
+    if min(args.width, args.height) < 7:  # scikit-image's SSIM window
+        raise TracerError(f"the accuracy bench needs images of at least 7 x 7 pixels, not {args.width} x {args.height}")
+    if args.seeds < 3:
+        raise TracerError(f"--seeds must be at least 3 (a spread needs them), not {args.seeds}")
+    if args.reference_samples < 2:
+        raise TracerError(f"--reference-samples must be at least 2, not {args.reference_samples}")
+    config = BenchConfig(width=args.width, height=args.height, reference_samples=args.reference_samples,
+                         seeds=args.seeds, backend=args.backend,
+                         savings_size=(max(args.width, 320), max(args.height, 240)))
+    out = Path(args.output)
+    scenes = [(Path(path).stem, load(path, strict=not args.lenient)) for path in args.scenes]
+    summaries = [measure(scene, name, out, config, progress=lambda line: print(line, flush=True))
+                 for name, scene in scenes]
+    plot_targets(summaries, out / "target_error.png")
+    write_report(summaries, out / "report.md")
     return 0
 
 
-def _terminate_like_interrupt() -> None:
-    """SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is removed."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, signal.default_int_handler)
+@contextlib.contextmanager
+def _terminate_like_interrupt():
+    """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
+    removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    _terminate_like_interrupt()
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with np.errstate(all="ignore"), warnings_as_lines(sys.stderr), one_blas_thread():
+        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
+                one_blas_thread():
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (TracerError, OSError, MemoryError) as err:
+    except Exception as err:  # noqa: BLE001 — translated if it is the input's fault, else raised again
         message = error_message(err, subject)
         if message is None:
             raise

@@ -17,7 +17,7 @@ from typing import Callable, Optional, Union
 
 import numpy as np
 
-from . import numerics
+from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
 from .errors import TracerError
 from .intersect import analytic
@@ -41,9 +41,8 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
     return np.einsum("ij,ij->i", perp, perp) <= radius * radius
 
 
-#: Closed shapes whose normals must agree with their entering flags (the square is a sheet, meshes keep
-#: their triangles' orientation, the plane's normal and flag come from one sign).
-SOLID_ANALYTIC_KINDS = ("sphere", "cube", "taperedCylinder", "cylinder", "cone", "torus")
+#: Closed analytic shapes whose normals must agree with their entering flags (ShapeKind.normals_agree).
+SOLID_ANALYTIC_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.family == "analytic" and e.normals_agree)
 
 
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
@@ -78,27 +77,20 @@ def _checked_inverse(shape: Shape) -> np.ndarray:
 #: The eight corners of the generic cube, for the bounding spheres of the closed-form shapes.
 #: (Shared by every primitive, so read-only.)
 _CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-_SQUARE_CORNERS = _CORNERS * (1, 1, 0)
-_TORUS_CORNERS = _CORNERS * (1.0 + TORUS_TUBE_RADIUS, 1.0 + TORUS_TUBE_RADIUS, TORUS_TUBE_RADIUS)
 _DISC_BOX = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
-for _constant in (_CORNERS, _SQUARE_CORNERS, _TORUS_CORNERS, _DISC_BOX):
+#: The corners of each registered kind's generic box.
+_BOX_CORNERS = {e.keyword: np.asarray(e.box[0]) + _CORNERS * np.asarray(e.box[1])
+                for e in shapes.REGISTRY if e.box is not None}
+for _constant in (_CORNERS, _DISC_BOX, *_BOX_CORNERS.values()):
     _constant.setflags(write=False)
-
-
-#: The kinds whose generic points do not depend on the shape.
-_SHARED_POINTS = {"sphere": _CORNERS, "cube": _CORNERS, "square": _SQUARE_CORNERS, "torus": _TORUS_CORNERS}
 
 
 def _analytic_generic_points(shape: Shape) -> Optional[np.ndarray]:
     """Points whose hull holds a closed-form shape's generic solid (8 of them), or None for the plane,
     polyhedra and meshes."""
     kind = shape.kind
-    if kind == "sphere" or kind == "cube":
-        return _CORNERS
-    if kind == "square":
-        return _SQUARE_CORNERS
-    if kind == "torus":
-        return _TORUS_CORNERS
+    if kind in _BOX_CORNERS:
+        return _BOX_CORNERS[kind]
     if kind in ("taperedCylinder", "cylinder", "cone"):
         top = max(shape.small_radius, 0.0)
         # Corners of the squares that bound the two discs: the frustum lies inside their hull.
@@ -149,7 +141,7 @@ def _batched_bounds(shapes: list[Shape], stack: np.ndarray) -> list[Optional[tup
     groups: dict[int, tuple[np.ndarray, list[int]]] = {}
     varied_rows, varied_points = [], []
     for i, s in enumerate(shapes):
-        pts = _SHARED_POINTS.get(s.kind)
+        pts = _BOX_CORNERS.get(s.kind)
         if pts is not None:
             groups.setdefault(id(pts), (pts, []))[1].append(i)
             continue
@@ -192,8 +184,11 @@ class Primitive:
         self.inverse = _checked_inverse(shape) if inverse is None else inverse
         # World normal = generic normal through the inverse-transpose; as row vectors: n_g @ inverse[:3,:3].
         self.normal_matrix = self.inverse[:3, :3]
-        self.thin = shape.kind == "square"
-        self.bounded = shape.kind != "plane"
+        entry = shapes.KINDS[shape.kind]
+        self.thin = entry.thin
+        self.bounded = entry.bounded
+        self._intersect = entry.function("intersect") if entry.intersect else None
+        self._normals_agree = entry.normals_agree
         self.tolerances = numerics.TOLERANCES
         #: numerics.inverse_rounding of the matrix (compile_scene fills it for all shapes at once)
         self.inverse_error: Optional[float] = None
@@ -267,11 +262,9 @@ class Primitive:
         return None if pts is None else transform_points(self.matrix, pts)
 
     def generic_hits(self, o: np.ndarray, d: np.ndarray) -> HitArrays:
+        if self._intersect is not None:
+            return self._intersect(o, d)
         kind = self.kind
-        if kind == "sphere":
-            return analytic.intersect_sphere(o, d)
-        if kind == "cube":
-            return analytic.intersect_cube(o, d)
         if kind == "square":
             return analytic.intersect_square(o, d, self.tolerances.square_edge)
         if kind == "plane":
@@ -297,7 +290,7 @@ class Primitive:
         shift = np.where(np.isfinite(shift), shift, 0.0)
         centred = o + shift[:, None] * d
         local = self.generic_hits(centred, d)
-        if self.kind in SOLID_ANALYTIC_KINDS or self._planes is not None:
+        if self._normals_agree:
             analytic.agree_with_crossing(local, d)
         local.t = local.t + shift[:, None]
         local.error = self.time_errors(origins[idx], centred, d, local)

@@ -14,21 +14,20 @@ from typing import Optional, Union
 
 import numpy as np
 
+from . import shapes
 from .errors import SceneError
+from .shapes import TORUS_TUBE_RADIUS  # noqa: F401 - part of the model's vocabulary
 
 Color = tuple[float, float, float]
 Vec3 = tuple[float, float, float]
 
 #: Generic shapes whose geometry is a closed-form surface.
-ANALYTIC_KINDS = ("sphere", "cube", "square", "plane", "taperedCylinder", "cylinder", "cone", "torus")
+ANALYTIC_KINDS = shapes.keywords("analytic")
 #: Built-in convex polyhedra (the book loads these from .3vn files).
-POLYHEDRON_KINDS = ("tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond")
+POLYHEDRON_KINDS = shapes.keywords("polyhedron")
 #: Shapes made of triangles.
-MESH_KINDS = ("teapot", "mesh")
-SHAPE_KINDS = ANALYTIC_KINDS + POLYHEDRON_KINDS + MESH_KINDS
-
-#: Tube radius of the generic torus (its ring radius is 1), as the book draws it.
-TORUS_TUBE_RADIUS = 0.2
+MESH_KINDS = shapes.keywords("mesh")
+SHAPE_KINDS = shapes.keywords()
 
 
 @dataclass(frozen=True)

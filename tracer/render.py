@@ -57,11 +57,15 @@ class RenderResult:
     seconds: float
     backend: str = "numpy"
     effects: frozenset = field(default_factory=frozenset)
+    error_estimate: Optional[object] = None  # tracer.target.ErrorEstimate, when rendered to an error target
 
     def stats(self) -> dict:
-        return {"rays": self.rays.as_dict(), "skipped": self.rays.skipped(), "seconds": round(self.seconds, 6),
-                "backend": self.backend, "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
-                "effects": sorted(self.effects)}
+        out = {"rays": self.rays.as_dict(), "skipped": self.rays.skipped(), "seconds": round(self.seconds, 6),
+               "backend": self.backend, "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
+               "effects": sorted(self.effects)}
+        if self.error_estimate is not None:
+            out["error"] = self.error_estimate.as_dict()
+        return out
 
 
 def check_size(width: int, height: int) -> None:
@@ -76,14 +80,23 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            cancel: Optional[Callable[[], bool]] = None, backend: str = "auto",
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
-           threads: Optional[int] = None, savings: Optional[RaySavings] = None) -> RenderResult:
+           threads: Optional[int] = None, savings: Optional[RaySavings] = None,
+           target_error: Optional[float] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
     ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
     ``savings``: which rays that cannot change the image are skipped (default: tracer.savings' defaults).
+    ``target_error``: instead of a fixed number of samples, sample each pixel until its estimated error is
+    at most this (see :mod:`tracer.target`; block size, samples and sampling mode are then not used).
     """
     check_size(width, height)
+    if target_error is not None:
+        from .target import check, render_to_error
+        check(target_error)
+        compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+        return render_to_error(compiled, width, height, target_error, backend=backend, threads=threads, seed=seed,
+                               savings=savings, cancel=cancel)
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
     started = time.perf_counter()

@@ -3,7 +3,8 @@
 The command line prints ``error: `` + :func:`error_message` and exits 2; the Blender add-on puts the same
 text in its report.  Errors meant for users (TracerError, SDLError) already name the file and place; OS
 errors are given the file they concern (never the hidden temporary file an atomic write uses); running out
-of memory names the input.  Anything else is a bug and is not translated (None), so that it is seen.
+of memory names the input; usd-core's errors give USD's own words.  Anything else is a bug and is not
+translated (None), so that it is seen.
 Warnings become ``warning:`` lines through tracer.errors.warnings_as_lines.
 """
 from __future__ import annotations
@@ -57,4 +58,11 @@ def error_message(err: BaseException, subject: Optional[str] = None) -> Optional
     if isinstance(err, MemoryError):
         where = f"{shown_name(subject)}: " if subject else ""
         return f"{where}not enough memory ({err or 'the request is too large for this machine'})"
+    if type(err).__name__ == "ErrorException" and type(err).__module__.startswith("pxr"):
+        # usd-core refusing a value while reading or writing (an asset path with a control character, say):
+        # its own words, which name what was wrong, after the file being worked on.
+        from .usd.opening import usd_error_message
+
+        where = f"{shown_name(subject)}: " if subject else ""
+        return shortened(f"{where}USD: {usd_error_message(str(err))}")
     return None

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import shapes
 from .compile import CompiledScene, CSGNode, fold_tree
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
@@ -27,9 +28,8 @@ SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
 SWITCHES = ("inside_shadows", "shared_tir", "dark_materials")
 DEFAULT_CUTOFF = 1.0 / 512.0
 #: Shapes that bound a solid (every ray into one comes out again): not the square (a sheet) nor meshes
-#: (which may be open).  The plane is the half-space below it.
-CLOSED_KINDS = frozenset({"sphere", "cube", "plane", "taperedCylinder", "cylinder", "cone", "torus",
-                          "tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond"})
+#: (which may be open).  The plane is the half-space below it.  (ShapeKind.closed)
+CLOSED_KINDS = frozenset(e.keyword for e in shapes.REGISTRY if e.closed)
 #: A direction for the point-in-solid test that no bundled shape's faces are parallel to.
 _PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
 

@@ -143,6 +143,8 @@ def build(force: bool = False, verbose: bool = False) -> Path:
                    str(HERE / "core.c"), "-lm"]
         if verbose:
             print(" ".join(command), file=sys.stderr)
+        else:  # the first render would otherwise stall for many seconds without a word
+            print(f"note: compiling the C core for this checkout (once): {path}", file=sys.stderr, flush=True)
         try:
             result = subprocess.run(command, cwd=HERE, capture_output=True, text=True, timeout=300)
         except (OSError, subprocess.SubprocessError) as err:

@@ -6,14 +6,19 @@
 #include <stdint.h>
 
 enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TORUS = 5, K_POLYHEDRON = 6,
-       K_MESH = 7 };
+       K_MESH = 7, K_PARABOLOID = 8 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
-#define K_COUNT 8
+#define K_COUNT 9
+/* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
+#define RT_SHAPE_HITS(X) X(K_SPHERE, hits_sphere) X(K_CUBE, hits_cube) X(K_PARABOLOID, hits_paraboloid)
+#define RT_SHAPE_UV(X) X(K_TAPERED, wall_and_discs_uv) X(K_PARABOLOID, wall_and_discs_uv)
+/* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
+#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
@@ -196,6 +201,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 75
-#define RT_CONTRACT_DIGEST "c7bdc332d9384186"
+#define RT_CONTRACT_DIGEST "60aa324fa40c4bb6"
 
 #endif

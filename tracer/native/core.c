@@ -211,8 +211,9 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
     const SceneDesc *D = &S->d;
     *inside = 0;
     switch (D->prim_kind[p]) {
-    case K_SPHERE: return hits_sphere(o, d, out);
-    case K_CUBE: return hits_cube(o, d, out);
+#define REGISTERED_HITS(kind, hits) case kind: return hits(o, d, out);
+    RT_SHAPE_HITS(REGISTERED_HITS)  /* the kinds tracer/shapes.py names a C function for */
+#undef REGISTERED_HITS
     case K_SQUARE: {
         /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
         int n = hits_z_plane(o, d, out, 1, D->tol_square_edge);
@@ -237,10 +238,10 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
     return 0;
 }
 
-/* Closed analytic shapes: their normals must agree with their entering flags (compile.SOLID_ANALYTIC_KINDS). */
+/* Closed analytic shapes: their normals must agree with their entering flags (ShapeKind.normals_agree). */
 static inline int solid_analytic(int32_t kind)
 {
-    return kind == K_SPHERE || kind == K_CUBE || kind == K_TAPERED || kind == K_TORUS || kind == K_POLYHEDRON;
+    return RT_NORMALS_AGREE(kind);
 }
 
 /* World ray -> generic origin moved to the line's point nearest the generic centre (returns the shift). */

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..compile import CompiledScene, CSGNode, Primitive, fold_tree
 from ..intersect.mesh import MeshArrays
+from .. import shapes
 from ..model import SHAPE_KINDS, traced_depth
 from . import contract
 from .contract import EFFECT_BITS, KIND, KIND_CODES, OP_CODES
@@ -86,11 +87,9 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     return None
 
 
-#: Generic boxes (centre, half extents) that hold each closed-form shape; tapered cylinders get theirs
-#: from their small radius, meshes and polyhedra from their vertices.
-_TORUS_OUTER = _SHARED["TORUS_RING"] + _SHARED["TORUS_TUBE"]
-_GENERIC_BOX = {"sphere": ((0, 0, 0), (1, 1, 1)), "cube": ((0, 0, 0), (1, 1, 1)), "square": ((0, 0, 0), (1, 1, 0)),
-                "torus": ((0, 0, 0), (_TORUS_OUTER, _TORUS_OUTER, _SHARED["TORUS_TUBE"]))}
+#: Generic boxes (centre, half extents) that hold each closed-form shape (from the shape registry); tapered
+#: cylinders get theirs from their small radius, meshes and polyhedra from their vertices.
+_GENERIC_BOX = {e.keyword: e.box for e in shapes.REGISTRY if e.box is not None}
 
 
 def _generic_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

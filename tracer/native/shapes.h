@@ -362,4 +362,35 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
     return n;
 }
 
+/* The generic paraboloid x^2 + y^2 <= z <= 1 (intersect/paraboloid.py): wall (part 0), cap disc z = 1
+ * (part 1).  Inside the wall between the roots of a t^2 + 2 b t + c (a >= 0), clipped to z <= 1. */
+static int hits_paraboloid(const double *o, const double *d, Hit *out)
+{
+    double a = d[0] * d[0] + d[1] * d[1];
+    double b = o[0] * d[0] + o[1] * d[1] - 0.5 * d[2];
+    double c = o[0] * o[0] + o[1] * o[1] - o[2];
+    double t_cap = (1.0 - o[2]) / d[2];
+    double slab_lo, slab_hi;
+    if (d[2] == 0.0) {
+        int below = o[2] <= 1.0;
+        slab_lo = below ? -INFINITY : NAN;
+        slab_hi = below ? INFINITY : NAN;
+    } else {
+        slab_lo = d[2] > 0.0 ? -INFINITY : t_cap;
+        slab_hi = d[2] > 0.0 ? t_cap : INFINITY;
+    }
+    double t_in, t_out;
+    if (!wall_interval(a, b, c, slab_lo, slab_hi, &t_in, &t_out) || !isfinite(t_in) || !isfinite(t_out))
+        return 0;
+    for (int end = 0; end < 2; end++) {
+        double t = end ? t_out : t_in;
+        int part = end ? t_out >= slab_hi : t_in <= slab_lo;  /* an end on z = 1 is the cap (ties too) */
+        if (part)
+            set_hit(&out[end], t, !end, 0.0, 0.0, 1.0, 1);
+        else
+            set_hit(&out[end], t, !end, 2.0 * (o[0] + t * d[0]), 2.0 * (o[1] + t * d[1]), -1.0, 0);
+    }
+    return 2;
+}
+
 #endif

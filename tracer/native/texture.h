@@ -146,24 +146,32 @@ static void tex_marble(const int64_t *perm, const double *grad, const double *q,
 static inline double angle01(double y, double x) { return np_mod(atan2(y, x) / TWO_PI_VALUE, 1.0); }
 
 /* surface_uv for one generic point on a primitive of kind `kind`, hit on `part`. */
+/* mapping.wall_and_discs_uv: a wall about z (part 0) by angle and height, its discs as squares; u wraps on
+ * all parts.  The tapered cylinders' mapping, and any registered shape's that names it. */
+static void wall_and_discs_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u,
+                              int *wrap_v)
+{
+    if (part == 0) {
+        *u = angle01(y, x);
+        *v = clip(z, 0.0, 1.0);
+    } else {
+        *u = (x + 1.0) / 2.0;
+        *v = (y + 1.0) / 2.0;
+    }
+    *wrap_u = 1;
+    *wrap_v = 0;
+}
+
 static void surface_uv(int kind, const double *p, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
 {
     double x = p[0], y = p[1], z = p[2];
     switch (kind) {
+#define REGISTERED_UV(shape_kind, mapping) case shape_kind: mapping(x, y, z, part, u, v, wrap_u, wrap_v); return;
+    RT_SHAPE_UV(REGISTERED_UV)  /* the kinds tracer/shapes.py names a C mapping for */
+#undef REGISTERED_UV
     case K_SPHERE:
         *u = angle01(y, x);
         *v = 0.5 + asin(clip(z, -1.0, 1.0)) / M_PI_VALUE;
-        *wrap_u = 1;
-        *wrap_v = 0;
-        return;
-    case K_TAPERED:  /* the wall (part 0) by angle and height, the discs as squares; u wraps on all parts */
-        if (part == 0) {
-            *u = angle01(y, x);
-            *v = clip(z, 0.0, 1.0);
-        } else {
-            *u = (x + 1.0) / 2.0;
-            *v = (y + 1.0) / 2.0;
-        }
         *wrap_u = 1;
         *wrap_v = 0;
         return;

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import shapes
+
 TWO_PI = 2.0 * np.pi
 
 
@@ -37,15 +39,23 @@ _CUBE_FACES = {
 }
 
 
+def wall_and_discs_uv(points: np.ndarray, parts: np.ndarray):
+    """A wall about z (part 0) by angle and height, its discs (other parts) as squares; u wraps.  The tapered
+    cylinders' mapping, and any registered shape's that names it (tracer/shapes.py)."""
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    u_disc, v_disc = _square(x, y)
+    wall = parts == 0
+    return (np.where(wall, _angle01(y, x), u_disc), np.where(wall, np.clip(z, 0.0, 1.0), v_disc), True, False)
+
+
 def surface_uv(kind: str, points: np.ndarray, parts: np.ndarray):
     """(u, v, wrap_u, wrap_v) for (N, 3) generic points on a shape of ``kind``; parts as the intersector gives."""
+    entry = shapes.KINDS.get(kind)
+    if entry is not None and entry.uv is not None:
+        return entry.function("uv")(points, parts)
     x, y, z = points[:, 0], points[:, 1], points[:, 2]
     if kind == "sphere":
         return _angle01(y, x), 0.5 + np.arcsin(np.clip(z, -1.0, 1.0)) / np.pi, True, False
-    if kind in ("cylinder", "cone", "taperedCylinder"):
-        u_disc, v_disc = _square(x, y)
-        wall = parts == 0
-        return (np.where(wall, _angle01(y, x), u_disc), np.where(wall, np.clip(z, 0.0, 1.0), v_disc), True, False)
     if kind == "square":
         u, v = _square(x, y)
         return u, v, False, False

@@ -20,6 +20,7 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
+from .. import shapes
 from ..camera import focal_length, view_angle
 from ..errors import TracerError
 from ..model import (CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene,
@@ -32,6 +33,9 @@ from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+#: Kinds written as their tessellation (USD has no implicit prim for them) and read back as the exact shape.
+_TESSELLATED = frozenset(e.keyword for e in shapes.REGISTRY if e.tessellate is not None)
 
 #: A distant light becomes a point light this many scene radii away, against its direction.
 DISTANT_LIGHT_DISTANCE = 1.0e5
@@ -280,7 +284,7 @@ class _Reader:
         if kind == "taperedCylinder" and shape.kind == "mesh":
             shape = Shape("taperedCylinder", shape.matrix,
                           tapered_radius=float(self.get(prim, C.A_SMALL_RADIUS, 1.0)))
-        elif kind in ("torus", "square") and shape.kind == "mesh":
+        elif kind in _TESSELLATED and shape.kind == "mesh":
             shape = Shape(kind, shape.matrix)
         elif kind is not None and kind != shape.kind:
             self.note(prim, f"sdl:shape {kind!r} does not match its USD type: read as {shape.kind}")
@@ -344,7 +348,7 @@ class _Reader:
         if kind in POLYHEDRON_KINDS or kind == "teapot":
             from ..sdl.parser import builtin_mesh
             return Shape(kind, world, mesh=builtin_mesh(kind))
-        if kind in ("torus", "square", "taperedCylinder"):
+        if kind in _TESSELLATED or kind == "taperedCylinder":
             return Shape("mesh", world)  # the caller makes the exact shape
         if kind == "mesh" and self.get(prim, C.A_MESH_POINTS) is not None:
             data = sdl_mesh(self, prim)
@@ -486,6 +490,10 @@ class _Reader:
             return
         eye = world[:3, 3]
         angle = view_angle(focal, aperture)
+        if not 0.0 < angle < 180.0:  # a focal length so long (or film so small) that no angle is left
+            self.problem(prim, f"camera focal length {focal:g} and aperture {aperture:g} give no usable view "
+                               f"angle", "the scene framed instead")
+            return
         # The look-at point a unit in front of the eye, or further for an eye so far out that a unit step
         # would be lost to rounding (half the eye's distance: no overflow even at 1e308).
         far = float(np.max(np.abs(eye)))

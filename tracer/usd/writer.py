@@ -14,10 +14,11 @@ from typing import Optional, Union
 
 import numpy as np
 
+from .. import shapes
 from ..atomic import replacing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
-from ..geometry.tessellate import square_mesh, tapered_cylinder_mesh, torus_mesh
+from ..geometry.tessellate import tapered_cylinder_mesh
 from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
 from ..transforms import translation
 from . import common as C
@@ -246,10 +247,9 @@ class _Writer:
 
     @staticmethod
     def _generic_mesh(shape: Shape) -> MeshData:
-        if shape.kind == "square":
-            return square_mesh()
-        if shape.kind == "torus":
-            return torus_mesh()
+        entry = shapes.KINDS[shape.kind]
+        if entry.tessellate is not None:  # the parameterless kinds USD has no implicit prim for
+            return entry.function("tessellate")()
         if shape.kind == "taperedCylinder":
             return tapered_cylinder_mesh(shape.tapered_radius)
         if shape.mesh is None:

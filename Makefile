@@ -35,7 +35,9 @@ accuracy: setup
 # Benchmarks (bench/run.py): whole-process time against POV-Ray 3.7 at 1280x960 on 2 threads, scaling from
 # 10 to 10,000 spheres, and the C core against the NumPy path. Needs povray (apt-get install -y povray) and,
 # for the plot in docs/performance.png, matplotlib; results go to bench/results/results.json. bench/memory.py:
-# peak memory of 960x540 to 4K renders in full-frame buffers (bench/results/memory.json).
+# peak memory of 960x540 to 4K renders in full-frame buffers (bench/results/memory.json). bench/scale.py:
+# 1e4..1e6 triangles and 1e3..1e6 spheres against POV-Ray, time and peak memory, the read/build/trace/write
+# split and Embree's primary-ray rate (bench/results/scale.json, docs/performance-scale.png; tens of minutes).
 # Rendering on a Dask cluster (bench/cluster.py): the 4K glass.sdl table of docs/distributed.md, plain local
 # against --scheduler local:1 and local:2, and the per-tile overhead (bench/results/distributed.json).
 .PHONY: bench-cluster
@@ -46,6 +48,7 @@ bench-cluster: setup
 bench: setup
 	$(PY) bench/run.py
 	$(PY) bench/memory.py
+	$(PY) bench/scale.py
 
 # The Blender extension zips in dist/: linux-x64 and windows-x64 with the C core prebuilt (Windows
 # cross-compiled with mingw-w64 and smoke-tested under Wine when installed), one for other platforms

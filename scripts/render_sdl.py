@@ -1,12 +1,13 @@
 """Render an SDL file headless with the add-on's SDL_RAYTRACER engine, in Blender or in the bpy module.
 
-    blender -b --factory-startup --python scripts/render_sdl.py -- SCENE.sdl OUT.png [WIDTH HEIGHT]
-    .venv/bin/python scripts/render_sdl.py SCENE.sdl OUT.png [WIDTH HEIGHT]
+    blender -b --factory-startup --python scripts/render_sdl.py -- SCENE.sdl OUT.png [WIDTH HEIGHT] [--lenient]
+    .venv/bin/python scripts/render_sdl.py SCENE.sdl OUT.png [WIDTH HEIGHT] [--lenient]
 
 Uses the add-on when it is installed and enabled, else registers the checkout's ``addon`` package.  The
-scene is imported into an empty file, rendered at WIDTH x HEIGHT (default 640 x 480) with the colour
+scene is imported strictly (any problem in the file stops it, as in ``python -m tracer render``; with
+``--lenient`` what can be read is imported and the problems are printed as warnings) into an empty file, rendered at WIDTH x HEIGHT (default 640 x 480) with the colour
 management the importer sets (View Transform Raw: the tracer's PNG, see docs/blender.md) and written to
-OUT.  Problems are one line and exit 2.
+OUT, whose folder must exist.  Problems are one line and exit 2.
 """
 from __future__ import annotations
 
@@ -35,24 +36,54 @@ def _ensure_addon():
     return None
 
 
+def _size(args: list[str]) -> tuple[int, int]:
+    """WIDTH and HEIGHT as whole numbers of pixels, at least 1 each (Blender would raise 0 to 4 silently)."""
+    if len(args) == 2:
+        return 640, 480
+    try:
+        width, height = int(args[2]), int(args[3])
+    except ValueError:
+        raise ValueError(f"size {args[2]} {args[3]}: WIDTH and HEIGHT must be whole numbers") from None
+    if width < 1 or height < 1:
+        raise ValueError(f"size {width} {height}: WIDTH and HEIGHT must be at least 1")
+    return width, height
+
+
+def _operator_problem(err: RuntimeError, scene_path: Path) -> str:
+    """An operator's reported error as the CLI words it: the parser's "FILE:LINE:COL: what" when there is one."""
+    problem = str(err).strip().splitlines()[-1].removeprefix("Error: ")
+    problem = problem.removeprefix(f"Cannot import {scene_path.name}: ")
+    return problem if problem.startswith(str(scene_path)) else f"{scene_path}: {problem}"
+
+
 def main() -> int:
     args = _arguments()
+    lenient = "--lenient" in args
+    args = [arg for arg in args if arg != "--lenient"]
     if len(args) not in (2, 4):
-        print(__doc__.strip().splitlines()[2].strip(), file=sys.stderr)
+        print("error: usage: " + __doc__.strip().splitlines()[2].strip(), file=sys.stderr)
         return 2
     scene_path, out = Path(args[0]).resolve(), Path(args[1]).resolve()
-    width, height = (int(args[2]), int(args[3])) if len(args) == 4 else (640, 480)
+    try:
+        width, height = _size(args)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     if not scene_path.is_file():
         print(f"error: {scene_path}: no such file", file=sys.stderr)
+        return 2
+    if not out.parent.is_dir():  # as the CLI: a typo in the folder is not silently made into a new folder
+        print(f"error: {out}: folder '{out.parent}' does not exist", file=sys.stderr)
         return 2
     bpy.ops.wm.read_homefile(use_empty=True)  # an empty scene; preferences (and enabled add-ons) kept
     try:
         registered = _ensure_addon()
     except ImportError as err:  # e.g. Debian's blender without python3-numpy
-        print(f"error: the add-on cannot load in this Python: {err}", file=sys.stderr)
+        hint = " (on Debian/Ubuntu: apt-get install python3-numpy)" if "numpy" in str(err) else ""
+        print(f"error: the add-on cannot load in this Python: {err}{hint}", file=sys.stderr)
         return 2
     try:
-        if bpy.ops.import_scene.sdl(filepath=str(scene_path)) != {"FINISHED"}:
+        if bpy.ops.import_scene.sdl(filepath=str(scene_path), strict=not lenient) != {"FINISHED"}:
             print(f"error: {scene_path}: could not be imported", file=sys.stderr)
             return 2
         scene = bpy.context.scene
@@ -65,7 +96,7 @@ def main() -> int:
         seconds = time.perf_counter() - started  # F12 itself: the scene built, traced and shown
         bpy.data.images["Render Result"].save_render(str(out), scene=scene)
     except RuntimeError as err:  # an operator's reported error: Blender has printed it already
-        print(f"error: {scene_path}: {str(err).strip().splitlines()[-1]}", file=sys.stderr)
+        print(f"error: {_operator_problem(err, scene_path)}", file=sys.stderr)
         return 2
     finally:
         if registered is not None:

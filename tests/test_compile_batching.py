@@ -81,3 +81,14 @@ def test_quick_singularity_check_agrees_with_numpy():
             assert is_singular(m) == _numpy_is_singular(m), m
         quick += _clearly_invertible(m)
     assert quick >= 1900  # the quick answer is the one taken for ordinary transforms
+
+
+def test_batched_rounding_equals_the_per_primitive_one():
+    rng = np.random.default_rng(4)
+    objects = [shape(kind, _random_matrix(rng)) for kind in ["sphere", "cube", "torus", "cone"] * 50]
+    compiled = compile_scene(scene_of(*objects))
+    for prim in compiled.primitives:
+        assert prim.inverse_error is not None  # computed by compile_scene for all at once
+        alone = Primitive(prim.shape, prim.index, prim.material_id)
+        assert prim.rounding == pytest.approx(alone.rounding, rel=1e-6, abs=1e-18)
+        assert prim.generic_size == alone.generic_size

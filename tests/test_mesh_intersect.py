@@ -224,6 +224,36 @@ def test_bvh_layout(mesh_key):
     np.testing.assert_array_equal(mesh.tri_p0, corners[mesh.tri_order, 0])
 
 
+def _tree(mesh: TriangleMesh) -> dict:
+    names = ("node_lo", "node_hi", "node_left", "node_right", "node_first", "node_count", "node_axis", "tri_order")
+    return {name: getattr(mesh, name) for name in names}
+
+
+@pytest.mark.parametrize("shape", ["random", "duplicates", "grid", "icosphere"])
+@pytest.mark.parametrize("leaf_size, bins", [(1, 2), (2, 4), (8, 16), (4, 64)])
+def test_c_builder_builds_the_numpy_builders_tree(monkeypatch, shape, leaf_size, bins):
+    """bvh_build.h promises the reference builder's tree, node for node and bit for bit."""
+    native = pytest.importorskip("tracer.native")
+    if native.load_error is not None:
+        pytest.skip(f"no C core: {native.load_error}")
+    rng = np.random.default_rng(len(shape) * 100 + bins)
+    if shape == "icosphere":
+        data = icosphere(3)
+    else:
+        count = {"random": 700, "duplicates": 40, "grid": 400}[shape]
+        points = {"random": lambda: rng.normal(size=(count * 3, 3)),
+                  "duplicates": lambda: np.tile(rng.normal(size=(3, 3)), (count, 1)),
+                  "grid": lambda: rng.integers(0, 3, size=(count * 3, 3)).astype(float)}[shape]()
+        data = MeshData(points, np.zeros((0, 3)), [((3 * i, 3 * i + 1, 3 * i + 2), ()) for i in range(count)])
+    in_c = TriangleMesh(data, leaf_size=leaf_size, bins=bins)
+    monkeypatch.setattr(mesh_module, "_native_builder", lambda: None)
+    in_numpy = TriangleMesh(data, leaf_size=leaf_size, bins=bins)
+    a, b = _tree(in_c), _tree(in_numpy)
+    for name in a:
+        assert a[name].dtype == b[name].dtype and np.array_equal(a[name], b[name]), name
+    assert in_c.node_count.max() <= leaf_size
+
+
 # ----------------------------------------------------------------------------------------- against brute force
 
 

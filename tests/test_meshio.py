@@ -210,3 +210,87 @@ def test_missing_file_is_an_sdl_error(tmp_path):
     with pytest.raises(SDLError) as info:
         read_3vn(tmp_path / "nope.3vn")
     assert "nope.3vn" in str(info.value)
+
+
+# ---------------------------------------------------------------- the bulk reader against the word reader
+
+from tracer import meshio  # noqa: E402
+
+number_words = st.one_of(
+    st.integers(-10**6, 10**6).map(str),
+    st.floats(allow_nan=False, allow_infinity=False, width=64).map(repr),
+    st.floats(allow_nan=False, allow_infinity=False, width=64).map(lambda x: f"{x:.17e}"),
+    st.floats(-1e3, 1e3).map(lambda x: f"{x:.3f}"),
+    st.sampled_from(["0", "-0", "+5", ".5", "5.", "-.25e-3", "1E+2", "00012", "0.000", "123456789012345678901234",
+                     "1e-400", "4.9e-324", "9007199254740993", "0.1000000000000000055511151231257827"]),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(number_words, min_size=1, max_size=40), st.lists(st.sampled_from([" ", "\n", "\t", "\r\n", "  \x0b"]),
+                                                                   min_size=40, max_size=40))
+def test_bulk_numbers_are_pythons_floats(words, gaps):
+    text = "".join(w + g for w, g in zip(words, gaps))
+    values = meshio._bulk_numbers(text.encode())
+    assert values is not None
+    assert [v.hex() for v in values.tolist()] == [float(w).hex() for w in words]
+
+
+@pytest.mark.parametrize("word", ["1e", "--1", "1.2.3", "e5", ".", "-", "+", "1e999", "nan", "inf", "0x10", "1-2",
+                                  "3,5", "1e+", "\u00a05".encode("utf-8").decode("latin-1")])
+def test_bulk_numbers_refuse_what_is_not_a_number(word):
+    assert meshio._bulk_numbers(f"1 2 {word} 4\n".encode("latin-1")) is None
+
+
+def test_numpy_scanner_agrees_with_the_c_one(monkeypatch):
+    text = b"3 -0 .5 5. +7 1E+2 -.25e-3 0.1 123456789012345678901234 1e-400\n"
+    expected = meshio._bulk_numbers(text)
+    import tracer.native as native
+    monkeypatch.setattr(native, "load_error", "pretend there is no C core")
+    assert np.array_equal(meshio._bulk_numbers(text), expected)
+    for bad in (b"1 2 1e 3", b"1 --2", b"1 1.2.3", b"1 nan", b"1 1e999"):
+        assert meshio._bulk_numbers(bad) is None
+
+
+def _read_both(path):
+    """The bulk reader's mesh and the word reader's, for the same file."""
+    fast = meshio._read_in_bulk(path.read_bytes(), str(path))
+    slow = meshio._read_words(path.read_text(), str(path))
+    return fast, slow
+
+
+def test_bulk_reader_gives_the_word_readers_mesh(tmp_path):
+    for text in (PYRAMID, PYRAMID.replace("\n", " "), "3 1 1\n0 0 0 1 0 0 0 1 0\n0 0 1\n3 0 1 2 0 0 0\n",
+                 "0 0 0\n"):
+        fast, slow = _read_both(write(tmp_path, text))
+        assert fast is not None
+        assert np.array_equal(fast.vertices, slow.vertices) and np.array_equal(fast.normals, slow.normals)
+        assert list(fast.faces) == slow.faces
+        for a, b in zip(fast.triangles(), slow.triangles()):
+            assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("text", [
+    PYRAMID.replace("3 0 1 4 1 1 1", "3 0 1 9 1 1 1"),  # vertex index out of range
+    PYRAMID.replace("3 0 1 4 1 1 1", "2 0 1 1 1"),  # a face of two corners
+    PYRAMID.replace("3 0 1 4 1 1 1", "3 0 1.5 4 1 1 1"),  # an index that is not whole
+    PYRAMID + "7\n",  # data after the last face
+    PYRAMID.replace("5 5 5", "5 5 6"),  # a face missing
+    PYRAMID.replace("5 5 5", "5 5 5.5"),
+])
+def test_bulk_reader_leaves_bad_files_to_the_word_reader(tmp_path, text):
+    path = write(tmp_path, text)
+    assert meshio._read_in_bulk(path.read_bytes(), str(path)) is None
+    with pytest.raises(SDLError) as err:
+        read_3vn(path)
+    assert str(path) in str(err.value)
+
+
+def test_a_byte_order_mark_is_dropped_and_errors_still_name_the_line(tmp_path):
+    path = tmp_path / "bom.3vn"
+    path.write_bytes(b"\xef\xbb\xbf" + PYRAMID.encode())
+    assert len(read_3vn(path).faces) == 5
+    path.write_bytes(b"\xef\xbb\xbf" + PYRAMID.replace("0 0 1\n", "0 0 x\n", 1).encode())
+    with pytest.raises(SDLError) as err:
+        read_3vn(path)
+    assert ":6" in str(err.value)

@@ -1,6 +1,8 @@
 
+import math
+
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
 from tracer.sdl.lexer import Token, is_number, to_float, tokenize
 
@@ -84,3 +86,15 @@ def test_what_float_takes_but_sdl_does_not(text):
     """Python's float() reads these (white space, other scripts' digits, underscores); SDL does not."""
     assert float(text) == float(text)
     assert to_float(text) is None
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.one_of(st.text(alphabet="0123456789.eE+-_ x", max_size=8),
+                 st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                 st.text(max_size=6)))
+def test_to_float_takes_exactly_the_number_pattern(text):
+    from tracer.sdl.lexer import NUMBER_RE
+    expected = float(text) if NUMBER_RE.fullmatch(text) else None
+    if expected is not None and not math.isfinite(expected):
+        expected = None
+    assert to_float(text) == expected

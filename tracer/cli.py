@@ -17,6 +17,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .bulk import one_blas_thread
 from .errors import RenderCancelled, TracerError, warnings_as_lines
 from .model import MAX_RECURSION_DEPTH, traced_depth
 from .reporting import error_message
@@ -413,7 +414,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr):
+        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
+                one_blas_thread():
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)

@@ -7,20 +7,25 @@ kind, textures) is what lets the tracer do no work at all for the others: the sh
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import hashlib
+import os
+import weakref
+from dataclasses import astuple, dataclass, field
 from functools import cached_property
+from operator import attrgetter
 from typing import Callable, Optional, Union
 
 import numpy as np
 
 from . import numerics, shapes
+from .bulk import collector_paused, one_blas_thread
 from .errors import TracerError
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, POLYHEDRON_KINDS, Material, Scene, SceneObject, Shape, TORUS_TUBE_RADIUS,
-                    iter_shapes)
+from .model import (CSG, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
+                    TORUS_TUBE_RADIUS, iter_shapes)
 from .transforms import transform_points
 
 
@@ -100,17 +105,23 @@ def _sphere_around(world: np.ndarray):
     return center, float(np.linalg.norm(hi - lo) * 0.5) * (1 + 1e-9)
 
 
-def _batched_inverses(shapes: list[Shape]) -> Optional[np.ndarray]:
-    """The inverses of all the shapes' matrices from one (N, 4, 4) np.linalg.inv call, which gives each
-    matrix the same LAPACK solve as a call of its own.  None if any matrix would
-    fail _checked_inverse's checks (or is not a float64 4x4): then each shape is checked on its own, in
-    order, so that the error names the first bad shape exactly as before."""
-    if not shapes:
-        return np.zeros((0, 4, 4))
+def _stacked_matrices(shapes: list[Shape]) -> Optional[np.ndarray]:
+    """The shapes' matrices as one (N, 4, 4) array, or None if any is not a float64 4x4 array."""
     matrices = [s.matrix for s in shapes]
     if not all(isinstance(m, np.ndarray) and m.dtype == np.float64 and m.shape == (4, 4) for m in matrices):
         return None
-    stack = np.stack(matrices)
+    return np.stack(matrices) if matrices else np.zeros((0, 4, 4))
+
+
+def _batched_inverses(stack: Optional[np.ndarray]) -> Optional[np.ndarray]:
+    """The inverses of all the shapes' matrices (``stack``, see _stacked_matrices) from one (N, 4, 4)
+    np.linalg.inv call, which gives each matrix the same LAPACK solve as a call of its own.  None if any
+    matrix would fail _checked_inverse's checks (or is not a float64 4x4): then each shape is checked on its
+    own, in order, so that the error names the first bad shape exactly as before."""
+    if stack is None:
+        return None
+    if not len(stack):
+        return np.zeros((0, 4, 4))
     if not (np.isfinite(stack).all() and (stack[:, 3] == (0, 0, 0, 1)).all()):
         return None
     try:
@@ -120,28 +131,41 @@ def _batched_inverses(shapes: list[Shape]) -> Optional[np.ndarray]:
     return inverses if np.isfinite(inverses).all() else None
 
 
-def _batched_bounds(shapes: list[Shape]) -> list[Optional[tuple]]:
+def _batched_bounds(shapes: list[Shape], stack: np.ndarray) -> list[Optional[tuple]]:
     """Bounding spheres of the closed-form shapes (None for the others), their corners carried to the world
-    by one stacked matrix product: what transform_points computes, to rounding in the last place (which
-    the radius's 1e-9 padding covers)."""
+    by one stacked matrix product: what transform_points and _sphere_around compute, to rounding in the
+    last place (which the radius's 1e-9 padding covers)."""
     out: list[Optional[tuple]] = [None] * len(shapes)
-    rows, points = [], []
+    # Shapes whose generic points are one shared constant go in one group per constant (no per-shape copy
+    # of the points); the others (tapered cylinders) in one group of their own points.
+    groups: dict[int, tuple[np.ndarray, list[int]]] = {}
+    varied_rows, varied_points = [], []
     for i, s in enumerate(shapes):
+        pts = _BOX_CORNERS.get(s.kind)
+        if pts is not None:
+            groups.setdefault(id(pts), (pts, []))[1].append(i)
+            continue
         pts = _analytic_generic_points(s)
-        if pts is not None and isinstance(s.matrix, np.ndarray) and s.matrix.dtype == np.float64:
-            rows.append(i)
-            points.append(pts)
-    if not rows:
-        return out
-    m = np.stack([shapes[i].matrix for i in rows])
-    world = np.stack(points) @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
-    lo, hi = world.min(axis=1), world.max(axis=1)
-    center = 0.5 * (lo + hi)
-    extent = hi - lo
-    for k, i in enumerate(rows):
-        # np.linalg.norm row by row: a vectorised norm may sum in another order.
-        out[i] = (center[k], float(np.linalg.norm(extent[k]) * 0.5) * (1 + 1e-9))
+        if pts is not None:
+            varied_rows.append(i)
+            varied_points.append(pts)
+    batches = list(groups.values())
+    if varied_rows:
+        batches.append((np.stack(varied_points), varied_rows))
+    for pts, rows in batches:
+        m = stack[rows]
+        world = pts @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
+        lo, hi = world.min(axis=1), world.max(axis=1)
+        centers = list(0.5 * (lo + hi))
+        extent = hi - lo
+        radius = (np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)).tolist()
+        for i, center, r in zip(rows, centers, radius):
+            out[i] = (center, r)
     return out
+
+
+#: Primitive.generic_size of the kinds where it is a constant (compile_scene stores it for them).
+_FIXED_GENERIC_SIZE = {"sphere": 1.0, "cube": 1.0, "square": 1.0, "plane": 1.0, "torus": 1.0 + TORUS_TUBE_RADIUS}
 
 
 class Primitive:
@@ -174,12 +198,11 @@ class Primitive:
             from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in ("teapot", "mesh"):
-            from .intersect.mesh import TriangleMesh
-            # Instances of one mesh (the same MeshData) share one BVH.
+            # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
             cache = {} if mesh_cache is None else mesh_cache
             key = id(shape.mesh)
             if key not in cache:
-                cache[key] = (shape.mesh, TriangleMesh(shape.mesh))
+                cache[key] = (shape.mesh, shared_triangle_mesh(shape.mesh))
             self._mesh = cache[key][1]
         self.center, self.radius = self._world_bounding_sphere() if bounds is None else bounds
 
@@ -471,23 +494,145 @@ def live_effects(scene: Scene) -> frozenset[str]:
     return frozenset(effects)
 
 
+#: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same
+#: .3vn in a thousand shapes, or in a scene compiled again, is built once.
+_TRIANGLE_MESHES: "weakref.WeakValueDictionary[tuple, object]" = weakref.WeakValueDictionary()
+
+
+def mesh_digest(mesh: MeshData) -> bytes:
+    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from)."""
+    h = hashlib.blake2b(digest_size=20)
+    for array in (mesh.vertices, mesh.normals):
+        array = np.ascontiguousarray(array, dtype=np.float64)
+        h.update(repr(array.shape).encode())
+        h.update(array.tobytes())
+    faces = mesh.faces
+    if isinstance(faces, FaceList):
+        h.update(b"packed")
+        for array in (faces.sizes, faces.vertex_index, faces.normal_index):
+            h.update(b"-" if array is None else np.ascontiguousarray(array, dtype=np.int64).tobytes())
+    else:
+        h.update(b"list")
+        h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
+    return h.digest()
+
+
+def shared_triangle_mesh(mesh: MeshData):
+    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after."""
+    from .intersect import mesh as mesh_module
+
+    key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
+    built = _TRIANGLE_MESHES.get(key)
+    if built is None:
+        built = mesh_module.TriangleMesh(mesh)
+        _TRIANGLE_MESHES[key] = built
+    return built
+
+
+def content_key(scene: Scene) -> tuple:
+    """Everything compile_scene reads from a scene, in a form that compares quickly (see _content)."""
+    return _content(scene)[0]
+
+
+def _content(scene: Scene) -> tuple:
+    """Everything compile_scene reads from a scene, in a form that compares quickly: two scenes (or one
+    scene at two times) with equal keys compile to the same thing.
+
+    Objects are compared by identity *and* by what compile_scene reads from them (kind, material, taper,
+    matrix, mesh content; a boolean's operation and operands), so replacing, reordering or editing any of
+    them, even a matrix changed in place, gives another key.  Pixmap files count with their size and
+    modification time.  The key holds no object: ids stay meaningful because the cached entry keeps the
+    objects alive (see compile_scene).  Returns (key, nodes, shapes, matrices): the nodes to keep alive, and
+    the shapes in iter_shapes order with their stacked matrices, for _compile."""
+    nodes, shapes, structure = [], [], []
+    todo = list(reversed(scene.objects))
+    while todo:
+        node = todo.pop()
+        nodes.append(node)
+        if isinstance(node, CSG):
+            structure.append((node.op, id(node.left), id(node.right)))
+            todo += (node.right, node.left)
+        else:
+            shapes.append(node)
+    stack = _stacked_matrices(shapes)
+    matrices = hashlib.blake2b(digest_size=20)
+    if stack is not None:
+        matrices.update(stack.tobytes())
+    else:  # (a matrix that is not a float64 4x4: compiling will say which)
+        matrices.update(repr([np.asarray(s.matrix).tolist() for s in shapes]).encode())
+    meshes = {id(s.mesh): s.mesh for s in shapes if s.mesh is not None}
+    pixmaps = []
+    for number, path in sorted(scene.pixmaps.items()):
+        try:
+            stat = os.stat(path)
+            pixmaps.append((number, str(path), stat.st_size, stat.st_mtime_ns))
+        except (OSError, ValueError):  # (a missing file, a name with a NUL: compiling reports it)
+            pixmaps.append((number, str(path), None, None))
+    fields = (tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius"))
+    return (tuple(map(id, nodes)), tuple(structure), *fields, tuple(id(s.mesh) for s in shapes),
+            tuple((k, mesh_digest(m)) for k, m in meshes.items()),
+            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps),
+            numerics.TOLERANCES), \
+        nodes, shapes, stack
+
+
 def compile_scene(scene: Scene) -> CompiledScene:
+    """The scene ready to trace.  Compiled once: the result is kept on the scene with its content_key, and
+    returned again for as long as the scene's content has not changed."""
+    with one_blas_thread(), collector_paused():
+        key, nodes, shapes, stack = _content(scene)
+        holder = getattr(scene, _CACHE_ATTRIBUTE, None)
+        cached = holder.entry if isinstance(holder, _CompiledHolder) else None
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        compiled = _compile(scene, shapes, stack)
+    # (the nodes are kept so that the ids in the key cannot be reused by new objects while it is cached)
+    setattr(scene, _CACHE_ATTRIBUTE, _CompiledHolder((key, compiled, nodes)))
+    return compiled
+
+
+#: Where compile_scene keeps its result on the Scene (not a dataclass field: replace() of a scene does not
+#: carry it, and it never takes part in comparisons).
+_CACHE_ATTRIBUTE = "_compiled_cache"
+
+
+class _CompiledHolder:
+    """compile_scene's entry on a scene, left behind when the scene is copied or pickled: a copy compiles
+    anew, and a pickled scene (sent to a Dask worker) must not drag the C core's pointers along."""
+
+    __slots__ = ("entry",)
+
+    def __init__(self, entry=None):
+        self.entry = entry
+
+    def __reduce__(self):
+        return _CompiledHolder, ()
+
+
+def _compile(scene: Scene, shapes: Optional[list[Shape]] = None, stack: Optional[np.ndarray] = None) -> CompiledScene:
+    """Compile ``scene``; ``shapes`` (in iter_shapes order) and their ``stack`` of matrices may be passed
+    in when the caller has them already (compile_scene's content key does)."""
     primitives: list[Primitive] = []
     material_ids: dict[Material, int] = {}
     mesh_cache: dict = {}
     # Inverses and bounding spheres for all shapes at once (iter_shapes visits them in the order
     # _compile_object numbers them): a scene of 10,000 spheres would otherwise spend most of its compile time
     # in 10,000 small NumPy calls of each kind.
-    shapes = [s for obj in scene.objects for s in iter_shapes(obj)]
-    inverses = _batched_inverses(shapes)
+    if shapes is None:
+        shapes = [s for obj in scene.objects for s in iter_shapes(obj)]
+        stack = _stacked_matrices(shapes)
+    inverses = _batched_inverses(stack)
     # Only with every matrix checked (finite, affine, invertible): otherwise the shapes are compiled one by
     # one as before, and the first bad one raises.
-    bounds = _batched_bounds(shapes) if inverses is not None else None
+    bounds = _batched_bounds(shapes, stack) if inverses is not None else None
     objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
     if inverses is not None and primitives:
-        errors = numerics.inverse_rounding(inverses, np.stack([s.matrix for s in shapes]).astype(np.float64))
+        errors = numerics.inverse_rounding(inverses, stack)
         for prim, error in zip(primitives, errors.tolist()):
             prim.inverse_error = error
+            size = _FIXED_GENERIC_SIZE.get(prim.kind)
+            if size is not None:  # (what generic_size gives these kinds, without its cached property's lock)
+                prim.__dict__["generic_size"] = size
     table = MaterialTable(list(material_ids) or [Material()])
     lights = scene.lights
     effects = live_effects(scene)

@@ -8,18 +8,122 @@ only keeps line numbers for its messages.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
-from typing import Iterator, Union
+from typing import Iterator, Optional, Union
 
 import numpy as np
 
 from .atomic import replacing
 from .errors import SDLError, WriteError
-from .model import MeshData
+from .model import FaceList, MeshData
 from .sdl.lexer import to_float
-from .userfiles import read_text
+from .userfiles import open_regular
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+
+def read_3vn(path: PathLike) -> MeshData:
+    """Read a ``.3vn`` file.  Any problem in its content raises SDLError naming the file and line.
+
+    The numbers are read in bulk (see :func:`_read_in_bulk`); only when that finds something wrong does
+    the word-by-word reader re-read the file, to name the problem and where it is."""
+    name = os.fspath(path)
+    try:
+        with open_regular(path, "mesh file") as handle:
+            data = handle.read()
+    except OSError as exc:
+        raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
+    mesh = _read_in_bulk(data, name)
+    if mesh is not None:
+        return mesh
+    # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number (as
+    # userfiles.read_text decodes: a byte-order mark dropped).
+    return _read_words(data.decode("utf-8-sig", errors="replace"), name)
+
+
+#: Counts beyond this are certainly corrupt, and would exhaust memory before the check.
+_BIG = 2**31 - 1
+
+
+def _read_in_bulk(data: bytes, name: str) -> Optional[MeshData]:
+    """The mesh, if the file is a well-formed ``.3vn`` of plain decimal numbers; None for anything else
+    (which :func:`_read_words` then reports).  All of a file's numbers are read at once into one array and
+    cut into vertices, normals and faces with array operations: no Python object per number."""
+    values = _bulk_numbers(data)
+    if values is None or len(values) < 3:
+        return None
+    head = values[:3]
+    if not (np.all(head == np.trunc(head)) and np.all(head >= 0) and np.all(head <= _BIG)):
+        return None
+    num_verts, num_norms, num_faces = (int(x) for x in head)
+    body = 3 + 3 * (num_verts + num_norms)
+    if len(values) < body + 7 * num_faces:
+        return None
+    vertices = values[3:3 + 3 * num_verts].reshape(num_verts, 3).copy()
+    normals = values[3 + 3 * num_verts:body].reshape(num_norms, 3).copy()
+    faces = _bulk_faces(values[body:], num_faces, num_verts, num_norms)
+    if faces is None:
+        return None
+    return MeshData(vertices=vertices, normals=normals, faces=faces, origin=name)
+
+
+def _bulk_faces(words: np.ndarray, num_faces: int, num_verts: int, num_norms: int) -> Optional[FaceList]:
+    """The face records (n, n vertex indices, n normal indices; nothing after the last), or None if they
+    are not exactly that with whole numbers in range."""
+    if num_faces == 0:
+        return FaceList([], np.zeros(0, np.int32), np.zeros(0, np.int32)) if len(words) == 0 else None
+    first = words[0]
+    width = 1 + 2 * int(first) if first == int(first) and 3 <= first <= _BIG else 0
+    if width and len(words) == num_faces * width and np.all(words[::width] == first):
+        table = words.reshape(num_faces, width)  # every face has the same number of corners: one reshape
+        n = width // 2
+        sizes = np.full(num_faces, n, dtype=np.int64)
+        vertex_index, normal_index = table[:, 1:1 + n].ravel(), table[:, 1 + n:].ravel()
+    else:
+        sizes = np.empty(num_faces, dtype=np.int64)
+        starts = np.empty(num_faces, dtype=np.int64)
+        pos = 0
+        for f in range(num_faces):  # mixed polygons: each record's length depends on the one before
+            if pos >= len(words):
+                return None
+            n = words[pos]
+            if not (n == int(n) and 3 <= n and pos + 1 + 2 * n <= len(words)):
+                return None
+            sizes[f], starts[f] = n, pos + 1
+            pos += 1 + 2 * int(n)
+        if pos != len(words):
+            return None
+        corner = np.repeat(starts, sizes) + (np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes))
+        vertex_index, normal_index = words[corner], words[corner + np.repeat(sizes, sizes)]
+    for index, count in ((vertex_index, num_verts), (normal_index, num_norms)):
+        if not (np.all(index == np.trunc(index)) and np.all(index >= 0) and np.all(index < count)):
+            return None
+    return FaceList(sizes, vertex_index.astype(np.int32), normal_index.astype(np.int32))
+
+
+def _bulk_numbers(data: bytes) -> Optional[np.ndarray]:
+    """Every white-space separated number of the file, or None if it holds anything else (a word that
+    NUMBER_RE does not take, a non-finite value, a byte outside ASCII).  The C core's scanner when it is
+    built; else NumPy's, after checking that only number characters and white space occur, that it read to
+    the end without a complaint and as many numbers as there are words."""
+    try:
+        from . import native
+        if native.load_error is None:
+            return native.scan_numbers(data)
+    except ImportError:
+        pass
+    raw = np.frombuffer(data, dtype=np.uint8)
+    allowed = np.zeros(256, dtype=bool)
+    allowed[list(b"0123456789+-.eE \t\n\r\x0b\x0c")] = True
+    if not allowed[raw].all():
+        return None
+    space = ~allowed[raw] | (raw == 32) | ((raw >= 9) & (raw <= 13))
+    words = int(np.count_nonzero(~space[1:] & space[:-1])) + int(len(raw) > 0 and not space[0])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")  # at a malformed word NumPy warns and stops
+        values = np.fromstring(data, dtype=np.float64, sep=" ")
+    return values if not caught and len(values) == words and np.isfinite(values).all() else None
 
 
 class _Numbers:
@@ -70,16 +174,10 @@ class _Numbers:
         return iter(self.words[self.pos:])
 
 
-def read_3vn(path: PathLike) -> MeshData:
-    """Read a ``.3vn`` file.  Any problem in its content raises SDLError naming the file and line."""
-    name = os.fspath(path)
-    try:
-        # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number.
-        text = read_text(path, "mesh file")
-    except OSError as exc:
-        raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
+def _read_words(text: str, name: str) -> MeshData:
+    """The word-by-word reader: slow, and exact about where a problem is."""
     numbers = _Numbers(text, name)
-    big = 2**31 - 1  # counts beyond this are certainly corrupt, and would exhaust memory before the check
+    big = _BIG
     num_verts = numbers.integer("the vertex count", 0, big)
     num_norms = numbers.integer("the normal count", 0, big)
     num_faces = numbers.integer("the face count", 0, big)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Optional, Union
 
 import numpy as np
@@ -60,6 +61,67 @@ class Material:
     parameters: tuple[float, ...] = ()
 
 
+class FaceList(Sequence):
+    """Polygons kept as three flat arrays instead of a list of tuples (how big meshes are read: a million
+    faces as tuples would take ~300 MB and seconds to make).  It reads like the list: item k is
+    ``(vertex indices, normal indices)`` of face k, as tuples of ints.
+
+    ``sizes`` (F,) corners per face; ``vertex_index`` (sum of sizes,) every face's vertex indices, face
+    after face; ``normal_index`` the same for normals, or None when no face has normals.
+    """
+
+    def __init__(self, sizes, vertex_index, normal_index=None):
+        self.sizes = np.asarray(sizes, dtype=np.int64).reshape(-1)
+        self.vertex_index = np.asarray(vertex_index).reshape(-1)
+        self.normal_index = None if normal_index is None else np.asarray(normal_index).reshape(-1)
+        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]).astype(np.int64)
+        if self.offsets[-1] != len(self.vertex_index) or (
+                self.normal_index is not None and len(self.normal_index) != len(self.vertex_index)):
+            raise ValueError("face sizes do not match the number of indices")
+
+    def __len__(self) -> int:
+        return len(self.sizes)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        k = range(len(self))[k]  # negative indices, IndexError
+        a, b = int(self.offsets[k]), int(self.offsets[k + 1])
+        verts = tuple(self.vertex_index[a:b].tolist())
+        return verts, (() if self.normal_index is None else tuple(self.normal_index[a:b].tolist()))
+
+    def __iter__(self):
+        verts = self.vertex_index.tolist()
+        norms = None if self.normal_index is None else self.normal_index.tolist()
+        bounds = self.offsets.tolist()
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            yield tuple(verts[a:b]), (() if norms is None else tuple(norms[a:b]))
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, FaceList):
+            return (np.array_equal(self.sizes, other.sizes) and np.array_equal(self.vertex_index, other.vertex_index)
+                    and (self.normal_index is None) == (other.normal_index is None)
+                    and (self.normal_index is None or np.array_equal(self.normal_index, other.normal_index)))
+        try:
+            return len(self) == len(other) and all(a == tuple(map(tuple, b)) for a, b in zip(self, other))
+        except TypeError:
+            return NotImplemented
+
+    __hash__ = None
+
+    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """MeshData.triangles() for these faces, without a Python loop over them."""
+        fans = np.maximum(self.sizes - 2, 0)
+        face = np.repeat(np.arange(len(self.sizes)), fans)
+        k = np.arange(len(face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. size - 2 in each face
+        start = self.offsets[:-1][face]
+        corners = np.stack([start, start + k, start + k + 1], axis=1)
+        tri_v = self.vertex_index[corners].astype(np.int64)
+        tri_n = (np.full(tri_v.shape, -1, dtype=np.int64) if self.normal_index is None
+                 else self.normal_index[corners].astype(np.int64))
+        return tri_v.reshape(-1, 3), tri_n.reshape(-1, 3)
+
+
 @dataclass
 class MeshData:
     """A polygon mesh in generic coordinates.
@@ -70,12 +132,14 @@ class MeshData:
 
     vertices: np.ndarray  # (V, 3) float64
     normals: np.ndarray  # (N, 3) float64
-    faces: list[tuple[tuple[int, ...], tuple[int, ...]]]
+    faces: Union[list[tuple[tuple[int, ...], tuple[int, ...]]], FaceList]
     #: Where the data came from (a file path, or e.g. "built-in:icosahedron").
     origin: str = ""
 
     def triangles(self) -> tuple[np.ndarray, np.ndarray]:
         """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""
+        if isinstance(self.faces, FaceList):
+            return self.faces.triangles()
         tri_v: list[tuple[int, int, int]] = []
         tri_n: list[tuple[int, int, int]] = []
         for verts, norms in self.faces:

@@ -60,6 +60,9 @@ class ShapeKind:
     c_uv: Optional[str] = None
     #: Offered in the Blender add-on's Add menu (a mesh needs a file).
     addable: bool = True
+    #: Not in the book's SDL (docs/sdl.md, "SDL extensions"): the bundled scenes, which keep to the book,
+    #: need not use it; its own test renders it instead.
+    extension: bool = False
 
     def function(self, field: str) -> Callable:
         """The Python function a field names, imported from this tracer package (whatever it is called)."""
@@ -109,7 +112,7 @@ REGISTRY: tuple[ShapeKind, ...] = (
     ShapeKind("paraboloid", "PARABOLOID", box=((0.0, 0.0, 0.5), (1.0, 1.0, 0.5)),
               intersect="tracer.intersect.paraboloid:intersect_paraboloid", c_intersect="hits_paraboloid",
               uv=WALL_AND_DISCS_UV, c_uv="wall_and_discs_uv",
-              tessellate="tracer.intersect.paraboloid:paraboloid_mesh"),
+              tessellate="tracer.intersect.paraboloid:paraboloid_mesh", extension=True),
 )
 
 #: SDL keyword -> entry.

@@ -123,24 +123,34 @@ class TriangleMesh:
             raise SceneError(f"mesh {mesh.origin!r}: a face uses a normal index out of range")
         self.triangle_count = len(tri_v)
 
-        p = vertices[tri_v]  # (T, 3 corners, 3)
-        p0 = p[:, 0]
-        e1 = p[:, 1] - p0
-        e2 = p[:, 2] - p0
+        # One corner at a time ((T, 3) arrays, not one (T, 3, 3) gather), and each temporary dropped as soon
+        # as it is used: for a million triangles every (T, 3) array is 24 MB.
+        corners = [vertices[tri_v[:, k]] for k in range(3)]
+        p0 = corners[0]
+        e1 = corners[1] - p0
+        e2 = corners[2] - p0
         winding = np.cross(e1, e2)
 
         # Unit vertex normals per corner; triangles with any missing normal have none at all.
         has_normals = (tri_n >= 0).all(axis=1) if len(normals) else np.zeros(len(tri_v), dtype=bool)
-        corner_normals = np.zeros((len(tri_v), 3, 3))
-        if has_normals.any():
-            raw = normals[tri_n[has_normals]]
-            length = np.linalg.norm(raw, axis=-1, keepdims=True)
-            corner_normals[has_normals] = np.divide(raw, length, out=np.zeros_like(raw), where=length > 0)
+        if has_normals.all() and len(tri_v):
+            corner_normals = normals[tri_n]  # (T, 3, 3), made unit in place
+            _normalise_rows(corner_normals)
+        else:
+            corner_normals = np.zeros((len(tri_v), 3, 3))
+            if has_normals.any():
+                raw = normals[tri_n[has_normals]]
+                _normalise_rows(raw)
+                corner_normals[has_normals] = raw
+                del raw
+        del tri_n
         # Orientation: flip the winding where the file's normals, averaged, disagree with it.
         flip = np.einsum("ij,ij->i", corner_normals.sum(axis=1), winding) < 0
         geometric = np.where(flip[:, None], -winding, winding)
+        del winding
         length = np.linalg.norm(geometric, axis=1, keepdims=True)
         geometric = np.divide(geometric, length, out=np.zeros_like(geometric), where=length > 0)
+        del length
 
         # Kept in the original (MeshData.triangles()) order, for the hits' normals.
         self._geometric_normal = geometric
@@ -149,30 +159,46 @@ class TriangleMesh:
 
         # The mesh's size gives absolute scales for box padding and hit deduplication.
         if len(tri_v):
-            self.bounds = np.stack([p.reshape(-1, 3).min(axis=0), p.reshape(-1, 3).max(axis=0)])
+            self.bounds = np.stack([np.min([c.min(axis=0) for c in corners], axis=0),
+                                    np.max([c.max(axis=0) for c in corners], axis=0)])
         else:
             self.bounds = np.zeros((2, 3))
         self.extent = float(np.max(self.bounds[1] - self.bounds[0], initial=0.0)) or 1.0
         self._magnitude = float(np.max(np.abs(self.bounds), initial=0.0))
 
-        self._build_bvh(p.min(axis=1), p.max(axis=1), p.mean(axis=1), leaf_size, bins)
+        # Boxes and centroids of the triangles for the builder (the centroid is the corners' mean, summed
+        # in corner order as p.mean(axis=1) sums them).
+        centroid = corners[0] + corners[1]
+        centroid += corners[2]
+        centroid /= 3.0
+        self._build_bvh(np.minimum(np.minimum(corners[0], corners[1]), corners[2]),
+                        np.maximum(np.maximum(corners[0], corners[1]), corners[2]), centroid, leaf_size, bins)
+        del centroid
 
         order = self.tri_order
-        self.tri_p0 = np.ascontiguousarray(p0[order])
-        self.tri_e1 = np.ascontiguousarray(e1[order])
-        self.tri_e2 = np.ascontiguousarray(e2[order])
-        self.tri_flip = np.ascontiguousarray(flip[order])
         # Scales for the parallel test and the barycentric slack (see ROUNDING_FACTOR), leaf order.
+        radius = np.linalg.norm(corners[0], axis=1)
+        for c in corners[1:]:
+            np.maximum(radius, np.linalg.norm(c, axis=1), out=radius)
+        del corners
+        self._radius = radius[order]
+        del radius
+        self.tri_p0 = p0[order]
+        del p0
+        self.tri_e1 = e1[order]
+        del e1
+        self.tri_e2 = e2[order]
+        del e2
+        self.tri_flip = flip[order]
         e1_length = np.linalg.norm(self.tri_e1, axis=1)
         e2_length = np.linalg.norm(self.tri_e2, axis=1)
-        self._radius = np.linalg.norm(p, axis=2).max(axis=1)[order] if len(order) else np.zeros(0)
         self._edge_scale = e1_length * e2_length
         self._slack1 = e2_length + self._radius
         self._slack2 = e1_length + self._radius
         # Vertex ids after welding equal positions, to tell which triangles touch (for deduplication).
         if len(order):
             _, welded = np.unique(vertices, axis=0, return_inverse=True)
-            self._tri_welded = welded.reshape(-1)[tri_v][order]
+            self._tri_welded = welded.reshape(-1)[tri_v[order]]
         else:
             self._tri_welded = np.zeros((0, 3), dtype=np.int64)
 
@@ -180,7 +206,19 @@ class TriangleMesh:
 
     def _build_bvh(self, tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
                    leaf_size: int, bins: int) -> None:
-        """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids)."""
+        """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids): built by
+        the C core when it is there (the same tree, in a fraction of the time), else in NumPy."""
+        native = _native_builder() if 2 <= bins <= 64 and leaf_size >= 1 else None
+        if native is None:
+            self._build_bvh_numpy(tri_lo, tri_hi, centroid, leaf_size, bins)
+            return
+        tree = native(tri_lo, tri_hi, centroid, leaf_size, bins)
+        self._store_nodes(tree["lo"], tree["hi"], tree["left"], tree["right"], tree["first"], tree["count"],
+                          tree["axis"], tree["order"])
+
+    def _build_bvh_numpy(self, tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
+                         leaf_size: int, bins: int) -> None:
+        """The reference builder (bvh_build.h builds the same tree)."""
         t_count = len(tri_lo)
         order = np.arange(t_count, dtype=np.int64)
         lo, hi, left, right, first, count, axes = [], [], [], [], [], [], []
@@ -480,6 +518,22 @@ class TriangleMesh:
         with np.errstate(all="ignore"):
             smooth = smooth / length[:, None]
         return np.where(usable[:, None], smooth, geometric)
+
+
+def _normalise_rows(vectors: np.ndarray) -> None:
+    """Scale each vector (last axis) to unit length in place; vectors of length 0 become 0."""
+    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    np.divide(vectors, length, out=vectors, where=length > 0)
+    vectors[np.broadcast_to(~(length > 0), vectors.shape)] = 0.0
+
+
+def _native_builder():
+    """tracer.native.build_mesh_bvh when the C core is built, else None."""
+    try:
+        from .. import native
+    except ImportError:
+        return None
+    return native.build_mesh_bvh if native.load_error is None else None
 
 
 class _Rays:

@@ -83,6 +83,11 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
                                    _i32p, _i32p, _dp, _i8p]
     lib.rt_texture_colors.restype = ctypes.c_int
     lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
+    lib.rt_scan_numbers.restype = ctypes.c_int64
+    lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
+    lib.rt_build_mesh_bvh.restype = ctypes.c_int64
+    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, _i64p, _dp, _dp,
+                                      _i64p, _i64p, _i64p, _i64p, _i8p]
     lib.rt_desc_layout.restype = ctypes.c_int64
     lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
     lib.rt_contract_digest.restype = ctypes.c_char_p
@@ -153,6 +158,57 @@ def _ptr(array: np.ndarray, ctype):
     return array.ctypes.data_as(ctypes.POINTER(ctype))
 
 
+def scan_numbers(data: bytes) -> Optional[np.ndarray]:
+    """The values of the white-space separated decimal numbers in ``data`` (see scan.h), or None when it
+    holds anything else: a word that is not such a number, a byte outside ASCII.  Needs the C core."""
+    if _lib is None:
+        raise TracerError(f"the C core is not available: {load_error}")
+    bad = ctypes.c_int64(-1)
+    count = _lib.rt_scan_numbers(data, len(data), None, 0, ctypes.byref(bad))
+    if count < 0:
+        return None
+    values = np.empty(count, dtype=np.float64)
+    if _lib.rt_scan_numbers(data, len(data), _ptr(values, ctypes.c_double), count, ctypes.byref(bad)) != count:
+        return None
+    return values
+
+
+def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int) -> dict:
+    """The BVH of TriangleMesh's builder (the same arrays, see bvh_build.h), built in C.  Node boxes are
+    not padded.  Needs the C core."""
+    if _lib is None:
+        raise TracerError(f"the C core is not available: {load_error}")
+    boxes = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3) for a in (tri_lo, tri_hi, centroid)]
+    n = len(boxes[0])
+    room = max(2 * n - 1, 1)
+    out = dict(order=np.empty(n, np.int64), lo=np.empty((room, 3)), hi=np.empty((room, 3)),
+               left=np.empty(room, np.int64), right=np.empty(room, np.int64), first=np.empty(room, np.int64),
+               count=np.empty(room, np.int64), axis=np.empty(room, np.int8))
+    nodes = _lib.rt_build_mesh_bvh(n, *(_ptr(a, ctypes.c_double) for a in boxes), int(leaf_size), int(bins),
+                                   _ptr(out["order"], ctypes.c_int64), _ptr(out["lo"], ctypes.c_double),
+                                   _ptr(out["hi"], ctypes.c_double), *(_ptr(out[k], ctypes.c_int64) for k in
+                                                                       ("left", "right", "first", "count")),
+                                   _ptr(out["axis"], ctypes.c_int8))
+    if nodes < 0:
+        raise MemoryError("the C core ran out of memory building a mesh BVH")
+    return {k: (v if k == "order" else v[:nodes].copy()) for k, v in out.items()}
+
+
+def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
+    """The FlatScene of a compiled scene, made once per compiled scene and kept on it (a second render of
+    it flattens nothing), again only when the mesh constants it reads have changed.  (The tolerances it
+    passes on are the compiled scene's own: compile_scene compiles again when they change.)"""
+    from ..intersect import mesh as mesh_module
+
+    key = tuple(getattr(mesh_module, name, None) for name in flatten.MESH_CONSTANTS)
+    cached = getattr(compiled, "_flat_cache", None)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    flat = flatten.FlatScene(compiled)
+    compiled._flat_cache = (key, flat)
+    return flat
+
+
 try:
     _lib = _load()
 except (BuildError, OSError) as err:
@@ -181,7 +237,7 @@ class NativeTracer:
         self.scene = compiled
         self.counts = RayCounts()
         self.threads = threads or default_threads()
-        self._flat = flatten.FlatScene(compiled)  # owns the arrays the C side points into
+        self._flat = _flat_scene(compiled)  # owns the arrays the C side points into
         message = ctypes.create_string_buffer(256)
         self._handle = _lib.rt_create(ctypes.byref(self._flat.desc), message, len(message))
         if not self._handle:

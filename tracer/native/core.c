@@ -23,6 +23,8 @@
 #include "shapes.h"
 #include "mesh.h"
 #include "csg.h"
+#include "scan.h"
+#include "bvh_build.h"
 
 #ifndef RT_SOURCE_HASH
 #define RT_SOURCE_HASH "unknown"

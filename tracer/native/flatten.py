@@ -329,4 +329,5 @@ class FlatScene:
         a["mesh_extent"] = [float(mesh.extent) for mesh in meshes]
         for name in MESH_TABLES:
             parts = [np.asarray(getattr(mesh, name)).reshape(-1) for mesh in meshes]
-            a[name] = np.concatenate(parts) if parts else ()
+            # (one mesh, the usual case, is passed as it is: a copy of a big mesh's tables is hundreds of MB)
+            a[name] = parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else ()

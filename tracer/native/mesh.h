@@ -31,6 +31,7 @@ typedef struct {
 
 typedef struct {
     double o[3], d[3], inv[3], speed, magnitude;
+    int finite_inv;  /* every 1 / d finite: no slab test can meet 0 * inf */
 } MeshRay;
 
 typedef struct {
@@ -48,6 +49,8 @@ static inline void mesh_ray(MeshRay *r, const double *o, const double *d)
     }
     r->speed = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     r->magnitude = sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2]);
+    r->finite_inv = isfinite(r->inv[0]) && isfinite(r->inv[1]) && isfinite(r->inv[2]) && isfinite(o[0]) &&
+                    isfinite(o[1]) && isfinite(o[2]);
 }
 
 /* np.minimum / np.maximum: NaN wins. */
@@ -55,10 +58,21 @@ static inline double nan_min(double a, double b) { return (isnan(a) || isnan(b))
 static inline double nan_max(double a, double b) { return (isnan(a) || isnan(b)) ? NAN : (a > b ? a : b); }
 
 /* The box [lo, hi] meets the ray for some t in [lower, upper]; a NaN slab (origin on a face plane of a
- * parallel ray) constrains nothing, as in TriangleMesh._slab. */
-static inline int slab_hit(const double *lo, const double *hi, const double *o, const double *inv, double lower,
-                           double upper)
+ * parallel ray) constrains nothing, as in TriangleMesh._slab.  A ray whose inverse direction (and origin)
+ * is finite cannot make a NaN (box corners are finite), and then plain min/max give the same answer. */
+static inline int slab_hit(const double *lo, const double *hi, const MeshRay *r, double lower, double upper)
 {
+    const double *o = r->o, *inv = r->inv;
+    if (r->finite_inv && !isnan(lower) && !isnan(upper)) {
+        double near = lower, far = upper;
+        for (int i = 0; i < 3; i++) {
+            double a = (lo[i] - o[i]) * inv[i], b = (hi[i] - o[i]) * inv[i];
+            double enter = a < b ? a : b, leave = a < b ? b : a;
+            near = enter > near ? enter : near;
+            far = leave < far ? leave : far;
+        }
+        return near <= far;
+    }
     double near = NAN, far = NAN;
     for (int i = 0; i < 3; i++) {
         double a = (lo[i] - o[i]) * inv[i], b = (hi[i] - o[i]) * inv[i];
@@ -82,6 +96,11 @@ static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, 
     double inv_det = 1.0 / det;
     double u = dot3(s, pvec) * inv_det;
     double v = dot3(r->d, qvec) * inv_det;
+    /* The slack below is at most barycentric_max (the cap), so a barycentric beyond twice that is a miss
+     * whatever the slack: rejected here before the slack's two divisions (most triangles of a leaf are). */
+    double reject = 2.0 * m->barycentric_max;
+    if (u < -reject || v < -reject || u + v > 1.0 + 2.0 * reject)
+        return 0;
     double tt = dot3(e2, qvec) * inv_det;
     /* The barycentric slack bounds the rounding of this ray and triangle (see ROUNDING_FACTOR in
      * mesh.py), capped for near-parallel rays. */
@@ -155,7 +174,7 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, r.o, r.inv, lower, best_t))
+        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, &r, lower, best_t))
             continue;
         if (m->count[node]) {
             int64_t first = m->first[node], last = first + m->count[node];
@@ -194,7 +213,7 @@ static int mesh_any(const MeshView *m, const double *o, const double *d, double 
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, r.o, r.inv, lower, upper))
+        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, &r, lower, upper))
             continue;
         if (m->count[node]) {
             int64_t first = m->first[node], last = first + m->count[node];
@@ -293,7 +312,7 @@ static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, r.o, r.inv, -INFINITY, INFINITY))
+        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, &r, -INFINITY, INFINITY))
             continue;
         if (m->count[node]) {
             int64_t first = m->first[node], last = first + m->count[node];

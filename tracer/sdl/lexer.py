@@ -47,9 +47,17 @@ def is_number(text: str) -> bool:
     return to_float(text) is not None
 
 
+#: The characters of NUMBER_RE.  A word made of these alone that float() takes is a NUMBER_RE match (float's
+#: grammar restricted to them is NUMBER_RE's), so to_float needs no regular expression.
+_NUMBER_CHARS = frozenset("0123456789.eE+-")
+
+
 def to_float(text: str) -> Optional[float]:
     """The value of a decimal number literal, or None if ``text`` is not one (or overflows to infinity)."""
-    if not NUMBER_RE.fullmatch(text):
+    if not _NUMBER_CHARS.issuperset(text):
         return None
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        return None
     return value if math.isfinite(value) else None

@@ -18,10 +18,8 @@ statement or shape.
 """
 from __future__ import annotations
 
-import contextlib
 import difflib
 import functools
-import gc
 import math
 import os
 from dataclasses import dataclass, field, replace
@@ -31,6 +29,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from .. import transforms
+from ..bulk import collector_paused
 from ..errors import SDLError
 from ..meshio import read_3vn
 from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, Camera, Light, Material,
@@ -724,26 +723,8 @@ def parse_sdl(text: str, base_dir: Optional[PathLike] = None, file: Optional[str
     """
     # Huge scales may overflow a transform to inf: the shape under it is reported as an error; NumPy's
     # overflow warning on the way would only repeat that.
-    with _collector_paused(), np.errstate(over="ignore", invalid="ignore"):
+    with collector_paused(), np.errstate(over="ignore", invalid="ignore"):
         return _Reader(text, base_dir, file, strict).read()
-
-
-@contextlib.contextmanager
-def _collector_paused():
-    """Python's cyclic garbage collector off while reading (and back as it was after).
-
-    Reading allocates a tuple per token and several objects per statement, few of them ever garbage, so the
-    collector's generation counters keep running over and it rescans the growing scene again and again: for
-    a file of 10,000 shapes that was about a third of the reading time.  Reference counting still frees
-    what is dropped; the few reference cycles made (the reader and its bound handlers) go at the next
-    collection after reading."""
-    was_enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was_enabled:
-            gc.enable()
 
 
 def load(path: PathLike, strict: bool = True) -> Scene:

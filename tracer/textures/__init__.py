@@ -32,7 +32,7 @@ def drop_unreadable_textures(scene) -> list[str]:
         problem = _texture_problem(scene, shapes, number)
         if problem is None and number > 0:
             try:
-                load_image(scene.pixmaps[number])
+                _load_for(scene, shapes, number)
             except TracerError as err:
                 problem = str(err)
         if problem:
@@ -62,6 +62,14 @@ def _texture_problem(scene, shapes, number: int) -> str | None:
     return None
 
 
+def _load_for(scene, shapes, number: int) -> np.ndarray:
+    """The picture of texture ``number``; an error names where the texture is used, then the image file."""
+    try:
+        return load_image(scene.pixmaps[number])
+    except TracerError as err:
+        raise TracerError(f"{_where_used(scene, shapes, number)}: {err}") from None
+
+
 class TextureSet:
     """The textures a compiled scene uses, with its images loaded once."""
 
@@ -77,7 +85,7 @@ class TextureSet:
             if number > 0:
                 path = scene.pixmaps[number]
                 if path not in loaded:
-                    loaded[path] = load_image(path)
+                    loaded[path] = _load_for(scene, shapes, number)
                 self.images[number] = loaded[path]
 
     def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:

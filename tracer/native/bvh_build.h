@@ -1,0 +1,165 @@
+/* Building a mesh's BVH in C: the same tree, node for node, as TriangleMesh._build_bvh_numpy in
+ * tracer/intersect/mesh.py (binned surface-area heuristic along the centroids' longest axis, stable
+ * partitions, nodes numbered in the same depth-first order), in O(n log n) with no Python per node.
+ *
+ * Every floating-point step is the NumPy code's, in its order (bucket = min(trunc((c - lo) * (bins /
+ * width)), bins - 1); half area = sx sy + sy sz + sz sx of the clamped sizes; cost = left area * left count
+ * + right area * right count; the first minimum wins), so the two builders agree exactly and the tests
+ * can compare their arrays. */
+#ifndef RT_BVH_BUILD_H
+#define RT_BVH_BUILD_H
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+#define BVH_MAX_BINS 64
+
+static double bvh_half_area(const double *lo, const double *hi)
+{
+    double s[3];
+    for (int k = 0; k < 3; k++) {
+        double size = hi[k] - lo[k];
+        size = size > 0.0 ? size : (size != size ? size : 0.0);  /* np.maximum(size, 0): NaN stays */
+        s[k] = isfinite(size) ? size : 0.0;
+    }
+    return s[0] * s[1] + s[1] * s[2] + s[2] * s[0];
+}
+
+static inline int64_t bvh_bucket(double c, double c_lo, double scale, int64_t bins)
+{
+    int64_t b = (int64_t)((c - c_lo) * scale);
+    return b < bins - 1 ? b : bins - 1;
+}
+
+/* Build over n triangles given by their boxes and centroids ((n, 3) each).  Writes order (n) and the node
+ * arrays, which must have room for 2 n - 1 nodes (at least 1), unpadded: the caller pads the boxes.
+ * Returns the number of nodes, or -1 when memory runs out or the arguments are out of range. */
+int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi, const double *centroid,
+                          int64_t leaf_size, int64_t bins, int64_t *order, double *node_lo, double *node_hi,
+                          int64_t *left, int64_t *right, int64_t *first, int64_t *count, int8_t *axis_out)
+{
+    if (n < 0 || leaf_size < 1 || bins < 2 || bins > BVH_MAX_BINS)
+        return -1;
+    for (int64_t i = 0; i < n; i++)
+        order[i] = i;
+    if (n == 0)
+        return 0;
+    int64_t *scratch = (int64_t *)malloc((size_t)n * sizeof(int64_t));
+    int64_t *stack = (int64_t *)malloc((size_t)(3 * (n + 1)) * sizeof(int64_t));
+    if (!scratch || !stack) {
+        free(scratch);
+        free(stack);
+        return -1;
+    }
+    int64_t nodes = 1, top = 0;
+    left[0] = right[0] = first[0] = count[0] = -1;
+    axis_out[0] = -1;
+    stack[top++] = 0, stack[top++] = 0, stack[top++] = n;
+    while (top) {
+        int64_t end = stack[--top], start = stack[--top], node = stack[--top];
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        double c_lo[3] = {INFINITY, INFINITY, INFINITY}, c_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (int64_t i = start; i < end; i++) {
+            int64_t t = order[i];
+            for (int k = 0; k < 3; k++) {
+                double a = tri_lo[3 * t + k], b = tri_hi[3 * t + k], c = centroid[3 * t + k];
+                lo[k] = a < lo[k] ? a : lo[k];
+                hi[k] = b > hi[k] ? b : hi[k];
+                c_lo[k] = c < c_lo[k] ? c : c_lo[k];
+                c_hi[k] = c > c_hi[k] ? c : c_hi[k];
+            }
+        }
+        for (int k = 0; k < 3; k++) {
+            node_lo[3 * node + k] = lo[k];
+            node_hi[3 * node + k] = hi[k];
+        }
+        int64_t size = end - start;
+        if (size <= leaf_size) {
+            first[node] = start;
+            count[node] = size;
+            continue;
+        }
+        int axis = 0;
+        for (int k = 1; k < 3; k++)
+            if (c_hi[k] - c_lo[k] > c_hi[axis] - c_lo[axis])
+                axis = k;
+        double width = c_hi[axis] - c_lo[axis];
+        double scale = (double)bins / width;
+        int64_t middle;
+        if (!(width > 0.0) || !isfinite(scale)) {
+            middle = start + size / 2;  /* all centroids in one place: halve the range */
+        } else {
+            double box_lo[BVH_MAX_BINS][3], box_hi[BVH_MAX_BINS][3];
+            int64_t in_bin[BVH_MAX_BINS] = {0};
+            for (int64_t b = 0; b < bins; b++)
+                for (int k = 0; k < 3; k++)
+                    box_lo[b][k] = INFINITY, box_hi[b][k] = -INFINITY;
+            for (int64_t i = start; i < end; i++) {
+                int64_t t = order[i], b = bvh_bucket(centroid[3 * t + axis], c_lo[axis], scale, bins);
+                in_bin[b]++;
+                for (int k = 0; k < 3; k++) {
+                    double a = tri_lo[3 * t + k], c = tri_hi[3 * t + k];
+                    box_lo[b][k] = a < box_lo[b][k] ? a : box_lo[b][k];
+                    box_hi[b][k] = c > box_hi[b][k] ? c : box_hi[b][k];
+                }
+            }
+            /* Candidate k splits after bucket k: areas of the prefix and suffix boxes. */
+            double right_area[BVH_MAX_BINS];
+            double acc_lo[3] = {INFINITY, INFINITY, INFINITY}, acc_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+            for (int64_t b = bins - 1; b >= 1; b--) {
+                for (int k = 0; k < 3; k++) {
+                    acc_lo[k] = box_lo[b][k] < acc_lo[k] ? box_lo[b][k] : acc_lo[k];
+                    acc_hi[k] = box_hi[b][k] > acc_hi[k] ? box_hi[b][k] : acc_hi[k];
+                }
+                right_area[b - 1] = bvh_half_area(acc_lo, acc_hi);
+            }
+            for (int k = 0; k < 3; k++)
+                acc_lo[k] = INFINITY, acc_hi[k] = -INFINITY;
+            int64_t best = -1, left_count = 0;
+            double best_cost = INFINITY;
+            for (int64_t b = 0; b + 1 < bins; b++) {
+                for (int k = 0; k < 3; k++) {
+                    acc_lo[k] = box_lo[b][k] < acc_lo[k] ? box_lo[b][k] : acc_lo[k];
+                    acc_hi[k] = box_hi[b][k] > acc_hi[k] ? box_hi[b][k] : acc_hi[k];
+                }
+                left_count += in_bin[b];
+                int64_t right_count = size - left_count;
+                double cost = (left_count == 0 || right_count == 0)
+                                  ? INFINITY
+                                  : bvh_half_area(acc_lo, acc_hi) * (double)left_count +
+                                        right_area[b] * (double)right_count;
+                if (best < 0 || cost < best_cost) {  /* np.argmin: the first minimum */
+                    best = b;
+                    best_cost = cost;
+                }
+            }
+            /* Stable partition: the left buckets keep their order at the front, the rest follows. */
+            int64_t kept = start, moved = 0;
+            for (int64_t i = start; i < end; i++) {
+                int64_t t = order[i];
+                if (bvh_bucket(centroid[3 * t + axis], c_lo[axis], scale, bins) <= best)
+                    order[kept++] = t;
+                else
+                    scratch[moved++] = t;
+            }
+            for (int64_t i = 0; i < moved; i++)
+                order[kept + i] = scratch[i];
+            middle = kept;
+        }
+        int64_t l = nodes++, r = nodes++;
+        left[l] = right[l] = first[l] = count[l] = left[r] = right[r] = first[r] = count[r] = -1;
+        axis_out[l] = axis_out[r] = -1;
+        left[node] = l;
+        right[node] = r;
+        axis_out[node] = (int8_t)axis;
+        count[node] = 0;
+        stack[top++] = r, stack[top++] = middle, stack[top++] = end;
+        stack[top++] = l, stack[top++] = start, stack[top++] = middle;
+    }
+    free(scratch);
+    free(stack);
+    return nodes;
+}
+
+#endif

@@ -316,3 +316,37 @@ def test_tls_scheduler_with_dasks_own_security_settings(tmp_path):
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+
+
+def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
+    """A terminal's Ctrl-C reaches every process of the group, the LocalCluster's workers too: the render must
+    still stop with its one line, no worker's traceback or log, no image and no process left behind."""
+    out = tmp_path / "big.png"
+    command = [sys.executable, "-m", "tracer", "render", str(SCENES / "glass.sdl"), "-o", str(out), "--width",
+               "3000", "--height", "2000", "--samples", "4", "--scheduler", "local:2", "-q"]
+    render = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              start_new_session=True)
+    try:
+        leader = psutil.Process(render.pid)
+        deadline = time.monotonic() + PROCESS_LIMIT
+        workers = []
+        while len(workers) < 2 and render.poll() is None and time.monotonic() < deadline:
+            workers = [p for p in leader.children(recursive=True)
+                       if "resource_tracker" not in " ".join(p.cmdline())]
+            time.sleep(0.2)
+        assert len(workers) >= 2, "the cluster's workers never started"
+        # Tiles reach the workers only once the cluster is up (a Ctrl-C while it starts is not seen): wait
+        # until one worker has spent more CPU than starting takes, i.e. it is tracing.
+        while max(sum(p.cpu_times()[:2]) for p in workers) < 4 and render.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.2)
+        os.killpg(render.pid, signal.SIGINT)
+        _, stderr = render.communicate(timeout=PROCESS_LIMIT)
+    finally:
+        if render.poll() is None:
+            os.killpg(render.pid, signal.SIGKILL)
+            render.wait()
+    assert render.returncode == 130, stderr
+    assert [line for line in stderr.splitlines() if line.strip()] == ["interrupted"], stderr
+    assert not out.exists()
+    assert not [p for p in workers if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]

@@ -24,8 +24,10 @@ import copy
 import dataclasses
 import functools
 import hashlib
+import logging
 import os
 import re
+import signal
 import tempfile
 import threading
 from dataclasses import dataclass, field
@@ -320,10 +322,14 @@ def connect(address: str) -> Iterator[object]:
         try:
             if workers is not None:
                 # No dashboard; the scheduler's HTTP endpoint on any free loopback port (not a warning
-                # when 8787 is taken by another cluster).
-                cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                   host="127.0.0.1", dashboard_address=None, silence_logs=40,
-                                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+                # when 8787 is taken by another cluster).  Dask's own logs stay quiet: what fails reaches the
+                # user as one line through the tasks, and closing after a Ctrl-C makes workers log, at ERROR,
+                # the heartbeats the closed scheduler no longer answers.
+                with _workers_deaf_to_interrupts():
+                    cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                       host="127.0.0.1", dashboard_address=None,
+                                                       silence_logs=logging.CRITICAL,
+                                                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
                 client = distributed.Client(cluster, timeout=timeout)
             else:
                 client = distributed.Client(address, timeout=timeout)
@@ -345,6 +351,27 @@ def connect(address: str) -> Iterator[object]:
             client.close()
             if cluster is not None:
                 cluster.close()
+
+
+#: Signals that a terminal sends to the whole process group (Ctrl-C) or that stop a job (SIGTERM).
+_SHIELDED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextlib.contextmanager
+def _workers_deaf_to_interrupts() -> Iterator[None]:
+    """Starts a LocalCluster's worker processes with Ctrl-C and SIGTERM ignored.
+
+    A terminal sends Ctrl-C to the whole process group: without this, every worker would print its own
+    KeyboardInterrupt traceback while this process stops the render with one line and closes the cluster
+    (which ends the workers).  An ignored disposition is what a spawned Python inherits and keeps (a handler
+    would be reset by exec, and blocking is undone by the event-loop thread that spawns the workers), so the
+    signals are ignored here while the cluster starts: a Ctrl-C in those few seconds is not seen."""
+    previous = {number: signal.signal(number, signal.SIG_IGN) for number in _SHIELDED_SIGNALS}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def local_threads(address: str) -> Optional[int]:

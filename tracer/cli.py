@@ -17,6 +17,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from . import sampling
 from .bulk import one_blas_thread
 from .errors import RenderCancelled, TracerError, warnings_as_lines
 from .model import MAX_RECURSION_DEPTH, traced_depth
@@ -51,8 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sampling", choices=("regular", "jittered", "adaptive"), default="jittered",
                    help="where the samples go: a regular grid, one random point per stratum, or jittered "
                         "samples only where neighbouring pixels differ (default jittered)")
-    r.add_argument("--threshold", type=float, default=0.05,
-                   help="adaptive sampling: colour difference between neighbours that triggers refinement")
+    r.add_argument("--threshold", type=float, default=sampling.DEFAULT_THRESHOLD,
+                   help="adaptive sampling: colour difference between neighbours that triggers refinement "
+                        f"(default {sampling.DEFAULT_THRESHOLD})")
     r.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto",
                    help="who does the per-ray work (default: the C core when it is built)")
     r.add_argument("--threads", type=int, default=None, metavar="N",

@@ -206,6 +206,7 @@ class _Macro:
 
 #: Statements a name comment does not reach past: it names a shape read directly after it, not one in a macro.
 _NAME_STOPS = frozenset(("def", "use", "{", "}"))
+_SHAPE_KEYWORDS = frozenset(SHAPE_KINDS)  # a set: looked up for every token between a name and its shape
 
 
 def _shape_names(tokens: list[Token], name_comments: list[tuple[int, str]]) -> dict[tuple[int, int], str]:
@@ -219,7 +220,7 @@ def _shape_names(tokens: list[Token], name_comments: list[tuple[int, str]]) -> d
         # By index, not a slice: a slice would copy the rest of the file for each of 10^5 named shapes.
         while index < len(tokens):
             token = tokens[index]
-            if token.text in SHAPE_KINDS:
+            if token.text in _SHAPE_KEYWORDS:
                 names[(token.line, token.column)] = name
                 break
             if token.text in _NAME_STOPS:

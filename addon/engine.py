@@ -1,7 +1,8 @@
 """The ``SDL_RAYTRACER`` render engine: final renders in blocks, and the viewport's Rendered mode.
 
 Final render: the depsgraph becomes a tracer scene (scene_build), rays come from Blender's camera exactly
-(raycam: lens, sensor size and fit, shift, pixel aspect, resolution %, border, orthographic), and the
+(raycam: lens, sensor size and fit, shift, pixel aspect, resolution %, border, orthographic), or, for
+a camera the importer made and nobody changed, from the SDL file's own camera as the tracer's are; the
 image is traced coarse to fine (blocks); after each finished tile the film goes to the render result
 (``update_result``), so the Image Editor shows it sharpening.  Esc is checked between chunks of rays, so
 it stops the render within a block.  Colours are the tracer's linear values, written as they are.
@@ -21,8 +22,9 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import blocks, deps, passes, raycam
-from .scene_build import SceneBuilder, matrix_np
+from . import blocks, convert, deps, passes, raycam
+from .importer import CAM_EXACT, CAM_SHOWN
+from .scene_build import SceneBuilder, flat, matrix_np
 
 ENGINE_ID = "SDL_RAYTRACER"
 #: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled.
@@ -60,6 +62,47 @@ def camera_params(cam_obj, matrix: Optional[np.ndarray] = None) -> raycam.Camera
         matrix=matrix, ortho=data.type == "ORTHO", lens=float(data.lens), sensor_width=float(data.sensor_width),
         sensor_height=float(data.sensor_height), sensor_fit=data.sensor_fit, ortho_scale=float(data.ortho_scale),
         shift_x=float(data.shift_x), shift_y=float(data.shift_y), clip_start=float(data.clip_start))
+
+
+def stored_sdl_camera(cam_obj, matrix: Optional[np.ndarray] = None):
+    """The SDL camera the importer made ``cam_obj`` from, as (eye, look, up, view angle) in Blender's axes,
+    while Blender still shows that camera as the import left it: its matrix (``matrix``, else its world
+    matrix), lens and sensor height equal the snapshot taken at import to float32 rounding, the sensor fit is
+    vertical and there is no shift.  None otherwise (an edited or a Blender-made camera)."""
+    if cam_obj.type != "CAMERA" or cam_obj.data.type != "PERSP":
+        return None
+    data = cam_obj.data
+    # Custom properties from the original: the evaluated copy holds them as of its last evaluation.
+    original = getattr(cam_obj, "original", cam_obj)
+    exact, shown = original.get(CAM_EXACT), original.get(CAM_SHOWN)
+    if exact is None or shown is None or data.sensor_fit != "VERTICAL" or data.shift_x or data.shift_y:
+        return None
+    now = flat(cam_obj.matrix_world if matrix is None else matrix) + [float(data.lens), float(data.sensor_height)]
+    if not convert.unchanged(now, list(shown)):
+        return None
+    values = [float(v) for v in exact]
+    return (np.array(values[0:3]), np.array(values[3:6]), np.array(values[6:9]), values[9])
+
+
+def camera_rays(cam_obj, matrix, params: raycam.CameraParams, winx: int, winy: int, x0: int, y0: int,
+                aspx: float, aspy: float):
+    """``rays_for(rows, cols, dy, dx)`` of a final render (rows and columns within the render border at
+    (x0, y0)).  A camera the importer made, still as it left it, traces the SDL file's own camera, as the
+    tracer does: Blender's float32 matrix and lens move rays by ~1e-7, enough to put a pixel whose centre
+    lies that close to an edge on the edge's other side.  Otherwise Blender's camera (raycam)."""
+    stored = stored_sdl_camera(cam_obj, matrix) if aspx == aspy else None
+    if stored is None:
+        def rays_for(rows, cols, dy=0.5, dx=0.5):
+            return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
+        return rays_for
+    camera = deps.module("camera")
+    frame = camera.CameraFrame.from_camera(deps.module("model").Camera(*stored), winx / winy)
+
+    def exact_rays_for(rows, cols, dy=0.5, dx=0.5):
+        directions = frame.directions(np.asarray(rows) + y0, np.asarray(cols) + x0, winy, winx, dy=dy, dx=dx)
+        # Start on the near clipping plane, as Blender draws nothing nearer (t = 1 is at distance 1).
+        return frame.eye + params.clip_start * directions, directions
+    return exact_rays_for
 
 
 def build_scene(depsgraph, mode: str):
@@ -212,8 +255,7 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             compiled = deps.module("compile").compile_scene(tracer_scene)
             aspx, aspy = render.pixel_aspect_x, render.pixel_aspect_y
 
-            def rays_for(rows, cols, dy=0.5, dx=0.5):
-                return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
+            rays_for = camera_rays(cam_obj, matrix, params, winx, winy, x0, y0, aspx, aspy)
 
             settings = render_settings(scene)
             if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once

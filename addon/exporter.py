@@ -14,8 +14,7 @@ from typing import Optional
 import numpy as np
 
 from . import convert, deps, raycam
-from .importer import CAM_EXACT, CAM_SHOWN
-from .engine import camera_params, render_size
+from .engine import camera_params, render_size, stored_sdl_camera
 from .scene_build import SceneBuilder, flat
 
 _UNWRITABLE = re.compile(r"[\s{}!]")
@@ -32,14 +31,9 @@ def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
     data = cam_obj.data
     if data.type != "PERSP":
         return None
-    # Custom properties from the original: the evaluated copy holds them as of its last evaluation.
-    original = getattr(cam_obj, "original", cam_obj)
-    exact, shown = original.get(CAM_EXACT), original.get(CAM_SHOWN)
-    now = flat(cam_obj.matrix_world) + [float(data.lens), float(data.sensor_height)]
-    if exact is not None and shown is not None and data.sensor_fit == "VERTICAL" and convert.unchanged(now, list(shown)):
-        values = [float(v) for v in exact]
-        eye, look, up = (np.array(values[i:i + 3]) for i in (0, 3, 6))
-        angle = values[9]
+    stored = stored_sdl_camera(cam_obj)
+    if stored is not None:
+        eye, look, up, angle = stored
     else:
         params = camera_params(cam_obj)
         eye, axes = params.frame()

@@ -79,6 +79,36 @@ def test_render_equals_the_tracers_own_render():
     assert np.all(image[..., 3] == 1.0)
 
 
+def test_an_imported_camera_traces_the_sdl_camera_until_it_is_edited():
+    """While the imported camera is as the import left it, F12 traces the tracer's own rays (not Blender's
+    float32 copy of the camera); once it is moved, Blender's camera."""
+    import_sdl(SCENES / "lecture.sdl")
+    scene = bpy.context.scene
+    cam = scene.camera
+    width, height = 64, 48
+    rows, cols = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    params = engine.camera_params(cam)
+    rays = engine.camera_rays(cam, None, params, width, height, 0, 0, 1.0, 1.0)
+    _, directions = rays(rows.ravel(), cols.ravel())
+    # The imported camera in Blender's axes (eye, look, up as the importer stored them) gives the
+    # tracer's directions bit for bit; Blender's float32 camera does not.
+    frame = tracer.camera.CameraFrame.from_camera(tracer.model.Camera(*engine.stored_sdl_camera(cam)), width / height)
+    assert np.array_equal(directions, frame.directions(rows.ravel(), cols.ravel(), height, width))
+    _, blender_directions = raycam.pixel_rays(params, width, height, rows, cols)
+    assert not np.array_equal(directions, blender_directions)
+    np.testing.assert_allclose(directions, blender_directions, atol=1e-5)
+    cam.location.x += 1e-3
+    bpy.context.view_layer.update()
+    assert engine.stored_sdl_camera(cam) is None
+    edited = engine.camera_rays(cam, None, engine.camera_params(cam), width, height, 0, 0, 1.0, 1.0)
+    _, directions = edited(rows.ravel(), cols.ravel())
+    _, blender_directions = raycam.pixel_rays(engine.camera_params(cam), width, height, rows, cols)
+    assert np.array_equal(directions, blender_directions)
+    cam.location.x -= 1e-3
+    cam.data.lens *= 1.001
+    assert engine.stored_sdl_camera(cam) is None
+
+
 def test_blocks_coarse_to_fine_every_pixel_once(monkeypatch):
     import_sdl(SCENES / "shapes.sdl")
     set_resolution(96, 72)

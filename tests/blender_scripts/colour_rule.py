@@ -1,10 +1,10 @@
 """The colour rule (docs/blender.md): after importing an SDL file, F12 shows, and saves, the tracer's PNG.
 
-    blender -b --factory-startup --python-exit-code 1 --python colour_rule.py -- ROOT OUT
-    python colour_rule.py ROOT OUT          (the bpy module)
+    blender -b --factory-startup --python-exit-code 1 --python colour_rule.py -- ROOT OUT [WIDTH HEIGHT]
+    python colour_rule.py ROOT OUT [WIDTH HEIGHT]          (the bpy module)
 
 For each of lecture.sdl and textures.sdl: imported into an empty file with the importer's defaults, F12 at
-64 x 48 with the scene's view settings as the importer left them, the Render Result saved as an 8-bit PNG
+64 x 48 (or WIDTH x HEIGHT) with the scene's view settings as the importer left them, the Render Result saved as an 8-bit PNG
 (saving applies the view transform, as the Image Editor's display does) to OUT/NAME-blender.png.  Also: a
 scene made in Blender keeps Blender's colour management, and an import with ``sdl_colours=False`` leaves
 it alone.  Prints ``RESULT {json}``; the test compares the PNGs with the tracer's.
@@ -17,6 +17,7 @@ import bpy
 
 argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
 root, out = argv[0], argv[1]
+size = (int(argv[2]), int(argv[3])) if len(argv) > 3 else (64, 48)
 sys.path.insert(0, root)
 
 import addon  # noqa: E402
@@ -41,7 +42,7 @@ try:
         assert bpy.ops.import_scene.sdl(filepath=os.path.join(root, "scenes", name + ".sdl")) == {"FINISHED"}
         scene = bpy.context.scene
         scene.render.engine = engine.ENGINE_ID
-        scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 64, 48, 100
+        scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = *size, 100
         scene.render.image_settings.file_format = "PNG"
         scene.render.image_settings.color_depth = "8"
         scene.render.image_settings.color_mode = "RGB"

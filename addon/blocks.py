@@ -193,6 +193,23 @@ class BlockRenderer:
         finally:
             self.seconds += time.perf_counter() - started
 
+    def run_to_error(self, target: float, cancel: Optional[Callable[[], bool]] = None):
+        """Trace the whole film to an error target instead of the block plan (tracer.target: pixels sampled
+        until their estimated error is below ``target``); returns the tracer's ErrorEstimate.  The alpha
+        stays 1: the target's sampling shades colour only."""
+        started = time.perf_counter()
+        target_module = deps.module("target")
+        try:
+            film, estimate = target_module.sample_to_error(self._tracer().camera_rays, self.rays_for, self.width,
+                                                           self.height, float(target), self.plan.seed, cancel)
+        except deps.module("errors").RenderCancelled:
+            raise Cancelled() from None
+        finally:
+            self.seconds += time.perf_counter() - started
+        self.color[...] = film
+        self.done = len(self.items)
+        return estimate
+
     def steps(self) -> Iterator[Tile]:
         """The remaining items one at a time, on the calling thread (for time-sliced viewport drawing)."""
         while self.done < len(self.items):

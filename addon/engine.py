@@ -282,8 +282,14 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                     self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
                                           f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
 
+            target = 0.0 if self.is_preview else float(scene.sdl_render.target_error)
+            estimate = None
             try:
-                tracer.run(cancel=self.cancelled, on_item=on_item)
+                if target > 0.0:
+                    self.update_stats("", f"SDL Ray Tracer | sampling to an error of {target:g}")
+                    estimate = tracer.run_to_error(target, cancel=self.cancelled)
+                else:
+                    tracer.run(cancel=self.cancelled, on_item=on_item)
             except blocks.Cancelled:
                 LAST_RENDER["cancelled"] = True
             write_pass(layer, tracer.rgba())
@@ -298,7 +304,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                                 "backend": tracer.backend_name, "objects": len(tracer_scene.objects),
                                 "lights": len(tracer_scene.lights), "warnings": list(warnings)})
             total = sum(counts.values())
-            self.update_stats("", f"SDL Ray Tracer | {total} rays in {tracer.seconds:.2f} s"
+            reached = ""
+            if estimate is not None:
+                LAST_RENDER["error_estimate"] = estimate.as_dict()
+                reached = (f" | estimated error {estimate.rms:.3g} (worst pixel {estimate.worst:.3g}, "
+                           f"{estimate.samples_mean:.1f} samples per pixel)")
+                self.report({"INFO"}, "SDL Ray Tracer:" + reached[2:])
+            self.update_stats("", f"SDL Ray Tracer | {total} rays in {tracer.seconds:.2f} s" + reached
                                   + (" | cancelled" if LAST_RENDER["cancelled"] else ""))
         except Exception as exc:  # noqa: BLE001 - a render must end with a message, not a traceback
             LAST_RENDER["error"] = str(exc)

@@ -130,8 +130,10 @@ class Importer:
     # -- objects ----------------------------------------------------------------------------------------
 
     def _object_name(self, shape) -> str:
-        """A shape's kind; a mesh's file name, less the ``<scene>_`` the exporter puts before the name of the
-        object it came from (so exported objects come back with their names)."""
+        """The name a ``! name:`` comment gave the shape; else its kind, or a mesh's file name less the
+        ``<scene>_`` the exporter puts before the name of the object it came from."""
+        if shape.name:
+            return shape.name
         source = shape.mesh.origin if shape.kind == "mesh" and shape.mesh is not None else None
         source = source or (shape.mesh_file if shape.kind == "mesh" else None)
         if not source:

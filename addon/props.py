@@ -96,6 +96,9 @@ class SDLRenderSettings(bpy.types.PropertyGroup):
                                  "than the threshold")])
     threshold: FloatProperty(name="Threshold", default=0.05, min=0.0, soft_max=1.0,
                              description="Adaptive sampling: colour difference that makes a pixel refined")
+    target_error: FloatProperty(name="Target Error", default=0.0, min=0.0, soft_max=0.1, precision=4,
+                                description="Final renders: sample each pixel until its estimated error (linear "
+                                            "colour) is below this, and report the estimate; 0 is off")
 
 
 CLASSES = (SDLMaterialSettings, SDLWorldSettings, SDLRenderSettings)

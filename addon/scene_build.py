@@ -175,7 +175,8 @@ class SceneBuilder:
 
     def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info):
         kind = info.kind
-        shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval))
+        shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval),
+                                 name=original.name)
         if kind == "taperedCylinder":
             shape.tapered_radius = info.param
         if kind in self.model.POLYHEDRON_KINDS or kind in ("teapot", "mesh"):
@@ -220,6 +221,7 @@ class SceneBuilder:
             shapes = [self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=merged,
                                        material=shapes[0].material)]
         for shape in shapes:
+            shape.name = obj_eval.original.name
             self.mesh_object_names[id(shape)] = obj_eval.original.name
         return shapes
 

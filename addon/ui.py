@@ -39,6 +39,7 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         row = sub.row()
         row.active = settings.sampling == "ADAPTIVE"
         row.prop(settings, "threshold")
+        layout.column().prop(settings, "target_error")
 
 
 class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):

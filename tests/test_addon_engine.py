@@ -109,6 +109,27 @@ def test_an_imported_camera_traces_the_sdl_camera_until_it_is_edited():
     assert engine.stored_sdl_camera(cam) is None
 
 
+def test_target_error_samples_the_whole_image_and_reports_the_estimate():
+    """Render Properties > Target Error: a final render sampled as ``tracer.render(target_error=E)`` does,
+    with the estimate in the render's statistics; 0 renders the block plan as before."""
+    import_sdl(SCENES / "lecture.sdl")
+    set_resolution(32, 24)
+    scene = bpy.context.scene
+    scene.sdl_render.target_error = 0.02
+    image = render_rgba("SDL_RAYTRACER")
+    reached = engine.LAST_RENDER["error_estimate"]
+    expected = tracer.render(tracer.load(str(SCENES / "lecture.sdl")), 32, 24,
+                             target_error=scene.sdl_render.target_error, seed=scene.frame_current)
+    np.testing.assert_allclose(image[..., :3], expected.image, atol=1e-4)
+    assert reached == expected.error_estimate.as_dict()
+    assert reached["target"] == pytest.approx(0.02)
+    assert reached["estimated_rmse"] <= 0.02 and reached["samples_mean"] > 1.0
+    assert reached["worst_pixel"] <= 0.02 or reached["pixels_at_limit"] > 0
+    scene.sdl_render.target_error = 0.0
+    render_rgba("SDL_RAYTRACER")
+    assert "error_estimate" not in engine.LAST_RENDER
+
+
 def test_blocks_coarse_to_fine_every_pixel_once(monkeypatch):
     import_sdl(SCENES / "shapes.sdl")
     set_resolution(96, 72)

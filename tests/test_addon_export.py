@@ -203,4 +203,26 @@ def test_exported_meshes_come_back_with_their_object_names(tmp_path):
     assert sorted(p.name for p in tmp_path.glob("*.3vn")) == ["zoo_Crate_box.3vn", "zoo_Suzanne.3vn"]
     fresh()
     import_sdl(out)
-    assert sorted(o.name for o in bpy.data.objects if o.type == "MESH") == ["Crate_box", "Suzanne"]
+    # the file name loses the space; the ``! name:`` comment keeps it
+    assert sorted(o.name for o in bpy.data.objects if o.type == "MESH") == ["Crate box", "Suzanne"]
+
+
+def test_object_names_survive_export_and_import(tmp_path):
+    """Generic shapes, a boolean's operands and a Blender mesh keep their names (spaces, non-ASCII) through
+    SDL: the exporter writes a ``! name:`` comment before each shape."""
+    src = tmp_path / "shapes.sdl"
+    src.write_text("sphere\ntranslate 3 0 0 cone\ntranslate 6 0 0 torus\n"
+                   "translate 0 5 0 difference cube scale 0.5 0.5 2 cylinder\n")
+    import_sdl(src)
+    new_names = iter(["Lamp post", "Ünïcode ✓ sphère", "Bagel 1", "Box", "Hole"])
+    for obj in shape_objects():
+        obj.name = next(new_names)
+    bpy.ops.mesh.primitive_monkey_add(location=(0, -4, 0))
+    bpy.context.object.name = "Monkey é"
+    names = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+    out = tmp_path / "named.sdl"
+    exported = export(out)
+    assert sorted(s.name for s in exported.shapes()) == names
+    fresh()
+    import_sdl(out)
+    assert sorted(o.name for o in bpy.data.objects if o.type == "MESH") == names

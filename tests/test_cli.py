@@ -114,6 +114,17 @@ def test_info_lists_objects_lights_and_effects():
     assert sum(1 for o in data["objects"] if "jack" in o.get("groups", [])) == 20
 
 
+
+def test_info_shows_shape_names(tmp_path):
+    scene = tmp_path / "named.sdl"
+    scene.write_text("! name: Lamp post\nsphere\ncube\n", encoding="utf-8")
+    proc = run("info", scene)
+    assert proc.returncode == 0, proc.stderr
+    assert "sphere 'Lamp post' at" in proc.stdout and "  cube at" in proc.stdout
+    data = json.loads(run("info", scene, "--json").stdout)
+    assert [o.get("name") for o in data["objects"]] == ["Lamp post", None]
+
+
 # --- convert (SDL <-> USD; docs/usd.md) -------------------------------------------------------------------
 
 def test_convert_sdl_to_usd_and_back_keeps_what_info_shows(tmp_path):

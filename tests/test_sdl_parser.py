@@ -599,3 +599,30 @@ def test_load_missing_file(tmp_path):
     with pytest.raises(SDLError) as info:
         load(tmp_path / "nothing.sdl")
     assert "nothing.sdl" in str(info.value)
+
+
+def test_name_comments_name_the_next_shape():
+    scene = parse_sdl("! name: Lamp post\n"
+                      "push translate 1 2 3 sphere pop\n"
+                      "cube ! name: Ünïcode ✓ crate  \n"
+                      "scale 2 2 2 difference cone\n"
+                      "! not a name comment\n"
+                      "torus\n")
+    shapes = list(scene.shapes())
+    assert [(s.kind, s.name) for s in shapes] == [("sphere", "Lamp post"), ("cube", None),
+                                                  ("cone", "Ünïcode ✓ crate"), ("torus", None)]
+
+
+def test_a_name_comment_stops_at_def_and_use():
+    """A name before 'use' or 'def' names no shape there or later; one inside a def body names its shape
+    wherever the macro is used."""
+    scene = parse_sdl("def lamp { ! name: bulb\n sphere }\n"
+                      "! name: lost\n use lamp\n"
+                      "! name: lost too\n def other { cube }\n"
+                      "cone use lamp\n")
+    assert [(s.kind, s.name) for s in scene.shapes()] == [("sphere", "bulb"), ("cone", None), ("sphere", "bulb")]
+
+
+def test_without_name_comments_shapes_have_no_names():
+    scene = parse_sdl("! group: x\nsphere\n!name:\ncube\n")
+    assert [s.name for s in scene.shapes()] == [None, None]

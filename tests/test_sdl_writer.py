@@ -332,3 +332,21 @@ def test_parsed_course_style_file_round_trips(tmp_path):
     assert "! group: jack / jackPart" in once
     assert "e-17" not in once  # no rounding noise in rotation axes
     assert_same_objects(parse_sdl(write_sdl(back)).objects, scene.objects)  # a second round changes nothing
+
+
+def test_names_survive_write_and_parse():
+    names = ["Lamp post", "Ünïcode ✓ crate", None, "two\nlines"]
+    scene = Scene(objects=[Shape("sphere", matrix=transforms.translation(i, 0, 0), name=name)
+                           for i, name in enumerate(names)])
+    scene.objects.append(CSG("union", Shape("cube", name="left one"), Shape("cone")))
+    text = write_sdl(scene)
+    assert "! name: Lamp post\n" in text
+    again = parse_sdl(text)
+    assert [s.name for s in again.shapes()] == ["Lamp post", "Ünïcode ✓ crate", None, "two lines", "left one", None]
+    assert write_sdl(again) == write_sdl(parse_sdl(write_sdl(again)))  # and SDL -> SDL keeps them
+
+
+def test_a_file_without_names_is_written_without_name_comments():
+    text = write_sdl(parse_sdl("sphere\ncube\n"))
+    assert "name:" not in text
+    assert [s.name for s in parse_sdl(text).shapes()] == [None, None]

@@ -316,6 +316,8 @@ def describe(scene) -> dict:
                 "groups": list(shape.groups)}
         if shape.mesh_file:
             info["file"] = shape.mesh_file
+        if shape.name:
+            info["name"] = shape.name
         return info
 
     def obj_info(obj):
@@ -355,6 +357,7 @@ def _info(args) -> int:
                 todo += [(child, indent + 1) for child in reversed(obj["children"])]
             else:
                 extra = f" {obj['file']}" if "file" in obj else ""
+                extra += f" {obj['name']!r}" if "name" in obj else ""
                 yield f"{pad}{obj['shape']}{extra} at ({', '.join(f'{x:g}' for x in obj['position'])}){group}"
 
     print(f"objects: {len(info['objects'])}")

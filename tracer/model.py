@@ -169,6 +169,8 @@ class Shape:
     #: Names of the def macros this shape was made inside, outermost first (for grouping in Blender).
     groups: tuple[str, ...] = ()
     source: Optional[SourceLocation] = None
+    #: The object's name: from a ``! name:`` comment before the shape in SDL, or the Blender object's name.
+    name: Optional[str] = None
 
     def __post_init__(self) -> None:
         if self.kind not in SHAPE_KINDS:

@@ -32,8 +32,8 @@ from .. import transforms
 from ..bulk import collector_paused
 from ..errors import SDLError
 from ..meshio import read_3vn
-from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, Camera, Light, Material,
-                     MeshData, Scene, SceneObject, Shape, SourceLocation)
+from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
+                     Material, MeshData, Scene, SceneObject, Shape, SourceLocation)
 from ..userfiles import read_text
 from .lexer import Token, tokenize, to_float
 
@@ -204,6 +204,30 @@ class _Macro:
     where: Token  # its name in the def, for messages
 
 
+#: Statements a name comment does not reach past: it names a shape read directly after it, not one in a macro.
+_NAME_STOPS = frozenset(("def", "use", "{", "}"))
+
+
+def _shape_names(tokens: list[Token], name_comments: list[tuple[int, str]]) -> dict[tuple[int, int], str]:
+    """(line, column) of a shape keyword -> the name the ``! name:`` comment before it gives.
+
+    A comment names the first shape keyword after it, unless a def, use or brace comes first; a later comment
+    before the same shape wins.  A named shape inside a def body is named wherever the macro is used.
+    """
+    names: dict[tuple[int, int], str] = {}
+    for index, name in name_comments:
+        # By index, not a slice: a slice would copy the rest of the file for each of 10^5 named shapes.
+        while index < len(tokens):
+            token = tokens[index]
+            if token.text in SHAPE_KINDS:
+                names[(token.line, token.column)] = name
+                break
+            if token.text in _NAME_STOPS:
+                break
+            index += 1
+    return names
+
+
 # ---------------------------------------------------------------------------------------------------------
 
 class _Reader:
@@ -211,7 +235,10 @@ class _Reader:
         self.file = file
         self.base_dir = Path(base_dir) if base_dir is not None else None
         self.strict = strict
-        self.source = _TokenSource(tokenize(text))
+        name_comments: list[tuple[int, str]] = []
+        tokens = tokenize(text, name_comments)
+        self.source = _TokenSource(tokens)
+        self.shape_names = _shape_names(tokens, name_comments)
         self.scene = Scene()
         self.material = Material()
         self.stack: list[np.ndarray] = [np.eye(4)]
@@ -522,6 +549,8 @@ class _Reader:
         kind = keyword.text
         shape = Shape(kind, matrix=self.stack[-1].copy(), material=self.material, groups=groups,
                       source=self._location(keyword))
+        if self.shape_names:
+            shape.name = self.shape_names.get((keyword.line, keyword.column))
         name = None
         if kind == "taperedCylinder":
             shape.tapered_radius = self._number_token(keyword)[0]

@@ -306,8 +306,16 @@ def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str
             raise WriteError(f"cannot write the {obj.kind}{where}: its transform is singular (a scale of 0?)")
         lines += [indent + statement for statement in material_statements(material, obj.material)]
         material = obj.material
+        if obj.name and _one_line(obj.name):
+            lines.append(f"{indent}! name: {_one_line(obj.name)}")
         lines.append(f"{indent}{_transform_text(obj.matrix)} {_shape_keyword(obj, mesh_names)}")
     return "\n".join(lines) + "\n"
+
+
+def _one_line(name: str) -> str:
+    """A name as a ``! name:`` comment holds it: the comment ends at a line break (which becomes a space), and
+    the reader strips white space at either end."""
+    return name.replace("\n", " ").strip()
 
 
 def write_sdl(scene: Scene) -> str:

@@ -34,11 +34,11 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
     if not np.isfinite(radius):
         return np.ones(origins.shape[0], dtype=bool)
     to_center = center - origins
-    dd = np.einsum("ij,ij->i", directions, directions)
+    dd = numerics.dot3(directions, directions)
     with np.errstate(invalid="ignore", divide="ignore"):
-        along = np.einsum("ij,ij->i", to_center, directions) / dd
+        along = numerics.dot3(to_center, directions) / dd
     perp = to_center - along[:, None] * directions
-    return np.einsum("ij,ij->i", perp, perp) <= radius * radius
+    return numerics.dot3(perp, perp) <= radius * radius
 
 
 #: Closed analytic shapes whose normals must agree with their entering flags (ShapeKind.normals_agree).
@@ -286,7 +286,7 @@ class Primitive:
         # Move each generic origin to the line's point nearest the generic centre: every shape's
         # equation then has O(1) coefficients, however far away the ray started.
         with np.errstate(invalid="ignore", divide="ignore"):
-            shift = -np.einsum("ij,ij->i", o, d) / np.einsum("ij,ij->i", d, d)
+            shift = -numerics.dot3(o, d) / numerics.dot3(d, d)
         shift = np.where(np.isfinite(shift), shift, 0.0)
         centred = o + shift[:, None] * d
         local = self.generic_hits(centred, d)

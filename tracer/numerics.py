@@ -23,6 +23,16 @@ import numpy as np
 UNIT_ROUNDOFF = np.finfo(float).eps / 2.0
 
 
+def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products over the last axis (of length 3, broadcasting), summed left to right as the C core's
+    dot3 is.
+
+    np.einsum's summation order is NumPy's choice: it groups the terms differently and can end an ulp away,
+    or, under cancellation (a triangle with a vertex at 1e30), anywhere.  Where the result decides a hit,
+    both backends must round alike."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def gamma(n: float) -> float:
     """Higham's gamma_n = n u / (1 - n u): the relative error bound of n chained roundings."""
     return n * UNIT_ROUNDOFF / (1.0 - n * UNIT_ROUNDOFF)
@@ -77,13 +87,14 @@ def generic_time_error(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray,
     near tangency (cos(phi) < sqrt(E)) the move is at most about sqrt(E) on a unit-curvature surface.
     """
     reach = np.abs(np.where(np.isfinite(t), t, 0.0)) * np.max(np.abs(direction), axis=1)[:, None]
-    scale = raw_scale[:, None] + np.max(np.abs(origin), axis=1)[:, None] + reach + size
+    # (summed in the C core's order: with a 1e30 vertex the size dominates and the order moves the last bit)
+    scale = raw_scale[:, None] + np.max(np.abs(origin), axis=1)[:, None] + size + reach
     error = rounding / size * scale
     # (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2, |d|^2 E |n|^2)):
     # one square root, one division; a zero normal counts as grazing.
-    along = np.einsum("nkj,nj->nk", normal, direction)
-    nn = np.einsum("nkj,nkj->nk", normal, normal)
-    dd = np.einsum("nj,nj->n", direction, direction)[:, None]
+    along = dot3(normal, direction[:, None, :])
+    nn = dot3(normal, normal)
+    dd = dot3(direction, direction)[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         crossing, grazing = along * along, dd * error * nn
         bound = size * error * np.sqrt(nn / np.where(crossing > grazing, crossing, grazing))
@@ -97,7 +108,7 @@ def offset_distance(t: np.ndarray, t_error: np.ndarray, origins: np.ndarray, dir
     The point o + t d is off the surface by at most the time error times |d| and by its own rounding;
     the offset origin's rounding is covered by the same gamma term.
     """
-    speed = np.linalg.norm(directions, axis=1)
+    speed = np.sqrt(dot3(directions, directions))
     rounding = gamma(tolerances.offset_ulps) * (np.max(np.abs(origins), axis=1)
                                                 + np.abs(t) * np.max(np.abs(directions), axis=1))
     return t_error * speed + rounding

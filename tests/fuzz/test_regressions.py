@@ -5,7 +5,8 @@ with comment lines saying what it once did (``class:``), optional extra options 
 than render (``command: convert``) and, where one answer is right, what must happen now (``expect: image``,
 ``expect: image warning`` — an image and at least one ``warning:`` line —, or ``expect: error WORD`` — the
 error line contains WORD).  Without ``expect`` either kept promise is fine: an image, or one ``error:`` line
-naming the file.
+naming the file.  ``compare: backends`` marks a scene the C core and the NumPy path once rendered differently:
+both must render it, within 1/255 of each other.
 """
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ def directives(path: Path) -> dict:
     for raw in path.read_bytes().splitlines()[:6]:
         line = raw.decode("utf-8", "replace").lstrip("!# ")
         key, sep, value = line.partition(":")
-        if sep and key in ("class", "args", "expect", "command"):
+        if sep and key in ("class", "args", "expect", "command", "compare"):
             found[key] = value.strip()
     return found
 
@@ -61,6 +62,25 @@ def test_regression_case_keeps_the_promise(case, tmp_path):
     if outcome.verdict == "error":
         assert not output.exists()
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")], "a temporary file was left behind"
+
+
+BACKEND_CASES = [p for p in CASES if directives(p).get("compare") == "backends"]
+
+
+@pytest.mark.parametrize("case", BACKEND_CASES, ids=[p.name for p in BACKEND_CASES])
+def test_regression_case_renders_alike_in_c_and_numpy(case, tmp_path):
+    import numpy as np
+    from PIL import Image
+
+    images = []
+    for backend in ("c", "numpy"):
+        output = tmp_path / f"{backend}.png"
+        outcome = run_cli(["render", case, "-o", output, "--width", 32, "--height", 24, "-q", "--backend", backend],
+                          output=output, names=[case.name])
+        assert outcome.verdict == "image", outcome.describe()
+        images.append(np.asarray(Image.open(output).convert("RGB"), dtype=np.int16))
+    worst = np.abs(images[0] - images[1]).max(axis=2)  # (1/255: fuzz.py's SAME_IMAGE)
+    assert worst.max() <= 1, f"C and NumPy differ by up to {worst.max()}/255 at pixels {np.argwhere(worst > 1).tolist()}"
 
 
 SPHERE = "camera 0 0 6  0 0 0  0 1 0  40\nlight 2 3 4  1 1 1\nsphere\n"

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..model import MeshData
+from ..numerics import dot3
 from .hits import HitArrays
 
 #: Inclusive slack on the barycentric test, so that a ray through an edge or vertex shared by two
@@ -481,12 +482,13 @@ class TriangleMesh:
         d = rays.directions[idx][:, None, :]  # (n, 1, 3)
         s = rays.origins[idx][:, None, :] - p0  # (n, k, 3)
         pvec = _cross(d, e2)  # (n, k, 3)
-        det = np.einsum("kj,nkj->nk", e1, pvec)
+        # (dot products summed as the C core's: under cancellation einsum's order decides hits differently)
+        det = dot3(e1, pvec)
         qvec = _cross(s, e1)
         inv_det = 1.0 / det
-        b1 = np.einsum("nkj,nkj->nk", s, pvec) * inv_det
-        b2 = np.einsum("nij,nkj->nk", d, qvec) * inv_det
-        t = np.einsum("kj,nkj->nk", e2, qvec) * inv_det
+        b1 = dot3(s, pvec) * inv_det
+        b2 = dot3(d, qvec) * inv_det
+        t = dot3(e2, qvec) * inv_det
         speed = rays.speed[idx, None]
         abs_det = np.abs(det)
         rounding = np.minimum(

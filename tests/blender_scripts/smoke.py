@@ -6,7 +6,8 @@ MODE ``zip:PATH``: the legacy zip built by scripts/build_extension.py --legacy, 
 Blender's add-on installer into an empty user scripts folder and enabled.
 
 Checks: register/unregister twice; import of every bundled scene with each shape at its SDL transform;
-export -> re-read gives the same matrices and materials; a small SDL_RAYTRACER render equal to the tracer's
+export -> re-read gives the same matrices and materials; object names (spaces, non-ASCII) survive export ->
+import; a small SDL_RAYTRACER render equal to the tracer's
 own; prints ``RESULT {json}``.
 """
 import json
@@ -73,6 +74,17 @@ for name in scenes:
         assert np.allclose(a.matrix, b.matrix, atol=1e-6 * max(1, abs(a.matrix).max())), name
         assert a.material == b.material, name
     checked[name] = len(objs)
+
+# Object names (spaces, non-ASCII) survive export -> import through the ``! name:`` comments.
+clear()
+bpy.ops.import_scene.sdl(filepath=os.path.join(root, "scenes", "lecture.sdl"))
+for index, obj in enumerate(o for o in bpy.data.objects if "sdl_kind" in o):
+    obj.name = f"Objekt {index} ü✓"
+names = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+assert bpy.ops.export_scene.sdl(filepath=os.path.join(out, "named.sdl")) == {"FINISHED"}
+clear()
+bpy.ops.import_scene.sdl(filepath=os.path.join(out, "named.sdl"))
+assert sorted(o.name for o in bpy.data.objects if o.type == "MESH") == names, names
 
 clear()
 path = os.path.join(root, "scenes", "lecture.sdl")

@@ -17,21 +17,20 @@ import bpy
 
 argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
 root, scene_path, width, height = argv[0], argv[1], int(argv[2]), int(argv[3])
-sys.path.insert(0, root)
+sys.path[:0] = [root, root + "/tests"]
 
 import numpy as np  # noqa: E402
 
 import addon  # noqa: E402
 from addon import deps, engine  # noqa: E402
+from blender_scripts.addon_env import fresh, import_sdl, set_resolution  # noqa: E402
 
-addon.register()
-bpy.ops.wm.read_homefile(use_empty=True)
-addon.register()
+fresh()
 try:
-    assert bpy.ops.import_scene.sdl(filepath=scene_path) == {"FINISHED"}
+    import_sdl(scene_path)
     scene = bpy.context.scene
     scene.render.engine = engine.ENGINE_ID
-    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
+    set_resolution(width, height)
     tracer = deps.module()
     tracer_times, f12_times = [], []
     for _ in range(2):

@@ -15,19 +15,18 @@ import bpy  # noqa: E402
 
 argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
 root, scene_path, width, height, out = argv[0], argv[1], int(argv[2]), int(argv[3]), argv[4]
-sys.path.insert(0, root)
+sys.path[:0] = [root, root + "/tests"]
 
 import addon  # noqa: E402
 from addon import engine  # noqa: E402
+from blender_scripts.addon_env import fresh, import_sdl, set_resolution  # noqa: E402
 
-addon.register()
-bpy.ops.wm.read_homefile(use_empty=True)
-addon.register()
+fresh()
 try:
-    assert bpy.ops.import_scene.sdl(filepath=scene_path) == {"FINISHED"}
+    import_sdl(scene_path)
     scene = bpy.context.scene
     scene.render.engine = engine.ENGINE_ID
-    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
+    set_resolution(width, height)
     bpy.ops.render.render()
     stats = dict(engine.LAST_RENDER)
     scene.render.image_settings.file_format = "OPEN_EXR"

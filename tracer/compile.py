@@ -500,21 +500,39 @@ _TRIANGLE_MESHES: "weakref.WeakValueDictionary[tuple, object]" = weakref.WeakVal
 
 
 def mesh_digest(mesh: MeshData) -> bytes:
-    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from)."""
+    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from).  Arrays
+    are hashed where they lie (indices a slice at a time as int64), so a big mesh is not copied for it."""
     h = hashlib.blake2b(digest_size=20)
     for array in (mesh.vertices, mesh.normals):
         array = np.ascontiguousarray(array, dtype=np.float64)
         h.update(repr(array.shape).encode())
-        h.update(array.tobytes())
+        h.update(array.reshape(-1))
     faces = mesh.faces
     if isinstance(faces, FaceList):
         h.update(b"packed")
-        for array in (faces.sizes, faces.vertex_index, faces.normal_index):
-            h.update(b"-" if array is None else np.ascontiguousarray(array, dtype=np.int64).tobytes())
+        size = faces.uniform_size
+        if size is not None:  # every face of one size: that size and the count say what sizes would
+            h.update(f"{size}x{len(faces)}".encode())
+        else:
+            _hash_indices(h, faces.sizes)
+        for array in (faces.vertex_index, faces.normal_index):
+            _hash_indices(h, array)
     else:
         h.update(b"list")
         h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
     return h.digest()
+
+
+def _hash_indices(h, array) -> None:
+    """Feed an index array (or None) to the hash as int64, a million at a time."""
+    if array is None:
+        h.update(b"-")
+        return
+    array = np.asarray(array).reshape(-1)
+    h.update(f"[{len(array)}]".encode())
+    step = 1 << 20
+    for start in range(0, len(array), step):
+        h.update(np.ascontiguousarray(array[start:start + step], dtype=np.int64))
 
 
 def shared_triangle_mesh(mesh: MeshData):

@@ -85,9 +85,13 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
     lib.rt_scan_numbers.restype = ctypes.c_int64
     lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
+    lib.rt_scan_3vn.restype = ctypes.c_int64
+    lib.rt_scan_3vn.argtypes = [ctypes.c_char_p, ctypes.c_int64, _i64p, _dp, _dp, _i64p, _i32p, _i32p]
     lib.rt_build_mesh_bvh.restype = ctypes.c_int64
-    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, _i64p, _dp, _dp,
-                                      _i64p, _i64p, _i64p, _i64p, _i8p]
+    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
+                                      _i32p, ctypes.POINTER(ctypes.c_void_p)]
+    lib.rt_free.restype = None
+    lib.rt_free.argtypes = [ctypes.c_void_p]
     lib.rt_desc_layout.restype = ctypes.c_int64
     lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
     lib.rt_contract_digest.restype = ctypes.c_char_p
@@ -173,25 +177,48 @@ def scan_numbers(data: bytes) -> Optional[np.ndarray]:
     return values
 
 
-def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int) -> dict:
-    """The BVH of TriangleMesh's builder (the same arrays, see bvh_build.h), built in C.  Node boxes are
-    not padded.  Needs the C core."""
+def scan_3vn(data: bytes) -> Optional[tuple[np.ndarray, ...]]:
+    """A ``.3vn`` file's (vertices (V, 3), normals (N, 3), face sizes (F,) int64, vertex indices and normal
+    indices (sum of sizes,) int32), read straight into those arrays (see scan.h), or None when the file is
+    not exactly a well-formed ``.3vn`` of decimal numbers.  Needs the C core."""
+    if _lib is None:
+        raise TracerError(f"the C core is not available: {load_error}")
+    counts = np.zeros(4, np.int64)
+    if _lib.rt_scan_3vn(data, len(data), _ptr(counts, ctypes.c_int64), None, None, None, None, None) != 0:
+        return None
+    n_vertices, n_normals, n_faces, corners = counts.tolist()
+    out = (np.empty((n_vertices, 3)), np.empty((n_normals, 3)), np.empty(n_faces, np.int64),
+           np.empty(corners, np.int32), np.empty(corners, np.int32))
+    pointers = [_ptr(a, t) for a, t in zip(out, (ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int32,
+                                                  ctypes.c_int32))]
+    if _lib.rt_scan_3vn(data, len(data), _ptr(counts, ctypes.c_int64), *pointers) != 0:
+        return None
+    return out
+
+
+def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int,
+                   pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, tri_order) of TriangleMesh's builder (the same tree, see bvh_build.h), built in C: NODE records
+    with boxes grown by ``pad`` and rounded outward, and the leaf order (int32).  Needs the C core."""
+    from ..intersect.mesh import NODE
+
     if _lib is None:
         raise TracerError(f"the C core is not available: {load_error}")
     boxes = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3) for a in (tri_lo, tri_hi, centroid)]
     n = len(boxes[0])
-    room = max(2 * n - 1, 1)
-    out = dict(order=np.empty(n, np.int64), lo=np.empty((room, 3)), hi=np.empty((room, 3)),
-               left=np.empty(room, np.int64), right=np.empty(room, np.int64), first=np.empty(room, np.int64),
-               count=np.empty(room, np.int64), axis=np.empty(room, np.int8))
-    nodes = _lib.rt_build_mesh_bvh(n, *(_ptr(a, ctypes.c_double) for a in boxes), int(leaf_size), int(bins),
-                                   _ptr(out["order"], ctypes.c_int64), _ptr(out["lo"], ctypes.c_double),
-                                   _ptr(out["hi"], ctypes.c_double), *(_ptr(out[k], ctypes.c_int64) for k in
-                                                                       ("left", "right", "first", "count")),
-                                   _ptr(out["axis"], ctypes.c_int8))
-    if nodes < 0:
+    order = np.empty(n, np.int32)
+    buffer = ctypes.c_void_p()
+    count = _lib.rt_build_mesh_bvh(n, *(_ptr(a, ctypes.c_double) for a in boxes), int(leaf_size), int(bins),
+                                   float(pad), _ptr(order, ctypes.c_int32), ctypes.byref(buffer))
+    if count < 0:
         raise MemoryError("the C core ran out of memory building a mesh BVH")
-    return {k: (v if k == "order" else v[:nodes].copy()) for k, v in out.items()}
+    try:
+        nodes = np.empty(count, dtype=NODE)
+        if count:
+            ctypes.memmove(nodes.ctypes.data, buffer.value, count * NODE.itemsize)
+    finally:
+        _lib.rt_free(buffer)
+    return nodes, order
 
 
 def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:

@@ -12,8 +12,51 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
+
+#include "mesh.h"
 
 #define BVH_MAX_BINS 64
+
+/* The nearest float at or below / at or above x (mesh.py's _single_outward): node boxes are kept in
+ * single precision, rounded outward so that they still hold every triangle.  NaN stays NaN. */
+static inline float bvh_single_below(double x)
+{
+    float f = (float)x;
+    return (double)f > x ? nextafterf(f, -INFINITY) : f;
+}
+
+static inline float bvh_single_above(double x)
+{
+    float f = (float)x;
+    return (double)f < x ? nextafterf(f, INFINITY) : f;
+}
+
+static int bvh_grow_stack(int64_t **stack, int64_t *capacity)
+{
+    int64_t *p = (int64_t *)realloc(*stack, (size_t)(2 * *capacity) * sizeof(int64_t));
+    if (!p)
+        return 0;
+    *stack = p;
+    *capacity *= 2;
+    return 1;
+}
+
+/* Room for at least `need` nodes in *nodes (grown by doubling); 0 when memory runs out. */
+static int bvh_reserve(MeshNode **nodes, int64_t *capacity, int64_t need)
+{
+    if (need <= *capacity)
+        return 1;
+    int64_t cap = *capacity ? *capacity : 64;
+    while (cap < need)
+        cap *= 2;
+    MeshNode *p = (MeshNode *)realloc(*nodes, (size_t)cap * sizeof(MeshNode));
+    if (!p)
+        return 0;
+    *nodes = p;
+    *capacity = cap;
+    return 1;
+}
 
 static double bvh_half_area(const double *lo, const double *hi)
 {
@@ -32,29 +75,32 @@ static inline int64_t bvh_bucket(double c, double c_lo, double scale, int64_t bi
     return b < bins - 1 ? b : bins - 1;
 }
 
-/* Build over n triangles given by their boxes and centroids ((n, 3) each).  Writes order (n) and the node
- * arrays, which must have room for 2 n - 1 nodes (at least 1), unpadded: the caller pads the boxes.
- * Returns the number of nodes, or -1 when memory runs out or the arguments are out of range. */
+/* Build over n triangles given by their boxes and centroids ((n, 3) each).  Writes order (n) and, into a
+ * buffer it allocates (*nodes_out, to be released with rt_free), the MeshNode records with their boxes grown
+ * by `pad` and rounded outward.  Returns the number of nodes, or -1 when memory runs out or the arguments
+ * are out of range. */
 int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi, const double *centroid,
-                          int64_t leaf_size, int64_t bins, int64_t *order, double *node_lo, double *node_hi,
-                          int64_t *left, int64_t *right, int64_t *first, int64_t *count, int8_t *axis_out)
+                          int64_t leaf_size, int64_t bins, double pad, int32_t *order, MeshNode **nodes_out)
 {
-    if (n < 0 || leaf_size < 1 || bins < 2 || bins > BVH_MAX_BINS)
+    *nodes_out = NULL;
+    if (n < 0 || n > INT32_MAX || leaf_size < 1 || leaf_size > UINT16_MAX || bins < 2 || bins > BVH_MAX_BINS)
         return -1;
     for (int64_t i = 0; i < n; i++)
-        order[i] = i;
+        order[i] = (int32_t)i;
     if (n == 0)
         return 0;
-    int64_t *scratch = (int64_t *)malloc((size_t)n * sizeof(int64_t));
-    int64_t *stack = (int64_t *)malloc((size_t)(3 * (n + 1)) * sizeof(int64_t));
-    if (!scratch || !stack) {
+    MeshNode *out = NULL;
+    int64_t capacity = 0, stack_capacity = 3 * 64;
+    int32_t *scratch = (int32_t *)malloc((size_t)n * sizeof(int32_t));
+    int64_t *stack = (int64_t *)malloc((size_t)stack_capacity * sizeof(int64_t));
+    if (!scratch || !stack || !bvh_reserve(&out, &capacity, 2 * (n / (leaf_size + 1)) + 1)) {
         free(scratch);
         free(stack);
+        free(out);
         return -1;
     }
     int64_t nodes = 1, top = 0;
-    left[0] = right[0] = first[0] = count[0] = -1;
-    axis_out[0] = -1;
+    memset(&out[0], 0, sizeof(MeshNode));
     stack[top++] = 0, stack[top++] = 0, stack[top++] = n;
     while (top) {
         int64_t end = stack[--top], start = stack[--top], node = stack[--top];
@@ -70,14 +116,16 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi,
                 c_hi[k] = c > c_hi[k] ? c : c_hi[k];
             }
         }
+        MeshNode *record = &out[node];
         for (int k = 0; k < 3; k++) {
-            node_lo[3 * node + k] = lo[k];
-            node_hi[3 * node + k] = hi[k];
+            record->lo[k] = bvh_single_below(lo[k] - pad);
+            record->hi[k] = bvh_single_above(hi[k] + pad);
         }
         int64_t size = end - start;
         if (size <= leaf_size) {
-            first[node] = start;
-            count[node] = size;
+            record->offset = (int32_t)start;
+            record->count = (uint16_t)size;
+            record->axis = -1;
             continue;
         }
         int axis = 0;
@@ -96,7 +144,8 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi,
                 for (int k = 0; k < 3; k++)
                     box_lo[b][k] = INFINITY, box_hi[b][k] = -INFINITY;
             for (int64_t i = start; i < end; i++) {
-                int64_t t = order[i], b = bvh_bucket(centroid[3 * t + axis], c_lo[axis], scale, bins);
+                int64_t t = order[i];
+                int64_t b = bvh_bucket(centroid[3 * t + axis], c_lo[axis], scale, bins);
                 in_bin[b]++;
                 for (int k = 0; k < 3; k++) {
                     double a = tri_lo[3 * t + k], c = tri_hi[3 * t + k];
@@ -147,18 +196,25 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi,
                 order[kept + i] = scratch[i];
             middle = kept;
         }
+        if (!bvh_reserve(&out, &capacity, nodes + 2) ||
+            (top + 6 > stack_capacity && !bvh_grow_stack(&stack, &stack_capacity))) {
+            free(scratch);
+            free(stack);
+            free(out);
+            return -1;
+        }
+        record = &out[node];  /* (the buffer may have moved) */
         int64_t l = nodes++, r = nodes++;
-        left[l] = right[l] = first[l] = count[l] = left[r] = right[r] = first[r] = count[r] = -1;
-        axis_out[l] = axis_out[r] = -1;
-        left[node] = l;
-        right[node] = r;
-        axis_out[node] = (int8_t)axis;
-        count[node] = 0;
+        memset(&out[l], 0, 2 * sizeof(MeshNode));
+        record->offset = (int32_t)l;
+        record->count = 0;
+        record->axis = (int8_t)axis;
         stack[top++] = r, stack[top++] = middle, stack[top++] = end;
         stack[top++] = l, stack[top++] = start, stack[top++] = middle;
     }
     free(scratch);
     free(stack);
+    *nodes_out = out;
     return nodes;
 }
 

@@ -13,6 +13,7 @@
 #ifndef RT_SCAN_H
 #define RT_SCAN_H
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -137,6 +138,104 @@ int64_t rt_scan_numbers(const char *text, int64_t length, double *out, int64_t c
         count++;
     }
     return count;
+}
+
+/* A .3vn file read straight into its arrays (tracer/meshio.py's fast path): no array of all its numbers.
+ *
+ * A cursor over the words of a text: scan_next gives the next word's value (1), the end (0), or -1 at a word
+ * that is not a number (or a byte that is not printable ASCII). */
+typedef struct {
+    const char *text;
+    int64_t length, pos;
+} ScanCursor;
+
+static int scan_next(ScanCursor *c, double *value)
+{
+    const char *text = c->text;
+    int64_t i = c->pos, length = c->length;
+    while (i < length && scan_is_space((unsigned char)text[i]))
+        i++;
+    if (i == length) {
+        c->pos = i;
+        return 0;
+    }
+    int64_t start = i;
+    while (i < length && !scan_is_space((unsigned char)text[i])) {
+        unsigned char ch = (unsigned char)text[i];
+        if (ch < 0x20 || ch >= 0x7f)
+            return -1;
+        i++;
+    }
+    c->pos = i;
+    int ok;
+    *value = scan_word(text + start, text + i, &ok);
+    return ok ? 1 : -1;
+}
+
+/* The next word as a whole number in [low, high] ("3.0" is one); 0 if it is not that. */
+static int scan_whole(ScanCursor *c, double low, double high, int64_t *out)
+{
+    double v;
+    if (scan_next(c, &v) != 1 || v != floor(v) || v < low || v > high)
+        return 0;
+    *out = (int64_t)v;
+    return 1;
+}
+
+#define SCAN_BIG 2147483647.0 /* meshio._BIG: larger counts are certainly corrupt */
+
+/* counts: vertices, normals, faces, corners (the sum of the faces' sizes).  With vertices == NULL, reads
+ * the three counts at the start and finds the corners from the number of words after them (which bounds
+ * every array by the file's size); else reads every number into the arrays (vertices and normals 3 each;
+ * per face its size, then its vertex and normal indices) and checks that the file is exactly that: whole
+ * numbers where indices and sizes go, sizes of at least 3, indices in range, nothing after the last face.
+ * Returns 0, or -1 for anything else: the word-by-word reader then says what is wrong and where. */
+int64_t rt_scan_3vn(const char *text, int64_t length, int64_t *counts, double *vertices, double *normals,
+                    int64_t *sizes, int32_t *vertex_index, int32_t *normal_index)
+{
+    ScanCursor c = {text, length, 0};
+    int64_t head[3];
+    for (int k = 0; k < 3; k++)
+        if (!scan_whole(&c, 0.0, SCAN_BIG, &head[k]))
+            return -1;
+    int64_t n_vertices = head[0], n_normals = head[1], n_faces = head[2];
+    if (!vertices) {
+        int64_t bad;
+        int64_t words = rt_scan_numbers(text + c.pos, length - c.pos, NULL, 0, &bad);
+        int64_t rest = words - 3 * (n_vertices + n_normals) - n_faces;
+        if (words < 0 || rest < 6 * n_faces || rest % 2)
+            return -1;
+        counts[0] = n_vertices, counts[1] = n_normals, counts[2] = n_faces, counts[3] = rest / 2;
+        return 0;
+    }
+    if (n_vertices != counts[0] || n_normals != counts[1] || n_faces != counts[2])
+        return -1;
+    for (int64_t i = 0; i < 3 * n_vertices; i++)
+        if (scan_next(&c, &vertices[i]) != 1)
+            return -1;
+    for (int64_t i = 0; i < 3 * n_normals; i++)
+        if (scan_next(&c, &normals[i]) != 1)
+            return -1;
+    int64_t used = 0, corners = counts[3];
+    for (int64_t f = 0; f < n_faces; f++) {
+        int64_t n, index;
+        if (!scan_whole(&c, 3.0, SCAN_BIG, &n) || n > corners - used)
+            return -1;
+        sizes[f] = n;
+        for (int64_t k = 0; k < n; k++) {
+            if (!scan_whole(&c, 0.0, (double)(n_vertices - 1), &index))
+                return -1;
+            vertex_index[used + k] = (int32_t)index;
+        }
+        for (int64_t k = 0; k < n; k++) {
+            if (!scan_whole(&c, 0.0, (double)(n_normals - 1), &index))
+                return -1;
+            normal_index[used + k] = (int32_t)index;
+        }
+        used += n;
+    }
+    double extra;
+    return used == corners && scan_next(&c, &extra) == 0 ? 0 : -1;
 }
 
 #endif

@@ -288,6 +288,23 @@ def test_c_and_numpy_bulk_readers_read_the_same_mesh(tmp_path, monkeypatch):
     assert in_c[0].faces.normal_index is not in_c[0].faces.vertex_index
 
 
+@pytest.mark.parametrize("piece", [1, 5, 64])
+def test_the_c_reader_reads_a_file_in_pieces_of_any_size(tmp_path, monkeypatch, piece):
+    """Words cut by the pieces' ends are read whole; a bad word is found wherever the pieces end."""
+    native = meshio._native()
+    if native is None:
+        pytest.skip("no C core")
+    path = write(tmp_path, PYRAMID)
+    whole = meshio._read_in_bulk(path.read_bytes(), "m")
+    monkeypatch.setattr(native, "SCAN_PIECE", piece)
+    with open(path, "rb") as handle:
+        pieces = meshio._read_in_bulk(handle, "m")
+    assert np.array_equal(pieces.vertices, whole.vertices) and np.array_equal(pieces.normals, whole.normals)
+    assert pieces.faces == whole.faces
+    for bad in (PYRAMID.replace("0.707 0 0.707", "0.707 0 0.7x07"), PYRAMID + "3\n", PYRAMID.replace("3 3 0 4 4 4 4", "3 3 0 4 4 4")):
+        assert meshio._read_in_bulk(bad.encode(), "m") is None
+
+
 @pytest.mark.parametrize("reader", ["c", "numpy"])
 @pytest.mark.parametrize("text", [
     PYRAMID.replace("3 0 1 4 1 1 1", "3 0 1 9 1 1 1"),  # vertex index out of range

@@ -7,10 +7,11 @@ only keeps line numbers for its messages.
 """
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from pathlib import Path
-from typing import Iterator, Optional, Union
+from typing import BinaryIO, Iterator, Optional, Union
 
 import numpy as np
 
@@ -31,12 +32,13 @@ def read_3vn(path: PathLike) -> MeshData:
     name = os.fspath(path)
     try:
         with open_regular(path, "mesh file") as handle:
+            mesh = _read_in_bulk(handle, name)
+            if mesh is not None:
+                return mesh
+            handle.seek(0)
             data = handle.read()
     except OSError as exc:
         raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
-    mesh = _read_in_bulk(data, name)
-    if mesh is not None:
-        return mesh
     # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number (as
     # userfiles.read_text decodes: a byte-order mark dropped).
     return _read_words(data.decode("utf-8-sig", errors="replace"), name)
@@ -46,14 +48,16 @@ def read_3vn(path: PathLike) -> MeshData:
 _BIG = 2**31 - 1
 
 
-def _read_in_bulk(data: bytes, name: str) -> Optional[MeshData]:
-    """The mesh, if the file is a well-formed ``.3vn`` of plain decimal numbers; None for anything else
-    (which :func:`_read_words` then reports).  The C core reads the numbers straight into the mesh's arrays;
-    without it, all of a file's numbers are read at once into one array and cut into vertices, normals and
-    faces with array operations: no Python object per number either way."""
+def _read_in_bulk(source: Union[bytes, BinaryIO], name: str) -> Optional[MeshData]:
+    """The mesh, if the file (its bytes, or a binary file at its start) is a well-formed ``.3vn`` of plain
+    decimal numbers; None for anything else (which :func:`_read_words` then reports).  The C core reads the
+    file a few megabytes at a time, straight into the mesh's arrays; without it, all of a file's numbers are
+    read at once into one array and cut into vertices, normals and faces with array operations: no Python
+    object per number either way."""
+    handle = io.BytesIO(source) if isinstance(source, (bytes, bytearray)) else source
     native = _native()
     if native is not None:
-        arrays = native.scan_3vn(data)
+        arrays = native.scan_3vn(handle)
         if arrays is None:
             return None
         vertices, normals, sizes, vertex_index, normal_index = arrays
@@ -61,7 +65,7 @@ def _read_in_bulk(data: bytes, name: str) -> Optional[MeshData]:
             normal_index = vertex_index
         return MeshData(vertices=vertices, normals=normals, faces=FaceList(sizes, vertex_index, normal_index),
                         origin=name)
-    values = _bulk_numbers(data)
+    values = _bulk_numbers(handle.read())
     if values is None or len(values) < 3:
         return None
     head = values[:3]

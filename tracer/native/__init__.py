@@ -15,7 +15,7 @@ from __future__ import annotations
 import ctypes
 import os
 from dataclasses import fields
-from typing import Optional
+from typing import BinaryIO, Optional
 
 import numpy as np
 
@@ -85,8 +85,12 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
     lib.rt_scan_numbers.restype = ctypes.c_int64
     lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
+    lib.rt_scan3_state_size.restype = ctypes.c_int64
+    lib.rt_scan3_state_size.argtypes = []
     lib.rt_scan_3vn.restype = ctypes.c_int64
-    lib.rt_scan_3vn.argtypes = [ctypes.c_char_p, ctypes.c_int64, _i64p, _dp, _dp, _i64p, _i32p, _i32p]
+    lib.rt_scan_3vn.argtypes = [_i64p, ctypes.c_char_p, ctypes.c_int64, _dp, _dp, _i64p, _i32p, _i32p]
+    lib.rt_scan_3vn_end.restype = ctypes.c_int64
+    lib.rt_scan_3vn_end.argtypes = [_i64p, ctypes.c_int]
     lib.rt_build_mesh_bvh.restype = ctypes.c_int64
     lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
                                       _i32p, ctypes.POINTER(ctypes.c_void_p)]
@@ -177,23 +181,62 @@ def scan_numbers(data: bytes) -> Optional[np.ndarray]:
     return values
 
 
-def scan_3vn(data: bytes) -> Optional[tuple[np.ndarray, ...]]:
+#: The .3vn reader reads a file this many bytes at a time: its peak is the mesh's arrays, not the file.
+SCAN_PIECE = 1 << 22
+_SPACE = b" \t\n\r\x0b\x0c\x1c\x1d\x1e\x1f"  # scan.h's scan_is_space
+
+
+def scan_3vn(handle: BinaryIO) -> Optional[tuple[np.ndarray, ...]]:
     """A ``.3vn`` file's (vertices (V, 3), normals (N, 3), face sizes (F,) int64, vertex indices and normal
-    indices (sum of sizes,) int32), read straight into those arrays (see scan.h), or None when the file is
-    not exactly a well-formed ``.3vn`` of decimal numbers.  Needs the C core."""
+    indices (sum of sizes,) int32), read from ``handle`` (at its start; it is read twice) a piece at a time
+    straight into those arrays (see scan.h), or None when the file is not exactly a well-formed ``.3vn`` of
+    decimal numbers.  Needs the C core."""
     if _lib is None:
         raise TracerError(f"the C core is not available: {load_error}")
-    counts = np.zeros(4, np.int64)
-    if _lib.rt_scan_3vn(data, len(data), _ptr(counts, ctypes.c_int64), None, None, None, None, None) != 0:
+    state = np.zeros(_lib.rt_scan3_state_size(), np.int64)
+    state_ptr = _ptr(state, ctypes.c_int64)
+    start = handle.tell()
+    for piece in _whole_word_pieces(handle):  # first pass: the counts, and the words after them
+        if _lib.rt_scan_3vn(state_ptr, piece, len(piece), None, None, None, None, None) != 0:
+            return None
+    corners = _lib.rt_scan_3vn_end(state_ptr, 0)
+    if corners < 0:
         return None
-    n_vertices, n_normals, n_faces, corners = counts.tolist()
+    counts = state[1:5].copy()  # SCAN3_V, SCAN3_N, SCAN3_F, SCAN3_CORNERS
+    n_vertices, n_normals, n_faces, _ = counts.tolist()
     out = (np.empty((n_vertices, 3)), np.empty((n_normals, 3)), np.empty(n_faces, np.int64),
            np.empty(corners, np.int32), np.empty(corners, np.int32))
     pointers = [_ptr(a, t) for a, t in zip(out, (ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int32,
                                                   ctypes.c_int32))]
-    if _lib.rt_scan_3vn(data, len(data), _ptr(counts, ctypes.c_int64), *pointers) != 0:
-        return None
-    return out
+    state[:] = 0
+    state[1:5] = counts
+    handle.seek(start)
+    for piece in _whole_word_pieces(handle):
+        if _lib.rt_scan_3vn(state_ptr, piece, len(piece), *pointers) != 0:
+            return None
+    return out if _lib.rt_scan_3vn_end(state_ptr, 1) == 0 else None
+
+
+def _whole_word_pieces(handle: BinaryIO):
+    """The file's bytes in pieces of about SCAN_PIECE, each ending at white space (or the file's end)."""
+    carry = b""
+    while True:
+        block = handle.read(SCAN_PIECE)
+        if not block:
+            if carry:
+                yield carry
+            return
+        block = carry + block
+        cut = _last_space(block)
+        if cut < 0:
+            carry = block
+            continue
+        yield block[:cut + 1]
+        carry = block[cut + 1:]
+
+
+def _last_space(block: bytes) -> int:
+    return max(block.rfind(bytes([space])) for space in _SPACE)
 
 
 def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int,

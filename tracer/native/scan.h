@@ -184,58 +184,96 @@ static int scan_whole(ScanCursor *c, double low, double high, int64_t *out)
 
 #define SCAN_BIG 2147483647.0 /* meshio._BIG: larger counts are certainly corrupt */
 
-/* counts: vertices, normals, faces, corners (the sum of the faces' sizes).  With vertices == NULL, reads
- * the three counts at the start and finds the corners from the number of words after them (which bounds
- * every array by the file's size); else reads every number into the arrays (vertices and normals 3 each;
- * per face its size, then its vertex and normal indices) and checks that the file is exactly that: whole
- * numbers where indices and sizes go, sizes of at least 3, indices in range, nothing after the last face.
- * Returns 0, or -1 for anything else: the word-by-word reader then says what is wrong and where. */
-int64_t rt_scan_3vn(const char *text, int64_t length, int64_t *counts, double *vertices, double *normals,
+/* The reader's state between pieces of a file (an int64 array on the Python side, so that a file is read a
+ * few megabytes at a time): SCAN3_WORD words read, SCAN3_V/N/F the counts at the start, SCAN3_CORNERS the
+ * corners (the sum of the faces' sizes), SCAN3_FACE the face being read, SCAN3_AT the position in its record
+ * (0: its size, 1..n: vertex indices, n+1..2n: normal indices), SCAN3_SIZE its size, SCAN3_USED the corners
+ * of the faces before it. */
+enum { SCAN3_WORD, SCAN3_V, SCAN3_N, SCAN3_F, SCAN3_CORNERS, SCAN3_FACE, SCAN3_AT, SCAN3_SIZE, SCAN3_USED,
+       SCAN3_STATE };
+
+int64_t rt_scan3_state_size(void) { return SCAN3_STATE; }
+
+/* One piece of a .3vn file (whole words: it ends at white space or at the end of the file), read straight
+ * into the mesh's arrays (tracer/meshio.py's fast path; no array of all its numbers).  With vertices ==
+ * NULL (the first pass) only the three counts are read and the words counted; the second pass, with the
+ * arrays sized from the first, reads every number and checks that the file is exactly a .3vn: whole numbers
+ * where sizes and indices go, sizes of at least 3, indices in range (normal indices into an empty list are
+ * not).  Returns 0, or -1 at anything else: the word-by-word reader then says what is wrong and where. */
+int64_t rt_scan_3vn(int64_t *state, const char *text, int64_t length, double *vertices, double *normals,
                     int64_t *sizes, int32_t *vertex_index, int32_t *normal_index)
 {
     ScanCursor c = {text, length, 0};
-    int64_t head[3];
-    for (int k = 0; k < 3; k++)
-        if (!scan_whole(&c, 0.0, SCAN_BIG, &head[k]))
-            return -1;
-    int64_t n_vertices = head[0], n_normals = head[1], n_faces = head[2];
-    if (!vertices) {
-        int64_t bad;
-        int64_t words = rt_scan_numbers(text + c.pos, length - c.pos, NULL, 0, &bad);
-        int64_t rest = words - 3 * (n_vertices + n_normals) - n_faces;
-        if (words < 0 || rest < 6 * n_faces || rest % 2)
-            return -1;
-        counts[0] = n_vertices, counts[1] = n_normals, counts[2] = n_faces, counts[3] = rest / 2;
-        return 0;
-    }
-    if (n_vertices != counts[0] || n_normals != counts[1] || n_faces != counts[2])
-        return -1;
-    for (int64_t i = 0; i < 3 * n_vertices; i++)
-        if (scan_next(&c, &vertices[i]) != 1)
-            return -1;
-    for (int64_t i = 0; i < 3 * n_normals; i++)
-        if (scan_next(&c, &normals[i]) != 1)
-            return -1;
-    int64_t used = 0, corners = counts[3];
-    for (int64_t f = 0; f < n_faces; f++) {
-        int64_t n, index;
-        if (!scan_whole(&c, 3.0, SCAN_BIG, &n) || n > corners - used)
-            return -1;
-        sizes[f] = n;
-        for (int64_t k = 0; k < n; k++) {
-            if (!scan_whole(&c, 0.0, (double)(n_vertices - 1), &index))
+    int64_t *st = state;
+    for (;;) {
+        int64_t word = st[SCAN3_WORD];
+        if (word >= 3 && !vertices) {  /* first pass, after the counts: count the rest */
+            int64_t bad, words = rt_scan_numbers(text + c.pos, length - c.pos, NULL, 0, &bad);
+            if (words < 0)
                 return -1;
-            vertex_index[used + k] = (int32_t)index;
+            st[SCAN3_WORD] += words;
+            return 0;
         }
-        for (int64_t k = 0; k < n; k++) {
-            if (!scan_whole(&c, 0.0, (double)(n_normals - 1), &index))
+        double value;
+        int got = scan_next(&c, &value);
+        if (got <= 0)
+            return got;  /* 0: the end of this piece */
+        st[SCAN3_WORD]++;
+        if (word < 3) {  /* a count */
+            if (value != floor(value) || value < 0.0 || value > SCAN_BIG ||
+                (vertices && (int64_t)value != st[SCAN3_V + word]))
                 return -1;
-            normal_index[used + k] = (int32_t)index;
+            st[SCAN3_V + word] = (int64_t)value;
+            continue;
         }
-        used += n;
+        int64_t nv = 3 * st[SCAN3_V], nn = 3 * st[SCAN3_N], i = word - 3;
+        if (i < nv) {
+            vertices[i] = value;
+            continue;
+        }
+        if (i < nv + nn) {
+            normals[i - nv] = value;
+            continue;
+        }
+        int64_t at = st[SCAN3_AT], used = st[SCAN3_USED];
+        if (value != floor(value) || st[SCAN3_FACE] >= st[SCAN3_F])
+            return -1;
+        if (at == 0) {
+            if (value < 3.0 || value > SCAN_BIG || (int64_t)value > st[SCAN3_CORNERS] - used)
+                return -1;
+            sizes[st[SCAN3_FACE]] = st[SCAN3_SIZE] = (int64_t)value;
+        } else if (at <= st[SCAN3_SIZE]) {
+            if (value < 0.0 || value >= (double)st[SCAN3_V])
+                return -1;
+            vertex_index[used + at - 1] = (int32_t)value;
+        } else {
+            if (value < 0.0 || value >= (double)st[SCAN3_N])
+                return -1;
+            normal_index[used + at - st[SCAN3_SIZE] - 1] = (int32_t)value;
+        }
+        if (at == 2 * st[SCAN3_SIZE]) {  /* the face's last normal index */
+            st[SCAN3_USED] += st[SCAN3_SIZE];
+            st[SCAN3_FACE]++;
+            st[SCAN3_AT] = 0;
+        } else {
+            st[SCAN3_AT] = at + 1;
+        }
     }
-    double extra;
-    return used == corners && scan_next(&c, &extra) == 0 ? 0 : -1;
 }
 
+/* After the first pass: the corners the faces must have (from the number of words, which bounds every
+ * array by the file's size), or -1 if the words cannot be such a file.  After the second: 0 if every face
+ * was read whole and nothing followed, else -1. */
+int64_t rt_scan_3vn_end(int64_t *state, int filled)
+{
+    int64_t *st = state;
+    if (st[SCAN3_WORD] < 3)
+        return -1;
+    if (filled)
+        return st[SCAN3_FACE] == st[SCAN3_F] && st[SCAN3_AT] == 0 && st[SCAN3_USED] == st[SCAN3_CORNERS] ? 0 : -1;
+    int64_t rest = st[SCAN3_WORD] - 3 - 3 * (st[SCAN3_V] + st[SCAN3_N]) - st[SCAN3_F];
+    if (rest < 6 * st[SCAN3_F] || rest % 2)
+        return -1;
+    return st[SCAN3_CORNERS] = rest / 2;
+}
 #endif

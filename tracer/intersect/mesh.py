@@ -142,10 +142,22 @@ class TriangleMesh:
 
     def _build_bvh(self, leaf_size: int, bins: int) -> None:
         """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids): built by
-        the C core when it is there (the same tree, in a fraction of the time), else in NumPy.  The boxes
-        and centroids (72 bytes a triangle) live only while the tree is built."""
-        # One corner at a time, in place: the box is min(min(P0, P1), P2), the centroid (P0 + P1 + P2) / 3
-        # summed in corner order (both builders get exactly these numbers).
+        the C core when it is there (the same tree, in a fraction of the time, reading the boxes and
+        centroids from the vertices as it goes), else in NumPy."""
+        pad = BOX_PADDING * (self.extent + self._magnitude)
+        native = _native_builder() if bins <= 64 else None
+        if native is not None:
+            self.nodes, self.tri_order = native(self.vertices, self.tri_vertex, leaf_size, bins, pad)
+        else:
+            self.nodes, self.tri_order = _build_bvh_numpy(*self._boxes_and_centroids(), leaf_size, bins, pad)
+        # Column views for the NumPy traversal.
+        self.node_lo, self.node_hi = self.nodes["lo"], self.nodes["hi"]
+        self.node_offset, self.node_count, self.node_axis = (self.nodes["offset"], self.nodes["count"],
+                                                              self.nodes["axis"])
+
+    def _boxes_and_centroids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(T, 3) each: the triangles' boxes, min(min(P0, P1), P2) and max(...), and centroids (P0 + P1 + P2) / 3
+        summed in corner order (bvh_build.h computes the same numbers), one corner at a time, in place."""
         tri_v, vertices = self.tri_vertex, self.vertices
         corner = vertices[tri_v[:, 0]]
         tri_lo, tri_hi, centroid = corner.copy(), corner.copy(), corner
@@ -156,16 +168,7 @@ class TriangleMesh:
             centroid += corner
         del corner
         centroid /= 3.0
-        pad = BOX_PADDING * (self.extent + self._magnitude)
-        native = _native_builder() if bins <= 64 else None
-        if native is not None:
-            self.nodes, self.tri_order = native(tri_lo, tri_hi, centroid, leaf_size, bins, pad)
-        else:
-            self.nodes, self.tri_order = _build_bvh_numpy(tri_lo, tri_hi, centroid, leaf_size, bins, pad)
-        # Column views for the NumPy traversal.
-        self.node_lo, self.node_hi = self.nodes["lo"], self.nodes["hi"]
-        self.node_offset, self.node_count, self.node_axis = (self.nodes["offset"], self.nodes["count"],
-                                                              self.nodes["axis"])
+        return tri_lo, tri_hi, centroid
 
     @property
     def node_total(self) -> int:

@@ -92,7 +92,7 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_scan_3vn_end.restype = ctypes.c_int64
     lib.rt_scan_3vn_end.argtypes = [_i64p, ctypes.c_int]
     lib.rt_build_mesh_bvh.restype = ctypes.c_int64
-    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
+    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _i32p, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
                                       _i32p, ctypes.POINTER(ctypes.c_void_p)]
     lib.rt_free.restype = None
     lib.rt_free.argtypes = [ctypes.c_void_p]
@@ -239,20 +239,23 @@ def _last_space(block: bytes) -> int:
     return max(block.rfind(bytes([space])) for space in _SPACE)
 
 
-def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int,
+def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int, bins: int,
                    pad: float) -> tuple[np.ndarray, np.ndarray]:
-    """(nodes, tri_order) of TriangleMesh's builder (the same tree, see bvh_build.h), built in C: NODE records
-    with boxes grown by ``pad`` and rounded outward, and the leaf order (int32).  Needs the C core."""
+    """(nodes, tri_order) of TriangleMesh's builder (the same tree, see bvh_build.h), built in C over the
+    triangles ``tri_vertex`` ((T, 3) indices, in range) of ``vertices`` ((V, 3)): NODE records with boxes
+    grown by ``pad`` and rounded outward, and the leaf order (int32).  Needs the C core."""
     from ..intersect.mesh import NODE
 
     if _lib is None:
         raise TracerError(f"the C core is not available: {load_error}")
-    boxes = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3) for a in (tri_lo, tri_hi, centroid)]
-    n = len(boxes[0])
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    tri_vertex = np.ascontiguousarray(tri_vertex, dtype=np.int32).reshape(-1, 3)
+    n = len(tri_vertex)
     order = np.empty(n, np.int32)
     buffer = ctypes.c_void_p()
-    count = _lib.rt_build_mesh_bvh(n, *(_ptr(a, ctypes.c_double) for a in boxes), int(leaf_size), int(bins),
-                                   float(pad), _ptr(order, ctypes.c_int32), ctypes.byref(buffer))
+    count = _lib.rt_build_mesh_bvh(n, _ptr(vertices, ctypes.c_double), _ptr(tri_vertex, ctypes.c_int32),
+                                   int(leaf_size), int(bins), float(pad), _ptr(order, ctypes.c_int32),
+                                   ctypes.byref(buffer))
     if count < 0:
         raise MemoryError("the C core ran out of memory building a mesh BVH")
     try:

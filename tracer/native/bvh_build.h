@@ -1,4 +1,4 @@
-/* Building a mesh's BVH in C: the same tree, node for node, as TriangleMesh._build_bvh_numpy in
+/* Building a mesh's BVH in C: the same tree, node for node, as _build_bvh_numpy in
  * tracer/intersect/mesh.py (binned surface-area heuristic along the centroids' longest axis, stable
  * partitions, nodes numbered in the same depth-first order), in O(n log n) with no Python per node.
  *
@@ -75,12 +75,31 @@ static inline int64_t bvh_bucket(double c, double c_lo, double scale, int64_t bi
     return b < bins - 1 ? b : bins - 1;
 }
 
-/* Build over n triangles given by their boxes and centroids ((n, 3) each).  Writes order (n) and, into a
- * buffer it allocates (*nodes_out, to be released with rt_free), the MeshNode records with their boxes grown
- * by `pad` and rounded outward.  Returns the number of nodes, or -1 when memory runs out or the arguments
- * are out of range. */
-int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi, const double *centroid,
-                          int64_t leaf_size, int64_t bins, double pad, int32_t *order, MeshNode **nodes_out)
+/* A triangle's box (min and max of its corners, NaN-propagating as np.minimum and np.maximum) and the
+ * centroid's coordinate on one axis ((P0 + P1 + P2) / 3 summed in corner order), from the vertices: what
+ * TriangleMesh._build_bvh computes for the NumPy builder, without keeping it for every triangle. */
+static inline void bvh_box(const double *vertices, const int32_t *tri, int64_t t, double *lo, double *hi)
+{
+    const double *p0 = vertices + 3 * (int64_t)tri[3 * t], *p1 = vertices + 3 * (int64_t)tri[3 * t + 1];
+    const double *p2 = vertices + 3 * (int64_t)tri[3 * t + 2];
+    for (int k = 0; k < 3; k++) {
+        lo[k] = nan_min(nan_min(p0[k], p1[k]), p2[k]);
+        hi[k] = nan_max(nan_max(p0[k], p1[k]), p2[k]);
+    }
+}
+
+static inline double bvh_centroid(const double *vertices, const int32_t *tri, int64_t t, int k)
+{
+    return ((vertices[3 * (int64_t)tri[3 * t] + k] + vertices[3 * (int64_t)tri[3 * t + 1] + k]) +
+            vertices[3 * (int64_t)tri[3 * t + 2] + k]) / 3.0;
+}
+
+/* Build over the n triangles tri (3 vertex indices each, checked by the caller) of the vertices.  Writes
+ * order (n) and, into a buffer it allocates (*nodes_out, to be released with rt_free), the MeshNode records
+ * with their boxes grown by `pad` and rounded outward.  Returns the number of nodes, or -1 when memory runs
+ * out or the arguments are out of range. */
+int64_t rt_build_mesh_bvh(int64_t n, const double *vertices, const int32_t *tri, int64_t leaf_size, int64_t bins,
+                          double pad, int32_t *order, MeshNode **nodes_out)
 {
     *nodes_out = NULL;
     if (n < 0 || n > INT32_MAX || leaf_size < 1 || leaf_size > UINT16_MAX || bins < 2 || bins > BVH_MAX_BINS)
@@ -108,8 +127,10 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi,
         double c_lo[3] = {INFINITY, INFINITY, INFINITY}, c_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
         for (int64_t i = start; i < end; i++) {
             int64_t t = order[i];
+            double t_lo[3], t_hi[3];
+            bvh_box(vertices, tri, t, t_lo, t_hi);
             for (int k = 0; k < 3; k++) {
-                double a = tri_lo[3 * t + k], b = tri_hi[3 * t + k], c = centroid[3 * t + k];
+                double a = t_lo[k], b = t_hi[k], c = bvh_centroid(vertices, tri, t, k);
                 lo[k] = a < lo[k] ? a : lo[k];
                 hi[k] = b > hi[k] ? b : hi[k];
                 c_lo[k] = c < c_lo[k] ? c : c_lo[k];
@@ -145,10 +166,12 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi,
                     box_lo[b][k] = INFINITY, box_hi[b][k] = -INFINITY;
             for (int64_t i = start; i < end; i++) {
                 int64_t t = order[i];
-                int64_t b = bvh_bucket(centroid[3 * t + axis], c_lo[axis], scale, bins);
+                int64_t b = bvh_bucket(bvh_centroid(vertices, tri, t, axis), c_lo[axis], scale, bins);
+                double t_lo[3], t_hi[3];
+                bvh_box(vertices, tri, t, t_lo, t_hi);
                 in_bin[b]++;
                 for (int k = 0; k < 3; k++) {
-                    double a = tri_lo[3 * t + k], c = tri_hi[3 * t + k];
+                    double a = t_lo[k], c = t_hi[k];
                     box_lo[b][k] = a < box_lo[b][k] ? a : box_lo[b][k];
                     box_hi[b][k] = c > box_hi[b][k] ? c : box_hi[b][k];
                 }
@@ -187,7 +210,7 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *tri_lo, const double *tri_hi,
             int64_t kept = start, moved = 0;
             for (int64_t i = start; i < end; i++) {
                 int64_t t = order[i];
-                if (bvh_bucket(centroid[3 * t + axis], c_lo[axis], scale, bins) <= best)
+                if (bvh_bucket(bvh_centroid(vertices, tri, t, axis), c_lo[axis], scale, bins) <= best)
                     order[kept++] = t;
                 else
                     scratch[moved++] = t;

@@ -787,11 +787,17 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
             pixmaps.append((number, str(path), None, None))
     columns = _Columns(nodes, shapes, bool(structure), stack,
                        *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius")))
-    key = (tuple(map(id, nodes)), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
-           tuple(map(id, mesh_list)), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
+    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
+           _ids_digest(mesh_list), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps),
            numerics.TOLERANCES)
     return key, columns
+
+
+def _ids_digest(objects: list) -> bytes:
+    """A digest of the objects' ids, in order (20 bytes, where a tuple of the ids takes 40 per object)."""
+    ids = np.fromiter(map(id, objects), dtype=np.uint64, count=len(objects))
+    return hashlib.blake2b(ids.tobytes(), digest_size=20).digest()
 
 
 def compile_scene(scene: Scene) -> CompiledScene:

@@ -21,7 +21,7 @@ from array import array
 from bisect import bisect_right
 from dataclasses import dataclass
 from itertools import accumulate, chain
-from typing import NamedTuple, Optional
+from typing import NamedTuple, Optional, Union
 
 
 class Token(NamedTuple):
@@ -54,8 +54,9 @@ class _Block:
     start: int  # where its first line starts in the text
     end: int  # where its last line ends
     first_line: int  # the number of its first line (1-based)
-    #: starts[i]: the number of the first token of its line i (a line without tokens: of the next token).
-    starts: array
+    #: starts[i]: the number of the first token of its line i (a line without tokens: of the next token); a
+    #: list while it is the last block (bisected for every shape read), an array after.
+    starts: Union[list[int], array]
 
 
 class Tokens:
@@ -72,6 +73,7 @@ class Tokens:
         self._blocks: list[_Block] = []
         self._block_bases: list[int] = []  # the number of each block's first token, for bisect
         self._lines: dict[int, list[str]] = {}  # the lines of the last blocks asked about, by block number
+        self._tokens: list[str] = []  # the last block's
         #: Tokens split so far.
         self.count = 0
         #: The name comments of the last block: (number of the token after the comment, the name).
@@ -96,19 +98,22 @@ class Tokens:
             # The common case for big generated files: no comments, no braces; every loop is in C.
             per_line = list(map(str.split, lines))
             tokens = list(chain.from_iterable(per_line))
-            starts = array("q", accumulate(map(len, per_line), initial=base))
+            starts = list(accumulate(map(len, per_line), initial=base))
             starts.pop()
+        if self._blocks:  # no longer the last: its line starts as an array, a quarter of the memory
+            self._blocks[-1].starts = array("q", self._blocks[-1].starts)
         self._block_bases.append(base)
         self._blocks.append(_Block(start, end, self._next_line, starts))
         self._lines = {len(self._blocks) - 1: lines}
+        self._tokens = tokens
         self._next_start = end + 1
         self._next_line += len(lines)
         self.count += len(tokens)
         return tokens
 
-    def _split_lines(self, lines: list[str], base: int) -> tuple[list[str], array]:
+    def _split_lines(self, lines: list[str], base: int) -> tuple[list[str], list[int]]:
         tokens: list[str] = []
-        starts = array("q")
+        starts = []
         for line in lines:
             starts.append(base + len(tokens))
             comment = line.find("!")
@@ -125,34 +130,41 @@ class Tokens:
 
     def locate(self, number: int) -> Token:
         """Token ``number`` (one already split) with its line and column."""
-        block_index = bisect_right(self._block_bases, number) - 1
-        block = self._blocks[block_index]
-        lines = self._lines.get(block_index)
-        if lines is None:  # an earlier block (a macro body defined there): split its lines again
-            lines = self._text[block.start:block.end].split("\n")
-            self._lines[block_index] = lines
+        return Token(*self._find(number))
+
+    def place(self, number: int) -> tuple[int, int]:
+        """The line and column of token ``number`` (one already split)."""
+        return self._find(number)[1:]
+
+    def _find(self, number: int) -> tuple[str, int, int]:
+        last = len(self._blocks) - 1
+        index = last if number >= self._block_bases[last] else bisect_right(self._block_bases, number) - 1
+        block = self._blocks[index]
         row = bisect_right(block.starts, number) - 1
-        text, column = _nth_token(_without_comment(lines[row]), number - block.starts[row])
-        return Token(text, block.first_line + row, column)
+        first = block.starts[row]  # the number of the first token on its line
+        lines = self._lines.get(index)
+        if lines is None:  # an earlier block (a macro body defined there): split its lines again
+            lines = self._lines[index] = self._text[block.start:block.end].split("\n")
+        line = lines[row]
+        if index == last:
+            base = self._block_bases[last]
+            words = self._tokens[first - base:number - base + 1]
+        else:
+            words = _TOKEN_RE.findall(_without_comment(line), 0)[:number - first + 1]
+        # Most lines are written with single spaces and no indent: then the column is the length of the
+        # words before the token, joined by spaces, if the line does start with just that.
+        before = " ".join(words[:-1]) + " " if len(words) > 1 else ""
+        if line.startswith(before) and line.startswith(words[-1], len(before)):
+            column = len(before) + 1
+        else:
+            column = next(match.start() + 1 for k, match in enumerate(_TOKEN_RE.finditer(_without_comment(line)))
+                          if k == len(words) - 1)
+        return words[-1], block.first_line + row, column
 
 
 def _without_comment(line: str) -> str:
     comment = line.find("!")
     return line if comment < 0 else line[:comment]
-
-
-def _nth_token(line: str, n: int) -> tuple[str, int]:
-    """Token ``n`` (from 0) of ``line`` (comment removed), and its 1-based column."""
-    if "{" not in line and "}" not in line:
-        words = line.split()
-        # Most lines are written with single spaces and no indent: then the column is plain arithmetic,
-        # checked by comparing the line's start with the words before it, joined.
-        before = " ".join(words[:n])
-        column = len(before) + 1 if n else 0
-        if line.startswith(before) and line.startswith(words[n], column) and (n == 0 or line[column - 1] == " "):
-            return words[n], column + 1
-    match = next(match for k, match in enumerate(_TOKEN_RE.finditer(line)) if k == n)
-    return match.group(), match.start() + 1
 
 
 def tokenize(text: str, names: Optional[list[tuple[int, str]]] = None) -> list[Token]:

@@ -195,7 +195,7 @@ class _TokenSource:
             if pos < len(top.tokens):  # the common case, inline: nothing to settle
                 top.pos = pos + 1
                 self.last = top.numbers[pos]
-                yield top.tokens[pos], self.last, self.macros()
+                yield top.tokens[pos], self.last, self._groups if self._groups is not None else self.macros()
             elif (token := self.next()) is not None:
                 yield token, self.last, self.macros()
             else:
@@ -440,8 +440,7 @@ class _Reader:
         return token, self.source.last
 
     def _location(self, at: int) -> SourceLocation:
-        token = self.tokens.locate(at)
-        return SourceLocation(self.file, token.line, token.column)
+        return SourceLocation(self.file, *self.tokens.place(at))
 
     # -- scene settings ---------------------------------------------------------------------------------
 

@@ -268,6 +268,8 @@ class _ShapeNames:
         self._waiting: Optional[tuple[int, str]] = None
 
     def add_block(self, tokens: list[str], first: int, comments: list[tuple[int, str]]) -> None:
+        """Names for the shapes in ``tokens`` (numbered from ``first``) from the name comments among them
+        (``comments``) and the one still waiting."""
         if self._waiting is not None:
             comments = [self._waiting] + comments
             self._waiting = None
@@ -335,8 +337,7 @@ class _Reader:
         assert set(self.handlers) == KEYWORDS
 
     def _new_block(self, tokens: list[str], first: int) -> None:
-        if self.tokens.name_comments:
-            self.shape_names.add_block(tokens, first, self.tokens.name_comments)
+        self.shape_names.add_block(tokens, first, self.tokens.name_comments)
 
     # -- driving loop -----------------------------------------------------------------------------------
 

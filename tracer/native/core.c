@@ -798,8 +798,9 @@ static int build_tree(Scene *S)
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
     BuildTask *tasks = (BuildTask *)malloc((size_t)(2 * nb + 2) * sizeof(BuildTask));
     /* The boxes as the slab test sees them: an axis whose bounds are in the wrong order is the slab
-     * between them, one with a NaN bound is no constraint at all. */
-    double *boxes = (double *)malloc((size_t)(6 * D->n_objects + 1) * sizeof(double));
+     * between them, one with a NaN bound is no constraint at all.  Like centre[], by position in items[]
+     * (the partition moves them with their items): the passes over a node then read memory in order. */
+    double *boxes = (double *)malloc((size_t)(6 * nb + 1) * sizeof(double));
     if (!S->unbounded || !S->items || !S->nodes || !centre || !tasks || !boxes) {
         free(centre);
         free(tasks);
@@ -810,7 +811,7 @@ static int build_tree(Scene *S)
     for (int64_t i = 0; i < D->n_objects; i++) {
         if (D->object_bounded[i]) {
             const double *box = D->object_box + 6 * i;
-            double *clean = boxes + 6 * i;
+            double *clean = boxes + 6 * b;
             for (int k = 0; k < 3; k++) {
                 double lo = box[k], hi = box[3 + k];
                 if (lo != lo || hi != hi) {
@@ -829,7 +830,7 @@ static int build_tree(Scene *S)
             S->unbounded[u++] = i;
         }
     }
-    /* centre[] is indexed by position in items[]; the partition below permutes them together. */
+    /* centre[] and boxes[] are indexed by position in items[]; the partition below permutes them together. */
     S->n_nodes = 0;
     S->tree_depth = 0;
     if (nb == 0) {
@@ -850,7 +851,7 @@ static int build_tree(Scene *S)
         box_empty(node->lo, node->hi);
         box_empty(clo, chi);
         for (int64_t i = task.start; i < task.end; i++) {
-            const double *box = boxes + 6 * S->items[i];
+            const double *box = boxes + 6 * i;
             box_grow(node->lo, node->hi, box, box + 3);
             box_grow(clo, chi, centre + 3 * i, centre + 3 * i);
         }
@@ -879,7 +880,7 @@ static int build_tree(Scene *S)
             for (int64_t i = task.start; i < task.end; i++) {
                 int64_t j = sah_bin(centre[3 * i + k], clo[k], extent);
                 count[j]++;
-                const double *box = boxes + 6 * S->items[i];
+                const double *box = boxes + 6 * i;
                 box_grow(blo[j], bhi[j], box, box + 3);
             }
             double right_area[SAH_BINS];
@@ -930,6 +931,11 @@ static int build_tree(Scene *S)
                         double c = centre[3 * i + k];
                         centre[3 * i + k] = centre[3 * j + k];
                         centre[3 * j + k] = c;
+                    }
+                    for (int k = 0; k < 6; k++) {
+                        double c = boxes[6 * i + k];
+                        boxes[6 * i + k] = boxes[6 * j + k];
+                        boxes[6 * j + k] = c;
                     }
                     j--;
                 }

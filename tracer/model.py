@@ -30,7 +30,7 @@ MESH_KINDS = shapes.keywords("mesh")
 SHAPE_KINDS = shapes.keywords()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: one per shape, 40 bytes less each
 class SourceLocation:
     """Where something came from, for messages: file (may be None for text), line and column (1-based)."""
 
@@ -43,7 +43,7 @@ class SourceLocation:
         return f"{name}:{self.line}:{self.column}" if self.column else f"{name}:{self.line}"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a scene of 10^5 shapes may hold as many materials
 class Material:
     """Surface properties; SDL's defaults (see docs/sdl.md)."""
 

@@ -714,9 +714,11 @@ static void box_empty(double *lo, double *hi)
 
 static void box_grow(double *lo, double *hi, const double *blo, const double *bhi)
 {
+    /* (stored whether changed or not: the compiler may then use minsd/maxsd, which give these same
+     * values, instead of a branch that mispredicts on every other object) */
     for (int i = 0; i < 3; i++) {
-        if (blo[i] < lo[i]) lo[i] = blo[i];
-        if (bhi[i] > hi[i]) hi[i] = bhi[i];
+        lo[i] = blo[i] < lo[i] ? blo[i] : lo[i];
+        hi[i] = bhi[i] > hi[i] ? bhi[i] : hi[i];
     }
 }
 

@@ -26,6 +26,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 #: Bounds a hang, never a speed: connecting to nothing waits for Dask's connect timeout (set to 3 s here).
 PROCESS_LIMIT = 120
+#: (read before this module starts a cluster: Dask's nanny writes its workers' variables into this process too)
+MALLOC_TRIM_AT_START = os.environ.get("MALLOC_TRIM_THRESHOLD_")
 
 
 def _children() -> list:
@@ -108,6 +110,16 @@ def test_a_worker_killed_mid_render_loses_nothing(client):
     assert not psutil.pid_exists(victim) or psutil.Process(victim).status() == psutil.STATUS_ZOMBIE
     assert np.array_equal(image, local.image)
     assert rays.camera == local.rays.camera
+
+
+def test_local_workers_keep_glibcs_adaptive_allocator(client):
+    """Dask's nanny puts MALLOC_TRIM_THRESHOLD_ into its workers' environment (and its own), which turns off
+    glibc's adaptive mmap threshold: every temporary array of a tile's rays is then mapped and faulted in
+    anew, and a worker spent a fifth of its time in the kernel.  A local:N cluster leaves the variable as this
+    process had it before any cluster started."""
+    assert set(client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_").values()) == {MALLOC_TRIM_AT_START}
+    assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == MALLOC_TRIM_AT_START
+    assert set(client.run(os.environ.get, "OMP_NUM_THREADS").values()) == {"1"}  # (the rest of Dask's list stays)
 
 
 def test_a_scene_a_worker_cannot_read_is_reported_once(client):

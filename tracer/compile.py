@@ -437,17 +437,24 @@ class MaterialTable:
     texture: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        # (one pass over the materials, then np.fromiter per field: a hundred thousand materials in a tenth
-        # of the time np.array of a list of tuples per field takes)
+        # (a pass over a chunk of materials, then np.fromiter per field: a hundred thousand materials in a
+        # tenth of the time np.array of a list of tuples per field takes; chunks keep the transposed
+        # tuples a few MB)
         n = len(self.materials)
-        columns = list(zip(*map(attrgetter(*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"), self.materials)))
-        if not columns:
-            columns = [()] * (len(_COLOR_FIELDS) + len(_NUMBER_FIELDS) + 1)
-        for name, values in zip(_COLOR_FIELDS, columns):
-            setattr(self, name, np.fromiter(chain.from_iterable(values), dtype=float, count=3 * n).reshape(n, 3))
-        for name, values in zip(_NUMBER_FIELDS, columns[len(_COLOR_FIELDS):]):
-            setattr(self, name, np.fromiter(values, dtype=float, count=n))
-        self.texture = np.fromiter(columns[-1], dtype=np.int64, count=n)
+        for name in _COLOR_FIELDS:
+            setattr(self, name, np.empty((n, 3)))
+        for name in _NUMBER_FIELDS:
+            setattr(self, name, np.empty(n))
+        self.texture = np.empty(n, dtype=np.int64)
+        fields = attrgetter(*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture")
+        for rows in row_chunks(n):
+            columns = list(zip(*map(fields, self.materials[rows])))
+            size = rows.stop - rows.start
+            for name, values in zip(_COLOR_FIELDS, columns):
+                getattr(self, name)[rows] = np.fromiter(chain.from_iterable(values), float, 3 * size).reshape(-1, 3)
+            for name, values in zip(_NUMBER_FIELDS, columns[len(_COLOR_FIELDS):]):
+                getattr(self, name)[rows] = np.fromiter(values, float, size)
+            self.texture[rows] = np.fromiter(columns[-1], np.int64, size)
 
 
 @dataclass
@@ -693,21 +700,39 @@ _TRIANGLE_MESHES: "weakref.WeakValueDictionary[tuple, object]" = weakref.WeakVal
 
 
 def mesh_digest(mesh: MeshData) -> bytes:
-    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from)."""
+    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from).  Arrays
+    are hashed where they lie (indices a slice at a time as int64), so a big mesh is not copied for it."""
     h = hashlib.blake2b(digest_size=20)
     for array in (mesh.vertices, mesh.normals):
         array = np.ascontiguousarray(array, dtype=np.float64)
         h.update(repr(array.shape).encode())
-        h.update(array.tobytes())
+        h.update(array.reshape(-1))
     faces = mesh.faces
     if isinstance(faces, FaceList):
         h.update(b"packed")
-        for array in (faces.sizes, faces.vertex_index, faces.normal_index):
-            h.update(b"-" if array is None else np.ascontiguousarray(array, dtype=np.int64).tobytes())
+        size = faces.uniform_size
+        if size is not None:  # every face of one size: that size and the count say what sizes would
+            h.update(f"{size}x{len(faces)}".encode())
+        else:
+            _hash_indices(h, faces.sizes)
+        for array in (faces.vertex_index, faces.normal_index):
+            _hash_indices(h, array)
     else:
         h.update(b"list")
         h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
     return h.digest()
+
+
+def _hash_indices(h, array) -> None:
+    """Feed an index array (or None) to the hash as int64, a million at a time."""
+    if array is None:
+        h.update(b"-")
+        return
+    array = np.asarray(array).reshape(-1)
+    h.update(f"[{len(array)}]".encode())
+    step = 1 << 20
+    for start in range(0, len(array), step):
+        h.update(np.ascontiguousarray(array[start:start + step], dtype=np.int64))
 
 
 def shared_triangle_mesh(mesh: MeshData):
@@ -772,7 +797,7 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
     stack = _stacked_matrices(shapes)
     matrices = hashlib.blake2b(digest_size=20)
     if stack is not None:
-        matrices.update(stack.tobytes())
+        matrices.update(stack)  # (the array's own bytes, without a copy)
     else:  # (a matrix that is not a float64 4x4: compiling will say which)
         matrices.update(repr([np.asarray(s.matrix).tolist() for s in shapes]).encode())
     mesh_list = list(map(attrgetter("mesh"), shapes))
@@ -797,7 +822,7 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
 def _ids_digest(objects: list) -> bytes:
     """A digest of the objects' ids, in order (20 bytes, where a tuple of the ids takes 40 per object)."""
     ids = np.fromiter(map(id, objects), dtype=np.uint64, count=len(objects))
-    return hashlib.blake2b(ids.tobytes(), digest_size=20).digest()
+    return hashlib.blake2b(ids, digest_size=20).digest()
 
 
 def compile_scene(scene: Scene) -> CompiledScene:

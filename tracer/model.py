@@ -7,7 +7,6 @@ coordinates (column vectors: ``world = matrix @ generic``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 from collections.abc import Sequence
 from typing import Optional, Union
@@ -188,7 +187,7 @@ class MeshData:
                 np.asarray(tri_n, dtype=np.int64).reshape(-1, 3))
 
 
-@dataclass
+@dataclass(slots=True)  # slots: a scene may hold 10^6 shapes, and a __dict__ each would add 160 bytes to each
 class Shape:
     """One generic shape placed in the world.
 
@@ -212,14 +211,16 @@ class Shape:
     def __post_init__(self) -> None:
         if self.kind not in SHAPE_KINDS:
             raise SceneError(f"unknown shape kind {self.kind!r}")
-        self.matrix = np.array(self.matrix, dtype=np.float64).reshape(4, 4)
+        matrix = np.array(self.matrix, dtype=np.float64)  # a copy of its own
+        # (16 numbers are reshaped and copied again: a reshaped view would keep a second array per shape.)
+        self.matrix = matrix if matrix.shape == (4, 4) else matrix.reshape(4, 4).copy()
 
     @property
     def small_radius(self) -> float:
         """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
         return {"cylinder": 1.0, "cone": 0.0}.get(self.kind, self.tapered_radius)
 
-    @cached_property
+    @property
     def inverse(self) -> np.ndarray:
         return np.linalg.inv(self.matrix)
 

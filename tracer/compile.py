@@ -500,7 +500,31 @@ _TRIANGLE_MESHES: "weakref.WeakValueDictionary[tuple, object]" = weakref.WeakVal
 
 
 def mesh_digest(mesh: MeshData) -> bytes:
-    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from)."""
+    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from).  A mesh
+    given to remember_digest is hashed once (while it holds the same arrays)."""
+    kept = mesh.__dict__.get(_DIGEST_ATTRIBUTE)
+    if kept is not None and kept[0] == _parts(mesh):
+        return kept[1]
+    return _hash_mesh(mesh)
+
+
+#: Where remember_digest keeps a mesh's digest, with the identity of the arrays it was computed from.
+_DIGEST_ATTRIBUTE = "_content_digest"
+
+
+def _parts(mesh: MeshData) -> tuple:
+    return id(mesh.vertices), id(mesh.normals), id(mesh.faces)
+
+
+def remember_digest(mesh: MeshData) -> MeshData:
+    """Hash ``mesh`` now and keep the digest on it, for a caller that never changes the mesh's arrays in place
+    afterwards (the Blender add-on's converted meshes, compiled again at every viewport update): compiling
+    a scene then does not hash a million triangles again.  Returns the mesh."""
+    mesh.__dict__[_DIGEST_ATTRIBUTE] = (_parts(mesh), _hash_mesh(mesh))
+    return mesh
+
+
+def _hash_mesh(mesh: MeshData) -> bytes:
     h = hashlib.blake2b(digest_size=20)
     for array in (mesh.vertices, mesh.normals):
         array = np.ascontiguousarray(array, dtype=np.float64)

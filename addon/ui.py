@@ -40,6 +40,9 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         row.active = settings.sampling == "ADAPTIVE"
         row.prop(settings, "threshold")
         layout.column().prop(settings, "target_error")
+        # Blender's own switch (Cycles shows it under Performance): keep this engine between final renders,
+        # so that F12 after moving a light or editing a material rebuilds only what changed.
+        layout.column().prop(context.scene.render, "use_persistent_data")
 
 
 class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):

@@ -273,3 +273,27 @@ def test_the_engine_blender_kept_goes_with_its_cache():
         gc.collect()
         assert len(object_cache._LIVE) == 0
     fresh()
+
+
+def test_the_render_panel_offers_persistent_data():
+    """Blender shows Persistent Data in Cycles' panels only: the engine's own render panel offers it."""
+    from addon import ui
+
+    shown = []
+
+    class Layout:
+        use_property_split = False
+
+        def column(self):
+            return self
+
+        def row(self):
+            return self
+
+        def prop(self, owner, name, **_kwargs):
+            shown.append((owner, name))
+
+    fresh()
+    scene = bpy.context.scene
+    ui.SDL_PT_render.draw(types.SimpleNamespace(layout=Layout()), types.SimpleNamespace(scene=scene))
+    assert (scene.render, "use_persistent_data") in shown

@@ -167,7 +167,7 @@ def main() -> None:
     summary = {"grid": args.grid, "polygons": runs["after"][0]["polygons"], "before_commit": args.before,
                "repeat": args.repeat}
     for name, results in runs.items():
-        summary[name] = {step: {key: statistics.median(r[step][key] for r in results)
+        summary[name] = {step: {key: round(statistics.median(r[step][key] for r in results), 3)
                                 for key in ("seconds", "build", "compile")} for step in STEPS}
     text = json.dumps(summary, indent=2)
     print(text)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -121,7 +122,7 @@ def test_glass_scene_refracts(backend):
     assert with_glass.rays.refraction > 0 and with_glass.rays.reflection > 0
     for shape in scene.shapes():
         if shape.material.transparency > 0:
-            shape.material = type(shape.material)(**{**shape.material.__dict__, "transparency": 0.0})
+            shape.material = replace(shape.material, transparency=0.0)
     opaque = tracer.render(scene, *scaled(backend, 80, 60), backend=backend)
     assert opaque.rays.refraction == 0
     changed = np.abs(with_glass.image - opaque.image).max(axis=2) > 0.05
@@ -133,7 +134,7 @@ def test_textures_scene_shows_its_textures(backend):
     size = scaled(backend, 160, 120)
     textured = tracer.render(scene, *size, backend=backend).image
     for shape in scene.shapes():
-        shape.material = type(shape.material)(**{**shape.material.__dict__, "texture": 0})
+        shape.material = replace(shape.material, texture=0)
     plain = tracer.render(scene, *size, backend=backend).image
     changed = np.abs(textured - plain).max(axis=2) > 0.05
     assert changed.mean() > 0.3

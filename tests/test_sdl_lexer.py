@@ -98,3 +98,28 @@ def test_to_float_takes_exactly_the_number_pattern(text):
     if expected is not None and not math.isfinite(expected):
         expected = None
     assert to_float(text) == expected
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.text(alphabet="0123456789.eE+-_ xn", min_size=1, max_size=6).filter(lambda w: not w.isspace()),
+                          st.floats().map(repr)), max_size=6))
+def test_several_words_at_once_are_what_each_is_alone(words):
+    from tracer.sdl.lexer import to_floats
+    words = [w for w in words if w.split() == [w]]  # tokens: no white space in them
+    alone = tuple(map(to_float, words))
+    assert to_floats(words) == (None if None in alone else alone)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from(["a", "b1", " ", "  ", "\t", "\r", "\n", "\n", "{", "}", "!", "! name: x", "é"]),
+                max_size=40).map("".join))
+def test_blocks_of_any_size_give_the_same_tokens_and_places(source):
+    """The lexer splits a text a block of lines at a time; where the blocks end changes nothing."""
+    from tracer.sdl import lexer
+    names = []
+    whole = tokenize(source, names)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(lexer, "BLOCK_CHARS", 1)
+        small_names = []
+        assert tokenize(source, small_names) == whole
+        assert small_names == names

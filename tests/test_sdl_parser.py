@@ -626,3 +626,102 @@ def test_a_name_comment_stops_at_def_and_use():
 def test_without_name_comments_shapes_have_no_names():
     scene = parse_sdl("! group: x\nsphere\n!name:\ncube\n")
     assert [s.name for s in scene.shapes()] == [None, None]
+
+
+# --- big files: read a block of lines at a time ----------------------------------------------------------
+# The lexer splits the text a block of lines at a time (lexer.BLOCK_CHARS) and the reader finds a token's
+# line and column only when it records or reports it.  These check that places, names and messages deep in
+# a file, and across block boundaries, are what they are in a small one.
+
+def _sphere_lines(count: int) -> list[str]:
+    return [f"diffuse 0.{k % 10}5 0.5 0.5 push translate {k} 0.25 -{k}.5 scale 0.5 0.5 0.5 sphere pop"
+            for k in range(count)]
+
+
+def test_places_and_names_deep_in_a_big_file():
+    lines = _sphere_lines(30_000)  # about 2.3 MB: several blocks
+    column = {k: lines[k].index("sphere") + 1 for k in (123, 20_000, 29_999)}
+    lines[20_000] = "! name: Far away\n" + "\t  " + lines[20_000]  # indented: the column is counted, not assumed
+    lines[29_998] = lines[29_998] + "   ! name: the last one"  # names the sphere on the next line
+    scene = parse("\n".join(lines))
+    spheres = scene.objects
+    assert len(spheres) == 30_000
+    assert spheres[123].source == SourceLocation("scene.sdl", 124, column[123])
+    assert spheres[20_000].source == SourceLocation("scene.sdl", 20_002, column[20_000] + 3)
+    assert spheres[29_999].source == SourceLocation("scene.sdl", 30_001, column[29_999])
+    assert spheres[20_000].name == "Far away" and spheres[29_999].name == "the last one"
+    assert [s.name for s in spheres].count(None) == 29_998
+    assert spheres[29_999].material.diffuse == (0.95, 0.5, 0.5)
+    assert np.array_equal(spheres[29_999].matrix, transforms.translation(29_999, 0.25, -29_999.5)
+                          @ transforms.scaling(0.5, 0.5, 0.5))
+
+
+@pytest.mark.parametrize("line, column, message", [
+    ("translate 1 x 3 sphere", 13, "expected a number after 'translate' (found 'x', expected 'translate dx dy dz')"),
+    ("  push pop pop", 12, "pop without a matching push (found 'pop')"),
+    ("push scale 1 0 1 cube pop", 18, "singular transform for 'cube' (a scale of 0?) (found 'cube', expected a transform "
+                             "with an inverse)"),
+    ("use nothing", 5, "undefined macro (found 'nothing', expected a name given by an earlier def)"),
+])
+def test_errors_deep_in_a_big_file_name_their_line_and_column(line, column, message):
+    lines = _sphere_lines(40_000)
+    lines[33_333] = line
+    with pytest.raises(SDLError) as info:
+        parse("\n".join(lines))
+    assert str(info.value) == f"scene.sdl:33334:{column}: {message}"
+    scene = parse("\n".join(lines), strict=False)
+    assert scene.warnings == [f"scene.sdl:33334:{column}: {message}"]
+
+
+def test_a_macro_defined_early_places_its_shapes_at_its_body_when_used_late():
+    lines = ["def lamp {", "  ! name: bulb", "  push scale 0.2 0.2 0.2 sphere pop", "  cube 7", "}"]
+    lines += _sphere_lines(30_000) + ["use lamp"]
+    scene = parse("\n".join(lines), strict=False)
+    bulb, cube = scene.objects[-2:]
+    assert (bulb.kind, bulb.name, bulb.groups) == ("sphere", "bulb", ("lamp",))
+    assert bulb.source == SourceLocation("scene.sdl", 3, lines[2].index("sphere") + 1)
+    assert cube.kind == "cube" and cube.source == SourceLocation("scene.sdl", 4, 3)
+    assert scene.warnings == ["scene.sdl:4:8: a number where a keyword belongs (too many numbers?) "
+                              "(found '7', expected a keyword)"]
+
+
+def _outcome(text: str, strict: bool):
+    """Everything a reader gives for ``text``: its error, or its objects (with places, names, groups,
+    materials and matrices), lights, camera, settings and warnings."""
+    try:
+        scene = parse(text, strict=strict)
+    except SDLError as error:
+        return str(error)
+    objects = []
+    for obj in scene.objects:
+        todo = [obj]
+        while todo:
+            node = todo.pop()
+            if isinstance(node, CSG):
+                objects.append((node.op, node.groups, node.source))
+                todo += [node.right, node.left]
+            else:
+                objects.append((node.kind, node.matrix.tolist(), node.material, node.tapered_radius, node.groups,
+                                node.source, node.name))
+    return objects, scene.lights, scene.camera, scene.settings, scene.warnings
+
+
+statement_or_junk = st.one_of(
+    st.sampled_from(sorted(KEYWORDS)),
+    st.sampled_from(["{", "}", "1", "-2.5", "0", "x", "a", "b", "9", "\n", "\n", "\n", "\r\n", "\t", "! c\n",
+                     "! name: n1\n", "! name: n 2\n", "def a {", "def b { sphere", "use a", "use b", "push",
+                     "translate 1 2 3", "scale 2 2 2", "rotate 30 0 1 0", "diffuse 0.5 0.5 0", "sphere", "cube",
+                     "a{b", "}{"]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(statement_or_junk, max_size=60), st.sampled_from([" ", "  ", "\n"]))
+def test_the_block_size_changes_nothing(words, separator):
+    """A block of one line at a time gives what one block for the whole text gives: the same objects,
+    places, names, errors and warnings."""
+    from tracer.sdl import lexer
+    text = separator.join(words)
+    whole = [_outcome(text, strict) for strict in (True, False)]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(lexer, "BLOCK_CHARS", 1)
+        assert [_outcome(text, strict) for strict in (True, False)] == whole

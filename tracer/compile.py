@@ -8,10 +8,13 @@ kind, textures) is what lets the tracer do no work at all for the others: the sh
 from __future__ import annotations
 
 import hashlib
+import operator
 import os
 import weakref
+from collections.abc import Sequence
 from dataclasses import astuple, dataclass, field
 from functools import cached_property
+from itertools import chain
 from operator import attrgetter
 from typing import Callable, Optional, Union
 
@@ -24,7 +27,7 @@ from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
+from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
                     TORUS_TUBE_RADIUS, iter_shapes)
 from .transforms import transform_points
 
@@ -107,10 +110,14 @@ def _sphere_around(world: np.ndarray):
 
 def _stacked_matrices(shapes: list[Shape]) -> Optional[np.ndarray]:
     """The shapes' matrices as one (N, 4, 4) array, or None if any is not a float64 4x4 array."""
-    matrices = [s.matrix for s in shapes]
-    if not all(isinstance(m, np.ndarray) and m.dtype == np.float64 and m.shape == (4, 4) for m in matrices):
+    matrices = list(map(attrgetter("matrix"), shapes))
+    if not matrices:
+        return np.zeros((0, 4, 4))
+    # (checked and joined a column at a time: a tenth of a second less for 100,000 shapes than np.stack)
+    if (set(map(type, matrices)) != {np.ndarray} or set(map(attrgetter("dtype"), matrices)) != {np.dtype(np.float64)}
+            or set(map(attrgetter("shape"), matrices)) != {(4, 4)}):
         return None
-    return np.stack(matrices) if matrices else np.zeros((0, 4, 4))
+    return np.concatenate(matrices).reshape(-1, 4, 4)
 
 
 def _batched_inverses(stack: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -131,48 +138,13 @@ def _batched_inverses(stack: Optional[np.ndarray]) -> Optional[np.ndarray]:
     return inverses if np.isfinite(inverses).all() else None
 
 
-def _batched_bounds(shapes: list[Shape], stack: np.ndarray) -> list[Optional[tuple]]:
-    """Bounding spheres of the closed-form shapes (None for the others), their corners carried to the world
-    by one stacked matrix product: what transform_points and _sphere_around compute, to rounding in the
-    last place (which the radius's 1e-9 padding covers)."""
-    out: list[Optional[tuple]] = [None] * len(shapes)
-    # Shapes whose generic points are one shared constant go in one group per constant (no per-shape copy
-    # of the points); the others (tapered cylinders) in one group of their own points.
-    groups: dict[int, tuple[np.ndarray, list[int]]] = {}
-    varied_rows, varied_points = [], []
-    for i, s in enumerate(shapes):
-        pts = _BOX_CORNERS.get(s.kind)
-        if pts is not None:
-            groups.setdefault(id(pts), (pts, []))[1].append(i)
-            continue
-        pts = _analytic_generic_points(s)
-        if pts is not None:
-            varied_rows.append(i)
-            varied_points.append(pts)
-    batches = list(groups.values())
-    if varied_rows:
-        batches.append((np.stack(varied_points), varied_rows))
-    for pts, rows in batches:
-        m = stack[rows]
-        world = pts @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
-        lo, hi = world.min(axis=1), world.max(axis=1)
-        centers = list(0.5 * (lo + hi))
-        extent = hi - lo
-        radius = (np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)).tolist()
-        for i, center, r in zip(rows, centers, radius):
-            out[i] = (center, r)
-    return out
-
-
-#: Primitive.generic_size of the kinds where it is a constant (compile_scene stores it for them).
-_FIXED_GENERIC_SIZE = {"sphere": 1.0, "cube": 1.0, "square": 1.0, "plane": 1.0, "torus": 1.0 + TORUS_TUBE_RADIUS}
-
-
 class Primitive:
     """One shape, ready to intersect world rays.
 
     ``inverse`` and ``bounds`` (centre, radius), when given, are what _checked_inverse and the bounding
-    sphere would compute: compile_scene computes them for all shapes at once."""
+    sphere would compute.  compile_scene makes none of these itself: it computes every primitive's numbers
+    at once into a :class:`PrimitiveTable`, and its primitives are views of the table's rows, made when
+    first asked for (see :meth:`of_row`)."""
 
     def __init__(self, shape: Shape, index: int, material_id: int, mesh_cache: Optional[dict] = None,
                  inverse: Optional[np.ndarray] = None, bounds: Optional[tuple] = None):
@@ -184,12 +156,7 @@ class Primitive:
         self.inverse = _checked_inverse(shape) if inverse is None else inverse
         # World normal = generic normal through the inverse-transpose; as row vectors: n_g @ inverse[:3,:3].
         self.normal_matrix = self.inverse[:3, :3]
-        entry = shapes.KINDS[shape.kind]
-        self.thin = entry.thin
-        self.bounded = entry.bounded
-        self._intersect = entry.function("intersect") if entry.intersect else None
-        self._normals_agree = entry.normals_agree
-        self.tolerances = numerics.TOLERANCES
+        self._take_kind(numerics.TOLERANCES)
         #: numerics.inverse_rounding of the matrix (compile_scene fills it for all shapes at once)
         self.inverse_error: Optional[float] = None
         self._mesh = None
@@ -205,6 +172,42 @@ class Primitive:
                 cache[key] = (shape.mesh, shared_triangle_mesh(shape.mesh))
             self._mesh = cache[key][1]
         self.center, self.radius = self._world_bounding_sphere() if bounds is None else bounds
+
+    def _take_kind(self, tolerances: numerics.Tolerances) -> None:
+        """What the shape registry says about this primitive's kind."""
+        entry = shapes.KINDS[self.kind]
+        self.thin = entry.thin
+        self.bounded = entry.bounded
+        self._intersect = entry.function("intersect") if entry.intersect else None
+        self._normals_agree = entry.normals_agree
+        self.tolerances = tolerances
+
+    @classmethod
+    def of_row(cls, table: "PrimitiveTable", index: int) -> "Primitive":
+        """The primitive of row ``index`` of a compiled scene's table: its numbers are the table's (views
+        of its arrays, no copies), so both backends read the same ones."""
+        self = cls.__new__(cls)
+        shape = table.shapes[index]
+        self.shape, self.index, self.kind = shape, index, shape.kind
+        self.material_id = int(table.material_ids[index])
+        self.matrix = table.matrices[index]
+        self.inverse = table.inverses[index]
+        self.normal_matrix = self.inverse[:3, :3]
+        self._take_kind(table.tolerances)
+        self.inverse_error = float(table.inverse_error[index])
+        self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
+        self._planes = None
+        if shape.kind in POLYHEDRON_KINDS:
+            from .geometry.polyhedra import face_planes
+            self._planes = face_planes(shape.kind)
+        bounded = self.bounded
+        self.center = table.centers[index] if bounded else None
+        self.radius = float(table.radii[index]) if bounded else np.inf
+        # (the cached properties' values, from the table)
+        self.__dict__["generic_size"] = float(table.generic_size[index])
+        linear, translation = table.inverse_norms[index].tolist()
+        self.__dict__["inverse_norms"] = (linear, translation)
+        return self
 
     @property
     def triangle_mesh(self):
@@ -410,6 +413,11 @@ def fold_tree(root, leaf: Callable, join: Callable):
     return values[0]
 
 
+_COLOR_FIELDS = ("ambient", "diffuse", "specular", "emissive")
+_NUMBER_FIELDS = ("specular_exponent", "specular_fraction", "surface_roughness", "reflectivity", "transparency",
+                  "speed_of_light")
+
+
 @dataclass
 class MaterialTable:
     """Materials as arrays indexed by material id (so shading gathers per ray)."""
@@ -425,71 +433,263 @@ class MaterialTable:
     reflectivity: np.ndarray = field(init=False)
     transparency: np.ndarray = field(init=False)
     speed_of_light: np.ndarray = field(init=False)
+    #: The texture number (0: none).
+    texture: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        m = self.materials
-        self.ambient = np.array([x.ambient for x in m], dtype=float).reshape(-1, 3)
-        self.diffuse = np.array([x.diffuse for x in m], dtype=float).reshape(-1, 3)
-        self.specular = np.array([x.specular for x in m], dtype=float).reshape(-1, 3)
-        self.emissive = np.array([x.emissive for x in m], dtype=float).reshape(-1, 3)
-        self.specular_exponent = np.array([x.specular_exponent for x in m], dtype=float)
-        self.specular_fraction = np.array([x.specular_fraction for x in m], dtype=float)
-        self.surface_roughness = np.array([x.surface_roughness for x in m], dtype=float)
-        self.reflectivity = np.array([x.reflectivity for x in m], dtype=float)
-        self.transparency = np.array([x.transparency for x in m], dtype=float)
-        self.speed_of_light = np.array([x.speed_of_light for x in m], dtype=float)
+        # (a pass over a chunk of materials, then np.fromiter per field: a hundred thousand materials in a
+        # tenth of the time np.array of a list of tuples per field takes; chunks keep the transposed
+        # tuples a few MB)
+        n = len(self.materials)
+        for name in _COLOR_FIELDS:
+            setattr(self, name, np.empty((n, 3)))
+        for name in _NUMBER_FIELDS:
+            setattr(self, name, np.empty(n))
+        self.texture = np.empty(n, dtype=np.int64)
+        fields = attrgetter(*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture")
+        for rows in row_chunks(n):
+            columns = list(zip(*map(fields, self.materials[rows])))
+            size = rows.stop - rows.start
+            for name, values in zip(_COLOR_FIELDS, columns):
+                getattr(self, name)[rows] = np.fromiter(chain.from_iterable(values), float, 3 * size).reshape(-1, 3)
+            for name, values in zip(_NUMBER_FIELDS, columns[len(_COLOR_FIELDS):]):
+                getattr(self, name)[rows] = np.fromiter(values, float, size)
+            self.texture[rows] = np.fromiter(columns[-1], np.int64, size)
 
 
 @dataclass
 class CompiledScene:
     scene: Scene
-    objects: list[Node]
-    primitives: list[Primitive]
+    objects: Sequence[Node]  # (a CompiledObjects from compile_scene)
+    primitives: Sequence[Primitive]  # (a PrimitiveList from compile_scene)
     materials: MaterialTable
     light_positions: np.ndarray  # (L, 3)
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
     textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
     tolerances: numerics.Tolerances = field(default_factory=lambda: numerics.TOLERANCES)
+    #: All primitives' numbers as arrays (what ``primitives`` are views of)
+    table: Optional["PrimitiveTable"] = None
 
     @property
     def settings(self):
         return self.scene.settings
 
 
-def _compile_object(obj: SceneObject, primitives: list[Primitive], material_ids: dict, mesh_cache: dict,
-                    inverses: Optional[np.ndarray] = None, bounds: Optional[list] = None) -> Node:
-    def leaf(shape: Shape) -> Primitive:
-        mat_id = material_ids.setdefault(shape.material, len(material_ids))
-        index = len(primitives)
-        prim = Primitive(shape, index, mat_id, mesh_cache, inverse=None if inverses is None else inverses[index],
-                         bounds=None if bounds is None else bounds[index])
-        primitives.append(prim)
+class PrimitiveTable:
+    """Every primitive of a compiled scene as stacked arrays, row i for primitive i (the shapes in
+    iter_shapes order over the scene's objects): what the NumPy path's Primitive objects read (each a view of
+    its row, made only when asked for) and what flatten.py hands to the C core, computed once for all.
+
+    ``matrices`` and ``inverses`` (N, 4, 4); ``inverse_error`` (N,) (numerics.inverse_rounding);
+    ``inverse_norms`` (N, 2) (Primitive.inverse_norms); ``generic_size`` (N,); ``centers`` (N, 3) and
+    ``radii`` (N,), the world bounding spheres (radius inf and centre 0 for unbounded shapes);
+    ``material_ids`` (N,); ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``top`` (N,), a
+    tapered cylinder's small radius (0 for other kinds); ``meshes``: the TriangleMesh of each mesh by the
+    id of its MeshData."""
+
+    def __init__(self, shapes: list[Shape], kinds: Sequence[str], tapered_radii: Sequence[float],
+                 stack: Optional[np.ndarray], material_ids: np.ndarray):
+        n = len(shapes)
+        self.shapes = shapes
+        self.tolerances = numerics.TOLERANCES
+        self.material_ids = material_ids
+        self.kind = np.fromiter(map(_KIND_INDEX.__getitem__, kinds), dtype=np.int16, count=n)
+        self.meshes: dict[int, object] = {}
+        inverses = _batched_inverses(stack)
+        if inverses is None:  # some matrix fails the checks: find the first, in order, for its message
+            inverses = np.zeros((n, 4, 4))
+            for i, shape in enumerate(shapes):
+                inverses[i] = _checked_inverse(shape)
+                self._build_mesh(shape)
+            stack = np.stack([np.asarray(s.matrix, dtype=np.float64) for s in shapes])
+        for i in self.rows(MESH_KINDS).tolist():
+            self._build_mesh(shapes[i])
+        self.matrices, self.inverses = stack, inverses
+        self.top = np.zeros(n)
+        tapered = self.rows(_TAPERED_KINDS)
+        if tapered.size:
+            self.top[tapered] = [shapes[i].small_radius for i in tapered.tolist()]
+        self.inverse_error, self.inverse_norms = np.empty(n), np.empty((n, 2))
+        for rows in row_chunks(n):
+            inverse = inverses[rows]
+            self.inverse_error[rows] = numerics.inverse_rounding(inverse, stack[rows])
+            # (the sums in Primitive's order: rows of three, left to right)
+            self.inverse_norms[rows, 0] = np.abs(inverse[:, :3, :3]).sum(axis=2).max(axis=1)
+            self.inverse_norms[rows, 1] = np.abs(inverse[:, :3, 3]).max(axis=1)
+        self.generic_size = np.ones(n)
+        self.centers, self.radii = np.zeros((n, 3)), np.full(n, np.inf)
+        self._fill_sizes_and_bounds()
+
+    def __len__(self) -> int:
+        return len(self.shapes)
+
+    def rows(self, kinds) -> np.ndarray:
+        """The rows of the shapes of these kinds (SDL keywords), in order."""
+        codes = [_KIND_INDEX[k] for k in kinds]
+        return np.flatnonzero(np.isin(self.kind, codes)) if len(self.kind) else np.zeros(0, dtype=np.int64)
+
+    def _build_mesh(self, shape: Shape) -> None:
+        if shape.kind in MESH_KINDS and id(shape.mesh) not in self.meshes:
+            self.meshes[id(shape.mesh)] = shared_triangle_mesh(shape.mesh)
+
+    def _fill_sizes_and_bounds(self) -> None:
+        """generic_size and the bounding spheres, a batch per kind (the kinds with a fixed generic box), per
+        chunk of tapered cylinders, and per mesh (or polyhedron vertex set) with its instances."""
+        for kind, corners in _BOX_CORNERS.items():
+            rows = self.rows([kind])
+            if rows.size:
+                self.generic_size[rows] = 1.0 + TORUS_TUBE_RADIUS if kind == "torus" else np.max(np.abs(corners))
+                self._bound(rows, corners)
+        rows = self.rows(_TAPERED_KINDS)
+        if rows.size:
+            top = np.maximum(self.top[rows], 0.0)
+            self.generic_size[rows] = np.maximum(top, 1.0)
+            for part in row_chunks(rows.size):
+                points = np.broadcast_to(_TAPERED_POINTS, (len(top[part]), 8, 3)).copy()
+                points[:, 4:, :2] *= top[part, None, None]
+                self._bound(rows[part], points)
+        groups: dict = {}
+        for i in self.rows(POLYHEDRON_KINDS + MESH_KINDS).tolist():
+            mesh = self.shapes[i].mesh
+            vertices = np.asarray(mesh.vertices, dtype=np.float64)
+            # (each polyhedron has a MeshData of its own: the same vertices, grouped by their bytes)
+            key = id(mesh) if self.shapes[i].kind in MESH_KINDS else vertices.tobytes()
+            groups.setdefault(key, (vertices, []))[1].append(i)
+        #: (vertices, rows) of each mesh and each polyhedron vertex set, with the rows of its instances
+        self.vertex_groups = [(vertices, np.array(rows)) for vertices, rows in groups.values()]
+        for vertices, rows in self.vertex_groups:
+            self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
+            per_chunk = max(1, _CHUNK // max(1, len(vertices)))
+            for start in range(0, len(rows), per_chunk):
+                self._bound(rows[start:start + per_chunk], vertices)
+
+    def _bound(self, rows: np.ndarray, points: np.ndarray) -> None:
+        """Bounding spheres of ``rows`` whose generic solids lie in the hull of ``points`` ((K, 3) for all,
+        or (len(rows), K, 3)), carried to the world by one stacked product: what transform_points and
+        _sphere_around give, to rounding in the last place (which the radius's 1e-9 padding covers)."""
+        for part in row_chunks(len(rows)):
+            m = self.matrices[rows[part]]
+            p = points if points.ndim == 2 else points[part]
+            world = p @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
+            lo, hi = world.min(axis=1), world.max(axis=1)
+            self.centers[rows[part]] = 0.5 * (lo + hi)
+            extent = hi - lo
+            self.radii[rows[part]] = np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)
+
+
+#: Index of each kind in the shape registry (PrimitiveTable.kind).
+_KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
+_TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
+#: The generic points of a tapered cylinder of top radius 1: the squares round its two discs (the frustum
+#: lies in their hull; the top's x and y are scaled by the top radius).
+_TAPERED_POINTS = np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX, np.ones(4)]])
+#: Rows per batch of the table's stacked computations: their temporaries stay a few MB at any size.
+_CHUNK = 1 << 15
+
+
+def row_chunks(n: int):
+    """Slices of range(n), _CHUNK long."""
+    return (slice(start, min(n, start + _CHUNK)) for start in range(0, n, _CHUNK))
+
+
+class PrimitiveList(Sequence):
+    """A compiled scene's primitives, made from its table's rows when first asked for (a scene of a million
+    spheres traced by the C core never makes one) and the same object on every later access."""
+
+    def __init__(self, table: PrimitiveTable):
+        self.table = table
+        self._made: list[Optional[Primitive]] = [None] * len(table)
+
+    def __len__(self) -> int:
+        return len(self._made)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        index = operator.index(index)
+        if index < 0:
+            index += len(self)
+        prim = self._made[index]
+        if prim is None:
+            prim = self._made[index] = Primitive.of_row(self.table, index)
         return prim
 
-    return fold_tree(obj, leaf, lambda node, left, right: CSGNode(node.op, left, right))
+    def __iter__(self):
+        return map(self.__getitem__, range(len(self)))
+
+
+class CompiledObjects(Sequence):
+    """A compiled scene's top-level objects: CSGNode trees for the booleans, and for the plain shapes their
+    primitive (made when first asked for).  ``primitive_index`` (objects,) is the primitive of each plain
+    object, -1 for a boolean."""
+
+    def __init__(self, primitives: PrimitiveList, primitive_index: np.ndarray, booleans: dict[int, "CSGNode"]):
+        self.primitives = primitives
+        self.primitive_index = primitive_index
+        self.booleans = booleans
+
+    def __len__(self) -> int:
+        return len(self.primitive_index)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        index = operator.index(index)
+        if index < 0:
+            index += len(self)
+        node = self.booleans.get(index)
+        return node if node is not None else self.primitives[int(self.primitive_index[index])]
+
+    def __iter__(self):
+        return map(self.__getitem__, range(len(self)))
+
+
+def _compile_objects(objects: list[SceneObject], primitives: PrimitiveList, any_boolean: bool) -> CompiledObjects:
+    """The top-level objects, their primitives numbered in iter_shapes order (as the table's rows)."""
+    if not any_boolean:
+        return CompiledObjects(primitives, np.arange(len(objects)), {})
+    index = np.full(len(objects), -1, dtype=np.int64)
+    booleans: dict[int, CSGNode] = {}
+    counter = iter(range(len(primitives)))
+    for k, obj in enumerate(objects):
+        if isinstance(obj, CSG):
+            booleans[k] = fold_tree(obj, lambda _: primitives[next(counter)],
+                                    lambda node, left, right: CSGNode(node.op, left, right))
+        else:
+            index[k] = next(counter)
+    return CompiledObjects(primitives, index, booleans)
 
 
 def live_effects(scene: Scene) -> frozenset[str]:
     """Which effects this scene can show at all; the tracer computes nothing for the others."""
-    settings = scene.settings
     shapes = scene.shapes()
-    materials = [s.material for s in shapes]
-    effects = {f"shape:{s.kind}" for s in shapes}
-    lit = any(any(c > 0 for c in m.diffuse + m.specular) for m in materials)
+    materials = list({id(s.material): s.material for s in shapes}.values())
+    return _effects(scene, {s.kind for s in shapes}, MaterialTable(materials) if materials else None,
+                    any(isinstance(o, CSG) for o in scene.objects))
+
+
+def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool) -> frozenset[str]:
+    """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes)."""
+    settings = scene.settings
+    effects = {f"shape:{kind}" for kind in kinds}
+    if table is None:
+        table = MaterialTable([])
+    lit = bool((table.diffuse > 0).any() or (table.specular > 0).any())
     if scene.lights and lit:
         effects.add("lighting")
         effects.add("shadows")
     deep = settings.max_recursion_depth > 0
-    if deep and any(m.reflectivity >= settings.min_reflectivity and m.reflectivity > 0 for m in materials):
+    r, t = table.reflectivity, table.transparency
+    if deep and ((r >= settings.min_reflectivity) & (r > 0)).any():
         effects.add("reflection")
-    if deep and any(m.transparency >= settings.min_transparency and m.transparency > 0 for m in materials):
+    if deep and ((t >= settings.min_transparency) & (t > 0)).any():
         effects.add("refraction")
-    if any(isinstance(o, CSG) for o in scene.objects):
+    if any_boolean:
         effects.add("csg")
-    if any(m.texture != 0 for m in materials):
+    if (table.texture != 0).any():
         effects.add("textures")
-    if "lighting" in effects and any(m.specular_fraction > 0 for m in materials):
+    if "lighting" in effects and (table.specular_fraction > 0).any():
         effects.add("cook-torrance")
     return frozenset(effects)
 
@@ -525,20 +725,39 @@ def remember_digest(mesh: MeshData) -> MeshData:
 
 
 def _hash_mesh(mesh: MeshData) -> bytes:
+    """The digest of a mesh's content: its vertices, normals and faces (what its BVH is built from).  Arrays
+    are hashed where they lie (indices a slice at a time as int64), so a big mesh is not copied for it."""
     h = hashlib.blake2b(digest_size=20)
     for array in (mesh.vertices, mesh.normals):
         array = np.ascontiguousarray(array, dtype=np.float64)
         h.update(repr(array.shape).encode())
-        h.update(array.tobytes())
+        h.update(array.reshape(-1))
     faces = mesh.faces
     if isinstance(faces, FaceList):
         h.update(b"packed")
-        for array in (faces.sizes, faces.vertex_index, faces.normal_index):
-            h.update(b"-" if array is None else np.ascontiguousarray(array, dtype=np.int64).tobytes())
+        size = faces.uniform_size
+        if size is not None:  # every face of one size: that size and the count say what sizes would
+            h.update(f"{size}x{len(faces)}".encode())
+        else:
+            _hash_indices(h, faces.sizes)
+        for array in (faces.vertex_index, faces.normal_index):
+            _hash_indices(h, array)
     else:
         h.update(b"list")
         h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
     return h.digest()
+
+
+def _hash_indices(h, array) -> None:
+    """Feed an index array (or None) to the hash as int64, a million at a time."""
+    if array is None:
+        h.update(b"-")
+        return
+    array = np.asarray(array).reshape(-1)
+    h.update(f"[{len(array)}]".encode())
+    step = 1 << 20
+    for start in range(0, len(array), step):
+        h.update(np.ascontiguousarray(array[start:start + step], dtype=np.int64))
 
 
 def shared_triangle_mesh(mesh: MeshData):
@@ -558,18 +777,26 @@ def content_key(scene: Scene) -> tuple:
     return _content(scene)[0]
 
 
-def _content(scene: Scene) -> tuple:
-    """Everything compile_scene reads from a scene, in a form that compares quickly: two scenes (or one
-    scene at two times) with equal keys compile to the same thing.
+@dataclass
+class _Columns:
+    """What _content gathers from a scene's shapes (in iter_shapes order) on its way, for _compile."""
 
-    Objects are compared by identity *and* by what compile_scene reads from them (kind, material, taper,
-    matrix, mesh content; a boolean's operation and operands), so replacing, reordering or editing any of
-    them, even a matrix changed in place, gives another key.  Pixmap files count with their size and
-    modification time.  The key holds no object: ids stay meaningful because the cached entry keeps the
-    objects alive (see compile_scene).  Returns (key, nodes, shapes, matrices): the nodes to keep alive, and
-    the shapes in iter_shapes order with their stacked matrices, for _compile."""
+    nodes: list  # every node of every object, depth first (shapes and booleans)
+    shapes: list[Shape]
+    any_boolean: bool
+    stack: Optional[np.ndarray]  # the shapes' matrices (see _stacked_matrices)
+    kinds: tuple[str, ...]
+    materials: tuple[Material, ...]
+    tapered_radii: tuple[float, ...]
+
+
+def _walk(objects: list[SceneObject]) -> tuple[list, list[Shape], list[tuple]]:
+    """(nodes, shapes, structure) of the objects, depth first, left to right, without recursion."""
+    if not any(issubclass(t, CSG) for t in set(map(type, objects))):  # no boolean: the objects are the shapes
+        shapes = list(objects)
+        return shapes, shapes, []
     nodes, shapes, structure = [], [], []
-    todo = list(reversed(scene.objects))
+    todo = list(reversed(objects))
     while todo:
         node = todo.pop()
         nodes.append(node)
@@ -578,13 +805,29 @@ def _content(scene: Scene) -> tuple:
             todo += (node.right, node.left)
         else:
             shapes.append(node)
+    return nodes, shapes, structure
+
+
+def _content(scene: Scene) -> tuple[tuple, _Columns]:
+    """Everything compile_scene reads from a scene, in a form that compares quickly: two scenes (or one
+    scene at two times) with equal keys compile to the same thing.
+
+    Objects are compared by identity *and* by what compile_scene reads from them (kind, material, taper,
+    matrix, mesh content; a boolean's operation and operands), so replacing, reordering or editing any of
+    them, even a matrix changed in place, gives another key.  Pixmap files count with their size and
+    modification time.  The key holds no scene object but materials (compared by value): ids stay
+    meaningful because the cached entry keeps the objects alive (see compile_scene).  Returns (key, columns):
+    the columns keep the nodes alive and hold what _compile needs."""
+    nodes, shapes, structure = _walk(scene.objects)
     stack = _stacked_matrices(shapes)
     matrices = hashlib.blake2b(digest_size=20)
     if stack is not None:
-        matrices.update(stack.tobytes())
+        matrices.update(stack)  # (the array's own bytes, without a copy)
     else:  # (a matrix that is not a float64 4x4: compiling will say which)
         matrices.update(repr([np.asarray(s.matrix).tolist() for s in shapes]).encode())
-    meshes = {id(s.mesh): s.mesh for s in shapes if s.mesh is not None}
+    mesh_list = list(map(attrgetter("mesh"), shapes))
+    meshes = dict(zip(map(id, mesh_list), mesh_list))
+    meshes.pop(id(None), None)
     pixmaps = []
     for number, path in sorted(scene.pixmaps.items()):
         try:
@@ -592,26 +835,33 @@ def _content(scene: Scene) -> tuple:
             pixmaps.append((number, str(path), stat.st_size, stat.st_mtime_ns))
         except (OSError, ValueError):  # (a missing file, a name with a NUL: compiling reports it)
             pixmaps.append((number, str(path), None, None))
-    fields = (tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius"))
-    return (tuple(map(id, nodes)), tuple(structure), *fields, tuple(id(s.mesh) for s in shapes),
-            tuple((k, mesh_digest(m)) for k, m in meshes.items()),
-            matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps),
-            numerics.TOLERANCES), \
-        nodes, shapes, stack
+    columns = _Columns(nodes, shapes, bool(structure), stack,
+                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius")))
+    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
+           _ids_digest(mesh_list), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
+           matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps),
+           numerics.TOLERANCES)
+    return key, columns
+
+
+def _ids_digest(objects: list) -> bytes:
+    """A digest of the objects' ids, in order (20 bytes, where a tuple of the ids takes 40 per object)."""
+    ids = np.fromiter(map(id, objects), dtype=np.uint64, count=len(objects))
+    return hashlib.blake2b(ids, digest_size=20).digest()
 
 
 def compile_scene(scene: Scene) -> CompiledScene:
     """The scene ready to trace.  Compiled once: the result is kept on the scene with its content_key, and
     returned again for as long as the scene's content has not changed."""
     with one_blas_thread(), collector_paused():
-        key, nodes, shapes, stack = _content(scene)
+        key, columns = _content(scene)
         holder = getattr(scene, _CACHE_ATTRIBUTE, None)
         cached = holder.entry if isinstance(holder, _CompiledHolder) else None
         if cached is not None and cached[0] == key:
             return cached[1]
-        compiled = _compile(scene, shapes, stack)
+        compiled = _compile(scene, columns)
     # (the nodes are kept so that the ids in the key cannot be reused by new objects while it is cached)
-    setattr(scene, _CACHE_ATTRIBUTE, _CompiledHolder((key, compiled, nodes)))
+    setattr(scene, _CACHE_ATTRIBUTE, _CompiledHolder((key, compiled, columns.nodes)))
     return compiled
 
 
@@ -633,39 +883,39 @@ class _CompiledHolder:
         return _CompiledHolder, ()
 
 
-def _compile(scene: Scene, shapes: Optional[list[Shape]] = None, stack: Optional[np.ndarray] = None) -> CompiledScene:
-    """Compile ``scene``; ``shapes`` (in iter_shapes order) and their ``stack`` of matrices may be passed
-    in when the caller has them already (compile_scene's content key does)."""
-    primitives: list[Primitive] = []
-    material_ids: dict[Material, int] = {}
-    mesh_cache: dict = {}
-    # Inverses and bounding spheres for all shapes at once (iter_shapes visits them in the order
-    # _compile_object numbers them): a scene of 10,000 spheres would otherwise spend most of its compile time
-    # in 10,000 small NumPy calls of each kind.
-    if shapes is None:
-        shapes = [s for obj in scene.objects for s in iter_shapes(obj)]
-        stack = _stacked_matrices(shapes)
-    inverses = _batched_inverses(stack)
-    # Only with every matrix checked (finite, affine, invertible): otherwise the shapes are compiled one by
-    # one as before, and the first bad one raises.
-    bounds = _batched_bounds(shapes, stack) if inverses is not None else None
-    objects = [_compile_object(obj, primitives, material_ids, mesh_cache, inverses, bounds) for obj in scene.objects]
-    if inverses is not None and primitives:
-        errors = numerics.inverse_rounding(inverses, stack)
-        for prim, error in zip(primitives, errors.tolist()):
-            prim.inverse_error = error
-            size = _FIXED_GENERIC_SIZE.get(prim.kind)
-            if size is not None:  # (what generic_size gives these kinds, without its cached property's lock)
-                prim.__dict__["generic_size"] = size
-    table = MaterialTable(list(material_ids) or [Material()])
-    lights = scene.lights
-    effects = live_effects(scene)
+def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Material]]:
+    """Per shape, the id of its material, and the distinct material objects in id order (ids in order of
+    first use).  Shapes share an id when they share the material object (as the shapes read from one SDL
+    state do); two equal materials of their own get two ids, which changes no colour, and spares hashing
+    every material by value, which took longer than the rest of compiling a scene of 100,000 spheres."""
+    distinct = dict(zip(map(id, materials), materials))  # in order of first use
+    number = dict(zip(distinct, range(len(distinct))))
+    ids = np.fromiter(map(number.__getitem__, map(id, materials)), dtype=np.int32, count=len(materials))
+    return ids, list(distinct.values())
+
+
+def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
+    """Compile ``scene`` (``columns``: what compile_scene's content key gathered, when the caller has it).
+
+    Every primitive's numbers (inverse, rounding, bounds) are computed at once, as arrays
+    (PrimitiveTable): a scene of 100,000 spheres would otherwise spend its compile time in a million
+    small NumPy calls."""
+    if columns is None:
+        columns = _content(scene)[1]
+    shapes = columns.shapes
+    material_ids, materials = _material_ids(columns.materials)
+    table = PrimitiveTable(shapes, columns.kinds, columns.tapered_radii, columns.stack, material_ids)
+    primitives = PrimitiveList(table)
+    objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
+    material_table = MaterialTable(materials or [Material()])
+    effects = _effects(scene, set(columns.kinds), material_table if shapes else None, columns.any_boolean)
     textures = None
     if "textures" in effects:
         from .textures import TextureSet
         textures = TextureSet(scene, primitives)
+    lights = scene.lights
     return CompiledScene(
-        scene=scene, objects=objects, primitives=primitives, materials=table,
+        scene=scene, objects=objects, primitives=primitives, materials=material_table,
         light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
         light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
-        effects=effects, textures=textures)
+        effects=effects, textures=textures, tolerances=table.tolerances, table=table)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import shapes
-from .compile import CompiledScene, CSGNode, fold_tree
+from .compile import CompiledScene, fold_tree
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
 SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
@@ -82,12 +82,22 @@ def sealed_lights(compiled: CompiledScene) -> np.ndarray:
     (the object is a closed solid and the light outside it).  Only objects with some transparent material
     are examined: rays get inside solids through them."""
     n_lights = len(compiled.light_positions)
-    sealed = np.zeros((len(compiled.objects), n_lights), dtype=bool)
+    objects = compiled.objects
+    sealed = np.zeros((len(objects), n_lights), dtype=bool)
     transparent = compiled.materials.transparency > 0
-    for index, obj in enumerate(compiled.objects):
-        leaves = obj.leaves() if isinstance(obj, CSGNode) else [obj]
-        if not any(transparent[p.material_id] for p in leaves) or not _closed(obj):
-            continue
+    # The plain shapes sifted all at once (a scene of 100,000 opaque spheres has none to examine), the
+    # booleans one by one.
+    table = compiled.table
+    index = objects.primitive_index
+    plain = np.flatnonzero(index >= 0)
+    rows = index[plain]
+    closed = np.isin(table.kind[rows], [k for k, e in enumerate(shapes.REGISTRY) if e.closed])
+    candidates = plain[transparent[table.material_ids[rows]] & closed].tolist()
+    for k, obj in objects.booleans.items():
+        if any(transparent[p.material_id] for p in obj.leaves()) and _closed(obj):
+            candidates.append(k)
+    for index in sorted(candidates):
+        obj = objects[index]
         for light in range(n_lights):
             sealed[index, light] = _contains(obj, compiled.light_positions[light]) is False
     return sealed

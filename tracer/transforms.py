@@ -40,6 +40,54 @@ def rotation(angle_degrees: float, ux: float, uy: float, uz: float) -> np.ndarra
     return m
 
 
+# The SDL reader's current transform: an affine map as 12 Python floats, the top three rows of its 4x4
+# matrix, row after row (the bottom row is always 0 0 0 1).  A scene of 10^5 shapes has some 2·10^5
+# transform statements; composing 4x4 NumPy arrays costs microseconds of call overhead each, the dozen
+# multiplications here a fraction of that.  A product that is zero is +0.0 here (the ``+ 0.0``), as in a
+# NumPy matrix product, whose sums start from +0.0: a -0.0 would only show up as "-0" when a scene is written.
+
+Affine = tuple[float, ...]
+
+IDENTITY_AFFINE: Affine = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+def affine_translate(m: Affine, dx: float, dy: float, dz: float) -> Affine:
+    """``m`` times translation(dx, dy, dz)."""
+    a, b, c, x, d, e, f, y, g, h, i, z = m
+    return (a, b, c, a * dx + b * dy + c * dz + x,
+            d, e, f, d * dx + e * dy + f * dz + y,
+            g, h, i, g * dx + h * dy + i * dz + z)
+
+
+def affine_scale(m: Affine, sx: float, sy: float, sz: float) -> Affine:
+    """``m`` times scaling(sx, sy, sz)."""
+    a, b, c, x, d, e, f, y, g, h, i, z = m
+    return (a * sx + 0.0, b * sy + 0.0, c * sz + 0.0, x, d * sx + 0.0, e * sy + 0.0, f * sz + 0.0, y,
+            g * sx + 0.0, h * sy + 0.0, i * sz + 0.0, z)
+
+
+def affine_times(m: Affine, matrix: np.ndarray) -> Affine:
+    """``m`` times an affine 4x4 ``matrix`` (a rotation, say)."""
+    (p, q, r, u), (s, t, v, w), (k, l, n, o), _ = matrix.tolist()
+    a, b, c, x, d, e, f, y, g, h, i, z = m
+    return (a * p + b * s + c * k + 0.0, a * q + b * t + c * l + 0.0, a * r + b * v + c * n + 0.0,
+            a * u + b * w + c * o + x,
+            d * p + e * s + f * k + 0.0, d * q + e * t + f * l + 0.0, d * r + e * v + f * n + 0.0,
+            d * u + e * w + f * o + y,
+            g * p + h * s + i * k + 0.0, g * q + h * t + i * l + 0.0, g * r + h * v + i * n + 0.0,
+            g * u + h * w + i * o + z)
+
+
+def affine_entries(m: Affine) -> tuple[float, ...]:
+    """The 16 entries of the 4x4 matrix of ``m``, row after row (what np.array(...).reshape(4, 4) takes)."""
+    return m + (0.0, 0.0, 0.0, 1.0)
+
+
+def affine_matrix(m: Affine) -> np.ndarray:
+    """The 4x4 matrix of ``m``."""
+    return np.array(affine_entries(m), dtype=np.float64).reshape(4, 4)
+
+
 def transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply an affine 4x4 to (..., 3) points."""
     return points @ matrix[:3, :3].T + matrix[:3, 3]

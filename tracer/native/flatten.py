@@ -16,10 +16,11 @@ from typing import Optional
 
 import numpy as np
 
-from ..compile import CompiledScene, CSGNode, Primitive, fold_tree
-from ..intersect.mesh import MeshArrays
-from .. import shapes
-from ..model import SHAPE_KINDS, traced_depth
+from ..compile import CompiledScene, Primitive, PrimitiveTable, row_chunks, fold_tree
+from ..geometry.polyhedra import face_planes
+from ..intersect.mesh import NODE, MeshArrays
+from .. import numerics, shapes
+from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
 from . import contract
 from .contract import EFFECT_BITS, KIND, KIND_CODES, OP_CODES
 
@@ -32,8 +33,11 @@ BOX_PADDING = 1e-8
 #: The tracer.intersect.mesh constants the C core reads (SceneDesc.mesh_constants, in this order).
 MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILON", "DEDUPE_RELATIVE",
                   "DEDUPE_RELATIVE_ADJACENT")
-#: Per-mesh tables: the MeshArrays fields that are SceneDesc fields too (all but the scalar extent).
-MESH_TABLES = tuple(name for name in MeshArrays.__dataclass_fields__ if name != "extent")
+#: SceneDesc's per-mesh address fields and the MeshArrays field each points into, with its element type.
+MESH_ADDRESSES = {"mesh_nodes": "nodes", "mesh_order": "tri_order", "mesh_tri_vertex": "tri_vertex",
+                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals"}
+MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tri_normal": np.int32,
+               "vertices": np.float64, "normals": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
 
@@ -60,26 +64,21 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
         return (None if node.op in OP_CODES else f"unknown boolean {node.op!r}") or left or right
 
     def check(node) -> Optional[str]:
-        if not isinstance(node, Primitive):
-            return f"unknown scene node {type(node).__name__}"
-        if node.kind not in KIND_CODES:
-            return f"not implemented in C: shape {node.kind}"
-        if KIND_CODES[node.kind] == KIND["POLYHEDRON"] and node.face_planes is None:
-            return f"{node.kind} has no face planes"
-        if KIND_CODES[node.kind] == KIND["MESH"] and node.triangle_mesh is None:
-            return f"{node.kind} has no triangle mesh"
-        return None
+        return None if isinstance(node, Primitive) else f"unknown scene node {type(node).__name__}"
 
-    plain = {kind for kind, code in KIND_CODES.items() if code not in (KIND["POLYHEDRON"], KIND["MESH"])}  # nothing more to check
-    for obj in compiled.objects:
-        if type(obj) is Primitive and obj.kind in plain:  # the common case, without a call
-            continue
+    # Every primitive is a row of the table: its kind has a C code (checked above), a polyhedron has its
+    # kind's face planes; only a mesh's triangles can be missing.
+    table = compiled.table
+    for i in table.rows(MESH_KINDS).tolist():
+        if id(table.shapes[i].mesh) not in table.meshes:
+            return f"{table.shapes[i].kind} has no triangle mesh"
+    for obj in compiled.objects.booleans.values():
         reason = fold_tree(obj, check, check_boolean)
         if reason:
             return reason
-        if isinstance(obj, CSGNode) and fold_tree(obj, lambda _: 0, lambda _, l, r: 1 + max(l, r)) > MAX_CSG_DEPTH:
+        if fold_tree(obj, lambda _: 0, lambda _, l, r: 1 + max(l, r)) > MAX_CSG_DEPTH:
             return f"booleans nested more than {MAX_CSG_DEPTH} deep"
-    if any(p.triangle_mesh is not None for p in compiled.primitives):
+    if table.meshes:
         from ..intersect import mesh as mesh_module
         missing = [c for c in MESH_CONSTANTS if not hasattr(mesh_module, c)]
         if missing:
@@ -87,52 +86,43 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     return None
 
 
-#: Generic boxes (centre, half extents) that hold each closed-form shape (from the shape registry); tapered
-#: cylinders get theirs from their small radius, meshes and polyhedra from their vertices.
-_GENERIC_BOX = {e.keyword: e.box for e in shapes.REGISTRY if e.box is not None}
+#: Per shape registry entry: its C kind code, and its generic box (centre, half extents) when it has a
+#: fixed one (tapered cylinders get theirs from their small radius, meshes and polyhedra from their
+#: vertices, the plane has none).
+_CODE_OF_ENTRY = np.array([KIND_CODES[e.keyword] for e in shapes.REGISTRY], dtype=np.int32)
+_FIXED_BOX = np.array([e.box is not None for e in shapes.REGISTRY])
+_BOX_CENTRE = np.array([e.box[0] if e.box else (0.0, 0.0, 0.0) for e in shapes.REGISTRY], dtype=np.float64)
+_BOX_HALF = np.array([e.box[1] if e.box else (0.0, 0.0, 0.0) for e in shapes.REGISTRY], dtype=np.float64)
+_BOUNDED = np.array([e.bounded for e in shapes.REGISTRY])
 
 
-def _generic_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _generic_boxes(table: PrimitiveTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per primitive: generic box centre (P, 3), half extents (P, 3), and whether it is bounded (P,)."""
-    n = len(prims)
-    centre, half = np.zeros((n, 3)), np.zeros((n, 3))
-    bounded = np.ones(n, dtype=bool)
-    mesh_boxes: dict[int, tuple] = {}
-    fixed = {kind: i for i, kind in enumerate(_GENERIC_BOX)}
-    table_centre = np.array([c for c, _ in _GENERIC_BOX.values()], dtype=np.float64)
-    table_half = np.array([h for _, h in _GENERIC_BOX.values()], dtype=np.float64)
-    kinds = [p.kind for p in prims]
-    which = np.array([fixed.get(kind, -1) for kind in kinds], dtype=np.int64)
-    simple = which >= 0
-    centre[simple], half[simple] = table_centre[which[simple]], table_half[which[simple]]
-    for i in np.flatnonzero(~simple).tolist():
-        p, kind = prims[i], kinds[i]
-        if kind == "plane":
-            bounded[i] = False
-        elif KIND_CODES[kind] == KIND["TAPERED"]:
-            r = max(1.0, float(p.shape.small_radius))
-            centre[i], half[i] = (0.0, 0.0, 0.5), (r, r, 0.5)
-        else:
-            key = id(p.shape.mesh)
-            if key not in mesh_boxes:
-                v = np.asarray(p.shape.mesh.vertices, dtype=np.float64).reshape(-1, 3)
-                lo, hi = (v.min(axis=0), v.max(axis=0)) if len(v) else (np.zeros(3), np.zeros(3))
-                mesh_boxes[key] = (0.5 * (lo + hi), 0.5 * (hi - lo))
-            centre[i], half[i] = mesh_boxes[key]
+    centre, half = _BOX_CENTRE[table.kind], _BOX_HALF[table.kind]
+    bounded = _BOUNDED[table.kind]
+    tapered = np.flatnonzero(_CODE_OF_ENTRY[table.kind] == KIND["TAPERED"])
+    if tapered.size:
+        r = np.maximum(1.0, table.top[tapered])
+        centre[tapered] = (0.0, 0.0, 0.5)
+        half[tapered] = np.stack([r, r, np.full(len(r), 0.5)], axis=1)
+    for vertices, rows in table.vertex_groups:
+        v = vertices.reshape(-1, 3)
+        lo, hi = (v.min(axis=0), v.max(axis=0)) if len(v) else (np.zeros(3), np.zeros(3))
+        centre[rows], half[rows] = 0.5 * (lo + hi), 0.5 * (hi - lo)
     return centre, half, bounded
 
 
-def _world_boxes(prims) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _world_boxes(table: PrimitiveTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World boxes (lo, hi, bounded) of the primitives: the generic box through each matrix (its exact
     bounding box is centre A c + t, half extents |A| h), padded relatively."""
-    centre, half, bounded = _generic_boxes(prims)
-    if not prims:
-        return np.zeros((0, 3)), np.zeros((0, 3)), bounded
-    m = np.stack([np.asarray(p.matrix, dtype=np.float64) for p in prims])
-    a = m[:, :3, :3]
-    world_centre = np.einsum("nij,nj->ni", a, centre) + m[:, :3, 3]
-    world_half = np.einsum("nij,nj->ni", np.abs(a), half)
-    lo, hi = world_centre - world_half, world_centre + world_half
+    centre, half, bounded = _generic_boxes(table)
+    lo, hi = np.empty((len(table), 3)), np.empty((len(table), 3))
+    for rows in row_chunks(len(table)):
+        m = table.matrices[rows]
+        a = m[:, :3, :3]
+        world_centre = np.einsum("nij,nj->ni", a, centre[rows]) + m[:, :3, 3]
+        world_half = np.einsum("nij,nj->ni", np.abs(a), half[rows])
+        lo[rows], hi[rows] = world_centre - world_half, world_centre + world_half
     scale = np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1)) + (hi - lo).max(axis=1)
     pad = (BOX_PADDING * scale)[:, None]
     return lo - pad, hi + pad, bounded
@@ -164,46 +154,42 @@ class FlatScene:
 
     def __init__(self, compiled: CompiledScene):
         self.arrays: dict[str, np.ndarray] = {}
-        prims = compiled.primitives
         a = self.arrays
-        codes = np.array([KIND_CODES[p.kind] for p in prims], dtype=np.int32)
+        table = compiled.table
+        n = len(table)
+        codes = _CODE_OF_ENTRY[table.kind]
         a["prim_kind"] = codes
-        # (np.stack: the same numbers as np.array of the list, without its slow path over many small arrays)
-        a["prim_inverse"] = (np.stack([p.inverse for p in prims]).astype(np.float64, copy=False).reshape(-1, 16)
-                             if prims else np.zeros((0, 16)))
-        sphere = np.zeros((len(prims), 4))
-        sphere[:, 3] = [p.radius for p in prims]
-        centred = [k for k, p in enumerate(prims) if p.center is not None]
-        if centred:
-            sphere[centred, :3] = np.stack([prims[k].center for k in centred]).astype(np.float64, copy=False)
-        a["prim_sphere"] = sphere
-        a["prim_param"] = [float(prims[k].shape.small_radius) if code == KIND["TAPERED"] else 0.0
-                           for k, code in enumerate(codes.tolist())]
-        a["prim_material"] = [p.material_id for p in prims]
-        a["prim_rounding"] = np.array([(p.rounding / p.generic_size, p.generic_size, *p.inverse_norms) for p in prims],
-                                      dtype=np.float64).reshape(-1, 4)
+        a["prim_inverse"] = table.inverses.reshape(n, 16)  # (a view: the C core reads the table's own inverses)
+        a["prim_sphere"] = np.concatenate([table.centers, table.radii[:, None]], axis=1)
+        a["prim_param"] = np.where(codes == KIND["TAPERED"], table.top, 0.0)
+        a["prim_material"] = table.material_ids
+        rounding = numerics.gamma(table.tolerances.hit_ulps) + table.inverse_error  # (Primitive.rounding)
+        a["prim_rounding"] = np.concatenate([(rounding / table.generic_size)[:, None], table.generic_size[:, None],
+                                             table.inverse_norms], axis=1)
 
-        # Polyhedra planes and meshes (instances share one mesh).
-        planes, aux = [], []
-        meshes, mesh_index = [], {}
-        for p, code in zip(prims, codes.tolist()):
-            if code == KIND["POLYHEDRON"]:
-                normals, offsets = p.face_planes
-                aux.append((sum(len(x) for x in planes), len(offsets)))
+        # Polyhedra planes (one set per kind) and meshes (instances share one mesh).
+        aux = np.zeros((n, 2), dtype=np.int64)
+        planes, first_plane = [], 0
+        for kind in POLYHEDRON_KINDS:
+            rows = table.rows([kind])
+            if rows.size:
+                normals, offsets = face_planes(kind)
+                aux[rows] = (first_plane, len(offsets))
                 planes.append(np.c_[np.asarray(normals, dtype=np.float64), np.asarray(offsets, dtype=np.float64)])
-            elif code == KIND["MESH"]:
-                mesh = p.triangle_mesh
-                if id(mesh) not in mesh_index:
-                    mesh_index[id(mesh)] = len(meshes)
-                    meshes.append(mesh.arrays())
-                aux.append((mesh_index[id(mesh)], 0))
-            else:
-                aux.append((0, 0))
+                first_plane += len(offsets)
+        meshes, mesh_index = [], {}
+        for i in table.rows(MESH_KINDS).tolist():
+            mesh = table.meshes[id(table.shapes[i].mesh)]
+            if id(mesh) not in mesh_index:
+                mesh_index[id(mesh)] = len(meshes)
+                meshes.append(mesh.arrays())
+            aux[i, 0] = mesh_index[id(mesh)]
         a["prim_aux"] = aux
         a["planes"] = np.concatenate(planes) if planes else np.zeros((0, 4))
         self._flatten_meshes(meshes)
 
-        # CSG nodes and top-level objects.
+        # CSG nodes and top-level objects: the plain shapes (the common case) all at once, each boolean
+        # by walking its tree.
         csg_op, csg_left, csg_right = [], [], []
 
         def boolean_ref(node, left: int, right: int) -> int:
@@ -212,24 +198,17 @@ class FlatScene:
             csg_right.append(right)
             return -len(csg_op)  # node k is ref -k - 1
 
-        def ref(node) -> int:
-            return fold_tree(node, lambda prim: prim.index, boolean_ref)
-
-        prim_lo, prim_hi, prim_bounded = _world_boxes(prims)
-        object_ref = [ref(obj) for obj in compiled.objects]
-        object_box = np.zeros((len(object_ref), 6))
-        bounded = np.zeros(len(object_ref), dtype=bool)
-        # Primitives (the common case) all at once, CSG objects one by one.
-        plain = [k for k, obj in enumerate(compiled.objects) if isinstance(obj, Primitive)]
-        if plain:
-            index = np.array([compiled.objects[k].index for k in plain], dtype=np.int64)
-            keep = prim_bounded[index]
-            rows = np.array(plain, dtype=np.int64)[keep]
-            bounded[rows] = True
-            object_box[rows, :3], object_box[rows, 3:] = prim_lo[index[keep]], prim_hi[index[keep]]
-        for k, obj in enumerate(compiled.objects):
-            if isinstance(obj, Primitive):
-                continue
+        prim_lo, prim_hi, prim_bounded = _world_boxes(table)
+        objects = compiled.objects
+        index = objects.primitive_index
+        plain = np.flatnonzero(index >= 0)
+        object_ref = index.copy()
+        object_box = np.zeros((len(index), 6))
+        bounded = np.zeros(len(index), dtype=bool)
+        bounded[plain] = prim_bounded[index[plain]]
+        object_box[plain, :3], object_box[plain, 3:] = prim_lo[index[plain]], prim_hi[index[plain]]
+        for k, obj in objects.booleans.items():
+            object_ref[k] = fold_tree(obj, lambda prim: prim.index, boolean_ref)
             box = _box(obj, prim_lo, prim_hi, prim_bounded)
             if box is not None:
                 bounded[k] = True
@@ -248,7 +227,7 @@ class FlatScene:
         n_images = self._flatten_textures(compiled)
 
         settings = compiled.settings
-        counts = dict(n_prims=len(prims), n_meshes=len(meshes), n_csg=len(csg_op), n_objects=len(object_ref),
+        counts = dict(n_prims=n, n_meshes=len(meshes), n_csg=len(csg_op), n_objects=len(object_ref),
                       n_materials=len(mats.materials), n_lights=len(compiled.light_positions), n_images=n_images)
         effects = sum(bit for name, bit in EFFECT_BITS.items() if name in compiled.effects)
         scalars = dict(background=tuple(settings.background), global_ambient=tuple(settings.global_ambient),
@@ -317,17 +296,15 @@ class FlatScene:
         return tuple(float(getattr(mesh_module, name)) for name in MESH_CONSTANTS)
 
     def _flatten_meshes(self, meshes: list[MeshArrays]) -> None:
-        """The meshes' tables one after the other (each flattened; SceneDesc.mesh_info says where each starts)."""
+        """Per mesh, its counts and the addresses of its own arrays (nothing is copied: the C core reads
+        the arrays the NumPy path reads; self.arrays keeps them alive)."""
         a = self.arrays
-        info, node_base, tri_base = [], 0, 0
-        for mesh in meshes:
-            n_nodes, n_tris = len(mesh.node_count), len(mesh.tri_order)
-            info.append((node_base, n_nodes, tri_base, n_tris))
-            node_base += n_nodes
-            tri_base += n_tris
-        a["mesh_info"] = info
-        a["mesh_extent"] = [float(mesh.extent) for mesh in meshes]
-        for name in MESH_TABLES:
-            parts = [np.asarray(getattr(mesh, name)).reshape(-1) for mesh in meshes]
-            # (one mesh, the usual case, is passed as it is: a copy of a big mesh's tables is hundreds of MB)
-            a[name] = parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else ()
+        a["mesh_info"] = [(len(m.nodes), len(m.tri_order), len(m.vertices), len(m.normals)) for m in meshes]
+        a["mesh_extent"] = [float(m.extent) for m in meshes]
+        kept = []
+        for field, column in MESH_ADDRESSES.items():
+            arrays = [getattr(m, column) for m in meshes]
+            checked = [None if x is None else np.ascontiguousarray(x, dtype=MESH_DTYPES[column]) for x in arrays]
+            kept += [x for x in checked if x is not None]
+            a[field] = np.array([0 if x is None else x.ctypes.data for x in checked], dtype=np.uintp)
+        self._mesh_arrays = kept  # the C side points into these

@@ -22,9 +22,9 @@ import difflib
 import functools
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Callable, Optional, Union
+from typing import Callable, Iterator, Optional, Sequence, Union
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from ..meshio import read_3vn
 from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
                      Material, MeshData, Scene, SceneObject, Shape, SourceLocation)
 from ..userfiles import read_text
-from .lexer import Token, tokenize, to_float
+from .lexer import Tokens, to_float, to_floats
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -94,46 +94,63 @@ def builtin_mesh(kind: str) -> MeshData:
 # ---------------------------------------------------------------------------------------------------------
 # Token source with macro splicing.
 
-@dataclass
 class _Frame:
-    """The file, or the body of one macro while ``use`` splices it in."""
+    """The file (its current block of tokens), or the body of one macro while ``use`` splices it in.
 
-    tokens: list[Token]
-    macro: Optional[str]
-    pos: int = 0
+    ``numbers`` gives each token's number in the file (see lexer.Tokens): its place, for messages."""
 
-    @property
-    def done(self) -> bool:
-        return self.pos >= len(self.tokens)
+    __slots__ = ("tokens", "numbers", "macro", "pos")
+
+    def __init__(self, tokens: list[str], numbers: Sequence[int], macro: Optional[str]):
+        self.tokens = tokens
+        self.numbers = numbers
+        self.macro = macro
+        self.pos = 0
 
 
 class _TokenSource:
     """The tokens to read next: the file's, with the bodies of the macros being expanded spliced in.
+
+    The file's tokens come from the lexer a block at a time; ``on_block(tokens, first number)`` sees each
+    block before any of its tokens is read.
 
     The names of the open macros are kept alongside the frames (a list, a count per name and the tuple
     handed out as a shape's groups, rebuilt only when a macro opens or closes), so that asking for them, or
     whether a name is open, costs the same at any nesting depth: a chain of 20,000 macros each using the
     next reads in linear time."""
 
-    def __init__(self, tokens: list[Token]):
-        self._frames = [_Frame(tokens, None)]
+    def __init__(self, lexed: Tokens, on_block: Callable[[list[str], int], None]):
+        self._lexed = lexed
+        self._on_block = on_block
+        self._frames = [_Frame([], range(0), None)]
         self._spliced = 0
         self._names: list[str] = []
         self._open: dict[str, int] = {}
         self._groups: Optional[tuple[str, ...]] = ()
+        #: The number of the token :meth:`next` returned last.
+        self.last = -1
 
     def _settle(self) -> None:
         # A finished macro frame is dropped only when the *next* token is wanted, so that right after reading
         # a macro's last token (a shape keyword, or the name in a final ``use``) that macro still counts as
         # being expanded: the shape is in its group, and ``use`` sees the whole chain.
         frames = self._frames
-        while len(frames) > 1 and frames[-1].done:
-            name = frames.pop().macro
-            self._names.pop()
-            self._open[name] -= 1
-            self._groups = None
+        while frames[-1].pos >= len(frames[-1].tokens):
+            if len(frames) > 1:
+                name = frames.pop().macro
+                self._names.pop()
+                self._open[name] -= 1
+                self._groups = None
+                continue
+            first = self._lexed.count
+            block = self._lexed.next_block()
+            if block is None:
+                return
+            self._on_block(block, first)
+            file = frames[0]
+            file.tokens, file.numbers, file.pos = block, range(first, first + len(block)), 0
 
-    def peek(self) -> Optional[Token]:
+    def peek(self) -> Optional[str]:
         # The common case first: the top frame has tokens left, so there is nothing to settle (a scene of
         # 10,000 shapes peeks 240,000 times).
         top = self._frames[-1]
@@ -141,31 +158,58 @@ class _TokenSource:
             return top.tokens[top.pos]
         self._settle()
         top = self._frames[-1]
-        return None if top.done else top.tokens[top.pos]
+        return top.tokens[top.pos] if top.pos < len(top.tokens) else None
 
-    def next(self) -> Optional[Token]:
+    def next(self) -> Optional[str]:
         token = self.peek()
         if token is not None:
-            self._frames[-1].pos += 1
+            top = self._frames[-1]
+            self.last = top.numbers[top.pos]
+            top.pos += 1
         return token
 
-    def upcoming(self, count: int) -> Optional[list[Token]]:
-        """The next ``count`` tokens if the top frame holds them all (then nothing needs settling between
-        them), else None; they stay unread until :meth:`skip`."""
+    def take_numbers(self, count: int) -> Optional[tuple[float, ...]]:
+        """The next ``count`` tokens as numbers (read), if the top frame holds them all and all are numbers
+        (then nothing needs settling between them); else None, and nothing is read."""
         top = self._frames[-1]
-        if top.pos + count <= len(top.tokens):
-            return top.tokens[top.pos:top.pos + count]
+        end = top.pos + count
+        if end <= len(top.tokens):
+            values = to_floats(top.tokens[top.pos:end])
+            if values is not None:
+                top.pos = end
+                return values
         return None
 
-    def skip(self, count: int) -> None:
-        """Mark ``count`` tokens of the top frame read (after :meth:`upcoming` returned them)."""
-        self._frames[-1].pos += count
+    def number_ahead(self) -> int:
+        """The number of the token :meth:`peek` returned."""
+        top = self._frames[-1]
+        return top.numbers[top.pos]
+
+    def keywords(self) -> Iterator[tuple[str, int, tuple[str, ...]]]:
+        """The tokens that start statements: each with its number and the macros open when it was read.
+        Its statement reads the rest of itself from this source before the next is asked for."""
+        frames = self._frames
+        while True:
+            top = frames[-1]
+            pos = top.pos
+            if pos < len(top.tokens):  # the common case, inline: nothing to settle
+                top.pos = pos + 1
+                self.last = top.numbers[pos]
+                yield top.tokens[pos], self.last, self._groups if self._groups is not None else self.macros()
+            elif (token := self.next()) is not None:
+                yield token, self.last, self.macros()
+            else:
+                return
 
     def macros(self) -> tuple[str, ...]:
         """Names of the macros being expanded, outermost first."""
         if self._groups is None:
             self._groups = tuple(self._names)
         return self._groups
+
+    def in_macro(self) -> bool:
+        """Whether the token read last came from a macro body."""
+        return len(self._frames) > 1
 
     def is_open(self, name: str) -> bool:
         """Whether macro ``name`` is being expanded (then using it again would never end)."""
@@ -180,10 +224,10 @@ class _TokenSource:
         """Tokens spliced in so far."""
         return self._spliced
 
-    def splice(self, name: str, body: list[Token]) -> None:
-        """Read ``body`` next (the caller has checked the expansion budget)."""
-        self._spliced += len(body)
-        self._frames.append(_Frame(body, name))
+    def splice(self, name: str, macro: "_Macro") -> None:
+        """Read the body of ``macro`` next (the caller has checked the expansion budget)."""
+        self._spliced += len(macro.body)
+        self._frames.append(_Frame(macro.body, macro.numbers, name))
         self._names.append(name)
         self._open[name] = self._open.get(name, 0) + 1
         self._groups = None
@@ -193,15 +237,17 @@ class _TokenSource:
 class _PendingBoolean:
     """A boolean whose operands are still being read; an operand of None was dropped (lenient mode)."""
 
-    op: Token
+    op: str
+    at: int  # the number of its keyword
     groups: tuple[str, ...]
     children: list[Optional[SceneObject]] = field(default_factory=list)
 
 
 @dataclass
 class _Macro:
-    body: list[Token]
-    where: Token  # its name in the def, for messages
+    body: list[str]
+    numbers: Sequence[int]  # of the body's tokens
+    at: int  # the number of its name in the def, for messages
 
 
 #: Statements a name comment does not reach past: it names a shape read directly after it, not one in a macro.
@@ -209,46 +255,68 @@ _NAME_STOPS = frozenset(("def", "use", "{", "}"))
 _SHAPE_KEYWORDS = frozenset(SHAPE_KINDS)  # a set: looked up for every token between a name and its shape
 
 
-def _shape_names(tokens: list[Token], name_comments: list[tuple[int, str]]) -> dict[tuple[int, int], str]:
-    """(line, column) of a shape keyword -> the name the ``! name:`` comment before it gives.
+class _ShapeNames:
+    """Which shape each ``! name:`` comment names: the number of a shape keyword -> its name.
 
     A comment names the first shape keyword after it, unless a def, use or brace comes first; a later comment
     before the same shape wins.  A named shape inside a def body is named wherever the macro is used.
-    """
-    names: dict[tuple[int, int], str] = {}
-    for index, name in name_comments:
-        # By index, not a slice: a slice would copy the rest of the file for each of 10^5 named shapes.
-        while index < len(tokens):
-            token = tokens[index]
-            if token.text in _SHAPE_KEYWORDS:
-                names[(token.line, token.column)] = name
-                break
-            if token.text in _NAME_STOPS:
-                break
-            index += 1
-    return names
+    Worked out a block of tokens at a time, as the lexer splits them; a comment whose shape is in a later
+    block waits for it."""
+
+    def __init__(self):
+        self.names: dict[int, str] = {}
+        self._waiting: Optional[tuple[int, str]] = None
+
+    def add_block(self, tokens: list[str], first: int, comments: list[tuple[int, str]]) -> None:
+        """Names for the shapes in ``tokens`` (numbered from ``first``) from the name comments among them
+        (``comments``) and the one still waiting."""
+        if self._waiting is not None:
+            comments = [self._waiting] + comments
+            self._waiting = None
+        ends = [number for number, _ in comments[1:]] + [first + len(tokens)]
+        for (number, name), end in zip(comments, ends):
+            # Looked for only up to the next comment: past it, that comment's name wins anyway.
+            for index in range(number - first, end - first):
+                token = tokens[index]
+                if token in _SHAPE_KEYWORDS:
+                    self.names[first + index] = name
+                    break
+                if token in _NAME_STOPS:
+                    break
+            else:
+                if end == first + len(tokens):
+                    self._waiting = (end, name)
 
 
 # ---------------------------------------------------------------------------------------------------------
+
+#: Material field -> default value, in the dataclass's order (the reader keeps the current material so).
+_MATERIAL_DEFAULTS = {f.name: getattr(Material(), f.name) for f in fields(Material)}
+
 
 class _Reader:
     def __init__(self, text: str, base_dir: Optional[PathLike], file: Optional[str], strict: bool):
         self.file = file
         self.base_dir = Path(base_dir) if base_dir is not None else None
         self.strict = strict
-        name_comments: list[tuple[int, str]] = []
-        tokens = tokenize(text, name_comments)
-        self.source = _TokenSource(tokens)
-        self.shape_names = _shape_names(tokens, name_comments)
+        self.tokens = Tokens(text)
+        self.shape_names = _ShapeNames()
+        self.source = _TokenSource(self.tokens, self._new_block)
         self.scene = Scene()
-        self.material = Material()
-        self.stack: list[np.ndarray] = [np.eye(4)]
+        # The current material as its fields (a statement sets one in place) and, once a shape needed it,
+        # as a Material; equal materials are one object (10^5 shapes in a few colours keep a few).
+        self.material_fields = dict(_MATERIAL_DEFAULTS)
+        self.material: Optional[Material] = None
+        self.materials: dict[tuple, Material] = {}
+        self.stack: list[transforms.Affine] = [transforms.IDENTITY_AFFINE]
+        self.invertible: Optional[transforms.Affine] = None  # the transform last found to have an inverse
         self.macros: dict[str, _Macro] = {}
         self.macro_sizes: dict[str, int] = {}  # tokens a use of each macro splices (see _expanded_size)
         self.pending: list[_PendingBoolean] = []
         self.mesh_cache: dict[str, MeshData] = {}
+        self.macro_locations: dict[int, SourceLocation] = {}  # shapes in macro bodies: one per body token
         self.reported: set[str] = set()
-        self.handlers: dict[str, Callable[[Token, tuple[str, ...]], None]] = {
+        self.handlers: dict[str, Callable[[str, int, tuple[str, ...]], None]] = {
             "light": self._light, "globalAmbient": self._global_ambient, "background": self._background,
             "minReflectivity": self._min_reflectivity, "minTransparency": self._min_transparency,
             "maxRecursionDepth": self._max_recursion_depth, "makePixmap": self._make_pixmap,
@@ -269,16 +337,19 @@ class _Reader:
             self.handlers[keyword] = self._boolean
         assert set(self.handlers) == KEYWORDS
 
+    def _new_block(self, tokens: list[str], first: int) -> None:
+        self.shape_names.add_block(tokens, first, self.tokens.name_comments)
+
     # -- driving loop -----------------------------------------------------------------------------------
 
     def read(self) -> Scene:
-        while (token := self.source.next()) is not None:
-            groups = self.source.macros()
+        handlers = self.handlers
+        for keyword, at, groups in self.source.keywords():
             try:
-                handler = self.handlers.get(token.text)
+                handler = handlers.get(keyword)
                 if handler is None:
-                    raise self._unknown(token)
-                handler(token, groups)
+                    raise self._unknown(keyword, at)
+                handler(keyword, at, groups)
             except SDLError as error:
                 self._report(error)
                 self._resync()
@@ -302,125 +373,116 @@ class _Reader:
     def _resync(self) -> None:
         # After a broken statement, skip its leftovers quietly up to the next keyword, so that one mistake
         # gives one warning rather than one per stray word.
-        while (token := self.source.peek()) is not None and token.text not in KEYWORDS:
+        while (token := self.source.peek()) is not None and token not in KEYWORDS:
             self.source.next()
 
     # -- building errors --------------------------------------------------------------------------------
 
-    def _error(self, at: Token, message: str, expected: Optional[str] = None, show_token: bool = True) -> SDLError:
-        return SDLError(message, file=self.file, line=at.line, column=at.column,
-                        token=at.text if show_token else None, expected=expected)
+    def _error(self, at: int, message: str, expected: Optional[str] = None, show_token: bool = True) -> SDLError:
+        """An error pointing at token number ``at``."""
+        token = self.tokens.locate(at)
+        return SDLError(message, file=self.file, line=token.line, column=token.column,
+                        token=token.text if show_token else None, expected=expected)
 
-    def _end_of_file(self, keyword: Token, expected: str) -> SDLError:
+    def _end_of_file(self, keyword: str, at: int, expected: str) -> SDLError:
         # Pointing at the statement that was cut short helps more than pointing past the last line.
-        return self._error(keyword, f"end of file inside the '{keyword.text}' statement",
-                           expected=expected, show_token=False)
+        return self._error(at, f"end of file inside the '{keyword}' statement", expected=expected, show_token=False)
 
     @staticmethod
-    def _usage(keyword: Token) -> str:
-        args = USAGE.get(keyword.text, "")
-        return f"'{keyword.text} {args}'" if args else f"'{keyword.text}'"
+    def _usage(keyword: str) -> str:
+        args = USAGE.get(keyword, "")
+        return f"'{keyword} {args}'" if args else f"'{keyword}'"
 
-    def _unknown(self, token: Token) -> SDLError:
-        text = token.text
+    def _unknown(self, text: str, at: int) -> SDLError:
         if text == "}":
-            return self._error(token, "unbalanced '}': no '{' is open")
+            return self._error(at, "unbalanced '}': no '{' is open")
         if text == "{":
-            return self._error(token, "'{' outside a def", expected="'def name { ... }'")
+            return self._error(at, "'{' outside a def", expected="'def name { ... }'")
         if to_float(text) is not None:
-            return self._error(token, "a number where a keyword belongs (too many numbers?)",
-                               expected="a keyword")
+            return self._error(at, "a number where a keyword belongs (too many numbers?)", expected="a keyword")
         if text in self.macros:
-            return self._error(token, f"unknown keyword; to expand the macro write 'use {text}'")
+            return self._error(at, f"unknown keyword; to expand the macro write 'use {text}'")
         # Keywords are case-sensitive; a wrong case is the likeliest typo of all.
         suggestion = [k for k in KEYWORDS if k.lower() == text.lower()] or \
             difflib.get_close_matches(text, sorted(KEYWORDS), n=1, cutoff=0.7)
         if suggestion:
-            return self._error(token, f"unknown keyword, did you mean '{suggestion[0]}'?")
-        return self._error(token, "unknown keyword", expected="a keyword")
+            return self._error(at, f"unknown keyword, did you mean '{suggestion[0]}'?")
+        return self._error(at, "unknown keyword", expected="a keyword")
 
     # -- reading arguments --------------------------------------------------------------------------------
 
-    def _number_token(self, keyword: Token) -> tuple[float, Token]:
+    def _number_token(self, keyword: str, at: int) -> tuple[float, int]:
+        """The next token as a number, and its number (place)."""
         token = self.source.peek()
         if token is None:
-            raise self._end_of_file(keyword, self._usage(keyword))
-        value = to_float(token.text)
+            raise self._end_of_file(keyword, at, self._usage(keyword))
+        value = to_float(token)
         if value is None:
             # Left unread: if it is a keyword, reading resumes with it (lenient mode).
-            raise self._error(token, f"expected a number after '{keyword.text}'", expected=self._usage(keyword))
+            raise self._error(self.source.number_ahead(), f"expected a number after '{keyword}'",
+                              expected=self._usage(keyword))
         self.source.next()
-        return value, token
+        return value, self.source.last
 
-    def _numbers(self, keyword: Token, count: int) -> tuple[float, ...]:
-        # Read as _number_token would, one number after another, without its per-token bookkeeping when the
-        # current frame holds all of them (nearly always).  On a word that is no number, the numbers before
-        # it are read and the word is left unread, as there.
-        tokens = self.source.upcoming(count)
-        if tokens is None:
-            return tuple(self._number_token(keyword)[0] for _ in range(count))
-        values = []
-        for token in tokens:
-            value = to_float(token.text)
-            if value is None:
-                self.source.skip(len(values))
-                raise self._error(token, f"expected a number after '{keyword.text}'", expected=self._usage(keyword))
-            values.append(value)
-        self.source.skip(count)
-        return tuple(values)
+    def _numbers(self, keyword: str, at: int, count: int) -> tuple[float, ...]:
+        values = self.source.take_numbers(count)
+        if values is None:  # a word that is no number, or a macro or block ends first: one by one
+            values = tuple(self._number_token(keyword, at)[0] for _ in range(count))
+        return values
 
-    def _name(self, keyword: Token, what: str) -> Token:
-        """A file or macro name: any word that is not a brace or a keyword."""
+    def _name(self, keyword: str, at: int, what: str) -> tuple[str, int]:
+        """A file or macro name: any word that is not a brace or a keyword; and its number (place)."""
         token = self.source.peek()
         if token is None:
-            raise self._end_of_file(keyword, self._usage(keyword))
-        if token.text in ("{", "}") or token.text in KEYWORDS:
-            raise self._error(token, f"expected {what} after '{keyword.text}'", expected=self._usage(keyword))
+            raise self._end_of_file(keyword, at, self._usage(keyword))
+        if token in ("{", "}") or token in KEYWORDS:
+            raise self._error(self.source.number_ahead(), f"expected {what} after '{keyword}'",
+                              expected=self._usage(keyword))
         self.source.next()
-        return token
+        return token, self.source.last
 
-    def _location(self, token: Token) -> SourceLocation:
-        return SourceLocation(self.file, token.line, token.column)
+    def _location(self, at: int) -> SourceLocation:
+        return SourceLocation(self.file, *self.tokens.place(at))
 
     # -- scene settings ---------------------------------------------------------------------------------
 
-    def _light(self, keyword: Token, groups) -> None:
-        x, y, z, r, g, b = self._numbers(keyword, 6)
+    def _light(self, keyword: str, at: int, groups) -> None:
+        x, y, z, r, g, b = self._numbers(keyword, at, 6)
         self.scene.lights.append(Light((x, y, z), (r, g, b)))
 
-    def _global_ambient(self, keyword: Token, groups) -> None:
-        self.scene.settings.global_ambient = self._numbers(keyword, 3)
+    def _global_ambient(self, keyword: str, at: int, groups) -> None:
+        self.scene.settings.global_ambient = self._numbers(keyword, at, 3)
 
-    def _background(self, keyword: Token, groups) -> None:
-        self.scene.settings.background = self._numbers(keyword, 3)
+    def _background(self, keyword: str, at: int, groups) -> None:
+        self.scene.settings.background = self._numbers(keyword, at, 3)
 
-    def _min_reflectivity(self, keyword: Token, groups) -> None:
-        self.scene.settings.min_reflectivity = self._numbers(keyword, 1)[0]
+    def _min_reflectivity(self, keyword: str, at: int, groups) -> None:
+        self.scene.settings.min_reflectivity = self._numbers(keyword, at, 1)[0]
 
-    def _min_transparency(self, keyword: Token, groups) -> None:
-        self.scene.settings.min_transparency = self._numbers(keyword, 1)[0]
+    def _min_transparency(self, keyword: str, at: int, groups) -> None:
+        self.scene.settings.min_transparency = self._numbers(keyword, at, 1)[0]
 
-    def _max_recursion_depth(self, keyword: Token, groups) -> None:
-        value, token = self._number_token(keyword)
+    def _max_recursion_depth(self, keyword: str, at: int, groups) -> None:
+        value, number = self._number_token(keyword, at)
         if not value.is_integer() or value < 0:
-            return self._report(self._error(token, "maxRecursionDepth must be a whole number >= 0"))
+            return self._report(self._error(number, "maxRecursionDepth must be a whole number >= 0"))
         if value > MAX_RECURSION_DEPTH:  # read, in strict mode too: a deep setting is no mistake
-            self._note(self._error(token, f"maxRecursionDepth is more than the tracer follows: "
-                                          f"{MAX_RECURSION_DEPTH} used"))
+            self._note(self._error(number, f"maxRecursionDepth is more than the tracer follows: "
+                                           f"{MAX_RECURSION_DEPTH} used"))
             value = MAX_RECURSION_DEPTH
         self.scene.settings.max_recursion_depth = int(value)
 
-    def _make_pixmap(self, keyword: Token, groups) -> None:
-        index, index_token = self._number_token(keyword)
-        name = self._name(keyword, "an image file name")
+    def _make_pixmap(self, keyword: str, at: int, groups) -> None:
+        index, index_number = self._number_token(keyword, at)
+        name, _ = self._name(keyword, at, "an image file name")
         if not index.is_integer() or int(index) not in PIXMAP_RANGE:
             return self._report(self._error(
-                index_token, "makePixmap image number out of range",
+                index_number, "makePixmap image number out of range",
                 expected=f"a whole number {PIXMAP_RANGE.start}..{PIXMAP_RANGE.stop - 1}"))
-        self.scene.pixmaps[int(index)] = str(self._resolve(name.text))
+        self.scene.pixmaps[int(index)] = str(self._resolve(name))
 
-    def _camera(self, keyword: Token, groups) -> None:
-        numbers = self._numbers(keyword, 10)
+    def _camera(self, keyword: str, at: int, groups) -> None:
+        numbers = self._numbers(keyword, at, 10)
         eye, look, up = numbers[0:3], numbers[3:6], numbers[6:9]
         angle = numbers[9]
         forward = np.subtract(look, eye)
@@ -432,77 +494,89 @@ class _Reader:
         elif not 0.0 < angle < 180.0:
             problem = "camera view angle must be between 0 and 180 degrees"
         if problem:
-            return self._report(self._error(keyword, problem))
+            return self._report(self._error(at, problem))
         self.scene.camera = Camera(eye=eye, look=look, up=up, view_angle=angle)
 
     # -- material ---------------------------------------------------------------------------------------
 
-    def _color_material(self, keyword: Token, groups) -> None:
-        self.material = replace(self.material, **{COLOR_MATERIAL[keyword.text]: self._numbers(keyword, 3)})
+    def _set_material(self, name: str, value) -> None:
+        self.material_fields[name] = value
+        self.material = None
 
-    def _float_material(self, keyword: Token, groups) -> None:
-        self.material = replace(self.material, **{FLOAT_MATERIAL[keyword.text]: self._numbers(keyword, 1)[0]})
+    def _current_material(self) -> Material:
+        """The material that the statements so far give, as one Material per distinct value."""
+        if self.material is None:
+            key = tuple(self.material_fields.values())
+            self.material = self.materials.get(key)
+            if self.material is None:
+                self.material = self.materials[key] = Material(*key)
+        return self.material
 
-    def _texture(self, keyword: Token, groups) -> None:
-        value, token = self._number_token(keyword)
+    def _color_material(self, keyword: str, at: int, groups) -> None:
+        self._set_material(COLOR_MATERIAL[keyword], self._numbers(keyword, at, 3))
+
+    def _float_material(self, keyword: str, at: int, groups) -> None:
+        self._set_material(FLOAT_MATERIAL[keyword], self._numbers(keyword, at, 1)[0])
+
+    def _texture(self, keyword: str, at: int, groups) -> None:
+        value, number = self._number_token(keyword, at)
         if not value.is_integer():
-            return self._report(self._error(token, "texture number must be a whole number"))
-        self.material = replace(self.material, texture=int(value))
+            return self._report(self._error(number, "texture number must be a whole number"))
+        self._set_material("texture", int(value))
 
-    def _parameters(self, keyword: Token, groups) -> None:
-        count, count_token = self._number_token(keyword)
+    def _parameters(self, keyword: str, at: int, groups) -> None:
+        count, count_number = self._number_token(keyword, at)
         if not count.is_integer() or count < 0:
-            raise self._error(count_token, "expected how many parameters follow",
+            raise self._error(count_number, "expected how many parameters follow",
                               expected=f"a whole number 0..{MAX_PARAMETERS}")
         count = int(count)
         if count <= MAX_PARAMETERS:
-            self.material = replace(self.material, parameters=self._numbers(keyword, count))
+            self._set_material("parameters", self._numbers(keyword, at, count))
             return
         # Too many: warn once, read the numbers that are there (up to the count) and keep the first ten.
-        self._report(self._error(count_token, f"parameters takes at most {MAX_PARAMETERS} numbers",
+        self._report(self._error(count_number, f"parameters takes at most {MAX_PARAMETERS} numbers",
                                  expected=f"a whole number 0..{MAX_PARAMETERS}"))
         values = []
-        while len(values) < count and (token := self.source.peek()) is not None and to_float(token.text) is not None:
-            values.append(to_float(self.source.next().text))
-        self.material = replace(self.material, parameters=tuple(values[:MAX_PARAMETERS]))
+        while len(values) < count and (token := self.source.peek()) is not None and to_float(token) is not None:
+            values.append(to_float(self.source.next()))
+        self._set_material("parameters", tuple(values[:MAX_PARAMETERS]))
 
-    def _default_materials(self, keyword: Token, groups) -> None:
-        self.material = Material()
+    def _default_materials(self, keyword: str, at: int, groups) -> None:
+        self.material_fields = dict(_MATERIAL_DEFAULTS)
+        self.material = None
 
     # -- transforms -------------------------------------------------------------------------------------
+    # Post-multiplied: the statement written last acts on the shape first (M = T·S for "translate scale").
 
-    def _apply(self, matrix: np.ndarray) -> None:
-        # Post-multiply: the statement written last acts on the shape first (M = T·S for "translate scale").
-        self.stack[-1] = self.stack[-1] @ matrix
+    def _translate(self, keyword: str, at: int, groups) -> None:
+        self.stack[-1] = transforms.affine_translate(self.stack[-1], *self._numbers(keyword, at, 3))
 
-    def _translate(self, keyword: Token, groups) -> None:
-        self._apply(transforms.translation(*self._numbers(keyword, 3)))
+    def _scale(self, keyword: str, at: int, groups) -> None:
+        self.stack[-1] = transforms.affine_scale(self.stack[-1], *self._numbers(keyword, at, 3))
 
-    def _scale(self, keyword: Token, groups) -> None:
-        self._apply(transforms.scaling(*self._numbers(keyword, 3)))
-
-    def _rotate(self, keyword: Token, groups) -> None:
-        angle = self._number_token(keyword)[0]
-        axis = [self._number_token(keyword) for _ in range(3)]
+    def _rotate(self, keyword: str, at: int, groups) -> None:
+        angle = self._number_token(keyword, at)[0]
+        axis = [self._number_token(keyword, at) for _ in range(3)]
         try:
             matrix = transforms.rotation(angle, *(value for value, _ in axis))
         except ValueError:
-            first = axis[0][1]
+            first = self.tokens.locate(axis[0][1])
             return self._report(SDLError(
                 "rotate needs a non-zero axis", file=self.file, line=first.line, column=first.column,
-                token=" ".join(token.text for _, token in axis), expected="'rotate angle ux uy uz', axis not 0 0 0"))
-        self._apply(matrix)
+                token=" ".join(self.tokens.locate(number).text for _, number in axis),
+                expected="'rotate angle ux uy uz', axis not 0 0 0"))
+        self.stack[-1] = transforms.affine_times(self.stack[-1], matrix)
 
-    def _push(self, keyword: Token, groups) -> None:
-        self.stack.append(self.stack[-1].copy())
+    def _push(self, keyword: str, at: int, groups) -> None:
+        self.stack.append(self.stack[-1])  # a tuple: the copy and the original never change
 
-    def _pop(self, keyword: Token, groups) -> None:
+    def _pop(self, keyword: str, at: int, groups) -> None:
         if len(self.stack) == 1:  # the base transform always stays
-            return self._report(self._error(keyword, "pop without a matching push"))
+            return self._report(self._error(at, "pop without a matching push"))
         self.stack.pop()
 
-    def _identity(self, keyword: Token, groups) -> None:
-        self.stack[-1] = np.eye(4)
+    def _identity(self, keyword: str, at: int, groups) -> None:
+        self.stack[-1] = transforms.IDENTITY_AFFINE
 
     # -- objects ----------------------------------------------------------------------------------------
 
@@ -521,133 +595,144 @@ class _Reader:
     def _combine(self, boolean: _PendingBoolean) -> Optional[SceneObject]:
         children = [c for c in boolean.children if c is not None]
         if len(children) == 2:
-            return CSG(boolean.op.text, children[0], children[1], groups=boolean.groups,
-                       source=self._location(boolean.op))
+            return CSG(boolean.op, children[0], children[1], groups=boolean.groups, source=self._location(boolean.at))
         # An operand was dropped (lenient mode): the boolean degrades to what is left.
         return children[0] if children else None
 
-    def _boolean(self, keyword: Token, groups) -> None:
-        self.pending.append(_PendingBoolean(keyword, groups))
+    def _boolean(self, keyword: str, at: int, groups) -> None:
+        self.pending.append(_PendingBoolean(keyword, at, groups))
 
     def _finish_booleans(self) -> None:
         while self.pending:
             boolean = self.pending.pop()
-            op = boolean.op.text
-            self._report(self._error(boolean.op, f"end of file: '{op}' needs two objects, found "
+            op = boolean.op
+            self._report(self._error(boolean.at, f"end of file: '{op}' needs two objects, found "
                                                  f"{len(boolean.children)}", expected=f"'{op} object object'",
                                      show_token=False))
             self._place(self._combine(boolean))
 
-    def _shape(self, keyword: Token, groups) -> None:
+    def _shape(self, keyword: str, at: int, groups) -> None:
         try:
-            shape = self._read_shape(keyword, groups)
+            shape = self._read_shape(keyword, at, groups)
         except SDLError:
             self._place(None)  # a broken operand still fills its place in a boolean
             raise
         self._place(shape)
 
-    def _read_shape(self, keyword: Token, groups) -> Optional[Shape]:
-        kind = keyword.text
-        shape = Shape(kind, matrix=self.stack[-1].copy(), material=self.material, groups=groups,
-                      source=self._location(keyword))
-        if self.shape_names:
-            shape.name = self.shape_names.get((keyword.line, keyword.column))
-        name = None
+    def _read_shape(self, kind: str, at: int, groups) -> Optional[Shape]:
+        tapered_radius, mesh_file = 1.0, None
         if kind == "taperedCylinder":
-            shape.tapered_radius = self._number_token(keyword)[0]
+            tapered_radius = self._number_token(kind, at)[0]
         elif kind == "mesh":
-            name = self._name(keyword, "a mesh file name")
-            shape.mesh_file = name.text
-        if is_singular(shape.matrix):
-            why = "singular transform" if np.isfinite(shape.matrix).all() else "transform overflows"
-            hint = "a scale of 0?" if why == "singular transform" else "scales too large for a float"
-            self._report(self._error(keyword, f"{why} for '{kind}' ({hint})", expected="a transform with an inverse"))
-            return None
+            mesh_file, mesh_at = self._name(kind, at, "a mesh file name")
+        transform = self.stack[-1]
+        if transform is not self.invertible:  # (shapes in a row often share their transform)
+            if _affine_is_singular(transform):
+                overflows = not all(map(math.isfinite, transform))
+                why = "transform overflows" if overflows else "singular transform"
+                hint = "scales too large for a float" if overflows else "a scale of 0?"
+                self._report(self._error(at, f"{why} for '{kind}' ({hint})", expected="a transform with an inverse"))
+                return None
+            self.invertible = transform
+        mesh = None
         if kind == "mesh":
-            shape.mesh = self._mesh_file(name)
-            if shape.mesh is None:
+            mesh = self._mesh_file(mesh_file, mesh_at)
+            if mesh is None:
                 return None
         elif kind in POLYHEDRON_KINDS or kind == "teapot":
-            shape.mesh = builtin_mesh(kind)
-        return shape
+            mesh = builtin_mesh(kind)
+        # (The 16 entries, not a matrix: Shape makes its own matrix of what it is given anyway.)
+        return Shape(_SHAPE_KIND[kind], transforms.affine_entries(transform), self._current_material(),
+                     tapered_radius, mesh, mesh_file, groups, self._shape_location(at),
+                     self.shape_names.names.get(at))
+
+    def _shape_location(self, at: int) -> SourceLocation:
+        if not self.source.in_macro():
+            return self._location(at)
+        # A macro used many times places its shapes at the same token each time: one location for all.
+        location = self.macro_locations.get(at)
+        if location is None:
+            location = self.macro_locations[at] = self._location(at)
+        return location
 
     def _resolve(self, name: str) -> Path:
         return self.base_dir / name if self.base_dir is not None else Path(name)
 
-    def _mesh_file(self, name: Token) -> Optional[MeshData]:
+    def _mesh_file(self, name: str, at: int) -> Optional[MeshData]:
         """The mesh a ``mesh`` statement names (read once per file), or None after reporting a problem."""
-        path = self._resolve(name.text)
+        path = self._resolve(name)
         key = os.path.normpath(os.path.abspath(path))
         if key in self.mesh_cache:
             return self.mesh_cache[key]
         if not path.is_file():
-            self._report(self._error(name, f"mesh file not found: {path}", expected="an existing .3vn file"))
+            self._report(self._error(at, f"mesh file not found: {path}", expected="an existing .3vn file"))
             return None
         try:
             mesh = read_3vn(path)
         except SDLError as inner:
             # The inner message names the .3vn file, its line and the bad word.
-            self._report(self._error(name, f"bad mesh file: {inner}", show_token=False))
+            self._report(self._error(at, f"bad mesh file: {inner}", show_token=False))
             return None
         self.mesh_cache[key] = mesh
         return mesh
 
     # -- macros -----------------------------------------------------------------------------------------
 
-    def _def(self, keyword: Token, groups) -> None:
-        name = self._name(keyword, "a macro name")
+    def _def(self, keyword: str, at: int, groups) -> None:
+        name, name_at = self._name(keyword, at, "a macro name")
         brace = self.source.peek()
         if brace is None:
-            raise self._end_of_file(keyword, self._usage(keyword))
-        if brace.text != "{":
-            raise self._error(brace, f"expected '{{' after 'def {name.text}'", expected=self._usage(keyword))
+            raise self._end_of_file(keyword, at, self._usage(keyword))
+        if brace != "{":
+            raise self._error(self.source.number_ahead(), f"expected '{{' after 'def {name}'",
+                              expected=self._usage(keyword))
         self.source.next()
-        body: list[Token] = []
+        body: list[str] = []
+        numbers: list[int] = []
         depth = 1  # braces nest (the book's body ends at the first '}')
         while True:
             token = self.source.next()
             if token is None:
-                self.macros.setdefault(name.text, _Macro(body, name))  # lenient mode keeps what was there
-                raise self._error(keyword, f"end of file inside the body of 'def {name.text}'",
-                                  expected="'}'", show_token=False)
-            depth += {"{": 1, "}": -1}.get(token.text, 0)
+                self.macros.setdefault(name, _Macro(body, _compact(numbers), name_at))  # lenient mode keeps it
+                raise self._error(at, f"end of file inside the body of 'def {name}'", expected="'}'", show_token=False)
+            depth += {"{": 1, "}": -1}.get(token, 0)
             if depth == 0:
                 break
             body.append(token)
-        self._define(name, body)
+            numbers.append(self.source.last)
+        self._define(name, name_at, _Macro(body, _compact(numbers), name_at))
 
-    def _define(self, name: Token, body: list[Token]) -> None:
-        earlier = self.macros.get(name.text)
-        self.macros[name.text] = _Macro(body, name)  # lenient mode: the later definition wins
+    def _define(self, name: str, at: int, macro: _Macro) -> None:
+        earlier = self.macros.get(name)
+        self.macros[name] = macro  # lenient mode: the later definition wins
         self.macro_sizes.clear()  # sizes of macros that use this name may change
         if earlier is not None:
-            self._report(self._error(name, f"macro '{name.text}' is already defined "
-                                           f"(line {earlier.where.line})"))
+            self._report(self._error(at, f"macro '{name}' is already defined "
+                                         f"(line {self.tokens.locate(earlier.at).line})"))
 
-    def _use(self, keyword: Token, groups) -> None:
-        name = self._name(keyword, "a macro name")
-        macro = self.macros.get(name.text)
+    def _use(self, keyword: str, at: int, groups) -> None:
+        name, name_at = self._name(keyword, at, "a macro name")
+        macro = self.macros.get(name)
         if macro is None:
-            close = difflib.get_close_matches(name.text, sorted(self.macros), n=1, cutoff=0.7)
+            close = difflib.get_close_matches(name, sorted(self.macros), n=1, cutoff=0.7)
             hint = f", did you mean '{close[0]}'?" if close else ""
-            raise self._error(name, f"undefined macro{hint}", expected="a name given by an earlier def")
-        if self.source.is_open(name.text):
-            chain = self.source.chain_from(name.text) + (name.text,)
-            raise self._error(name, f"macro '{name.text}' uses itself: {_chain(chain)}")
-        size = self._expanded_size(name.text)
+            raise self._error(name_at, f"undefined macro{hint}", expected="a name given by an earlier def")
+        if self.source.is_open(name):
+            chain = self.source.chain_from(name) + (name,)
+            raise self._error(name_at, f"macro '{name}' uses itself: {_chain(chain)}")
+        size = self._expanded_size(name)
         if self.source.spliced + size > MAX_SPLICED_TOKENS:
-            chain = self.source.macros() + self._growth(name.text)
-            raise self._error(name, f"'use {_cut_name(name.text)}' would splice {size:,} tokens "
-                                    f"({_chain(chain)}), more than the {MAX_SPLICED_TOKENS:,} that macros "
-                                    f"may expand to in one file", show_token=False)
-        self.source.splice(name.text, macro.body)
+            chain = self.source.macros() + self._growth(name)
+            raise self._error(name_at, f"'use {_cut_name(name)}' would splice {size:,} tokens "
+                                       f"({_chain(chain)}), more than the {MAX_SPLICED_TOKENS:,} that macros "
+                                       f"may expand to in one file", show_token=False)
+        self.source.splice(name, macro)
 
     def _growth(self, name: str) -> tuple[str, ...]:
         """``name`` and, from it down, the macro each one uses that expands to the most: where a budget went."""
         chain, seen = [name], {name}
         while (macro := self.macros.get(chain[-1])) is not None:
-            used = [t.text for prev, t in zip(macro.body, macro.body[1:]) if prev.text == "use"]
-            used = [u for u in used if u not in seen and u in self.macros]
+            used = [u for u in _used_macros(macro.body) if u not in seen and u in self.macros]
             if not used:
                 break
             chain.append(max(used, key=self._expanded_size))
@@ -672,7 +757,7 @@ class _Reader:
                 sizes[current] = 0
                 stack.pop()
                 continue
-            used = [t.text for prev, t in zip(macro.body, macro.body[1:]) if prev.text == "use"]
+            used = _used_macros(macro.body)
             pending = [u for u in used if u not in sizes and u not in visiting and u in self.macros]
             if current not in visiting and pending:
                 visiting.add(current)
@@ -684,6 +769,24 @@ class _Reader:
             sizes[current] = min(total, 1 << 62)
             stack.pop()
         return sizes[name]
+
+
+def _used_macros(body: list[str]) -> list[str]:
+    """The names after each ``use`` in a macro body."""
+    return [word for before, word in zip(body, body[1:]) if before == "use"]
+
+
+def _compact(numbers: list[int]) -> Sequence[int]:
+    """Token numbers as a range when they follow one another (a body read straight from the file: nearly
+    always), else the list."""
+    if numbers and numbers[-1] - numbers[0] == len(numbers) - 1 and \
+            numbers == list(range(numbers[0], numbers[-1] + 1)):
+        return range(numbers[0], numbers[-1] + 1)
+    return numbers
+
+
+#: The one string of each shape keyword: a shape's kind is that, not the token's own copy.
+_SHAPE_KIND = {kind: kind for kind in SHAPE_KINDS}
 
 
 def _cut_name(name: str) -> str:
@@ -710,10 +813,15 @@ def _clearly_invertible(matrix: np.ndarray) -> bool:
     under MAX_CONDITION, so the answer is the same without their cost (a third of the parse time of a scene
     of 10,000 shapes).  When this says no, is_singular asks NumPy as before."""
     rows = matrix.tolist()
+    return math.isfinite(sum(rows[3])) and _affine_clearly_invertible(rows[0] + rows[1] + rows[2])
+
+
+def _affine_clearly_invertible(affine: transforms.Affine) -> bool:
+    """_clearly_invertible for the top three rows of a matrix, row after row (see transforms.Affine)."""
     # The sum is finite only if every entry is (one that overflows just leaves the question to NumPy).
-    if not math.isfinite(sum(rows[0]) + sum(rows[1]) + sum(rows[2]) + sum(rows[3])):
+    if not math.isfinite(sum(affine)):
         return False
-    (a, b, c, _), (d, e, f, _), (g, h, i, _) = rows[:3]
+    a, b, c, _, d, e, f, _, g, h, i, _ = affine
     size = max(abs(a), abs(b), abs(c), abs(d), abs(e), abs(f), abs(g), abs(h), abs(i))
     if not 1e-80 <= size <= 1e80:
         return False
@@ -726,6 +834,11 @@ def is_singular(matrix: np.ndarray) -> bool:
     if isinstance(matrix, np.ndarray) and matrix.shape == (4, 4) and _clearly_invertible(matrix):
         return False
     return _numpy_is_singular(matrix)
+
+
+def _affine_is_singular(affine: transforms.Affine) -> bool:
+    """is_singular for the matrix of an affine map given as transforms.Affine."""
+    return not _affine_clearly_invertible(affine) and _numpy_is_singular(transforms.affine_matrix(affine))
 
 
 def _numpy_is_singular(matrix: np.ndarray) -> bool:

@@ -228,7 +228,9 @@ def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
             verts, norms = tri_verts, normal_index
         else:
             corners = _corners_of(np.nonzero(mat_index == index)[0])
-            verts, norms = tri_verts[corners], normal_index[corners]
+            verts = tri_verts[corners]
+            # (normals per vertex: one index array serves both, as FaceList allows)
+            norms = verts if normal_index is tri_verts else normal_index[corners]
         faces = model.FaceList(np.full(len(verts) // 3, 3, dtype=np.int64), verts, norms)
         data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin)
         # Never changed after this (a changed object is converted anew): hashed here, once, not at every compile.

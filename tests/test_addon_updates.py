@@ -297,3 +297,53 @@ def test_the_render_panel_offers_persistent_data():
     scene = bpy.context.scene
     ui.SDL_PT_render.draw(types.SimpleNamespace(layout=Layout()), types.SimpleNamespace(scene=scene))
     assert (scene.render, "use_persistent_data") in shown
+
+
+def _triangles_as_blender_gives_them(mesh) -> dict:
+    """Per material index, each triangle's corner positions and corner normals, asked of Blender one
+    triangle at a time (the slow way the add-on used to read them)."""
+    mesh.calc_loop_triangles()
+    positions = np.array([v.co[:] for v in mesh.vertices])
+    normals = meshes._corner_normals(mesh)
+    out: dict = {}
+    for tri in mesh.loop_triangles:
+        out.setdefault(tri.material_index, []).append((positions[list(tri.vertices)], normals[list(tri.loops)]))
+    return out
+
+
+def test_meshes_read_as_arrays_are_blenders_triangles_and_normals():
+    """triangle_meshes reads positions, triangles, materials and normals as whole arrays (normals from the
+    domain Blender keeps them in): the same triangles, corner positions and corner normals as Blender's."""
+    fresh()
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=12, ring_count=7)
+    sphere = bpy.context.active_object
+    mesh = sphere.data
+    for name in ("a", "b", "c"):
+        mesh.materials.append(bpy.data.materials.new(name))
+    bpy.ops.mesh.primitive_circle_add(vertices=9, fill_type="NGON")
+    ngon = bpy.context.active_object.data
+
+    def smooth(value):
+        mesh.polygons.foreach_set("use_smooth", [value] * len(mesh.polygons))
+
+    def sharpen():
+        mesh.edges[3].use_edge_sharp = mesh.edges[10].use_edge_sharp = True
+        if hasattr(mesh, "use_auto_smooth"):  # Blender < 4.1
+            mesh.use_auto_smooth = True
+
+    def materials():
+        mesh.polygons.foreach_set("material_index", [p % 3 for p in range(len(mesh.polygons))])
+
+    cases = [(ngon, None), (mesh, lambda: smooth(False)), (mesh, lambda: smooth(True)), (mesh, materials),
+             (mesh, lambda: smooth(False)), (mesh, lambda: (smooth(True), sharpen()))]
+    for target, change in cases:
+        if change is not None:
+            change()
+            target.update()
+        parts = meshes.triangle_meshes(target, "x")
+        expected = _triangles_as_blender_gives_them(target)
+        assert sorted(parts) == sorted(expected)
+        for index, triangles in expected.items():
+            tri_v, tri_n = parts[index].triangles()
+            np.testing.assert_array_equal(np.asarray(parts[index].vertices)[tri_v], [p for p, _ in triangles])
+            np.testing.assert_array_equal(np.asarray(parts[index].normals)[tri_n], [n for _, n in triangles])

@@ -1,14 +1,19 @@
 """What rendering on a Dask cluster costs on this machine (docs/distributed.md).
 
-    python3 bench/cluster.py [--quick] [--rounds N] [--size WxH] [--out bench/results]
+    python3 bench/cluster.py [--quick] [--rounds N] [--size WxH] [--configs local,local:1,local:2] [--out bench/results]
 
 (a) The table: ``python -m tracer render scenes/glass.sdl`` at 3840x2160 with 16 samples, whole process
     (interpreter start, reading the scene, the cluster's start-up, writing the PNG), plain local render
     against ``--scheduler local:1`` and ``local:2``: wall time, and CPU time of the process and all its
-    children (the workers); the three are interleaved round by round (the machine is shared, so only
-    ratios taken in one run mean anything) and the median of the rounds is kept.  The images must be
-    identical.
-(b) The per-tile overhead: in one process with a running one-worker cluster, scenes/lecture.sdl at 512x512
+    children (the workers); the configurations are interleaved round by round (the machine is shared, so
+    only ratios taken in one run mean anything) and the median of the rounds is kept, with the load
+    average before each run.  For the cluster runs the CPU is also split between the render's own process
+    (scheduler, nannies, assembling the tiles, the PNG) and its worker processes, as last seen by polling
+    them.  The images must be identical.
+(b) Start-up: the same commands on a 64 x 48 image (next to nothing to trace) in tiles of 16 pixels,
+    interleaved the same way: what a cluster adds to a render whatever its size (starting the worker
+    processes, each one's first task, stopping them).
+(c) The per-tile overhead: in one process with a running one-worker cluster, scenes/lecture.sdl at 512x512
     (one sample: tracing is cheap, so the overhead shows) cut into tiles of 16 to 256 pixels, on the
     cluster and locally; the CPU time of every process (client, scheduler, worker) beyond the local
     render's, per tile.  Against the CPU time of one tile of the 4K render this decides the tile size.
@@ -27,6 +32,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Sequence
 
 import psutil
 
@@ -35,6 +41,8 @@ sys.path.insert(0, str(ROOT))
 
 import tracer  # noqa: E402
 from tracer import distributed as dist  # noqa: E402
+
+CONFIGS = ("local", "local:1", "local:2")
 
 
 def _cpu_seconds() -> float:
@@ -49,35 +57,68 @@ def _cpu_seconds() -> float:
     return total
 
 
-def whole_process(width: int, height: int, samples: int, rounds: int, folder: Path) -> dict:
-    configs = {"local": [], "local:1": [], "local:2": []}
-    cpus = {name: [] for name in configs}
+def whole_process(width: int, height: int, samples: int, rounds: int, folder: Path,
+                  configs: Sequence[str] = CONFIGS, extra: Sequence[str] = ()) -> dict:
+    runs: dict[str, list[dict]] = {name: [] for name in configs}
     outputs = {}
     for r in range(rounds):
         for name in configs:
             out = folder / f"{name.replace(':', '_')}.png"
             cmd = [sys.executable, "-m", "tracer", "render", str(ROOT / "scenes" / "glass.sdl"), "-o", str(out),
-                   "--width", str(width), "--height", str(height), "--samples", str(samples), "-q", "--stats"]
+                   "--width", str(width), "--height", str(height), "--samples", str(samples), "-q", "--stats", *extra]
             if name != "local":
                 cmd += ["--scheduler", name]
-            cpu_before = _children_cpu()
-            started = time.perf_counter()
-            done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-            seconds = time.perf_counter() - started
-            cpu = _children_cpu() - cpu_before
-            if done.returncode:
-                raise SystemExit(f"{' '.join(cmd)} failed: {done.stderr}")
-            configs[name].append(seconds)
-            cpus[name].append(cpu)
+            run = _timed(cmd)
+            runs[name].append(run)
             outputs[name] = out.read_bytes()
-            print(f"round {r + 1}: {name:8s} {seconds:8.2f} s wall, {cpu:8.2f} s CPU", flush=True)
+            split = (f" (render process {run['own_cpu']:.2f} s, workers {run['workers_cpu']:.2f} s)"
+                     if name != "local" else "")
+            print(f"round {r + 1}: {name:8s} {run['wall']:8.2f} s wall, {run['cpu']:8.2f} s CPU{split}, load "
+                  f"{run['load'][0]:.2f}", flush=True)
     identical = len(set(outputs.values())) == 1
-    medians = {name: statistics.median(times) for name, times in configs.items()}
-    cpu_medians = {name: statistics.median(times) for name, times in cpus.items()}
+    medians = {name: statistics.median(run["wall"] for run in runs[name]) for name in configs}
+    cpu_medians = {name: statistics.median(run["cpu"] for run in runs[name]) for name in configs}
     return {"width": width, "height": height, "samples": samples, "rounds": rounds, "identical_bytes": identical,
-            "seconds": configs, "cpu_seconds": cpus, "median": medians, "cpu_median": cpu_medians,
+            "runs": runs, "median": medians, "cpu_median": cpu_medians,
+            "load_median": statistics.median(run["load"][0] for name in configs for run in runs[name]),
             "against_local": {name: medians[name] / medians["local"] for name in medians},
             "cpu_against_local": {name: cpu_medians[name] / cpu_medians["local"] for name in cpu_medians}}
+
+
+def _timed(cmd: list[str]) -> dict:
+    """Runs a command: wall and CPU seconds (its own and all its children's), the CPU of its own process and of
+    its children as last seen while it ran, and the load average before it started."""
+    load = os.getloadavg()
+    cpu_before = _children_cpu()
+    started = time.perf_counter()
+    process = psutil.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    seen: dict[int, float] = {}
+    while process.poll() is None:
+        try:
+            seen[process.pid] = sum(process.cpu_times()[:2])
+            for child in process.children(recursive=True):
+                seen[child.pid] = sum(child.cpu_times()[:2])
+        except psutil.NoSuchProcess:
+            pass
+        time.sleep(0.25)
+    _, stderr = process.communicate()
+    wall = time.perf_counter() - started
+    if process.returncode:
+        raise SystemExit(f"{' '.join(cmd)} failed: {stderr}")
+    own = seen.pop(process.pid, 0.0)
+    return {"wall": wall, "cpu": _children_cpu() - cpu_before, "own_cpu": own, "workers_cpu": sum(seen.values()),
+            "load": load}
+
+
+def startup(rounds: int, folder: Path, configs: Sequence[str] = CONFIGS) -> dict:
+    """Whole-process renders of a 64 x 48 image: what starting (and stopping) a cluster costs.  Tiles of 16
+    pixels, so that every worker gets some and pays its first task (importing the tracer, compiling the
+    scene)."""
+    table = whole_process(64, 48, 1, rounds, folder, configs, extra=("--tile", "16"))
+    return {name: {"wall": table["median"][name], "cpu": table["cpu_median"][name],
+                   "wall_over_local": table["median"][name] - table["median"]["local"],
+                   "cpu_over_local": table["cpu_median"][name] - table["cpu_median"]["local"]}
+            for name in configs} | {"rounds": rounds, "runs": table["runs"]}
 
 
 def _children_cpu() -> float:
@@ -115,19 +156,26 @@ def tile_overhead(sizes=(16, 32, 64, 128, 256)) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", default=str(ROOT / "bench" / "results"))
-    parser.add_argument("--skip-table", action="store_true", help="only the per-tile overhead")
+    parser.add_argument("--skip-table", action="store_true", help="only the start-up and per-tile overhead")
     parser.add_argument("--size", default="3840x2160", help="the table's image size (default 3840x2160)")
+    parser.add_argument("--configs", default=",".join(CONFIGS),
+                        help="what the table compares, in order (default local,local:1,local:2; local is needed)")
     args = parser.parse_args()
+    configs = args.configs.split(",")
+    if "local" not in configs or not all(c == "local" or c.startswith(dist.LOCAL_PREFIX) for c in configs):
+        parser.error("--configs: local and local:N, comma-separated")
     results = {"cpus": os.cpu_count(), "load_average_at_start": os.getloadavg()}
     results["tile_overhead"] = tile_overhead()
-    if not args.skip_table:
-        width, height = (int(n) for n in args.size.split("x"))
-        width, height, rounds = (960, 540, 1) if args.quick else (width, height, args.rounds)
-        with tempfile.TemporaryDirectory() as folder:
-            results["table"] = whole_process(width, height, 16, rounds, Path(folder))
-        print(json.dumps({k: results["table"][k] for k in ("against_local", "cpu_against_local")}))
+    with tempfile.TemporaryDirectory() as folder:
+        results["startup"] = startup(1 if args.quick else args.rounds, Path(folder), configs)
+        print(json.dumps({name: results["startup"][name] for name in configs}))
+        if not args.skip_table:
+            width, height = (int(n) for n in args.size.split("x"))
+            width, height, rounds = (960, 540, 1) if args.quick else (width, height, args.rounds)
+            results["table"] = whole_process(width, height, 16, rounds, Path(folder), configs)
+            print(json.dumps({k: results["table"][k] for k in ("against_local", "cpu_against_local", "load_median")}))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "distributed.json").write_text(json.dumps(results, indent=1))

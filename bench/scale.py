@@ -105,10 +105,14 @@ def phases(sdl: Path, width: int, height: int, threads: int, out: Path) -> dict:
         prim = next(iter(meshes.values()))
         data = prim.shape.mesh
         mesh = prim.triangle_mesh
-        kept = sum(a.nbytes for a in vars(mesh).values() if isinstance(a, np.ndarray))
-        source = data.vertices.nbytes + data.normals.nbytes + sum(
-            getattr(data.faces, name).nbytes for name in ("sizes", "vertex_index", "normal_index", "offsets")
-            if getattr(data.faces, name, None) is not None)
+        # Each buffer once, by address: the TriangleMesh keeps the MeshData's own vertex, normal and index
+        # arrays (views of them), which count as the mesh data's.
+        source_arrays = [data.vertices, data.normals] + (
+            data.faces.arrays() if hasattr(data.faces, "arrays") else [])
+        source_buffers = {a.__array_interface__["data"][0]: a.nbytes for a in source_arrays}
+        own = {a.__array_interface__["data"][0]: a.nbytes for a in mesh.kept_arrays()}
+        kept = sum(nbytes for address, nbytes in own.items() if address not in source_buffers)
+        source = sum(source_buffers.values())
         row["triangles"] = mesh.triangle_count
         row["bytes_per_triangle"] = {"bvh_and_tables": kept / mesh.triangle_count,
                                      "mesh_data": source / mesh.triangle_count}

@@ -26,6 +26,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 #: Bounds a hang, never a speed: connecting to nothing waits for Dask's connect timeout (set to 3 s here).
 PROCESS_LIMIT = 120
+#: (read before this module starts a cluster: Dask's nanny writes its workers' variables into this process too)
+MALLOC_TRIM_AT_START = os.environ.get("MALLOC_TRIM_THRESHOLD_")
 
 
 def _children() -> list:
@@ -108,6 +110,19 @@ def test_a_worker_killed_mid_render_loses_nothing(client):
     assert not psutil.pid_exists(victim) or psutil.Process(victim).status() == psutil.STATUS_ZOMBIE
     assert np.array_equal(image, local.image)
     assert rays.camera == local.rays.camera
+
+
+def test_local_workers_keep_glibcs_adaptive_allocator(client):
+    """Dask's nanny puts MALLOC_TRIM_THRESHOLD_ into its workers' environment (and its own), which turns off
+    glibc's adaptive mmap threshold: every temporary array of a tile's rays is then mapped and faulted in
+    anew, and a worker spent a fifth of its time in the kernel.  A local:N cluster leaves the variable as this
+    process had it before any cluster started."""
+    def workers(name):  # (a lambda: a bound os.environ.get would travel with this process's environment)
+        return set(client.run(lambda: os.environ.get(name)).values())
+
+    assert workers("MALLOC_TRIM_THRESHOLD_") == {MALLOC_TRIM_AT_START}
+    assert os.environ.get("MALLOC_TRIM_THRESHOLD_") == MALLOC_TRIM_AT_START
+    assert workers("OMP_NUM_THREADS") == {"1"}  # (the rest of Dask's list stays)
 
 
 def test_a_scene_a_worker_cannot_read_is_reported_once(client):
@@ -350,3 +365,78 @@ def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
     assert [line for line in stderr.splitlines() if line.strip()] == ["interrupted"], stderr
     assert not out.exists()
     assert not [p for p in workers if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+
+
+#: The numbers of an accuracy summary that are measured, not computed from images and ray counts.
+TIMINGS = {"seconds_median", "seconds_iqr", "cpu_median", "cpu_iqr", "compile_median", "trace_median",
+           "pareto_seconds", "seconds", "seconds_all", "seconds_with", "iqr_all", "iqr_with", "cpu_all", "cpu_with",
+           "cpu_iqr_all", "cpu_iqr_with"}
+
+
+def _without_timings(value):
+    if isinstance(value, dict):
+        return {k: _without_timings(v) for k, v in value.items() if k not in TIMINGS}
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def test_an_accuracy_sweep_on_the_cluster_equals_the_local_sweep(client, tmp_path):
+    """bench accuracy --scheduler: every render of the sweep is a task that carries its setting (depth, solver
+    tolerances, ray savings, seed) to a worker, which reads the scene once from the bundle; errors, rays,
+    slopes, fronts and targets equal the local sweep's, and the progress lines come in order."""
+    from tracer.accuracy import BenchConfig, measure
+
+    path = SCENES / "shapes.sdl"  # a torus (its Newton steps are swept), mirrors, shadows
+    config = BenchConfig(width=16, height=12, reference_samples=8, seeds=3, sample_counts=(4, 16),
+                         targets=(0.05,), savings_size=(16, 12), savings_runs=1)
+    local = measure(tracer.load(path), "local", tmp_path / "local", config, progress=lambda _: None)
+    lines = []
+    scene = tracer.load(path)
+    cluster = measure(scene, "cluster", tmp_path / "cluster", dataclasses.replace(config, threads=1),
+                      progress=lines.append, run_tasks=dist.SceneTasks(client, dist.SceneBundle.of(path, scene)))
+    assert _without_timings({**cluster, "scene": "local"}) == _without_timings(local)
+    assert [line.split(" (")[0] for line in lines[1:5]] == \
+        [f"  reference: estimated RMSE {local['reference']['estimated_rmse']:.2e}", "  round 1/3 done",
+         "  round 2/3 done", "  round 3/3 done"]
+    assert (tmp_path / "cluster" / "cluster.csv").is_file() and (tmp_path / "cluster" / "cluster.png").is_file()
+
+
+def test_a_settings_solver_tolerances_travel_with_its_task(client):
+    """A setting's tolerances are process-wide state only while its scene compiles: tasks of coarse and default
+    tolerances, one after the other on the same workers, each give what they give locally (and the coarse
+    one differs)."""
+    from tracer.accuracy import BenchConfig, Setting, run_setting
+
+    path = SCENES / "shapes.sdl"
+    config = BenchConfig(width=16, height=12, threads=1)
+    default, coarse = Setting("baseline", "default"), Setting("hit error ulps", "coarse", hit_ulps=1e12)
+    calls = [(run_setting, (setting, 0, config)) for setting in (default, coarse, default, coarse)]
+    scene = tracer.load(path)
+    arrived = []
+    results = dist.SceneTasks(client, dist.SceneBundle.of(path, scene))(calls, lambda i, _: arrived.append(i))
+    assert sorted(arrived) == [0, 1, 2, 3]
+    here = [run_setting(scene, setting, 0, config) for setting in (default, coarse)]
+    assert np.abs(here[1]["image"] - here[0]["image"]).max() > 0.01  # coarse bounds change this image
+    for k, record in enumerate(results):
+        assert np.array_equal(record["image"], here[k % 2]["image"]) and record["rays"] == here[k % 2]["rays"]
+
+
+def test_bench_accuracy_with_a_scheduler_writes_the_local_numbers(tmp_path):
+    """The command line: ``bench accuracy --scheduler local:2`` writes the CSV a local sweep writes, timings
+    aside; a bad address is one line."""
+    import csv
+
+    common = [SCENES / "lecture.sdl", "--width", 8, "--height", 7, "--reference-samples", 4, "--seeds", 3]
+    local = _run("bench", "accuracy", *common, "-o", tmp_path / "local")
+    assert local.returncode == 0, local.stderr
+    cluster = _run("bench", "accuracy", *common, "-o", tmp_path / "cluster", "--scheduler", "local:2")
+    assert cluster.returncode == 0, cluster.stderr
+    tables = []
+    for folder in ("local", "cluster"):
+        with open(tmp_path / folder / "lecture.csv") as handle:
+            tables.append([{k: v for k, v in row.items() if k not in TIMINGS} for row in csv.DictReader(handle)])
+    assert tables[0] == tables[1] and len(tables[0]) > 10
+    assert (tmp_path / "cluster" / "report.md").is_file()
+    bad = _run("bench", "accuracy", *common, "-o", tmp_path / "x", "--scheduler", "nonsense")
+    assert bad.returncode == 2 and bad.stderr.startswith("error: --scheduler nonsense") and bad.stderr.count("\n") == 1

@@ -16,7 +16,7 @@ from hypothesis import given, settings, strategies as st
 
 from tracer.intersect import mesh as mesh_module
 from tracer.intersect.mesh import TriangleMesh
-from tracer.model import MeshData
+from tracer.model import FaceList, MeshData
 
 # ----------------------------------------------------------------------------------------- mesh builders
 
@@ -199,34 +199,71 @@ def test_bvh_layout(mesh_key):
     data, mesh = traced(mesh_key)
     tri_v, _ = data.triangles()
     corners = data.vertices[tri_v]
+    assert mesh.tri_order.dtype == np.int32 and mesh.nodes.dtype.itemsize == 32
     assert sorted(mesh.tri_order.tolist()) == list(range(len(tri_v)))
     leaves = np.flatnonzero(mesh.node_count > 0)
     inner = np.flatnonzero(mesh.node_count == 0)
     assert mesh.node_count.max() <= 2
-    # Leaves' ranges tile tri_order exactly once.
+    # Leaves' ranges tile tri_order exactly once, and their (single-precision) boxes hold their triangles.
     covered = np.zeros(len(tri_v), dtype=int)
     for leaf in leaves:
-        first, count = mesh.node_first[leaf], mesh.node_count[leaf]
+        first, count = mesh.node_offset[leaf], mesh.node_count[leaf]
         covered[first:first + count] += 1
         tris = corners[mesh.tri_order[first:first + count]].reshape(-1, 3)
         assert (tris >= mesh.node_lo[leaf]).all() and (tris <= mesh.node_hi[leaf]).all()
-        assert mesh.node_left[leaf] == mesh.node_right[leaf] == -1
+        assert mesh.node_axis[leaf] == -1
     assert (covered == 1).all()
-    # Inner nodes: children allocated together, nested boxes, every node reachable once.
-    assert (mesh.node_right[inner] == mesh.node_left[inner] + 1).all()
+    # Inner nodes: children allocated together (offset, offset + 1), nested boxes, every node reachable once.
     for node in inner:
-        for child in (mesh.node_left[node], mesh.node_right[node]):
+        assert mesh.node_axis[node] in (0, 1, 2)
+        for child in (mesh.node_offset[node], mesh.node_offset[node] + 1):
             assert (mesh.node_lo[child] >= mesh.node_lo[node]).all()
             assert (mesh.node_hi[child] <= mesh.node_hi[node]).all()
-    children = np.concatenate([mesh.node_left[inner], mesh.node_right[inner]])
+    children = np.concatenate([mesh.node_offset[inner], mesh.node_offset[inner] + 1])
     assert sorted(children.tolist()) == list(range(1, mesh.node_total))
-    # Per-triangle arrays are in leaf order.
-    np.testing.assert_array_equal(mesh.tri_p0, corners[mesh.tri_order, 0])
+    # Vertex-indexed: the triangles are the mesh's own indices into its own vertices.
+    np.testing.assert_array_equal(mesh.tri_vertex, tri_v)
+    assert np.shares_memory(mesh.vertices, data.vertices)
+
+
+def test_boxes_are_rounded_outward_to_single_precision(monkeypatch):
+    """Corners that are not floats still lie inside their leaves' boxes (rounded down and up, not to the
+    nearest), with the padding switched off."""
+    monkeypatch.setattr(mesh_module, "BOX_PADDING", 0.0)
+    data = icosphere(1)
+    data.vertices = data.vertices * (1 / 3) + 0.1  # coordinates with no exact single-precision value
+    mesh = TriangleMesh(data, leaf_size=1)
+    corners = data.vertices[data.triangles()[0]]
+    for leaf in np.flatnonzero(mesh.node_count > 0):
+        tri = corners[mesh.tri_order[mesh.node_offset[leaf]]]
+        assert (tri >= mesh.node_lo[leaf]).all() and (tri <= mesh.node_hi[leaf]).all()
+    # ... by one step at most: the root's box is the vertices' box, to float32 precision.
+    np.testing.assert_allclose(mesh.node_lo[0], corners.reshape(-1, 3).min(axis=0), rtol=2 ** -23)
+
+
+def test_a_triangle_mesh_keeps_indices_not_copies():
+    """A mesh of triangles whose normal indices are its vertex indices (as bench/big_scenes.py's torus and
+    most exporters write them) keeps one index array, the FaceList's own, and under 64 bytes a triangle
+    with its BVH."""
+    n = 40  # a torus-like grid: n * n vertices, 2 n n triangles
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    u, v = 2 * np.pi * i / n, 2 * np.pi * j / n
+    vertices = np.stack([(2 + np.cos(v)) * np.cos(u), (2 + np.cos(v)) * np.sin(u), np.sin(v)], axis=-1).reshape(-1, 3)
+    a = (i * n + j).ravel()
+    b = (((i + 1) % n) * n + j).ravel()
+    c = (((i + 1) % n) * n + (j + 1) % n).ravel()
+    d = (i * n + (j + 1) % n).ravel()
+    index = np.stack([np.stack([a, b, c], 1), np.stack([a, c, d], 1)], 1).reshape(-1).astype(np.int32)
+    data = MeshData(vertices, vertices.copy(), FaceList(np.full(len(index) // 3, 3), index, index))
+    mesh = TriangleMesh(data)
+    assert np.shares_memory(mesh.tri_vertex, data.faces.vertex_index) and mesh.tri_normal is mesh.tri_vertex
+    assert np.shares_memory(mesh.vertices, data.vertices) and np.shares_memory(mesh.normals, data.normals)
+    kept = {x.ctypes.data: x.nbytes for x in mesh.kept_arrays() + data.faces.arrays()}
+    assert sum(kept.values()) / mesh.triangle_count < 64
 
 
 def _tree(mesh: TriangleMesh) -> dict:
-    names = ("node_lo", "node_hi", "node_left", "node_right", "node_first", "node_count", "node_axis", "tri_order")
-    return {name: getattr(mesh, name) for name in names}
+    return {"nodes": mesh.nodes, "tri_order": mesh.tri_order}
 
 
 @pytest.mark.parametrize("shape", ["random", "duplicates", "grid", "icosphere"])
@@ -250,7 +287,7 @@ def test_c_builder_builds_the_numpy_builders_tree(monkeypatch, shape, leaf_size,
     in_numpy = TriangleMesh(data, leaf_size=leaf_size, bins=bins)
     a, b = _tree(in_c), _tree(in_numpy)
     for name in a:
-        assert a[name].dtype == b[name].dtype and np.array_equal(a[name], b[name]), name
+        assert a[name].dtype == b[name].dtype and a[name].tobytes() == b[name].tobytes(), name
     assert in_c.node_count.max() <= leaf_size
 
 

@@ -270,6 +270,42 @@ def test_bulk_reader_gives_the_word_readers_mesh(tmp_path):
             assert np.array_equal(a, b)
 
 
+def test_c_and_numpy_bulk_readers_read_the_same_mesh(tmp_path, monkeypatch):
+    shared = "4 4 2\n0 0 0 1 0 0 0 1 0 0 0 1\n0 0 1 0 0 1 0 0 1 0 0 1\n3 0 1 2 0 1 2\n3.0 0 2 3 0 2 3\n"
+    texts = (PYRAMID, "0 0 0\n", shared, PYRAMID.replace("4 3 2 1 0 0 0 0 0", "4 3 2 1 0 4 3 2 1"))
+    if meshio._native() is None:
+        pytest.skip("no C core")
+    in_c = [meshio._read_in_bulk(write(tmp_path, text).read_bytes(), "m") for text in texts]
+    monkeypatch.setattr(meshio, "_native", lambda: None)
+    in_numpy = [meshio._read_in_bulk(write(tmp_path, text).read_bytes(), "m") for text in texts]
+    for a, b in zip(in_c, in_numpy):
+        assert a is not None and b is not None
+        assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.normals, b.normals)
+        assert a.faces == b.faces and a.faces.vertex_index.dtype == b.faces.vertex_index.dtype == np.int32
+    # Normal k of vertex k: one index array, not two, from either reader.
+    for mesh in (in_c[2], in_numpy[2]):
+        assert mesh.faces.normal_index is mesh.faces.vertex_index
+    assert in_c[0].faces.normal_index is not in_c[0].faces.vertex_index
+
+
+@pytest.mark.parametrize("piece", [1, 5, 64])
+def test_the_c_reader_reads_a_file_in_pieces_of_any_size(tmp_path, monkeypatch, piece):
+    """Words cut by the pieces' ends are read whole; a bad word is found wherever the pieces end."""
+    native = meshio._native()
+    if native is None:
+        pytest.skip("no C core")
+    path = write(tmp_path, PYRAMID)
+    whole = meshio._read_in_bulk(path.read_bytes(), "m")
+    monkeypatch.setattr(native, "SCAN_PIECE", piece)
+    with open(path, "rb") as handle:
+        pieces = meshio._read_in_bulk(handle, "m")
+    assert np.array_equal(pieces.vertices, whole.vertices) and np.array_equal(pieces.normals, whole.normals)
+    assert pieces.faces == whole.faces
+    for bad in (PYRAMID.replace("0.707 0 0.707", "0.707 0 0.7x07"), PYRAMID + "3\n", PYRAMID.replace("3 3 0 4 4 4 4", "3 3 0 4 4 4")):
+        assert meshio._read_in_bulk(bad.encode(), "m") is None
+
+
+@pytest.mark.parametrize("reader", ["c", "numpy"])
 @pytest.mark.parametrize("text", [
     PYRAMID.replace("3 0 1 4 1 1 1", "3 0 1 9 1 1 1"),  # vertex index out of range
     PYRAMID.replace("3 0 1 4 1 1 1", "2 0 1 1 1"),  # a face of two corners
@@ -277,8 +313,14 @@ def test_bulk_reader_gives_the_word_readers_mesh(tmp_path):
     PYRAMID + "7\n",  # data after the last face
     PYRAMID.replace("5 5 5", "5 5 6"),  # a face missing
     PYRAMID.replace("5 5 5", "5 5 5.5"),
+    PYRAMID.replace("5 5 5", "5 0 5"),  # normal indices into an empty list
+    PYRAMID.replace("-1 -1 0", "-1 -1 x"),  # a word that is not a number
 ])
-def test_bulk_reader_leaves_bad_files_to_the_word_reader(tmp_path, text):
+def test_bulk_reader_leaves_bad_files_to_the_word_reader(tmp_path, monkeypatch, reader, text):
+    if reader == "numpy":
+        monkeypatch.setattr(meshio, "_native", lambda: None)
+    elif meshio._native() is None:
+        pytest.skip("no C core")
     path = write(tmp_path, text)
     assert meshio._read_in_bulk(path.read_bytes(), str(path)) is None
     with pytest.raises(SDLError) as err:

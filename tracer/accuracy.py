@@ -21,6 +21,12 @@ For each scene:
 * the **Pareto front** of the sampling and block-size rows, error against rays and against CPU seconds;
 * **error targets**: ``--target-error E`` renders, their estimated against their measured error.
 
+Every render is a task ``fn(scene, *args)`` whose arguments carry all it depends on (the setting, the
+seed, the configuration; a setting's solver tolerances are applied while its scene compiles, under a lock,
+and the compiled scene keeps them), so the tasks run one after the other here or, with ``bench accuracy
+--scheduler``, on a Dask cluster (:class:`tracer.distributed.SceneTasks`) with the same results; errors,
+slopes and fronts are worked out here from the images that come back.
+
 Metrics come from scikit-image (``mean_squared_error``, ``peak_signal_noise_ratio``,
 ``structural_similarity``) on colour clipped to [0, 1]; statistics from NumPy and SciPy.  Writes
 ``DIR/SCENE.csv``, ``DIR/SCENE.json``, ``DIR/SCENE.png`` (three panels), and, for all scenes together,
@@ -32,17 +38,18 @@ import contextlib
 import csv
 import json
 import math
+import threading
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Any, Callable, Iterator, Optional, Sequence
 
 import numpy as np
 
 from . import numerics
-from .compile import compile_scene, live_effects
+from .compile import CompiledScene, compile_scene, live_effects
 from .model import Scene
-from .render import render
+from .render import RenderResult, render
 from .savings import RaySavings
 from .trace import RAY_KINDS
 
@@ -89,6 +96,24 @@ class BenchConfig:
     #: more runs than the settings (a difference of 10-30 % has to stand out of this machine's noise)
     savings_size: tuple[int, int] = (320, 240)
     savings_runs: int = 15
+    threads: Optional[int] = None  # the C core's threads per render (None: its default, every core)
+
+
+#: ``run_tasks(calls, on_result)``: runs ``fn(scene, *args)`` for every ``(fn, args)`` of ``calls`` and returns
+#: the results in the order of ``calls``, handing each to ``on_result(index, result)`` as it is done.
+RunTasks = Callable[[Sequence[tuple[Callable, tuple]], Callable[[int, Any], None]], list]
+
+
+def run_here(scene: Scene) -> RunTasks:
+    """The tasks of a sweep run in this process, one after the other, in order."""
+    def run_tasks(calls, on_result):
+        results = []
+        for index, (fn, args) in enumerate(calls):
+            results.append(fn(scene, *args))
+            on_result(index, results[-1])
+        return results
+
+    return run_tasks
 
 
 def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflection", "shape:torus"}),
@@ -113,7 +138,7 @@ def default_settings(scene_depth: int, effects: frozenset = frozenset({"reflecti
 @contextlib.contextmanager
 def solver_tolerances(setting: Setting) -> Iterator[None]:
     """Temporarily use a setting's tolerances: numerics.TOLERANCES, which compile_scene copies into the
-    scenes it compiles (and flatten hands to the C core)."""
+    scenes it compiles (and flatten hands to the C core).  Process-wide: see :func:`compiled_for`."""
     saved = numerics.TOLERANCES
     try:
         if setting.hit_ulps is not None:
@@ -123,6 +148,21 @@ def solver_tolerances(setting: Setting) -> Iterator[None]:
         yield
     finally:
         numerics.TOLERANCES = saved
+
+
+#: One compile at a time per process while a setting's tolerances are in numerics.TOLERANCES: a worker may
+#: run several tasks of a sweep, of different settings, in threads, and every task compiles through
+#: compiled_for.
+_compiling = threading.Lock()
+
+
+def compiled_for(scene: Scene, setting: Optional[Setting] = None) -> CompiledScene:
+    """The scene compiled with a setting's depth and tolerances (None: its own depth, the default
+    tolerances).  The compiled scene carries its tolerances (its primitives and the C core read them from
+    it), so tracing it needs no global state."""
+    setting = setting or Setting("baseline", "as read")
+    with _compiling, solver_tolerances(setting):
+        return compile_scene(_with_depth(scene, setting.depth))
 
 
 def _with_depth(scene: Scene, depth: Optional[int]) -> Scene:
@@ -143,31 +183,46 @@ def errors(image: np.ndarray, reference: np.ndarray) -> dict[str, float]:
     return {"rmse": rmse, "psnr": psnr, "ssim": ssim}
 
 
+def reference_parts(config: BenchConfig, seed: int = 1_000_003) -> list[tuple[int, int]]:
+    """(seed, rays per pixel) of each part of the reference: parts of at most REFERENCE_PART rays."""
+    parts = max(2, math.ceil(config.reference_samples / REFERENCE_PART))
+    return [(seed + k, max(1, config.reference_samples // parts)) for k in range(parts)]
+
+
+def reference_part(scene: Scene, config: BenchConfig, seed: int, samples: int) -> tuple[np.ndarray, float]:
+    """A task: one part of the reference, clipped to [0, 1], and the seconds it took."""
+    started = time.perf_counter()
+    image = render(compiled_for(scene), config.width, config.height, samples=samples, seed=seed,
+                   backend=config.backend, threads=config.threads).image
+    return np.clip(image, 0, 1).astype(np.float64), time.perf_counter() - started
+
+
+def combine_reference(parts: Sequence[tuple[np.ndarray, float]]) -> tuple[np.ndarray, float, float]:
+    """(image, its estimated RMSE, seconds): the mean of the parts; the estimate is the standard error of that
+    mean from the parts' spread."""
+    images = np.stack([image for image, _ in parts])
+    estimate = math.sqrt(float(np.mean(images.var(axis=0, ddof=1) / len(parts))))
+    return images.mean(axis=0), estimate, sum(seconds for _, seconds in parts)
+
+
 def reference_image(scene: Scene, config: BenchConfig, seed: int = 1_000_003) -> tuple[np.ndarray, float, float]:
     """(image, its estimated RMSE, seconds): the mean of independently seeded parts of at most
-    REFERENCE_PART rays per pixel; the estimate is the standard error of that mean from the parts' spread."""
-    parts = max(2, math.ceil(config.reference_samples / REFERENCE_PART))
-    per_part = max(1, config.reference_samples // parts)
-    started = time.perf_counter()
-    images = np.stack([np.clip(render(scene, config.width, config.height, samples=per_part, seed=seed + k,
-                                      backend=config.backend).image, 0, 1).astype(np.float64)
-                       for k in range(parts)])
-    seconds = time.perf_counter() - started
-    estimate = math.sqrt(float(np.mean(images.var(axis=0, ddof=1) / parts)))
-    return images.mean(axis=0), estimate, seconds
+    REFERENCE_PART rays per pixel."""
+    return combine_reference([reference_part(scene, config, *part) for part in reference_parts(config, seed)])
 
 
-def _run(scene: Scene, setting: Setting, seed: int, config: BenchConfig):
-    """One render of a setting: (result, compile seconds, trace seconds)."""
-    with solver_tolerances(setting):
-        started, cpu_started = time.perf_counter(), time.process_time()
-        compiled = compile_scene(_with_depth(scene, setting.depth))
-        compiled_at = time.perf_counter()
-        result = render(compiled, config.width, config.height, block_size=setting.block_size,
-                        samples=setting.samples, sampling_mode=setting.mode, seed=seed, backend=config.backend,
-                        savings=setting.savings)
-        done, cpu = time.perf_counter(), time.process_time() - cpu_started
-    return result, compiled_at - started, done - compiled_at, cpu
+def run_setting(scene: Scene, setting: Setting, seed: int, config: BenchConfig) -> dict:
+    """A task: one render of a setting.  Its image (float32, as rendered), rays, and the wall seconds of
+    compiling and of tracing, and the CPU seconds of all the process's threads."""
+    started, cpu_started = time.perf_counter(), time.process_time()
+    compiled = compiled_for(scene, setting)
+    compiled_at = time.perf_counter()
+    result = render(compiled, config.width, config.height, block_size=setting.block_size,
+                    samples=setting.samples, sampling_mode=setting.mode, seed=seed, backend=config.backend,
+                    savings=setting.savings, threads=config.threads)
+    done, cpu = time.perf_counter(), time.process_time() - cpu_started
+    return {"image": result.image, "compile": compiled_at - started, "trace": done - compiled_at, "cpu": cpu,
+            "rays": result.rays.as_dict(), "skipped": result.rays.skipped(), "backend": result.backend}
 
 
 def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -212,25 +267,27 @@ def _summarise(setting: Setting, runs: list[dict]) -> dict:
             "skipped": {k: float(np.mean([r["skipped"][k] for r in runs])) for k in runs[0]["skipped"]}}
 
 
-def measure_targets(scene: Scene, reference: np.ndarray, config: BenchConfig, seed: int = 7) -> list[dict]:
-    """Renders to each error target: the estimate against the error measured against the reference, for the
+def target_render(scene: Scene, config: BenchConfig, target: float, seed: int = 7) -> RenderResult:
+    """A task: a render to an error target."""
+    return render(compiled_for(scene), config.width, config.height, target_error=target, seed=seed,
+                  backend=config.backend, threads=config.threads)
+
+
+def target_row(result: RenderResult, target: float, reference: np.ndarray) -> dict:
+    """A render to an error target: its estimate against the error measured against the reference, for the
     image and per pixel (pixels binned by their estimate)."""
-    out = []
-    for target in config.targets:
-        result = render(scene, config.width, config.height, target_error=target, seed=seed, backend=config.backend)
-        estimate = result.error_estimate
-        # Per pixel, the RMS over the channels, as the estimate's unit is one channel's error.
-        per_pixel = np.sqrt(np.mean((np.clip(result.image, 0, 1) - reference) ** 2, axis=2))
-        # Bins of the estimate, by factors of two from 1e-4 (below it, pixels are flat: a variance near 0).
-        which = np.digitize(estimate.per_pixel, TARGET_BINS)
-        bins = [(float(np.sqrt(np.mean(estimate.per_pixel[which == b] ** 2))),
-                 float(np.sqrt(np.mean(per_pixel[which == b] ** 2))))
-                for b in range(1, len(TARGET_BINS)) if np.count_nonzero(which == b) >= 10]
-        out.append({"target": target, "estimated_rmse": estimate.rms, "measured_rmse": errors(result.image, reference)["rmse"],
-                    "worst_estimate": estimate.worst, "measured_p99": float(np.percentile(per_pixel, 99)),
-                    "samples_mean": estimate.samples_mean, "pixels_at_limit": estimate.pixels_at_limit,
-                    "rays": int(sum(result.rays.as_dict().values())), "seconds": result.seconds, "bins": bins})
-    return out
+    estimate = result.error_estimate
+    # Per pixel, the RMS over the channels, as the estimate's unit is one channel's error.
+    per_pixel = np.sqrt(np.mean((np.clip(result.image, 0, 1) - reference) ** 2, axis=2))
+    # Bins of the estimate, by factors of two from 1e-4 (below it, pixels are flat: a variance near 0).
+    which = np.digitize(estimate.per_pixel, TARGET_BINS)
+    bins = [(float(np.sqrt(np.mean(estimate.per_pixel[which == b] ** 2))),
+             float(np.sqrt(np.mean(per_pixel[which == b] ** 2))))
+            for b in range(1, len(TARGET_BINS)) if np.count_nonzero(which == b) >= 10]
+    return {"target": target, "estimated_rmse": estimate.rms, "measured_rmse": errors(result.image, reference)["rmse"],
+            "worst_estimate": estimate.worst, "measured_p99": float(np.percentile(per_pixel, 99)),
+            "samples_mean": estimate.samples_mean, "pixels_at_limit": estimate.pixels_at_limit,
+            "rays": int(sum(result.rays.as_dict().values())), "seconds": result.seconds, "bins": bins}
 
 
 def measure_savings(scene: Scene, config: BenchConfig) -> dict:
@@ -238,14 +295,15 @@ def measure_savings(scene: Scene, config: BenchConfig) -> dict:
     seconds (median and IQR of ``config.savings_runs`` runs each way, interleaved), and the largest pixel
     change."""
     width, height = config.savings_size
-    compiled = compile_scene(scene)
+    compiled = compiled_for(scene)
     seconds: dict[str, list[float]] = {"all": [], "saved": []}
     cpu: dict[str, list[float]] = {"all": [], "saved": []}
     images, rays = {}, {}
     for _ in range(config.savings_runs):
         for key, savings in (("all", RaySavings.none()), ("saved", None)):
             cpu_started = time.process_time()
-            result = render(compiled, width, height, backend=config.backend, savings=savings)
+            result = render(compiled, width, height, backend=config.backend, savings=savings,
+                            threads=config.threads)
             cpu[key].append(time.process_time() - cpu_started)
             seconds[key].append(result.seconds)
             images[key], rays[key] = np.clip(result.image, 0, 1), sum(result.rays.as_dict().values())
@@ -261,27 +319,63 @@ def measure_savings(scene: Scene, config: BenchConfig) -> dict:
             "max_change_8bit": float(np.abs(images["all"] - images["saved"]).max() * 255)}
 
 
-def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchConfig(), progress=print) -> dict:
-    """Everything for one scene; writes DIR/NAME.csv, .json and .png and returns the summary."""
+class _SweepProgress:
+    """The sweep's progress lines, as whole steps finish (the reference, each round of settings), in order
+    whatever the order the tasks finish in."""
+
+    def __init__(self, progress, parts: int, settings: int, rounds: int):
+        self.progress, self.settings = progress, settings
+        self.parts: list = [None] * parts
+        self.left = [settings] * rounds
+        self.reported = -1  # -1: not even the reference; k: rounds reported
+
+    def arrived(self, index: int, result) -> None:
+        if index < len(self.parts):
+            self.parts[index] = result
+        elif index - len(self.parts) < self.settings * len(self.left):
+            self.left[(index - len(self.parts)) // self.settings] -= 1
+        if self.reported < 0 and all(part is not None for part in self.parts):
+            _, error, seconds = combine_reference(self.parts)
+            self.progress(f"  reference: estimated RMSE {error:.2e} ({seconds:.1f} s)")
+            self.reported = 0
+        while 0 <= self.reported < len(self.left) and self.left[self.reported] == 0:
+            self.reported += 1
+            self.progress(f"  round {self.reported}/{len(self.left)} done")
+
+
+def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchConfig(), progress=print,
+            run_tasks: Optional[RunTasks] = None) -> dict:
+    """Everything for one scene; writes DIR/NAME.csv, .json and .png and returns the summary.  ``run_tasks``
+    runs the renders (default :func:`run_here`; tracer.distributed.SceneTasks on a cluster)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     depth = scene.settings.max_recursion_depth
     progress(f"{name}: reference, {config.reference_samples} jittered rays per pixel at depth {depth}, "
              f"{config.width} x {config.height}")
-    reference, reference_error, reference_seconds = reference_image(scene, config)
-    progress(f"  reference: estimated RMSE {reference_error:.2e} ({reference_seconds:.1f} s)")
     effects = live_effects(scene)
     settings = default_settings(depth, effects, config.sample_counts)
+    timed_savings = any(s.group == "ray savings" for s in settings)
+    # Every render of the sweep, in the order a single process runs them: the reference, the settings round
+    # by round (interleaved: a change in the machine's load touches them all alike), the error targets, the
+    # timed ray savings.
+    parts = reference_parts(config)
+    calls = [(reference_part, (config, *part)) for part in parts]
+    calls += [(run_setting, (setting, seed, config)) for seed in range(config.seeds) for setting in settings]
+    calls += [(target_render, (config, target)) for target in config.targets]
+    calls += [(measure_savings, (config,))] if timed_savings else []
+    first_run, first_target = len(parts), len(parts) + config.seeds * len(settings)
+    progress_lines = _SweepProgress(progress, len(parts), len(settings), config.seeds)
+    results = (run_tasks or run_here(scene))(calls, progress_lines.arrived)
+    reference, reference_error, reference_seconds = combine_reference(results[:len(parts)])
     runs: dict[Setting, list[dict]] = {s: [] for s in settings}
     deep_images: dict[int, np.ndarray] = {}
-    for seed in range(config.seeds):  # interleaved: every setting once per round
-        for setting in settings:
-            result, compile_s, trace_s, cpu_s = _run(scene, setting, seed, config)
-            run = {**errors(result.image, reference), "compile": compile_s, "trace": trace_s, "cpu": cpu_s,
-                   "rays": result.rays.as_dict(), "skipped": result.rays.skipped()}
-            if setting.group == "recursion depth":  # pixel-centre rays: the same at every depth
-                deep_images.setdefault(setting.depth, np.clip(result.image, 0, 1))
-            runs[setting].append(run)
-        progress(f"  round {seed + 1}/{config.seeds} done")
+    for k, record in enumerate(results[first_run:first_target]):
+        setting = settings[k % len(settings)]
+        run = {**errors(record["image"], reference), **{key: record[key] for key in
+                                                        ("compile", "trace", "cpu", "rays", "skipped")}}
+        if setting.group == "recursion depth":  # pixel-centre rays: the same at every depth
+            deep_images.setdefault(setting.depth, np.clip(record["image"], 0, 1))
+        runs[setting].append(run)
+    backend = results[first_run]["backend"]
     rows = [_summarise(s, runs[s]) for s in settings]
     bias = None
     if deep_images:
@@ -295,12 +389,13 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
         for r, on in zip(trade, front):
             r[key] = bool(on)
     slopes = fitted_slopes(rows)
-    targets = measure_targets(scene, reference, config) if config.targets else []
+    targets = [target_row(result, target, reference)
+               for result, target in zip(results[first_target:first_target + len(config.targets)], config.targets)]
     baseline = next(r for r in rows if r["group"] == "baseline")
     every = next((r for r in rows if r["group"] == "ray savings"), None)
     summary = {
         "scene": name, "width": config.width, "height": config.height, "seeds": config.seeds,
-        "backend": render(scene, 4, 3, backend=config.backend).backend,
+        "backend": backend,
         "reference": {"samples": config.reference_samples, "depth": depth, "estimated_rmse": reference_error,
                       "seconds": reference_seconds,
                       "smallest_reported_rmse": min(r["rmse_mean"] for r in rows if r["rmse_mean"] > 0)},
@@ -308,7 +403,7 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
         "slopes": slopes, "targets": targets, "rows": rows,
         "savings": None if every is None else {
             "rays_all": every["rays"], "rays_saved": every["rays"] - baseline["rays"],
-            "skipped": baseline["skipped"], "timed": measure_savings(scene, config)},
+            "skipped": baseline["skipped"], "timed": results[-1]},
     }
     for r in rows:
         progress(f"  {r['setting']:<20} rmse {r['rmse_mean']:.5f} ± {r['rmse_std']:.5f}  {r['rays']:>10} rays  "

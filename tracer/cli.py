@@ -90,6 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "(default 5, at least 3)")
     acc.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto")
     acc.add_argument("--lenient", action="store_true")
+    acc.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run the renders of the sweep as tasks on a Dask cluster, as render --scheduler does "
+                          "(the same results; see docs/distributed.md)")
 
     i = sub.add_parser("info", help="list a scene's objects, lights and live effects")
     _add_scene_options(i)
@@ -393,9 +396,24 @@ def _bench(args) -> int:
                          seeds=args.seeds, backend=args.backend,
                          savings_size=(max(args.width, 320), max(args.height, 240)))
     out = Path(args.output)
-    scenes = [(Path(path).stem, load(path, strict=not args.lenient)) for path in args.scenes]
-    summaries = [measure(scene, name, out, config, progress=lambda line: print(line, flush=True))
-                 for name, scene in scenes]
+    scenes = [(path, Path(path).stem, load(path, strict=not args.lenient)) for path in args.scenes]
+
+    def progress(line):
+        print(line, flush=True)
+
+    if args.scheduler is None:
+        summaries = [measure(scene, name, out, config, progress=progress) for _, name, scene in scenes]
+    else:
+        from . import distributed as dist
+
+        dist.parse_address(args.scheduler)
+        dist.require_dask()
+        config = replace(config, threads=dist.local_threads(args.scheduler))
+        bundles = [dist.SceneBundle.of(path, scene, args.lenient) for path, _, scene in scenes]
+        with dist.connect(args.scheduler) as client:
+            summaries = [measure(scene, name, out, config, progress=progress,
+                                 run_tasks=dist.SceneTasks(client, bundle))
+                         for (_, name, scene), bundle in zip(scenes, bundles)]
     plot_targets(summaries, out / "target_error.png")
     write_report(summaries, out / "report.md")
     return 0

@@ -708,21 +708,64 @@ _TRIANGLE_MESHES: "weakref.WeakValueDictionary[tuple, object]" = weakref.WeakVal
 
 
 def mesh_digest(mesh: MeshData) -> bytes:
-    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from)."""
+    """A digest of a mesh's content: its vertices, normals and faces (what its BVH is built from).  A mesh
+    given to remember_digest is hashed once (while it holds the same arrays)."""
+    kept = mesh.__dict__.get(_DIGEST_ATTRIBUTE)
+    if kept is not None and kept[0] == _parts(mesh):
+        return kept[1]
+    return _hash_mesh(mesh)
+
+
+#: Where remember_digest keeps a mesh's digest, with the identity of the arrays it was computed from.
+_DIGEST_ATTRIBUTE = "_content_digest"
+
+
+def _parts(mesh: MeshData) -> tuple:
+    return id(mesh.vertices), id(mesh.normals), id(mesh.faces)
+
+
+def remember_digest(mesh: MeshData) -> MeshData:
+    """Hash ``mesh`` now and keep the digest on it, for a caller that never changes the mesh's arrays in place
+    afterwards (the Blender add-on's converted meshes, compiled again at every viewport update): compiling
+    a scene then does not hash a million triangles again.  Returns the mesh."""
+    mesh.__dict__[_DIGEST_ATTRIBUTE] = (_parts(mesh), _hash_mesh(mesh))
+    return mesh
+
+
+def _hash_mesh(mesh: MeshData) -> bytes:
+    """The digest of a mesh's content: its vertices, normals and faces (what its BVH is built from).  Arrays
+    are hashed where they lie (indices a slice at a time as int64), so a big mesh is not copied for it."""
     h = hashlib.blake2b(digest_size=20)
     for array in (mesh.vertices, mesh.normals):
         array = np.ascontiguousarray(array, dtype=np.float64)
         h.update(repr(array.shape).encode())
-        h.update(array.tobytes())
+        h.update(array.reshape(-1))
     faces = mesh.faces
     if isinstance(faces, FaceList):
         h.update(b"packed")
-        for array in (faces.sizes, faces.vertex_index, faces.normal_index):
-            h.update(b"-" if array is None else np.ascontiguousarray(array, dtype=np.int64).tobytes())
+        size = faces.uniform_size
+        if size is not None:  # every face of one size: that size and the count say what sizes would
+            h.update(f"{size}x{len(faces)}".encode())
+        else:
+            _hash_indices(h, faces.sizes)
+        for array in (faces.vertex_index, faces.normal_index):
+            _hash_indices(h, array)
     else:
         h.update(b"list")
         h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
     return h.digest()
+
+
+def _hash_indices(h, array) -> None:
+    """Feed an index array (or None) to the hash as int64, a million at a time."""
+    if array is None:
+        h.update(b"-")
+        return
+    array = np.asarray(array).reshape(-1)
+    h.update(f"[{len(array)}]".encode())
+    step = 1 << 20
+    for start in range(0, len(array), step):
+        h.update(np.ascontiguousarray(array[start:start + step], dtype=np.int64))
 
 
 def shared_triangle_mesh(mesh: MeshData):

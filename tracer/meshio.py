@@ -7,10 +7,11 @@ only keeps line numbers for its messages.
 """
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from pathlib import Path
-from typing import Iterator, Optional, Union
+from typing import BinaryIO, Iterator, Optional, Union
 
 import numpy as np
 
@@ -31,12 +32,13 @@ def read_3vn(path: PathLike) -> MeshData:
     name = os.fspath(path)
     try:
         with open_regular(path, "mesh file") as handle:
+            mesh = _read_in_bulk(handle, name)
+            if mesh is not None:
+                return mesh
+            handle.seek(0)
             data = handle.read()
     except OSError as exc:
         raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
-    mesh = _read_in_bulk(data, name)
-    if mesh is not None:
-        return mesh
     # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number (as
     # userfiles.read_text decodes: a byte-order mark dropped).
     return _read_words(data.decode("utf-8-sig", errors="replace"), name)
@@ -46,11 +48,24 @@ def read_3vn(path: PathLike) -> MeshData:
 _BIG = 2**31 - 1
 
 
-def _read_in_bulk(data: bytes, name: str) -> Optional[MeshData]:
-    """The mesh, if the file is a well-formed ``.3vn`` of plain decimal numbers; None for anything else
-    (which :func:`_read_words` then reports).  All of a file's numbers are read at once into one array and
-    cut into vertices, normals and faces with array operations: no Python object per number."""
-    values = _bulk_numbers(data)
+def _read_in_bulk(source: Union[bytes, BinaryIO], name: str) -> Optional[MeshData]:
+    """The mesh, if the file (its bytes, or a binary file at its start) is a well-formed ``.3vn`` of plain
+    decimal numbers; None for anything else (which :func:`_read_words` then reports).  The C core reads the
+    file a few megabytes at a time, straight into the mesh's arrays; without it, all of a file's numbers are
+    read at once into one array and cut into vertices, normals and faces with array operations: no Python
+    object per number either way."""
+    handle = io.BytesIO(source) if isinstance(source, (bytes, bytearray)) else source
+    native = _native()
+    if native is not None:
+        arrays = native.scan_3vn(handle)
+        if arrays is None:
+            return None
+        vertices, normals, sizes, vertex_index, normal_index = arrays
+        if np.array_equal(vertex_index, normal_index):  # normal k of vertex k: one array (see FaceList)
+            normal_index = vertex_index
+        return MeshData(vertices=vertices, normals=normals, faces=FaceList(sizes, vertex_index, normal_index),
+                        origin=name)
+    values = _bulk_numbers(handle.read())
     if values is None or len(values) < 3:
         return None
     head = values[:3]
@@ -99,7 +114,10 @@ def _bulk_faces(words: np.ndarray, num_faces: int, num_verts: int, num_norms: in
     for index, count in ((vertex_index, num_verts), (normal_index, num_norms)):
         if not (np.all(index == np.trunc(index)) and np.all(index >= 0) and np.all(index < count)):
             return None
-    return FaceList(sizes, vertex_index.astype(np.int32), normal_index.astype(np.int32))
+    vertex_index, normal_index = vertex_index.astype(np.int32), normal_index.astype(np.int32)
+    if np.array_equal(vertex_index, normal_index):  # normal k of vertex k, as most exporters write: one array
+        normal_index = vertex_index
+    return FaceList(sizes, vertex_index, normal_index)
 
 
 def _bulk_numbers(data: bytes) -> Optional[np.ndarray]:
@@ -107,12 +125,9 @@ def _bulk_numbers(data: bytes) -> Optional[np.ndarray]:
     NUMBER_RE does not take, a non-finite value, a byte outside ASCII).  The C core's scanner when it is
     built; else NumPy's, after checking that only number characters and white space occur, that it read to
     the end without a complaint and as many numbers as there are words."""
-    try:
-        from . import native
-        if native.load_error is None:
-            return native.scan_numbers(data)
-    except ImportError:
-        pass
+    native = _native()
+    if native is not None:
+        return native.scan_numbers(data)
     raw = np.frombuffer(data, dtype=np.uint8)
     allowed = np.zeros(256, dtype=bool)
     allowed[list(b"0123456789+-.eE \t\n\r\x0b\x0c")] = True
@@ -124,6 +139,15 @@ def _bulk_numbers(data: bytes) -> Optional[np.ndarray]:
         warnings.simplefilter("always")  # at a malformed word NumPy warns and stops
         values = np.fromstring(data, dtype=np.float64, sep=" ")
     return values if not caught and len(values) == words and np.isfinite(values).all() else None
+
+
+def _native():
+    """tracer.native when the C core is built, else None."""
+    try:
+        from . import native
+    except ImportError:
+        return None
+    return native if native.load_error is None else None
 
 
 class _Numbers:

@@ -7,7 +7,6 @@ coordinates (column vectors: ``world = matrix @ generic``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 from collections.abc import Sequence
 from typing import Optional, Union
@@ -67,26 +66,63 @@ class FaceList(Sequence):
     ``(vertex indices, normal indices)`` of face k, as tuples of ints.
 
     ``sizes`` (F,) corners per face; ``vertex_index`` (sum of sizes,) every face's vertex indices, face
-    after face; ``normal_index`` the same for normals, or None when no face has normals.
+    after face; ``normal_index`` the same for normals, or None when no face has normals (or the very same
+    array as ``vertex_index`` when corner k of every face uses normal k of its vertex: one array, not two).
+    Faces that all have one size (a triangle or quad mesh) keep only that size: ``sizes`` and ``offsets``
+    are then made when asked for.
     """
 
     def __init__(self, sizes, vertex_index, normal_index=None):
-        self.sizes = np.asarray(sizes, dtype=np.int64).reshape(-1)
+        shared = normal_index is not None and normal_index is vertex_index
         self.vertex_index = np.asarray(vertex_index).reshape(-1)
-        self.normal_index = None if normal_index is None else np.asarray(normal_index).reshape(-1)
-        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]).astype(np.int64)
-        if self.offsets[-1] != len(self.vertex_index) or (
+        self.normal_index = (None if normal_index is None else self.vertex_index if shared
+                             else np.asarray(normal_index).reshape(-1))
+        sizes = np.asarray(sizes, dtype=np.int64).reshape(-1)
+        self._count = len(sizes)
+        self._uniform = int(sizes[0]) if len(sizes) and (sizes == sizes[0]).all() else None
+        self._sizes = None if self._uniform is not None else sizes
+        self._offsets = None if self._uniform is not None else np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        total = self._count * self._uniform if self._uniform is not None else self._offsets[-1]
+        if total != len(self.vertex_index) or (
                 self.normal_index is not None and len(self.normal_index) != len(self.vertex_index)):
             raise ValueError("face sizes do not match the number of indices")
 
+    @property
+    def sizes(self) -> np.ndarray:
+        return np.full(self._count, self._uniform, dtype=np.int64) if self._sizes is None else self._sizes
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """(F + 1,) where each face's indices start, and the total."""
+        if self._offsets is None:
+            return np.arange(self._count + 1, dtype=np.int64) * self._uniform
+        return self._offsets
+
+    @property
+    def uniform_size(self) -> Optional[int]:
+        """The corner count of every face when they all have the same, else None."""
+        return self._uniform
+
+    def all_triangles(self) -> bool:
+        return self._count == 0 or self._uniform == 3
+
+    def arrays(self) -> list[np.ndarray]:
+        """The arrays this list keeps (each once)."""
+        kept = [self.vertex_index] + [a for a in (self._sizes, self._offsets) if a is not None]
+        return kept + ([] if self.normal_index is None or self.normal_index is self.vertex_index
+                       else [self.normal_index])
+
     def __len__(self) -> int:
-        return len(self.sizes)
+        return self._count
 
     def __getitem__(self, k):
         if isinstance(k, slice):
             return [self[i] for i in range(*k.indices(len(self)))]
         k = range(len(self))[k]  # negative indices, IndexError
-        a, b = int(self.offsets[k]), int(self.offsets[k + 1])
+        if self._uniform is not None:
+            a, b = k * self._uniform, (k + 1) * self._uniform
+        else:
+            a, b = int(self._offsets[k]), int(self._offsets[k + 1])
         verts = tuple(self.vertex_index[a:b].tolist())
         return verts, (() if self.normal_index is None else tuple(self.normal_index[a:b].tolist()))
 
@@ -151,7 +187,7 @@ class MeshData:
                 np.asarray(tri_n, dtype=np.int64).reshape(-1, 3))
 
 
-@dataclass
+@dataclass(slots=True)  # slots: a scene may hold 10^6 shapes, and a __dict__ each would add 160 bytes to each
 class Shape:
     """One generic shape placed in the world.
 
@@ -175,14 +211,16 @@ class Shape:
     def __post_init__(self) -> None:
         if self.kind not in SHAPE_KINDS:
             raise SceneError(f"unknown shape kind {self.kind!r}")
-        self.matrix = np.array(self.matrix, dtype=np.float64).reshape(4, 4)
+        matrix = np.array(self.matrix, dtype=np.float64)  # a copy of its own
+        # (16 numbers are reshaped and copied again: a reshaped view would keep a second array per shape.)
+        self.matrix = matrix if matrix.shape == (4, 4) else matrix.reshape(4, 4).copy()
 
     @property
     def small_radius(self) -> float:
         """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
         return {"cylinder": 1.0, "cone": 0.0}.get(self.kind, self.tapered_radius)
 
-    @cached_property
+    @property
     def inverse(self) -> np.ndarray:
         return np.linalg.inv(self.matrix)
 

@@ -1,10 +1,14 @@
 """Rays against triangle meshes: a bounding volume hierarchy built and traversed in NumPy.
 
-The BVH is kept in flat arrays (see :class:`TriangleMesh`) so that the C core can later walk the very
-same arrays.  The NumPy traversal is *packet*-style: a Python stack holds ``(node, active rays)`` pairs,
-every node is visited at most once per call, with the subset of rays whose slab test passed, and a
-leaf tests all its rays against all its triangles at once (a vectorised Möller–Trumbore).  The Python
-overhead is therefore per node, not per ray, which is what makes coherent batches fast.
+A mesh is kept *vertex-indexed* (see :class:`TriangleMesh`): the file's vertex and normal arrays, three
+int32 indices per triangle into each, the leaf order of the triangles, and compact BVH nodes (32 bytes,
+single-precision boxes rounded outward).  Everything a hit test needs per triangle (edges, scales for the
+tolerances, the geometric normal, the orientation) is computed from the vertices where it is needed, in the
+same order of operations as the C core (mesh.h), which walks the very same arrays.  The NumPy traversal is
+*packet*-style: a Python stack holds ``(node, active rays)`` pairs, every node is visited at most once per
+call, with the subset of rays whose slab test passed, and a leaf tests all its rays against all its
+triangles at once (a vectorised Möller–Trumbore).  The Python overhead is therefore per node, not per ray,
+which is what makes coherent batches fast.
 """
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from ..model import MeshData
+from ..model import FaceList, MeshData
 from ..numerics import dot3
 from .hits import HitArrays
 
@@ -45,36 +49,33 @@ DEDUPE_RELATIVE_ADJACENT = 1e-9
 BOX_PADDING = 1e-9
 
 
+#: One BVH node as the C core reads it (mesh.h's MeshNode, 32 bytes): the box in single precision, rounded
+#: outward from the padded double-precision box; ``offset`` is an inner node's left child (the right one is
+#: ``offset + 1``) or a leaf's first slot in ``tri_order``; ``count`` is a leaf's number of triangles (0 for
+#: an inner node); ``axis`` the axis an inner node was split along (-1 for a leaf).
+NODE = np.dtype({"names": ["lo", "hi", "offset", "count", "axis", "pad"],
+                 "formats": [("<f4", (3,)), ("<f4", (3,)), "<i4", "<u2", "i1", "u1"],
+                 "offsets": [0, 12, 24, 28, 30, 31], "itemsize": 32})
+#: A leaf's triangle count must fit the node's 16 bits; indices and offsets are int32.
+MAX_LEAF_SIZE = 2**16 - 1
+MAX_INDEX = 2**31 - 1
+
+
 @dataclass(frozen=True)
 class MeshArrays:
-    """A :class:`TriangleMesh`'s BVH and per-triangle tables, as the C core walks them (views, no copies).
+    """A :class:`TriangleMesh` as the C core walks it (the mesh's own arrays, no copies).
 
-    Named as their SceneDesc fields (tracer/native/contract.py).  Leaf order (row i is triangle
-    ``tri_order[i]``): ``tri_p0``, ``tri_e1``, ``tri_e2``, ``tri_flip``, ``tri_edge_scale`` (|e1| |e2|),
-    ``tri_radius`` (largest vertex norm), ``tri_slack1`` (|e2| + radius), ``tri_slack2`` (|e1| + radius),
-    ``tri_welded`` (vertex ids after welding equal positions).  Original order: ``tri_geometric`` (unit
-    geometric normals), ``tri_corners`` (three unit corner normals each), ``tri_has_normals``."""
+    ``nodes`` (M,) :data:`NODE` records; ``tri_order`` (T,) int32: leaf slot -> triangle; ``tri_vertex``
+    (T, 3) int32 vertex indices per triangle; ``tri_normal`` (T, 3) int32 normal indices (a triangle with any
+    index below 0 has no normals), or None when no triangle has normals; ``vertices`` (V, 3) and ``normals``
+    (N, 3) float64 as the mesh gives them (normals need not be unit)."""
 
-    node_lo: np.ndarray
-    node_hi: np.ndarray
-    node_left: np.ndarray
-    node_right: np.ndarray
-    node_first: np.ndarray
-    node_count: np.ndarray
-    node_axis: np.ndarray
+    nodes: np.ndarray
     tri_order: np.ndarray
-    tri_p0: np.ndarray
-    tri_e1: np.ndarray
-    tri_e2: np.ndarray
-    tri_flip: np.ndarray
-    tri_edge_scale: np.ndarray
-    tri_radius: np.ndarray
-    tri_slack1: np.ndarray
-    tri_slack2: np.ndarray
-    tri_welded: np.ndarray
-    tri_geometric: np.ndarray
-    tri_corners: np.ndarray
-    tri_has_normals: np.ndarray
+    tri_vertex: np.ndarray
+    tri_normal: "np.ndarray | None"
+    vertices: np.ndarray
+    normals: np.ndarray
     extent: float
 
 
@@ -86,251 +87,143 @@ class TriangleMesh:
     ``(1 - b1 - b2) P0 + b1 P1 + b2 P2``.
 
     Orientation: the *geometric normal* of a triangle is its winding normal (P1 - P0) x (P2 - P0),
-    flipped when the triangle's vertex normals, averaged, point against it (meshes without normals keep
-    the winding).  A hit is *entering* when ``direction . geometric normal < 0``.  The reported normal is
-    the shading normal: the barycentric interpolation of the (unit) vertex normals, or the geometric
-    normal where the triangle has none, where the interpolation is degenerate or where it falls on the
-    inner side of the geometric normal.  All reported normals are unit length.
+    flipped when the triangle's unit vertex normals, summed, point against it (triangles without normals
+    keep the winding).  A hit is *entering* when ``direction . geometric normal < 0``.  The reported
+    normal is the shading normal: the barycentric interpolation of the (unit) vertex normals, or the
+    geometric normal where the triangle has none, where the interpolation is degenerate or where it falls
+    on the inner side of the geometric normal.  All reported normals are unit length.
 
     Shared edges and vertices: the barycentric test is inclusive with a slack the size of the rounding
     (see ROUNDING_FACTOR), and all-hits merges hits of one ray with the same entering sign at the same
-    time (see DEDUPE_RELATIVE), so a ray through an edge or vertex crosses the surface once.
+    time (see DEDUPE_RELATIVE), so a ray through an edge or vertex crosses the surface once.  Two
+    triangles *touch* when they share a vertex index or a vertex position.
+
+    Memory (vertex-indexed, nothing per triangle but indices): ``vertices`` (V, 3) and ``normals`` (N, 3)
+    float64 are the MeshData's own arrays; ``tri_vertex`` and ``tri_normal`` (T, 3) int32 are views of its
+    FaceList when every face is a triangle (one array when the normal indices equal the vertex indices);
+    ``tri_order`` (T,) int32; ``nodes`` (M,) :data:`NODE`.
 
     BVH: binned surface-area heuristic (``bins`` buckets along the longest axis of the centroids),
-    split until a node holds at most ``leaf_size`` triangles.  Layout (M nodes, node 0 is the root,
-    each inner node's children are allocated together so ``node_right == node_left + 1``; all arrays
-    are C-contiguous):
-
-    * ``node_lo``, ``node_hi`` (M, 3) float64: the node's box (padded by a tiny fraction of the mesh size).
-    * ``node_left``, ``node_right`` (M,) int64: children of an inner node, -1 for a leaf.
-    * ``node_first`` (M,) int64, ``node_count`` (M,) int64: a leaf's triangles are
-      ``tri_order[node_first : node_first + node_count]``; inner nodes have count 0 (first -1).
-    * ``node_axis`` (M,) int8: the axis an inner node was split along (left holds the smaller
-      centroids), used to visit the nearer child first; -1 for leaves.
-    * ``tri_order`` (T,) int64: triangle indices (into ``MeshData.triangles()``) in leaf order.
-
-    Per-triangle data in *leaf order* (row i belongs to triangle ``tri_order[i]``), so that a leaf's
-    triangles are one contiguous slice: ``tri_p0`` (T, 3), ``tri_e1``, ``tri_e2`` (T, 3) = P1 - P0,
-    P2 - P0, and ``tri_flip`` (T,) bool, the triangles whose geometric normal is minus the winding normal.
+    split until a node holds at most ``leaf_size`` triangles.  Node 0 is the root, each inner node's
+    children are allocated together; a leaf's triangles are ``tri_order[offset : offset + count]``.
     """
 
     def __init__(self, mesh: MeshData, leaf_size: int = 8, bins: int = 16) -> None:
-        tri_v, tri_n = mesh.triangles()
-        vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
-        normals = np.asarray(mesh.normals, dtype=np.float64).reshape(-1, 3)
+        if not 1 <= leaf_size <= MAX_LEAF_SIZE or bins < 2:
+            raise ValueError(f"leaf_size must be in 1..{MAX_LEAF_SIZE} and bins at least 2")
+        vertices, normals = _rows_of_three(mesh.vertices), _rows_of_three(mesh.normals)
+        if max(len(vertices), len(normals)) > MAX_INDEX:
+            raise SceneError(f"mesh {mesh.origin!r}: more than {MAX_INDEX} vertices or normals")
+        tri_v, tri_n = _indexed_triangles(mesh)
         if tri_v.size and (tri_v.min() < 0 or tri_v.max() >= len(vertices)):
             raise SceneError(f"mesh {mesh.origin!r}: a face uses a vertex index out of range")
-        if (tri_n >= len(normals)).any():
+        if tri_n is not None and tri_n.size and tri_n.max() >= len(normals):
             raise SceneError(f"mesh {mesh.origin!r}: a face uses a normal index out of range")
+        self.vertices, self.normals = vertices, normals
+        self.tri_vertex, self.tri_normal = tri_v, tri_n
         self.triangle_count = len(tri_v)
 
-        # One corner at a time ((T, 3) arrays, not one (T, 3, 3) gather), and each temporary dropped as soon
-        # as it is used: for a million triangles every (T, 3) array is 24 MB.
-        corners = [vertices[tri_v[:, k]] for k in range(3)]
-        p0 = corners[0]
-        e1 = corners[1] - p0
-        e2 = corners[2] - p0
-        winding = np.cross(e1, e2)
-
-        # Unit vertex normals per corner; triangles with any missing normal have none at all.
-        has_normals = (tri_n >= 0).all(axis=1) if len(normals) else np.zeros(len(tri_v), dtype=bool)
-        if has_normals.all() and len(tri_v):
-            corner_normals = normals[tri_n]  # (T, 3, 3), made unit in place
-            _normalise_rows(corner_normals)
-        else:
-            corner_normals = np.zeros((len(tri_v), 3, 3))
-            if has_normals.any():
-                raw = normals[tri_n[has_normals]]
-                _normalise_rows(raw)
-                corner_normals[has_normals] = raw
-                del raw
-        del tri_n
-        # Orientation: flip the winding where the file's normals, averaged, disagree with it.
-        flip = np.einsum("ij,ij->i", corner_normals.sum(axis=1), winding) < 0
-        geometric = np.where(flip[:, None], -winding, winding)
-        del winding
-        length = np.linalg.norm(geometric, axis=1, keepdims=True)
-        geometric = np.divide(geometric, length, out=np.zeros_like(geometric), where=length > 0)
-        del length
-
-        # Kept in the original (MeshData.triangles()) order, for the hits' normals.
-        self._geometric_normal = geometric
-        self._corner_normals = corner_normals
-        self._has_normals = has_normals
-
-        # The mesh's size gives absolute scales for box padding and hit deduplication.
+        # The mesh's size (of the vertices the triangles use) gives absolute scales for box padding and hit
+        # deduplication.
         if len(tri_v):
-            self.bounds = np.stack([np.min([c.min(axis=0) for c in corners], axis=0),
-                                    np.max([c.max(axis=0) for c in corners], axis=0)])
+            used = np.zeros(len(vertices), dtype=bool)
+            used[tri_v.reshape(-1)] = True
+            where = used[:, None]
+            self.bounds = np.stack([np.min(vertices, axis=0, where=where, initial=np.inf),
+                                    np.max(vertices, axis=0, where=where, initial=-np.inf)])
+            del used, where
         else:
             self.bounds = np.zeros((2, 3))
         self.extent = float(np.max(self.bounds[1] - self.bounds[0], initial=0.0)) or 1.0
         self._magnitude = float(np.max(np.abs(self.bounds), initial=0.0))
-
-        # Boxes and centroids of the triangles for the builder (the centroid is the corners' mean, summed
-        # in corner order as p.mean(axis=1) sums them).
-        centroid = corners[0] + corners[1]
-        centroid += corners[2]
-        centroid /= 3.0
-        self._build_bvh(np.minimum(np.minimum(corners[0], corners[1]), corners[2]),
-                        np.maximum(np.maximum(corners[0], corners[1]), corners[2]), centroid, leaf_size, bins)
-        del centroid
-
-        order = self.tri_order
-        # Scales for the parallel test and the barycentric slack (see ROUNDING_FACTOR), leaf order.
-        radius = np.linalg.norm(corners[0], axis=1)
-        for c in corners[1:]:
-            np.maximum(radius, np.linalg.norm(c, axis=1), out=radius)
-        del corners
-        self._radius = radius[order]
-        del radius
-        self.tri_p0 = p0[order]
-        del p0
-        self.tri_e1 = e1[order]
-        del e1
-        self.tri_e2 = e2[order]
-        del e2
-        self.tri_flip = flip[order]
-        e1_length = np.linalg.norm(self.tri_e1, axis=1)
-        e2_length = np.linalg.norm(self.tri_e2, axis=1)
-        self._edge_scale = e1_length * e2_length
-        self._slack1 = e2_length + self._radius
-        self._slack2 = e1_length + self._radius
-        # Vertex ids after welding equal positions, to tell which triangles touch (for deduplication).
-        if len(order):
-            _, welded = np.unique(vertices, axis=0, return_inverse=True)
-            self._tri_welded = welded.reshape(-1)[tri_v[order]]
-        else:
-            self._tri_welded = np.zeros((0, 3), dtype=np.int64)
+        self._build_bvh(leaf_size, bins)
 
     # ------------------------------------------------------------------ BVH construction
 
-    def _build_bvh(self, tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
-                   leaf_size: int, bins: int) -> None:
+    def _build_bvh(self, leaf_size: int, bins: int) -> None:
         """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids): built by
-        the C core when it is there (the same tree, in a fraction of the time), else in NumPy."""
-        native = _native_builder() if 2 <= bins <= 64 and leaf_size >= 1 else None
-        if native is None:
-            self._build_bvh_numpy(tri_lo, tri_hi, centroid, leaf_size, bins)
-            return
-        tree = native(tri_lo, tri_hi, centroid, leaf_size, bins)
-        self._store_nodes(tree["lo"], tree["hi"], tree["left"], tree["right"], tree["first"], tree["count"],
-                          tree["axis"], tree["order"])
-
-    def _build_bvh_numpy(self, tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray,
-                         leaf_size: int, bins: int) -> None:
-        """The reference builder (bvh_build.h builds the same tree)."""
-        t_count = len(tri_lo)
-        order = np.arange(t_count, dtype=np.int64)
-        lo, hi, left, right, first, count, axes = [], [], [], [], [], [], []
-
-        def new_node() -> int:
-            for column in (lo, hi):
-                column.append(None)
-            for column in (left, right, first, count, axes):
-                column.append(-1)
-            return len(lo) - 1
-
-        if t_count == 0:
-            self._store_nodes(lo, hi, left, right, first, count, axes, order)
-            return
-
-        stack = [(new_node(), 0, t_count)]  # (node, start, end) over ``order``
-        while stack:
-            node, start, end = stack.pop()
-            members = order[start:end]
-            lo[node] = tri_lo[members].min(axis=0)
-            hi[node] = tri_hi[members].max(axis=0)
-            n = end - start
-            split = self._choose_split(tri_lo[members], tri_hi[members], centroid[members], bins) \
-                if n > leaf_size else None
-            if split is None:
-                first[node], count[node] = start, n
-                continue
-            axis, goes_left = split
-            # Stable partition of this node's range: left members first.
-            order[start:end] = np.concatenate([members[goes_left], members[~goes_left]])
-            middle = start + int(goes_left.sum())
-            left_child, right_child = new_node(), new_node()
-            left[node], right[node], axes[node], count[node] = left_child, right_child, axis, 0
-            stack.append((right_child, middle, end))
-            stack.append((left_child, start, middle))
-        self._store_nodes(lo, hi, left, right, first, count, axes, order)
-
-    @staticmethod
-    def _choose_split(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, bins: int):
-        """(axis, mask of triangles going left) by the surface area heuristic over ``bins`` buckets.
-
-        The axis is the longest extent of the centroids.  When all centroids coincide there is nothing
-        to bin, and the range is simply halved (so leaves stay small even for duplicate triangles).
-        """
-        n = len(centroid)
-        c_lo, c_hi = centroid.min(axis=0), centroid.max(axis=0)
-        axis = int(np.argmax(c_hi - c_lo))
-        width = c_hi[axis] - c_lo[axis]
-        if not width > 0:
-            goes_left = np.zeros(n, dtype=bool)
-            goes_left[: n // 2] = True
-            return axis, goes_left
-
-        bucket = np.minimum(((centroid[:, axis] - c_lo[axis]) * (bins / width)).astype(np.int64), bins - 1)
-        # Per-bucket boxes: sort by bucket, then reduce each non-empty run (bucket 0 and bins-1 are
-        # never empty, the centroids' minimum and maximum are in them).
-        by_bucket = np.argsort(bucket, kind="stable")
-        sorted_bucket = bucket[by_bucket]
-        starts = np.flatnonzero(np.r_[True, sorted_bucket[1:] != sorted_bucket[:-1]])
-        present = sorted_bucket[starts]
-        box_lo = np.full((bins, 3), np.inf)
-        box_hi = np.full((bins, 3), -np.inf)
-        box_lo[present] = np.minimum.reduceat(tri_lo[by_bucket], starts, axis=0)
-        box_hi[present] = np.maximum.reduceat(tri_hi[by_bucket], starts, axis=0)
-        counts = np.bincount(bucket, minlength=bins)
-
-        def half_area(lo, hi):
-            size = np.maximum(hi - lo, 0.0)  # empty prefixes have inf/-inf bounds: area 0
-            size[~np.isfinite(size)] = 0.0
-            return size[:, 0] * size[:, 1] + size[:, 1] * size[:, 2] + size[:, 2] * size[:, 0]
-
-        # Candidate k splits between bucket k and k+1 (k = 0 .. bins-2).
-        left_area = half_area(np.minimum.accumulate(box_lo, axis=0), np.maximum.accumulate(box_hi, axis=0))[:-1]
-        right_area = half_area(np.minimum.accumulate(box_lo[::-1], axis=0),
-                               np.maximum.accumulate(box_hi[::-1], axis=0))[::-1][1:]
-        left_count = np.cumsum(counts)[:-1]
-        right_count = n - left_count
-        cost = left_area * left_count + right_area * right_count
-        cost[(left_count == 0) | (right_count == 0)] = np.inf
-        best = int(np.argmin(cost))
-        return axis, bucket <= best
-
-    def _store_nodes(self, lo, hi, left, right, first, count, axes, order) -> None:
+        the C core when it is there (the same tree, in a fraction of the time, reading the boxes and
+        centroids from the vertices as it goes), else in NumPy."""
         pad = BOX_PADDING * (self.extent + self._magnitude)
-        self.node_lo = np.array(lo, dtype=np.float64).reshape(-1, 3) - pad
-        self.node_hi = np.array(hi, dtype=np.float64).reshape(-1, 3) + pad
-        self.node_left = np.array(left, dtype=np.int64)
-        self.node_right = np.array(right, dtype=np.int64)
-        self.node_first = np.array(first, dtype=np.int64)
-        self.node_count = np.array(count, dtype=np.int64)
-        self.node_axis = np.array(axes, dtype=np.int8)
-        self.tri_order = order
-        self.node_first[self.node_count == 0] = -1
+        native = _native_builder() if bins <= 64 else None
+        if native is not None:
+            self.nodes, self.tri_order = native(self.vertices, self.tri_vertex, leaf_size, bins, pad)
+        else:
+            self.nodes, self.tri_order = _build_bvh_numpy(*self._boxes_and_centroids(), leaf_size, bins, pad)
+        # Column views for the NumPy traversal.
+        self.node_lo, self.node_hi = self.nodes["lo"], self.nodes["hi"]
+        self.node_offset, self.node_count, self.node_axis = (self.nodes["offset"], self.nodes["count"],
+                                                              self.nodes["axis"])
+
+    def _boxes_and_centroids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(T, 3) each: the triangles' boxes, min(min(P0, P1), P2) and max(...), and centroids (P0 + P1 + P2) / 3
+        summed in corner order (bvh_build.h computes the same numbers), one corner at a time, in place."""
+        tri_v, vertices = self.tri_vertex, self.vertices
+        corner = vertices[tri_v[:, 0]]
+        tri_lo, tri_hi, centroid = corner.copy(), corner.copy(), corner
+        for k in (1, 2):
+            corner = vertices[tri_v[:, k]]
+            np.minimum(tri_lo, corner, out=tri_lo)
+            np.maximum(tri_hi, corner, out=tri_hi)
+            centroid += corner
+        del corner
+        centroid /= 3.0
+        return tri_lo, tri_hi, centroid
 
     @property
     def node_total(self) -> int:
-        return len(self.node_count)
+        return len(self.nodes)
 
     def arrays(self) -> MeshArrays:
         """The tables another tracer needs to walk this mesh exactly as the queries below do."""
-        return MeshArrays(
-            node_lo=self.node_lo, node_hi=self.node_hi, node_left=self.node_left, node_right=self.node_right,
-            node_first=self.node_first, node_count=self.node_count, node_axis=self.node_axis,
-            tri_order=self.tri_order, tri_p0=self.tri_p0, tri_e1=self.tri_e1, tri_e2=self.tri_e2,
-            tri_flip=self.tri_flip, tri_edge_scale=self._edge_scale, tri_radius=self._radius,
-            tri_slack1=self._slack1, tri_slack2=self._slack2, tri_welded=self._tri_welded,
-            tri_geometric=self._geometric_normal, tri_corners=self._corner_normals,
-            tri_has_normals=self._has_normals, extent=self.extent)
+        return MeshArrays(nodes=self.nodes, tri_order=self.tri_order, tri_vertex=self.tri_vertex,
+                          tri_normal=self.tri_normal, vertices=self.vertices, normals=self.normals,
+                          extent=self.extent)
+
+    def kept_arrays(self) -> list[np.ndarray]:
+        """Every array this mesh keeps alive (some are the MeshData's own): what it costs in memory."""
+        arrays = [self.nodes, self.tri_order, self.tri_vertex, self.vertices, self.normals]
+        return arrays + ([] if self.tri_normal is None else [self.tri_normal])
+
+    # ------------------------------------------------------------------ per-triangle values
+
+    def _corners(self, tri: np.ndarray):
+        """(P0, P1, P2) of triangles ``tri`` (original order), each (n, 3)."""
+        index = self.tri_vertex[tri]
+        return self.vertices[index[:, 0]], self.vertices[index[:, 1]], self.vertices[index[:, 2]]
+
+    def _frame(self, tri: np.ndarray):
+        """(P0, E1 = P1 - P0, E2 = P2 - P0) of triangles ``tri``."""
+        p0, p1, p2 = self._corners(tri)
+        return p0, p1 - p0, p2 - p0
+
+    def _unit_corner_normals(self, tri: np.ndarray):
+        """The three unit vertex normals of triangles ``tri`` ((n, 3) each; zero for a zero normal) and which
+        triangles have normals at all (zeros for those that have not)."""
+        n = len(tri)
+        if self.tri_normal is None or not len(self.normals):
+            zero = np.zeros((n, 3))
+            return (zero, zero, zero), np.zeros(n, dtype=bool)
+        index = self.tri_normal[tri]
+        has = (index >= 0).all(axis=1)
+        corners = []
+        for k in range(3):
+            v = self.normals[np.where(has, index[:, k], 0)]
+            length = np.sqrt(dot3(v, v))[:, None]
+            usable = has[:, None] & (length > 0)
+            with np.errstate(all="ignore"):
+                corners.append(np.where(usable, v / length, 0.0))
+        return tuple(corners), has
+
+    @staticmethod
+    def _geometric(e1: np.ndarray, e2: np.ndarray, corners):
+        """(winding normal E1 x E2, flip): flip where the unit corner normals, summed, point against it."""
+        winding = _cross(e1, e2)
+        summed = corners[0] + corners[1]
+        summed += corners[2]
+        return winding, dot3(summed, winding) < 0
 
     # ------------------------------------------------------------------ queries
-
     def all_hits(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
         """Every crossing of each whole line ``origin + t direction`` (t from -inf to +inf), sorted by t.
 
@@ -344,7 +237,7 @@ class TriangleMesh:
         def on_leaf(node, idx, t, b1, b2, hit):
             ray_pos, tri_pos = np.nonzero(hit)
             if len(ray_pos):
-                first = self.node_first[node]
+                first = self.node_offset[node]
                 found.append((idx[ray_pos], first + tri_pos, t[ray_pos, tri_pos],
                               b1[ray_pos, tri_pos], b2[ray_pos, tri_pos]))
 
@@ -354,7 +247,7 @@ class TriangleMesh:
         ray, slot, t, b1, b2 = (np.concatenate(column) for column in zip(*found))
         entering = self._entering(rays.directions[ray], slot)
         ray, slot, t, b1, b2, entering = _dedupe_and_order(
-            ray, slot, t, b1, b2, entering, rays.speed, self.extent, self._tri_welded)
+            ray, slot, t, b1, b2, entering, rays.speed, self.extent, self._touching)
 
         # Scatter the hits, now sorted by (ray, t), into (N, K) slots.
         counts = np.bincount(ray, minlength=rays.n)
@@ -386,7 +279,7 @@ class TriangleMesh:
             winners, pick = idx[better], pick[better]
             rows = rows[better]
             best_t[winners] = candidate[rows, pick]
-            best_slot[winners] = self.node_first[node] + pick
+            best_slot[winners] = self.node_offset[node] + pick
             best_b[winners, 0] = b1[rows, pick]
             best_b[winners, 1] = b2[rows, pick]
 
@@ -444,7 +337,8 @@ class TriangleMesh:
                     t, b1, b2, hit = self._leaf_hits(node, rays, idx)
                     on_leaf(node, idx, t, b1, b2, hit)
                     continue
-                near, far = self.node_left[node], self.node_right[node]
+                near = int(self.node_offset[node])
+                far = near + 1
                 if shrink and rays.directions[idx, self.node_axis[node]].sum() < 0:
                     near, far = far, near
                 stack.append((far, idx))
@@ -474,11 +368,15 @@ class TriangleMesh:
         ``t`` etc. are garbage where ``hit`` is False (parallel rays are masked, never divided by 0
         into a reported value).
         """
-        first = self.node_first[node]
-        last = first + self.node_count[node]
-        p0 = self.tri_p0[first:last]
-        e1 = self.tri_e1[first:last]
-        e2 = self.tri_e2[first:last]
+        first = int(self.node_offset[node])
+        tri = self.tri_order[first:first + int(self.node_count[node])]
+        p0, p1, p2 = self._corners(tri)
+        e1, e2 = p1 - p0, p2 - p0
+        # Scales for the parallel test and the barycentric slack (see ROUNDING_FACTOR): the largest vertex
+        # norm and the edge lengths, as mesh.h computes them.
+        radius = np.maximum(np.maximum(_length(p0), _length(p1)), _length(p2))
+        e1_length, e2_length = _length(e1), _length(e2)
+        slack1_scale, slack2_scale = e2_length + radius, e1_length + radius
         d = rays.directions[idx][:, None, :]  # (n, 1, 3)
         s = rays.origins[idx][:, None, :] - p0  # (n, k, 3)
         pvec = _cross(d, e2)  # (n, k, 3)
@@ -492,11 +390,11 @@ class TriangleMesh:
         speed = rays.speed[idx, None]
         abs_det = np.abs(det)
         rounding = np.minimum(
-            ROUNDING_FACTOR * np.finfo(float).eps * speed * (rays.magnitude[idx, None] + self._radius[first:last])
-            / abs_det, BARYCENTRIC_EPSILON_MAX / np.maximum(self._slack1[first:last], self._slack2[first:last]))
-        slack1 = rounding * self._slack1[first:last]
-        slack2 = rounding * self._slack2[first:last]
-        hit = ((abs_det > PARALLEL_EPSILON * speed * self._edge_scale[first:last])
+            ROUNDING_FACTOR * np.finfo(float).eps * speed * (rays.magnitude[idx, None] + radius) / abs_det,
+            BARYCENTRIC_EPSILON_MAX / np.maximum(slack1_scale, slack2_scale))
+        slack1 = rounding * slack1_scale
+        slack2 = rounding * slack2_scale
+        hit = ((abs_det > PARALLEL_EPSILON * speed * (e1_length * e2_length))
                & (b1 >= -slack1) & (b2 >= -slack2) & (b1 + b2 <= 1.0 + slack1 + slack2) & np.isfinite(t))
         return t, b1, b2, hit
 
@@ -504,29 +402,177 @@ class TriangleMesh:
 
     def _entering(self, directions: np.ndarray, slot: np.ndarray) -> np.ndarray:
         """direction . geometric normal < 0 for triangles given in leaf order."""
-        winding = np.cross(self.tri_e1[slot], self.tri_e2[slot])
-        facing = np.einsum("ij,ij->i", directions, winding)
-        return np.where(self.tri_flip[slot], facing > 0, facing < 0)
+        tri = self.tri_order[slot]
+        _, e1, e2 = self._frame(tri)
+        corners, _ = self._unit_corner_normals(tri)
+        winding, flip = self._geometric(e1, e2, corners)
+        facing = dot3(directions, winding)
+        return np.where(flip, facing > 0, facing < 0)
 
     def _shading_normal(self, tri: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
         """Unit shading normals for hits on triangles ``tri`` (original order) at barycentrics (b1, b2)."""
-        geometric = self._geometric_normal[tri]
-        corners = self._corner_normals[tri]
-        weights = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
-        smooth = np.einsum("ij,ijk->ik", weights, corners)
-        length = np.linalg.norm(smooth, axis=1)
+        _, e1, e2 = self._frame(tri)
+        corners, has_normals = self._unit_corner_normals(tri)
+        winding, flip = self._geometric(e1, e2, corners)
+        geometric = np.where(flip[:, None], -winding, winding)
+        length = _length(geometric)[:, None]
+        geometric = np.divide(geometric, length, out=np.zeros_like(geometric), where=length > 0)
+        smooth = ((1.0 - b1 - b2)[:, None] * corners[0] + b1[:, None] * corners[1]) + b2[:, None] * corners[2]
+        length = _length(smooth)
         # Use the interpolation only where it is meaningful and on the outer side of the face.
-        usable = self._has_normals[tri] & (length > 1e-12) & (np.einsum("ij,ij->i", smooth, geometric) > 0)
+        usable = has_normals & (length > 1e-12) & (dot3(smooth, geometric) > 0)
         with np.errstate(all="ignore"):
             smooth = smooth / length[:, None]
         return np.where(usable[:, None], smooth, geometric)
 
+    def _touching(self, slot_a: np.ndarray, slot_b: np.ndarray) -> np.ndarray:
+        """Do the triangles in leaf slots ``slot_a`` and ``slot_b`` share a vertex (by index or position)?"""
+        a, b = self.tri_vertex[self.tri_order[slot_a]], self.tri_vertex[self.tri_order[slot_b]]
+        same = a[:, :, None] == b[:, None, :]
+        same |= (self.vertices[a][:, :, None, :] == self.vertices[b][:, None, :, :]).all(axis=3)
+        return same.any(axis=(1, 2))
 
-def _normalise_rows(vectors: np.ndarray) -> None:
-    """Scale each vector (last axis) to unit length in place; vectors of length 0 become 0."""
-    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    np.divide(vectors, length, out=vectors, where=length > 0)
-    vectors[np.broadcast_to(~(length > 0), vectors.shape)] = 0.0
+
+def _build_bvh_numpy(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int,
+                 pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reference builder (bvh_build.h builds the same tree): (NODE records, tri_order int32)."""
+    t_count = len(tri_lo)
+    order = np.arange(t_count, dtype=np.int64)
+    lo, hi, left, right, first, count, axes = [], [], [], [], [], [], []
+
+    def new_node() -> int:
+        for column in (lo, hi):
+            column.append(None)
+        for column in (left, right, first, count, axes):
+            column.append(-1)
+        return len(lo) - 1
+
+    if t_count == 0:
+        return _node_records(lo, hi, left, first, count, axes, pad), order.astype(np.int32)
+
+    stack = [(new_node(), 0, t_count)]  # (node, start, end) over ``order``
+    while stack:
+        node, start, end = stack.pop()
+        members = order[start:end]
+        lo[node] = tri_lo[members].min(axis=0)
+        hi[node] = tri_hi[members].max(axis=0)
+        n = end - start
+        split = _choose_split(tri_lo[members], tri_hi[members], centroid[members], bins) \
+            if n > leaf_size else None
+        if split is None:
+            first[node], count[node] = start, n
+            continue
+        axis, goes_left = split
+        # Stable partition of this node's range: left members first.
+        order[start:end] = np.concatenate([members[goes_left], members[~goes_left]])
+        middle = start + int(goes_left.sum())
+        left_child, right_child = new_node(), new_node()
+        left[node], right[node], axes[node], count[node] = left_child, right_child, axis, 0
+        stack.append((right_child, middle, end))
+        stack.append((left_child, start, middle))
+    return _node_records(lo, hi, left, first, count, axes, pad), order.astype(np.int32)
+
+def _choose_split(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, bins: int):
+    """(axis, mask of triangles going left) by the surface area heuristic over ``bins`` buckets.
+
+    The axis is the longest extent of the centroids.  When all centroids coincide there is nothing
+    to bin, and the range is simply halved (so leaves stay small even for duplicate triangles).
+    """
+    n = len(centroid)
+    c_lo, c_hi = centroid.min(axis=0), centroid.max(axis=0)
+    axis = int(np.argmax(c_hi - c_lo))
+    width = c_hi[axis] - c_lo[axis]
+    if not width > 0:
+        goes_left = np.zeros(n, dtype=bool)
+        goes_left[: n // 2] = True
+        return axis, goes_left
+
+    bucket = np.minimum(((centroid[:, axis] - c_lo[axis]) * (bins / width)).astype(np.int64), bins - 1)
+    # Per-bucket boxes: sort by bucket, then reduce each non-empty run (bucket 0 and bins-1 are
+    # never empty, the centroids' minimum and maximum are in them).
+    by_bucket = np.argsort(bucket, kind="stable")
+    sorted_bucket = bucket[by_bucket]
+    starts = np.flatnonzero(np.r_[True, sorted_bucket[1:] != sorted_bucket[:-1]])
+    present = sorted_bucket[starts]
+    box_lo = np.full((bins, 3), np.inf)
+    box_hi = np.full((bins, 3), -np.inf)
+    box_lo[present] = np.minimum.reduceat(tri_lo[by_bucket], starts, axis=0)
+    box_hi[present] = np.maximum.reduceat(tri_hi[by_bucket], starts, axis=0)
+    counts = np.bincount(bucket, minlength=bins)
+
+    def half_area(lo, hi):
+        size = np.maximum(hi - lo, 0.0)  # empty prefixes have inf/-inf bounds: area 0
+        size[~np.isfinite(size)] = 0.0
+        return size[:, 0] * size[:, 1] + size[:, 1] * size[:, 2] + size[:, 2] * size[:, 0]
+
+    # Candidate k splits between bucket k and k+1 (k = 0 .. bins-2).
+    left_area = half_area(np.minimum.accumulate(box_lo, axis=0), np.maximum.accumulate(box_hi, axis=0))[:-1]
+    right_area = half_area(np.minimum.accumulate(box_lo[::-1], axis=0),
+                           np.maximum.accumulate(box_hi[::-1], axis=0))[::-1][1:]
+    left_count = np.cumsum(counts)[:-1]
+    right_count = n - left_count
+    cost = left_area * left_count + right_area * right_count
+    cost[(left_count == 0) | (right_count == 0)] = np.inf
+    best = int(np.argmin(cost))
+    return axis, bucket <= best
+
+
+
+def _node_records(lo, hi, left, first, count, axes, pad: float) -> np.ndarray:
+    """The builder's columns as NODE records: boxes padded by ``pad``, then rounded outward to single
+    precision (mesh.h's bvh_store_node does the same for the C builder)."""
+    nodes = np.zeros(len(count), dtype=NODE)
+    if not len(count):
+        return nodes
+    nodes["lo"] = _single_outward(np.array(lo, dtype=np.float64).reshape(-1, 3) - pad, down=True)
+    nodes["hi"] = _single_outward(np.array(hi, dtype=np.float64).reshape(-1, 3) + pad, down=False)
+    count = np.array(count, dtype=np.int64)
+    nodes["offset"] = np.where(count > 0, np.array(first, dtype=np.int64), np.array(left, dtype=np.int64))
+    nodes["count"] = count
+    nodes["axis"] = np.array(axes, dtype=np.int8)
+    return nodes
+
+
+def _single_outward(x: np.ndarray, down: bool) -> np.ndarray:
+    """The nearest float32 at or below (``down``) or at or above ``x``; NaN stays NaN."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        rounded = x.astype(np.float32)
+        off = rounded > x if down else rounded < x
+        return np.where(off, np.nextafter(rounded, np.float32(-np.inf if down else np.inf)), rounded)
+
+def _indexed_triangles(mesh: MeshData) -> tuple[np.ndarray, "np.ndarray | None"]:
+    """(T, 3) int32 vertex indices and normal indices of ``mesh.triangles()`` (None when no triangle has
+    normals).  When every face is a triangle these are views of the FaceList's own arrays (no copy), and
+    one array when the normal indices are the vertex indices."""
+    faces = mesh.faces
+    if isinstance(faces, FaceList) and faces.all_triangles():
+        tri_v = _as_int32(faces.vertex_index).reshape(-1, 3)
+        if faces.normal_index is None:
+            return tri_v, None
+        if faces.normal_index is faces.vertex_index:
+            return tri_v, tri_v
+        return tri_v, _as_int32(faces.normal_index).reshape(-1, 3)
+    tri_v, tri_n = mesh.triangles()
+    tri_v = _as_int32(tri_v)
+    if not (tri_n >= 0).any():
+        return tri_v, None
+    return tri_v, (tri_v if np.array_equal(tri_n, tri_v) else _as_int32(tri_n))
+
+
+def _rows_of_three(values) -> np.ndarray:
+    """(n, 3) C-contiguous float64: the array itself when it is one already (the MeshData's vertices)."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    return values if values.ndim == 2 and values.shape[1] == 3 else values.reshape(-1, 3)
+
+
+def _as_int32(index: np.ndarray) -> np.ndarray:
+    """Indices as a C-contiguous int32 array (the array itself when it is one).  Every negative index means
+    the same (none: an error for a vertex), and any index beyond int32 is out of every mesh's range: they
+    are clipped to -1 and MAX_INDEX, which the range checks then judge."""
+    index = np.asarray(index)
+    if index.dtype != np.int32:
+        index = np.clip(index, -1, MAX_INDEX).astype(np.int32)
+    return np.ascontiguousarray(index)
 
 
 def _native_builder():
@@ -554,6 +600,11 @@ class _Rays:
         self.magnitude = np.linalg.norm(self.origins, axis=1)
 
 
+def _length(v: np.ndarray) -> np.ndarray:
+    """Euclidean lengths over the last axis, summed as the C core's sqrt(dot3(v, v))."""
+    return np.sqrt(dot3(v, v))
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis with broadcasting (np.cross is slower on small arrays)."""
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
@@ -561,19 +612,19 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
 
 
-def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent, welded):
+def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent, touching):
     """Drop repeated crossings of shared edges/vertices, then sort by (ray, t) with ties alternating.
 
     Duplicates are hits of one ray with the same entering sign whose times differ by at most
     ``DEDUPE_RELATIVE * (|t| + extent / |d|)``, or ``DEDUPE_RELATIVE_ADJACENT`` times that when the two
     triangles share a vertex.  Sorting by (ray, sign, t) puts them next to each other even when hits of
-    the other sign fall between them in time.  ``welded`` (T, 3) holds the triangles' vertex ids (leaf
-    order, like ``slot``).
+    the other sign fall between them in time.  ``touching(slot_a, slot_b)`` says which pairs of
+    triangles (leaf slots) share a vertex.
     """
     tol_scale = extent / np.where(speed > 0, speed, 1.0)
     order = np.lexsort((t, entering, ray))
     ray, slot, t, b1, b2, entering = ray[order], slot[order], t[order], b1[order], b2[order], entering[order]
-    window = _dedupe_window(slot, t, tol_scale[ray], welded)
+    window = _dedupe_window(slot, t, tol_scale[ray], touching)
     repeat = np.zeros(len(t), dtype=bool)
     repeat[1:] = (ray[1:] == ray[:-1]) & (entering[1:] == entering[:-1]) & (t[1:] - t[:-1] <= window)
     keep = ~repeat
@@ -585,7 +636,7 @@ def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent, welded):
     # order does not change.
     order = np.lexsort((t, ray))
     ray, slot, t, b1, b2, entering = ray[order], slot[order], t[order], b1[order], b2[order], entering[order]
-    window = _dedupe_window(slot, t, tol_scale[ray], welded)
+    window = _dedupe_window(slot, t, tol_scale[ray], touching)
     tie = np.zeros(len(t), dtype=bool)  # tie[i]: hits i and i+1 coincide with opposite signs
     tie[:-1] = (ray[1:] == ray[:-1]) & (entering[1:] != entering[:-1]) & (t[1:] - t[:-1] <= window)
     tie[1:] &= ~tie[:-1]  # pairs do not overlap
@@ -602,8 +653,7 @@ def _dedupe_and_order(ray, slot, t, b1, b2, entering, speed, extent, welded):
     return ray, slot, t, b1, b2, entering
 
 
-def _dedupe_window(slot, t, tol_scale, welded):
+def _dedupe_window(slot, t, tol_scale, touching):
     """How far apart hits i and i+1 (of a sorted list) may be and still be one place: (len - 1,)."""
     scale = np.maximum(np.abs(t[1:]), np.abs(t[:-1])) + tol_scale[1:]
-    touching = (welded[slot[1:], :, None] == welded[slot[:-1], None, :]).any(axis=(1, 2))
-    return np.where(touching, DEDUPE_RELATIVE_ADJACENT, DEDUPE_RELATIVE) * scale
+    return np.where(touching(slot[1:], slot[:-1]), DEDUPE_RELATIVE_ADJACENT, DEDUPE_RELATIVE) * scale

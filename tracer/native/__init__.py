@@ -15,7 +15,7 @@ from __future__ import annotations
 import ctypes
 import os
 from dataclasses import fields
-from typing import Optional
+from typing import BinaryIO, Optional
 
 import numpy as np
 
@@ -85,9 +85,17 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
     lib.rt_scan_numbers.restype = ctypes.c_int64
     lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
+    lib.rt_scan3_state_size.restype = ctypes.c_int64
+    lib.rt_scan3_state_size.argtypes = []
+    lib.rt_scan_3vn.restype = ctypes.c_int64
+    lib.rt_scan_3vn.argtypes = [_i64p, ctypes.c_char_p, ctypes.c_int64, _dp, _dp, _i64p, _i32p, _i32p]
+    lib.rt_scan_3vn_end.restype = ctypes.c_int64
+    lib.rt_scan_3vn_end.argtypes = [_i64p, ctypes.c_int]
     lib.rt_build_mesh_bvh.restype = ctypes.c_int64
-    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _dp, _dp, ctypes.c_int64, ctypes.c_int64, _i64p, _dp, _dp,
-                                      _i64p, _i64p, _i64p, _i64p, _i8p]
+    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _i32p, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
+                                      _i32p, ctypes.POINTER(ctypes.c_void_p)]
+    lib.rt_free.restype = None
+    lib.rt_free.argtypes = [ctypes.c_void_p]
     lib.rt_desc_layout.restype = ctypes.c_int64
     lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
     lib.rt_contract_digest.restype = ctypes.c_char_p
@@ -173,25 +181,90 @@ def scan_numbers(data: bytes) -> Optional[np.ndarray]:
     return values
 
 
-def build_mesh_bvh(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, leaf_size: int, bins: int) -> dict:
-    """The BVH of TriangleMesh's builder (the same arrays, see bvh_build.h), built in C.  Node boxes are
-    not padded.  Needs the C core."""
+#: The .3vn reader reads a file this many bytes at a time: its peak is the mesh's arrays, not the file.
+SCAN_PIECE = 1 << 22
+_SPACE = b" \t\n\r\x0b\x0c\x1c\x1d\x1e\x1f"  # scan.h's scan_is_space
+
+
+def scan_3vn(handle: BinaryIO) -> Optional[tuple[np.ndarray, ...]]:
+    """A ``.3vn`` file's (vertices (V, 3), normals (N, 3), face sizes (F,) int64, vertex indices and normal
+    indices (sum of sizes,) int32), read from ``handle`` (at its start; it is read twice) a piece at a time
+    straight into those arrays (see scan.h), or None when the file is not exactly a well-formed ``.3vn`` of
+    decimal numbers.  Needs the C core."""
     if _lib is None:
         raise TracerError(f"the C core is not available: {load_error}")
-    boxes = [np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3) for a in (tri_lo, tri_hi, centroid)]
-    n = len(boxes[0])
-    room = max(2 * n - 1, 1)
-    out = dict(order=np.empty(n, np.int64), lo=np.empty((room, 3)), hi=np.empty((room, 3)),
-               left=np.empty(room, np.int64), right=np.empty(room, np.int64), first=np.empty(room, np.int64),
-               count=np.empty(room, np.int64), axis=np.empty(room, np.int8))
-    nodes = _lib.rt_build_mesh_bvh(n, *(_ptr(a, ctypes.c_double) for a in boxes), int(leaf_size), int(bins),
-                                   _ptr(out["order"], ctypes.c_int64), _ptr(out["lo"], ctypes.c_double),
-                                   _ptr(out["hi"], ctypes.c_double), *(_ptr(out[k], ctypes.c_int64) for k in
-                                                                       ("left", "right", "first", "count")),
-                                   _ptr(out["axis"], ctypes.c_int8))
-    if nodes < 0:
+    state = np.zeros(_lib.rt_scan3_state_size(), np.int64)
+    state_ptr = _ptr(state, ctypes.c_int64)
+    start = handle.tell()
+    for piece in _whole_word_pieces(handle):  # first pass: the counts, and the words after them
+        if _lib.rt_scan_3vn(state_ptr, piece, len(piece), None, None, None, None, None) != 0:
+            return None
+    corners = _lib.rt_scan_3vn_end(state_ptr, 0)
+    if corners < 0:
+        return None
+    counts = state[1:5].copy()  # SCAN3_V, SCAN3_N, SCAN3_F, SCAN3_CORNERS
+    n_vertices, n_normals, n_faces, _ = counts.tolist()
+    out = (np.empty((n_vertices, 3)), np.empty((n_normals, 3)), np.empty(n_faces, np.int64),
+           np.empty(corners, np.int32), np.empty(corners, np.int32))
+    pointers = [_ptr(a, t) for a, t in zip(out, (ctypes.c_double, ctypes.c_double, ctypes.c_int64, ctypes.c_int32,
+                                                  ctypes.c_int32))]
+    state[:] = 0
+    state[1:5] = counts
+    handle.seek(start)
+    for piece in _whole_word_pieces(handle):
+        if _lib.rt_scan_3vn(state_ptr, piece, len(piece), *pointers) != 0:
+            return None
+    return out if _lib.rt_scan_3vn_end(state_ptr, 1) == 0 else None
+
+
+def _whole_word_pieces(handle: BinaryIO):
+    """The file's bytes in pieces of about SCAN_PIECE, each ending at white space (or the file's end)."""
+    carry = b""
+    while True:
+        block = handle.read(SCAN_PIECE)
+        if not block:
+            if carry:
+                yield carry
+            return
+        block = carry + block
+        cut = _last_space(block)
+        if cut < 0:
+            carry = block
+            continue
+        yield block[:cut + 1]
+        carry = block[cut + 1:]
+
+
+def _last_space(block: bytes) -> int:
+    return max(block.rfind(bytes([space])) for space in _SPACE)
+
+
+def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int, bins: int,
+                   pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """(nodes, tri_order) of TriangleMesh's builder (the same tree, see bvh_build.h), built in C over the
+    triangles ``tri_vertex`` ((T, 3) indices, in range) of ``vertices`` ((V, 3)): NODE records with boxes
+    grown by ``pad`` and rounded outward, and the leaf order (int32).  Needs the C core."""
+    from ..intersect.mesh import NODE
+
+    if _lib is None:
+        raise TracerError(f"the C core is not available: {load_error}")
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    tri_vertex = np.ascontiguousarray(tri_vertex, dtype=np.int32).reshape(-1, 3)
+    n = len(tri_vertex)
+    order = np.empty(n, np.int32)
+    buffer = ctypes.c_void_p()
+    count = _lib.rt_build_mesh_bvh(n, _ptr(vertices, ctypes.c_double), _ptr(tri_vertex, ctypes.c_int32),
+                                   int(leaf_size), int(bins), float(pad), _ptr(order, ctypes.c_int32),
+                                   ctypes.byref(buffer))
+    if count < 0:
         raise MemoryError("the C core ran out of memory building a mesh BVH")
-    return {k: (v if k == "order" else v[:nodes].copy()) for k, v in out.items()}
+    try:
+        nodes = np.empty(count, dtype=NODE)
+        if count:
+            ctypes.memmove(nodes.ctypes.data, buffer.value, count * NODE.itemsize)
+    finally:
+        _lib.rt_free(buffer)
+    return nodes, order
 
 
 def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:

@@ -47,31 +47,17 @@ typedef struct {
     const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
-    /* triangle meshes (MeshArrays, concatenated; indices inside stay mesh-local) */
+    /* triangle meshes (TriangleMesh.arrays(): per mesh, the address of each of its own arrays) */
     int64_t n_meshes;
-    const int64_t *mesh_info;                /* 4 per mesh: node base, node count, triangle base, triangle count */
+    const int64_t *mesh_info;                /* 4 per mesh: node, triangle, vertex and normal counts */
     const double *mesh_extent;
     double mesh_constants[5];                /* tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT */
-    const double *node_lo;                   /* 3 per node */
-    const double *node_hi;
-    const int64_t *node_left;
-    const int64_t *node_right;
-    const int64_t *node_first;
-    const int64_t *node_count;
-    const int8_t *node_axis;
-    const int64_t *tri_order;                /* leaf order -> original triangle */
-    const double *tri_p0;                    /* leaf order, 3 each */
-    const double *tri_e1;
-    const double *tri_e2;
-    const uint8_t *tri_flip;
-    const double *tri_edge_scale;
-    const double *tri_radius;                /* leaf order: largest vertex norm */
-    const double *tri_slack1;                /* leaf order: |e2| + radius */
-    const double *tri_slack2;                /* leaf order: |e1| + radius */
-    const int64_t *tri_welded;               /* leaf order, 3 each: vertex ids after welding equal positions */
-    const double *tri_geometric;             /* original order, 3 each */
-    const double *tri_corners;               /* original order, 9 each (three unit corner normals) */
-    const uint8_t *tri_has_normals;
+    const uint8_t *const *mesh_nodes;        /* per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each */
+    const int32_t *const *mesh_order;        /* per mesh: leaf slot -> triangle */
+    const int32_t *const *mesh_tri_vertex;   /* per mesh: 3 vertex indices per triangle */
+    const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
+    const double *const *mesh_vertices;      /* per mesh: 3 per vertex */
+    const double *const *mesh_normals;       /* per mesh: 3 per normal (made unit where used) */
     /* CSG */
     int64_t n_csg;
     const int32_t *csg_op;                   /* OP_* per node */
@@ -138,26 +124,12 @@ typedef struct {
     X(mesh_info) \
     X(mesh_extent) \
     X(mesh_constants) \
-    X(node_lo) \
-    X(node_hi) \
-    X(node_left) \
-    X(node_right) \
-    X(node_first) \
-    X(node_count) \
-    X(node_axis) \
-    X(tri_order) \
-    X(tri_p0) \
-    X(tri_e1) \
-    X(tri_e2) \
-    X(tri_flip) \
-    X(tri_edge_scale) \
-    X(tri_radius) \
-    X(tri_slack1) \
-    X(tri_slack2) \
-    X(tri_welded) \
-    X(tri_geometric) \
-    X(tri_corners) \
-    X(tri_has_normals) \
+    X(mesh_nodes) \
+    X(mesh_order) \
+    X(mesh_tri_vertex) \
+    X(mesh_tri_normal) \
+    X(mesh_vertices) \
+    X(mesh_normals) \
     X(n_csg) \
     X(csg_op) \
     X(csg_left) \
@@ -200,7 +172,7 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 75
-#define RT_CONTRACT_DIGEST "60aa324fa40c4bb6"
+#define RT_SCENE_DESC_FIELD_COUNT 61
+#define RT_CONTRACT_DIGEST "63c73e847c36681b"
 
 #endif

@@ -991,14 +991,15 @@ static int64_t mesh_check_depth(const MeshView *m)
     stack[top++] = 1;
     while (top) {
         int64_t depth = stack[--top], node = stack[--top];
+        const MeshNode *nd = &m->nodes[node];
         if (++visited > m->n_nodes) { free(stack); return -1; }
         if (depth > deepest) deepest = depth;
-        if (m->count[node]) {
-            if (m->first[node] < 0 || m->first[node] + m->count[node] > m->n_tris) { free(stack); return -1; }
+        if (nd->count) {
+            if (nd->offset < 0 || (int64_t)nd->offset + nd->count > m->n_tris) { free(stack); return -1; }
             continue;
         }
-        int64_t l = m->left[node], r = m->right[node];
-        if (l <= node || r <= node || l >= m->n_nodes || r >= m->n_nodes || m->axis[node] < 0 || m->axis[node] > 2) {
+        int64_t l = nd->offset, r = l + 1;
+        if (l <= node || r >= m->n_nodes || nd->axis < 0 || nd->axis > 2) {
             free(stack);
             return -1;
         }
@@ -1008,6 +1009,22 @@ static int64_t mesh_check_depth(const MeshView *m)
     free(stack);
     return deepest;
 }
+
+/* Every index of a mesh in range: the leaf order, the vertex indices, the normal indices (below 0: none). */
+static int mesh_check_indices(const MeshView *m)
+{
+    for (int64_t i = 0; i < m->n_tris; i++)
+        if (m->order[i] < 0 || m->order[i] >= m->n_tris)
+            return 0;
+    for (int64_t i = 0; i < 3 * m->n_tris; i++)
+        if (m->tri_vertex[i] < 0 || m->tri_vertex[i] >= m->n_vertices ||
+            (m->tri_normal && m->tri_normal[i] >= m->n_normals))
+            return 0;
+    return 1;
+}
+
+/* Releases a buffer the library allocated for the caller (rt_build_mesh_bvh's nodes). */
+void rt_free(void *buffer) { free(buffer); }
 
 void rt_destroy(void *handle)
 {
@@ -1093,39 +1110,29 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
         REFUSE("out of memory");
     for (int64_t k = 0; k < D->n_meshes; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
-        int64_t nb = info[0], tb = info[2];
         MeshView *m = &S->meshes[k];
-        m->lo = D->node_lo + 3 * nb;
-        m->hi = D->node_hi + 3 * nb;
-        m->left = D->node_left + nb;
-        m->right = D->node_right + nb;
-        m->first = D->node_first + nb;
-        m->count = D->node_count + nb;
-        m->axis = D->node_axis + nb;
-        m->n_nodes = info[1];
-        m->order = D->tri_order + tb;
-        m->p0 = D->tri_p0 + 3 * tb;
-        m->e1 = D->tri_e1 + 3 * tb;
-        m->e2 = D->tri_e2 + 3 * tb;
-        m->flip = D->tri_flip + tb;
-        m->edge_scale = D->tri_edge_scale + tb;
-        m->radius = D->tri_radius + tb;
-        m->slack1 = D->tri_slack1 + tb;
-        m->slack2 = D->tri_slack2 + tb;
-        m->welded = D->tri_welded + 3 * tb;
+        m->nodes = (const MeshNode *)D->mesh_nodes[k];
+        m->n_nodes = info[0];
+        m->n_tris = info[1];
+        m->n_vertices = info[2];
+        m->n_normals = info[3];
+        m->order = D->mesh_order[k];
+        m->tri_vertex = D->mesh_tri_vertex[k];
+        m->tri_normal = D->mesh_tri_normal[k];
+        m->vertices = D->mesh_vertices[k];
+        m->normals = D->mesh_normals[k];
         m->rounding_factor = D->mesh_constants[0];
         m->barycentric_max = D->mesh_constants[1];
         m->parallel_eps = D->mesh_constants[2];
         m->dedupe = D->mesh_constants[3];
         m->dedupe_adjacent = D->mesh_constants[4];
-        m->geometric = D->tri_geometric + 3 * tb;
-        m->corners = D->tri_corners + 9 * tb;
-        m->has_normals = D->tri_has_normals + tb;
-        m->n_tris = info[3];
         m->extent = D->mesh_extent[k];
-        for (int64_t i = 0; i < m->n_tris; i++)
-            if (m->order[i] < 0 || m->order[i] >= m->n_tris)
-                REFUSE("mesh %lld: triangle order entry %lld is out of range", (long long)k, (long long)i);
+        if (m->n_nodes < 0 || m->n_tris < 0 || m->n_vertices < 0 || m->n_normals < 0 ||
+            ((m->n_nodes || m->n_tris) && (!m->nodes || !m->order || !m->tri_vertex || !m->vertices)) ||
+            (m->tri_normal && !m->normals))
+            REFUSE("mesh %lld: missing arrays or negative counts", (long long)k);
+        if (!mesh_check_indices(m))
+            REFUSE("mesh %lld: an index is out of range", (long long)k);
         m->depth = mesh_check_depth(m);
         if (m->depth < 0)
             REFUSE("mesh %lld: inconsistent hierarchy (or out of memory)", (long long)k);

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..compile import CompiledScene, Primitive, PrimitiveTable, fold_tree
 from ..geometry.polyhedra import face_planes
-from ..intersect.mesh import MeshArrays
+from ..intersect.mesh import NODE, MeshArrays
 from .. import numerics, shapes
 from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
 from . import contract
@@ -33,8 +33,11 @@ BOX_PADDING = 1e-8
 #: The tracer.intersect.mesh constants the C core reads (SceneDesc.mesh_constants, in this order).
 MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILON", "DEDUPE_RELATIVE",
                   "DEDUPE_RELATIVE_ADJACENT")
-#: Per-mesh tables: the MeshArrays fields that are SceneDesc fields too (all but the scalar extent).
-MESH_TABLES = tuple(name for name in MeshArrays.__dataclass_fields__ if name != "extent")
+#: SceneDesc's per-mesh address fields and the MeshArrays field each points into, with its element type.
+MESH_ADDRESSES = {"mesh_nodes": "nodes", "mesh_order": "tri_order", "mesh_tri_vertex": "tri_vertex",
+                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals"}
+MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tri_normal": np.int32,
+               "vertices": np.float64, "normals": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
 
@@ -271,17 +274,15 @@ class FlatScene:
         return tuple(float(getattr(mesh_module, name)) for name in MESH_CONSTANTS)
 
     def _flatten_meshes(self, meshes: list[MeshArrays]) -> None:
-        """The meshes' tables one after the other (each flattened; SceneDesc.mesh_info says where each starts)."""
+        """Per mesh, its counts and the addresses of its own arrays (nothing is copied: the C core reads
+        the arrays the NumPy path reads; self.arrays keeps them alive)."""
         a = self.arrays
-        info, node_base, tri_base = [], 0, 0
-        for mesh in meshes:
-            n_nodes, n_tris = len(mesh.node_count), len(mesh.tri_order)
-            info.append((node_base, n_nodes, tri_base, n_tris))
-            node_base += n_nodes
-            tri_base += n_tris
-        a["mesh_info"] = info
-        a["mesh_extent"] = [float(mesh.extent) for mesh in meshes]
-        for name in MESH_TABLES:
-            parts = [np.asarray(getattr(mesh, name)).reshape(-1) for mesh in meshes]
-            # (one mesh, the usual case, is passed as it is: a copy of a big mesh's tables is hundreds of MB)
-            a[name] = parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else ()
+        a["mesh_info"] = [(len(m.nodes), len(m.tri_order), len(m.vertices), len(m.normals)) for m in meshes]
+        a["mesh_extent"] = [float(m.extent) for m in meshes]
+        kept = []
+        for field, column in MESH_ADDRESSES.items():
+            arrays = [getattr(m, column) for m in meshes]
+            checked = [None if x is None else np.ascontiguousarray(x, dtype=MESH_DTYPES[column]) for x in arrays]
+            kept += [x for x in checked if x is not None]
+            a[field] = np.array([0 if x is None else x.ctypes.data for x in checked], dtype=np.uintp)
+        self._mesh_arrays = kept  # the C side points into these

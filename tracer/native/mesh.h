@@ -1,29 +1,43 @@
-/* Rays against triangle meshes: the C form of tracer/intersect/mesh.py, walking the very same flat BVH
- * arrays (one ray at a time instead of packets).  All-hits, closest-hit and any-hit queries; the
- * tolerances, the deduplication of shared-edge crossings and the ordering of coincident enter/exit pairs
- * are those of the NumPy code. */
+/* Rays against triangle meshes: the C form of tracer/intersect/mesh.py, walking the very same arrays (one
+ * ray at a time instead of packets).  All-hits, closest-hit and any-hit queries; the tolerances, the
+ * deduplication of shared-edge crossings and the ordering of coincident enter/exit pairs are those of the
+ * NumPy code.
+ *
+ * A mesh is vertex-indexed: three int32 vertex (and normal) indices per triangle into the mesh's own
+ * vertex and normal arrays, a leaf order, and 32-byte nodes.  Edges, scales, orientation and normals are
+ * computed from the vertices where a hit needs them, with the NumPy code's operations in its order. */
 #ifndef RT_MESH_H
 #define RT_MESH_H
 
+#include <stddef.h>
 #include <stdlib.h>
 
 #include "core.h"
 #include "numeric.h"
 
+/* One BVH node (tracer.intersect.mesh.NODE): the box in single precision (rounded outward); an inner node
+ * (count 0) has its children at offset and offset + 1 and was split along axis; a leaf holds the
+ * triangles order[offset .. offset + count). */
+typedef struct {
+    float lo[3], hi[3];
+    int32_t offset;
+    uint16_t count;
+    int8_t axis;
+    uint8_t pad;
+} MeshNode;
+
+_Static_assert(sizeof(MeshNode) == 32 && offsetof(MeshNode, hi) == 12 && offsetof(MeshNode, offset) == 24 &&
+                   offsetof(MeshNode, count) == 28 && offsetof(MeshNode, axis) == 30,
+               "MeshNode must match tracer.intersect.mesh.NODE");
 
 typedef struct {
-    const double *lo, *hi;
-    const int64_t *left, *right, *first, *count;
-    const int8_t *axis;
+    const MeshNode *nodes;
     int64_t n_nodes;
-    const int64_t *order;
-    const double *p0, *e1, *e2;
-    const uint8_t *flip;
-    const double *edge_scale, *radius, *slack1, *slack2;
-    const int64_t *welded;
-    const double *geometric, *corners;
-    const uint8_t *has_normals;
-    int64_t n_tris;
+    const int32_t *order;       /* leaf slot -> triangle */
+    const int32_t *tri_vertex;  /* 3 per triangle */
+    const int32_t *tri_normal;  /* 3 per triangle (below 0: the triangle has no normals), or NULL */
+    const double *vertices, *normals;
+    int64_t n_tris, n_vertices, n_normals;
     double extent;
     int64_t depth;  /* longest root-to-leaf path, in nodes */
     double rounding_factor, barycentric_max, parallel_eps, dedupe, dedupe_adjacent;
@@ -57,16 +71,16 @@ static inline void mesh_ray(MeshRay *r, const double *o, const double *d)
 static inline double nan_min(double a, double b) { return (isnan(a) || isnan(b)) ? NAN : (a < b ? a : b); }
 static inline double nan_max(double a, double b) { return (isnan(a) || isnan(b)) ? NAN : (a > b ? a : b); }
 
-/* The box [lo, hi] meets the ray for some t in [lower, upper]; a NaN slab (origin on a face plane of a
+/* The node's box meets the ray for some t in [lower, upper]; a NaN slab (origin on a face plane of a
  * parallel ray) constrains nothing, as in TriangleMesh._slab.  A ray whose inverse direction (and origin)
  * is finite cannot make a NaN (box corners are finite), and then plain min/max give the same answer. */
-static inline int slab_hit(const double *lo, const double *hi, const MeshRay *r, double lower, double upper)
+static inline int slab_hit(const MeshNode *node, const MeshRay *r, double lower, double upper)
 {
     const double *o = r->o, *inv = r->inv;
     if (r->finite_inv && !isnan(lower) && !isnan(upper)) {
         double near = lower, far = upper;
         for (int i = 0; i < 3; i++) {
-            double a = (lo[i] - o[i]) * inv[i], b = (hi[i] - o[i]) * inv[i];
+            double a = ((double)node->lo[i] - o[i]) * inv[i], b = ((double)node->hi[i] - o[i]) * inv[i];
             double enter = a < b ? a : b, leave = a < b ? b : a;
             near = enter > near ? enter : near;
             far = leave < far ? leave : far;
@@ -75,7 +89,7 @@ static inline int slab_hit(const double *lo, const double *hi, const MeshRay *r,
     }
     double near = NAN, far = NAN;
     for (int i = 0; i < 3; i++) {
-        double a = (lo[i] - o[i]) * inv[i], b = (hi[i] - o[i]) * inv[i];
+        double a = ((double)node->lo[i] - o[i]) * inv[i], b = ((double)node->hi[i] - o[i]) * inv[i];
         near = fmax_nan(near, nan_min(a, b));
         far = fmin_nan(far, nan_max(a, b));
     }
@@ -84,10 +98,35 @@ static inline int slab_hit(const double *lo, const double *hi, const MeshRay *r,
     return near <= far;
 }
 
-/* Moller-Trumbore against leaf-order triangle i. */
+static inline double length3(const double *v) { return sqrt(dot3(v, v)); }
+
+/* The corners of triangle tri (original order). */
+static inline void mesh_corners(const MeshView *m, int64_t tri, const double **p0, const double **p1,
+                                const double **p2)
+{
+    const int32_t *index = m->tri_vertex + 3 * tri;
+    *p0 = m->vertices + 3 * (int64_t)index[0];
+    *p1 = m->vertices + 3 * (int64_t)index[1];
+    *p2 = m->vertices + 3 * (int64_t)index[2];
+}
+
+static inline void mesh_edges(const MeshView *m, int64_t tri, double *e1, double *e2)
+{
+    const double *p0, *p1, *p2;
+    mesh_corners(m, tri, &p0, &p1, &p2);
+    for (int k = 0; k < 3; k++) {
+        e1[k] = p1[k] - p0[k];
+        e2[k] = p2[k] - p0[k];
+    }
+}
+
+/* Moller-Trumbore against the triangle in leaf slot i. */
 static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, double *t, double *b1, double *b2)
 {
-    const double *p0 = m->p0 + 3 * i, *e1 = m->e1 + 3 * i, *e2 = m->e2 + 3 * i;
+    const double *p0, *p1, *p2;
+    mesh_corners(m, m->order[i], &p0, &p1, &p2);
+    double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
     double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
     double pvec[3], qvec[3];
     cross3(r->d, e2, pvec);
@@ -97,20 +136,23 @@ static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, 
     double u = dot3(s, pvec) * inv_det;
     double v = dot3(r->d, qvec) * inv_det;
     /* The slack below is at most barycentric_max (the cap), so a barycentric beyond twice that is a miss
-     * whatever the slack: rejected here before the slack's two divisions (most triangles of a leaf are). */
+     * whatever the slack: rejected here before the slack's square roots and divisions (most triangles of a
+     * leaf are). */
     double reject = 2.0 * m->barycentric_max;
     if (u < -reject || v < -reject || u + v > 1.0 + 2.0 * reject)
         return 0;
     double tt = dot3(e2, qvec) * inv_det;
     /* The barycentric slack bounds the rounding of this ray and triangle (see ROUNDING_FACTOR in
-     * mesh.py), capped for near-parallel rays. */
+     * mesh.py), capped for near-parallel rays; its scales are the largest vertex norm and the edges. */
+    double radius = nan_max(nan_max(length3(p0), length3(p1)), length3(p2));
+    double e1_length = length3(e1), e2_length = length3(e2);
     double abs_det = fabs(det);
-    double s1 = m->slack1[i], s2 = m->slack2[i];
-    double rounding = m->rounding_factor * DBL_EPSILON * r->speed * (r->magnitude + m->radius[i]) / abs_det;
-    double cap = m->barycentric_max / (s1 > s2 ? s1 : s2);
+    double s1 = e2_length + radius, s2 = e1_length + radius;
+    double rounding = m->rounding_factor * DBL_EPSILON * r->speed * (r->magnitude + radius) / abs_det;
+    double cap = m->barycentric_max / nan_max(s1, s2);
     rounding = nan_min(rounding, cap);
     double slack1 = rounding * s1, slack2 = rounding * s2;
-    if (abs_det > m->parallel_eps * r->speed * m->edge_scale[i] && u >= -slack1 && v >= -slack2 &&
+    if (abs_det > m->parallel_eps * r->speed * (e1_length * e2_length) && u >= -slack1 && v >= -slack2 &&
         u + v <= 1.0 + slack1 + slack2 && isfinite(tt)) {
         *t = tt;
         *b1 = u;
@@ -120,24 +162,60 @@ static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, 
     return 0;
 }
 
+/* The unit vertex normals of triangle tri (zero where a normal is zero, all zero where the triangle has
+ * none); returns whether it has normals.  (TriangleMesh._unit_corner_normals) */
+static inline int mesh_corner_normals(const MeshView *m, int64_t tri, double c[3][3])
+{
+    const int32_t *index = m->tri_normal ? m->tri_normal + 3 * tri : NULL;
+    int has = index && index[0] >= 0 && index[1] >= 0 && index[2] >= 0;
+    for (int j = 0; j < 3; j++) {
+        double length = has ? length3(m->normals + 3 * (int64_t)index[j]) : 0.0;
+        for (int k = 0; k < 3; k++)
+            c[j][k] = length > 0.0 ? m->normals[3 * (int64_t)index[j] + k] / length : 0.0;
+    }
+    return has;
+}
+
+/* The winding normal E1 x E2 of triangle tri into w; returns whether the unit corner normals, summed,
+ * point against it (the geometric normal is then -w).  (TriangleMesh._geometric) */
+static inline int mesh_winding(const MeshView *m, int64_t tri, const double c[3][3], double *w)
+{
+    double e1[3], e2[3], sum[3];
+    mesh_edges(m, tri, e1, e2);
+    cross3(e1, e2, w);
+    for (int k = 0; k < 3; k++)
+        sum[k] = (c[0][k] + c[1][k]) + c[2][k];
+    return dot3(sum, w) < 0.0;
+}
+
 static inline int mesh_entering(const MeshView *m, int64_t slot, const double *d)
 {
-    double w[3];
-    cross3(m->e1 + 3 * slot, m->e2 + 3 * slot, w);
+    double c[3][3], w[3];
+    int64_t tri = m->order[slot];
+    mesh_corner_normals(m, tri, c);
+    int flip = mesh_winding(m, tri, c, w);
     double facing = dot3(d, w);
-    return m->flip[slot] ? facing > 0.0 : facing < 0.0;
+    return flip ? facing > 0.0 : facing < 0.0;
 }
 
 /* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
 static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
 {
-    const double *g = m->geometric + 3 * tri, *c = m->corners + 9 * tri;
+    double c[3][3], g[3];
+    int has = mesh_corner_normals(m, tri, c);
+    int flip = mesh_winding(m, tri, c, g);
+    if (flip)
+        for (int k = 0; k < 3; k++)
+            g[k] = -g[k];
+    double g_length = length3(g);
+    for (int k = 0; k < 3; k++)
+        g[k] = g_length > 0.0 ? g[k] / g_length : 0.0;
     double w0 = 1.0 - b1 - b2;
     double s[3];
     for (int k = 0; k < 3; k++)
-        s[k] = w0 * c[k] + b1 * c[3 + k] + b2 * c[6 + k];
-    double length = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
-    if (m->has_normals[tri] && length > 1e-12 && dot3(s, g) > 0.0) {
+        s[k] = w0 * c[0][k] + b1 * c[1][k] + b2 * c[2][k];
+    double length = length3(s);
+    if (has && length > 1e-12 && dot3(s, g) > 0.0) {
         n[0] = s[0] / length;
         n[1] = s[1] / length;
         n[2] = s[2] / length;
@@ -174,10 +252,11 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, &r, lower, best_t))
+        const MeshNode *nd = &m->nodes[node];
+        if (!slab_hit(nd, &r, lower, best_t))
             continue;
-        if (m->count[node]) {
-            int64_t first = m->first[node], last = first + m->count[node];
+        if (nd->count) {
+            int64_t first = nd->offset, last = first + nd->count;
             for (int64_t i = first; i < last; i++) {
                 double t, b1, b2;
                 if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < best_t) {
@@ -189,8 +268,8 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
             }
             continue;
         }
-        int64_t near = m->left[node], far = m->right[node];
-        if (r.d[m->axis[node]] < 0.0) {
+        int64_t near = nd->offset, far = nd->offset + 1;
+        if (r.d[nd->axis] < 0.0) {
             int64_t x = near; near = far; far = x;
         }
         stack[top++] = far;
@@ -213,10 +292,11 @@ static int mesh_any(const MeshView *m, const double *o, const double *d, double 
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, &r, lower, upper))
+        const MeshNode *nd = &m->nodes[node];
+        if (!slab_hit(nd, &r, lower, upper))
             continue;
-        if (m->count[node]) {
-            int64_t first = m->first[node], last = first + m->count[node];
+        if (nd->count) {
+            int64_t first = nd->offset, last = first + nd->count;
             for (int64_t i = first; i < last; i++) {
                 double t, b1, b2;
                 if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < upper)
@@ -224,8 +304,8 @@ static int mesh_any(const MeshView *m, const double *o, const double *d, double 
             }
             continue;
         }
-        stack[top++] = m->right[node];
-        stack[top++] = m->left[node];
+        stack[top++] = nd->offset + 1;
+        stack[top++] = nd->offset;
     }
     return 0;
 }
@@ -282,20 +362,28 @@ static void raw_sort_by_t(RawHit *h, int64_t n)
     }
 }
 
+/* Do the triangles in leaf slots a and b share a vertex, by index or by position?
+ * (TriangleMesh._touching) */
+static inline int mesh_touching(const MeshView *m, int64_t a, int64_t b)
+{
+    const int32_t *va = m->tri_vertex + 3 * (int64_t)m->order[a], *vb = m->tri_vertex + 3 * (int64_t)m->order[b];
+    for (int x = 0; x < 3; x++)
+        for (int y = 0; y < 3; y++) {
+            if (va[x] == vb[y])
+                return 1;
+            const double *p = m->vertices + 3 * (int64_t)va[x], *q = m->vertices + 3 * (int64_t)vb[y];
+            if (p[0] == q[0] && p[1] == q[1] && p[2] == q[2])
+                return 1;
+        }
+    return 0;
+}
+
 /* How far apart hits a and b may be and still be one place (mesh.py's _dedupe_window): wider when the two
  * triangles share a vertex. */
 static inline double dedupe_window(const MeshView *m, const RawHit *a, const RawHit *b, double tol_scale)
 {
     double scale = fmax_nan(fabs(b->t), fabs(a->t)) + tol_scale;
-    const int64_t *wa = m->welded + 3 * a->slot, *wb = m->welded + 3 * b->slot;
-    int touching = 0;
-    for (int x = 0; x < 3 && !touching; x++)
-        for (int y = 0; y < 3; y++)
-            if (wa[x] == wb[y]) {
-                touching = 1;
-                break;
-            }
-    return (touching ? m->dedupe_adjacent : m->dedupe) * scale;
+    return (mesh_touching(m, a->slot, b->slot) ? m->dedupe_adjacent : m->dedupe) * scale;
 }
 
 /* Every crossing of the whole line, deduplicated and ordered as TriangleMesh.all_hits.  Grows
@@ -312,10 +400,11 @@ static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        if (!slab_hit(m->lo + 3 * node, m->hi + 3 * node, &r, -INFINITY, INFINITY))
+        const MeshNode *nd = &m->nodes[node];
+        if (!slab_hit(nd, &r, -INFINITY, INFINITY))
             continue;
-        if (m->count[node]) {
-            int64_t first = m->first[node], last = first + m->count[node];
+        if (nd->count) {
+            int64_t first = nd->offset, last = first + nd->count;
             for (int64_t i = first; i < last; i++) {
                 double t, b1, b2;
                 if (mesh_triangle(m, i, &r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
@@ -323,8 +412,8 @@ static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int
             }
             continue;
         }
-        stack[top++] = m->right[node];
-        stack[top++] = m->left[node];
+        stack[top++] = nd->offset + 1;
+        stack[top++] = nd->offset;
     }
     int64_t n = raw->n;
     if (n == 0)

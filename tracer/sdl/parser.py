@@ -309,6 +309,7 @@ class _Reader:
         self.material: Optional[Material] = None
         self.materials: dict[tuple, Material] = {}
         self.stack: list[transforms.Affine] = [transforms.IDENTITY_AFFINE]
+        self.invertible: Optional[transforms.Affine] = None  # the transform last found to have an inverse
         self.macros: dict[str, _Macro] = {}
         self.macro_sizes: dict[str, int] = {}  # tokens a use of each macro splices (see _expanded_size)
         self.pending: list[_PendingBoolean] = []
@@ -625,12 +626,14 @@ class _Reader:
         elif kind == "mesh":
             mesh_file, mesh_at = self._name(kind, at, "a mesh file name")
         transform = self.stack[-1]
-        if _affine_is_singular(transform):
-            overflows = not all(map(math.isfinite, transform))
-            why = "transform overflows" if overflows else "singular transform"
-            hint = "scales too large for a float" if overflows else "a scale of 0?"
-            self._report(self._error(at, f"{why} for '{kind}' ({hint})", expected="a transform with an inverse"))
-            return None
+        if transform is not self.invertible:  # (shapes in a row often share their transform)
+            if _affine_is_singular(transform):
+                overflows = not all(map(math.isfinite, transform))
+                why = "transform overflows" if overflows else "singular transform"
+                hint = "scales too large for a float" if overflows else "a scale of 0?"
+                self._report(self._error(at, f"{why} for '{kind}' ({hint})", expected="a transform with an inverse"))
+                return None
+            self.invertible = transform
         mesh = None
         if kind == "mesh":
             mesh = self._mesh_file(mesh_file, mesh_at)

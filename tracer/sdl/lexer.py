@@ -8,7 +8,7 @@ A comment ``! name: text`` is kept aside: it names the next shape.
 The lexer does not decide what a token means: a file name such as ``../meshes/pawn.3vn`` is one token like
 any other, and the parser decides whether a token is a keyword, a number or a name.
 
-A scene of a million shapes is some 2.4·10^7 tokens, so the reader gets them from :class:`Tokens` as plain
+A scene of a million shapes is some 1.5·10^7 tokens, so the reader gets them from :class:`Tokens` as plain
 strings, a block of lines at a time, numbered in reading order; it asks where a token is (its line and
 column) only for what it records or reports (a shape's source, an error), and that question re-reads the
 token's line.  :func:`tokenize` gives every token with its place, for tests and small texts.

@@ -10,6 +10,11 @@ it stops the render within a block.  Colours are the tracer's linear values, wri
 Viewport: each redraw traces for a short time slice with the viewport's own view and projection
 matrices, draws the film so far as a texture over the region, and asks for another redraw until the
 image is finished; any change to the scene or the view starts again.
+
+Both keep what they made of each object's geometry (object_cache) and rebuild only the objects that
+``depsgraph.updates`` says changed: the viewport for as long as it shows Rendered, final renders while the
+scene's Persistent Data is on (Blender then keeps the engine between renders, as for Cycles).  The last
+compiled scene is kept too, so that the meshes' BVHs, found again by content, are not built anew.
 """
 from __future__ import annotations
 
@@ -22,7 +27,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import blocks, convert, deps, passes, raycam
+from . import blocks, convert, deps, object_cache, passes, raycam
 from .importer import CAM_EXACT, CAM_SHOWN
 from .scene_build import SceneBuilder, flat, matrix_np
 
@@ -105,8 +110,8 @@ def camera_rays(cam_obj, matrix, params: raycam.CameraParams, winx: int, winy: i
     return exact_rays_for
 
 
-def build_scene(depsgraph, mode: str):
-    builder = SceneBuilder(depsgraph, mode=mode)
+def build_scene(depsgraph, mode: str, cache: Optional[object_cache.ObjectCache] = None):
+    builder = SceneBuilder(depsgraph, mode=mode, cache=cache)
     scene = builder.build(depsgraph.scene)
     return scene, builder.warnings
 
@@ -213,6 +218,13 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         self._view = None  # viewport state
         self._view_dirty = True
         self._view_scene = None
+        self._geometry = object_cache.ObjectCache()  # what each object's geometry became, between builds
+        self._kept = None  # the last final render's compiled scene, with Persistent Data on
+
+    def update(self, data, depsgraph):
+        """Before each final render: what changed since the last one (everything, unless Persistent Data
+        kept this engine and its depsgraph)."""
+        self._geometry.apply_updates(depsgraph)
 
     # -- final render ---------------------------------------------------------------------------------
 
@@ -247,12 +259,16 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 matrix = None
             params = camera_params(cam_obj, matrix)
             self.update_stats("", "SDL Ray Tracer | building the scene")
-            tracer_scene, warnings = build_scene(depsgraph, "RENDER")
+            tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
             if self.is_preview:
                 preview_lighting(tracer_scene)
             for message in warnings:
                 self.report({"WARNING"}, message)
             compiled = deps.module("compile").compile_scene(tracer_scene)
+            # Kept for the next render only where Blender keeps this engine for it (Persistent Data).
+            self._kept = compiled if render.use_persistent_data else None
+            if not render.use_persistent_data:
+                self._geometry.clear()
             aspx, aspy = render.pixel_aspect_x, render.pixel_aspect_y
 
             rays_for = camera_rays(cam_obj, matrix, params, winx, winy, x0, y0, aspx, aspy)
@@ -329,6 +345,7 @@ class SDLRenderEngine(bpy.types.RenderEngine):
     # -- viewport -------------------------------------------------------------------------------------
 
     def view_update(self, context, depsgraph):
+        self._geometry.apply_updates(depsgraph)
         self._view_dirty = True
         self._view = None
 
@@ -342,7 +359,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         key = (width, height, persp.tobytes())
         try:
             if self._view_dirty or self._view_scene is None:
-                tracer_scene, _ = build_scene(depsgraph, "VIEWPORT")
+                tracer_scene, _ = build_scene(depsgraph, "VIEWPORT", self._geometry)
+                # (the scene compiled before stays alive until this one is made: its BVHs are found again)
                 self._view_scene = deps.module("compile").compile_scene(tracer_scene)
                 self._view_dirty = False
                 self._view = None

@@ -157,36 +157,90 @@ def _corner_normals(mesh) -> np.ndarray:
     return out.reshape(-1, 3).astype(np.float64)
 
 
-def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
-    """The mesh's triangles (as Blender splits its polygons) with its corner normals, as one tracer MeshData
-    per material index."""
-    MeshData = deps.module("model").MeshData
+def _read(collection, name: str, count: int, dtype) -> np.ndarray:
+    out = np.empty(count, dtype=dtype)
+    collection.foreach_get(name, out)
+    return out
+
+
+def _triangle_normals(mesh, tri_verts: np.ndarray, tri_loops: np.ndarray, tri_polygons: np.ndarray):
+    """The mesh's shading normals and each triangle corner's index into them.
+
+    Blender 4.1+ says where its normals live (``normals_domain``): per vertex on a smooth mesh, per face on a
+    flat one, per corner only where sharp edges or custom normals split them.  Its corner normals are then
+    the vertex's or the face's normal copied, so reading them from that domain gives the same values in a
+    fraction of the memory (a million quads have four million corners but a million vertices)."""
+    domain = getattr(mesh, "normals_domain", "CORNER")
+    if domain == "POINT":
+        normals = _read(mesh.vertex_normals, "vector", len(mesh.vertices) * 3, np.float32)
+        index = tri_verts
+    elif domain == "FACE":
+        normals = _read(mesh.polygon_normals, "vector", len(mesh.polygons) * 3, np.float32)
+        index = np.repeat(tri_polygons, 3)
+    else:
+        return _corner_normals(mesh), tri_loops
+    return normals.reshape(-1, 3).astype(np.float64), index
+
+
+def _triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Blender's triangles of the mesh's polygons: for each, its corners' vertices and corners (flat, three
+    per triangle), its polygon and its material index.
+
+    Blender 4.0+ keeps the corners' vertices, the triangles' polygons and the material indices as plain
+    arrays (attributes), which read at memory speed; asking each triangle for its vertices and material goes
+    through every item, ~0.5 s per million.  Blender 3.x asks the triangles."""
     mesh.calc_loop_triangles()
     tris = mesh.loop_triangles
     count = len(tris)
-    if count == 0:
+    tri_loops = _read(tris, "loops", count * 3, np.int32)
+    attributes = mesh.attributes
+    corner_vert = attributes.get(".corner_vert")
+    if corner_vert is not None and hasattr(mesh, "loop_triangle_polygons"):
+        tri_verts = _read(corner_vert.data, "value", len(mesh.loops), np.int32)[tri_loops]
+        tri_polygons = _read(mesh.loop_triangle_polygons, "value", count, np.int32)
+        materials = attributes.get("material_index")
+        if materials is None or materials.domain != "FACE":  # (no attribute: every polygon has material 0)
+            mat_index = np.zeros(count, dtype=np.int32)
+        else:
+            mat_index = _read(materials.data, "value", len(mesh.polygons), np.int32)[tri_polygons]
+    else:
+        tri_verts = _read(tris, "vertices", count * 3, np.int32)
+        tri_polygons = _read(tris, "polygon_index", count, np.int32)
+        mat_index = _read(tris, "material_index", count, np.int32)
+    return tri_verts, tri_loops, tri_polygons, mat_index
+
+
+def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
+    """The mesh's triangles (as Blender splits its polygons) with its shading normals, as one tracer MeshData
+    per material index.  Faces are kept as flat arrays (model.FaceList): a million-polygon mesh as Python
+    tuples took seconds to make and to hash.  The parts share the vertex and normal arrays.  Their digest
+    (compile.mesh_digest) is taken here, once: whoever keeps them must not change them."""
+    model = deps.module("model")
+    tri_verts, tri_loops, tri_polygons, mat_index = _triangles(mesh)
+    if len(mat_index) == 0:
         return {}
-    co = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
-    mesh.vertices.foreach_get("co", co)
-    vertices = co.reshape(-1, 3).astype(np.float64)
-    tri_verts = np.empty(count * 3, dtype=np.int32)
-    tris.foreach_get("vertices", tri_verts)
-    tri_loops = np.empty(count * 3, dtype=np.int32)
-    tris.foreach_get("loops", tri_loops)
-    mat_index = np.empty(count, dtype=np.int32)
-    tris.foreach_get("material_index", mat_index)
-    normals = _corner_normals(mesh)
-    tri_verts = tri_verts.reshape(-1, 3)
-    tri_loops = tri_loops.reshape(-1, 3)
+    vertices = _read(mesh.vertices, "co", len(mesh.vertices) * 3, np.float32).reshape(-1, 3).astype(np.float64)
+    normals, normal_index = _triangle_normals(mesh, tri_verts, tri_loops, tri_polygons)
+    materials = np.unique(mat_index)
     out = {}
-    for index in np.unique(mat_index):
-        rows = np.nonzero(mat_index == index)[0]
-        used_loops = np.unique(tri_loops[rows])
-        remap = np.full(len(normals), -1, dtype=np.int64)
-        remap[used_loops] = np.arange(len(used_loops))
-        faces = list(zip(map(tuple, tri_verts[rows].tolist()), map(tuple, remap[tri_loops[rows]].tolist())))
-        out[int(index)] = MeshData(vertices=vertices, normals=normals[used_loops], faces=faces, origin=origin)
+    for index in materials:
+        if len(materials) == 1:
+            verts, norms = tri_verts, normal_index
+        else:
+            corners = _corners_of(np.nonzero(mat_index == index)[0])
+            verts = tri_verts[corners]
+            # (normals per vertex: one index array serves both, as FaceList allows)
+            norms = verts if normal_index is tri_verts else normal_index[corners]
+        faces = model.FaceList(np.full(len(verts) // 3, 3, dtype=np.int64), verts, norms)
+        data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin)
+        # Never changed after this (a changed object is converted anew): hashed here, once, not at every compile.
+        out[int(index)] = deps.module("compile").remember_digest(data)
     return out
+
+
+def _corners_of(triangles: np.ndarray) -> np.ndarray:
+    """Indices of the three corners of each of ``triangles`` in a flat (triangle, corner) array."""
+    return (triangles[:, None] * 3 + np.arange(3)).reshape(-1)
 
 
 #: .3vn files read: path -> (modification time, MeshData); one version of each file.
@@ -203,7 +257,8 @@ def exact_mesh_data(info: GenericInfo, mesh):
         mtime_read, data = _exact_files.get(info.mesh_file, (None, None))
         if mtime_read != mtime:
             try:
-                data = deps.module("meshio").read_3vn(info.mesh_file)
+                # (kept unchanged while the file is: its digest is taken once)
+                data = deps.module("compile").remember_digest(deps.module("meshio").read_3vn(info.mesh_file))
             except Exception:  # noqa: BLE001 - a changed or broken file: fall back to Blender's copy
                 return None
             _exact_files[info.mesh_file] = (mtime, data)

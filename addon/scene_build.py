@@ -22,7 +22,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import convert, deps, meshes, props
+from . import convert, deps, meshes, object_cache, props
 
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
@@ -58,16 +58,19 @@ class SceneBuilder:
     in the viewport) or ``EXPORT`` (modifiers enabled for rendering, polygons kept as polygons, ``mesh``
     files referenced); which objects there are is the depsgraph's (and ``build``'s options).  ``to_target``
     maps Blender's world to the output frame (identity for rendering, Blender -> SDL axes for export).
+    What is made from an object's geometry goes through ``cache`` (object_cache.ObjectCache): the engine
+    passes its own, kept between builds; by default a new one, so that instances of an object share it.
     """
 
-    def __init__(self, depsgraph, mode: str = "RENDER", to_target: Optional[np.ndarray] = None):
+    def __init__(self, depsgraph, mode: str = "RENDER", to_target: Optional[np.ndarray] = None,
+                 cache: Optional[object_cache.ObjectCache] = None):
         self.depsgraph = depsgraph
         self.mode = mode
+        self.cache = object_cache.ObjectCache() if cache is None else cache
         self.to_target = np.eye(4) if to_target is None else np.asarray(to_target, dtype=np.float64)
         self.model = deps.module("model")
         self.warnings: list[str] = []
         self._generic_cache: dict = {}
-        self._mesh_cache: dict = {}
         #: id(shape) -> the Blender object's name, for each mesh shape (the exporter names mesh files by it)
         self.mesh_object_names: dict[int, str] = {}
         self._materials: dict = {}
@@ -124,12 +127,13 @@ class SceneBuilder:
 
     # -- objects --------------------------------------------------------------------------------------
 
-    def generic(self, obj):
+    def generic(self, obj, own: bool = True):
         """Generic-shape info of an object's own mesh (None if not an unedited generic shape)."""
         original = obj.original if hasattr(obj, "original") else obj
         if original.type != "MESH":
             return None
-        return meshes.generic_info(original.data, self._generic_cache)
+        return self.cache.get(obj, "generic", lambda: meshes.generic_info(original.data, self._generic_cache),
+                              own)
 
     def shape_matrix(self, obj, matrix_world: np.ndarray, info) -> np.ndarray:
         """World matrix of the generic shape (Blender axes), exact while the object is where import put it."""
@@ -140,8 +144,9 @@ class SceneBuilder:
         return matrix_world @ info.mesh_matrix
 
     def object_node(self, obj, matrix_world: Optional[np.ndarray] = None, top_level: bool = True,
-                    visiting: Optional[set] = None):
-        """Tracer object(s) for one evaluated object: a list (a mesh may give one per material)."""
+                    visiting: Optional[set] = None, own: bool = True):
+        """Tracer object(s) for one evaluated object: a list (a mesh may give one per material).  ``own`` is
+        False for an instance made by geometry nodes (see ObjectCache.get)."""
         obj_eval = self._evaluated(obj)
         if matrix_world is None:
             matrix_world = matrix_np(obj_eval.matrix_world)
@@ -150,14 +155,14 @@ class SceneBuilder:
         if original.name in visiting:
             self.warnings.append(f"{original.name}: Boolean operands form a loop; traced as a mesh")
             return self.mesh_nodes(obj_eval, matrix_world, top_level)
-        info = self.generic(obj_eval)
+        info = self.generic(obj_eval, own)
         enabled = enabled_modifiers(original, self.mode) if info is not None else []
         if info is None or any(m.type != "BOOLEAN" for m in enabled):
-            return self.mesh_nodes(obj_eval, matrix_world, top_level)
+            return self.mesh_nodes(obj_eval, matrix_world, top_level, own)
         matrix = self.shape_matrix(original, matrix_world, info)
         if not self._usable(matrix, original.name):
             return []
-        node = self.leaf_shape(original, obj_eval, matrix, info)
+        node = self.leaf_shape(original, obj_eval, matrix, info, own)
         visiting = visiting | {original.name}
         for modifier in enabled:
             operands = []
@@ -173,16 +178,17 @@ class SceneBuilder:
                 node = self.model.CSG(BOOLEAN_OPS[modifier.operation], node, right[0])
         return [node]
 
-    def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info):
+    def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info, own: bool = True):
         kind = info.kind
         shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval),
                                  name=original.name)
         if kind == "taperedCylinder":
             shape.tapered_radius = info.param
         if kind in self.model.POLYHEDRON_KINDS or kind in ("teapot", "mesh"):
-            data = meshes.exact_mesh_data(info, original.data)
+            data = self.cache.get(obj_eval, "exact mesh", lambda: meshes.exact_mesh_data(info, original.data), own)
             if data is None:  # a mesh file that is gone: Blender's copy, in the mesh's own frame
-                data = self._blender_mesh(original.data, polygons=self.mode == "EXPORT")[0]
+                data = self.cache.get(obj_eval, f"mesh {self.mode}",
+                                      lambda: self._blender_mesh(original.data), own)[0]
                 shape.matrix = self._target(matrix @ np.linalg.inv(info.mesh_matrix))
             elif kind == "mesh" and self.mode == "EXPORT":
                 shape.mesh_file = info.mesh_file
@@ -190,34 +196,38 @@ class SceneBuilder:
             self.mesh_object_names[id(shape)] = original.name
         return shape
 
-    def _blender_mesh(self, mesh, polygons: bool) -> dict:
-        key = (mesh.as_pointer(), polygons)
-        if key not in self._mesh_cache:
-            self._mesh_cache[key] = (polygon_meshes(mesh) if polygons else meshes.triangle_meshes(mesh, mesh.name))
-        return self._mesh_cache[key]
+    def _blender_mesh(self, mesh, name: Optional[str] = None) -> dict:
+        """A Blender mesh as tracer meshes, one per material: polygons for export, else triangles."""
+        name = mesh.name if name is None else name
+        return polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, name)
 
-    def mesh_nodes(self, obj_eval, matrix_world: np.ndarray, top_level: bool) -> list:
-        if obj_eval.type not in GEOMETRY_TYPES:
-            return []
-        if not self._usable(matrix_world, obj_eval.name):
-            return []
+    def _evaluated_mesh(self, obj_eval) -> dict:
+        """_blender_mesh of the object's evaluated geometry (modifiers applied; curves and text as meshes)."""
         try:
             mesh = obj_eval.to_mesh()
         except RuntimeError:
             mesh = None
         if mesh is None:
-            return []
+            return {}
         try:
-            parts = polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, obj_eval.name)
+            return self._blender_mesh(mesh, obj_eval.name)
         finally:
             obj_eval.to_mesh_clear()
+
+    def mesh_nodes(self, obj_eval, matrix_world: np.ndarray, top_level: bool, own: bool = True) -> list:
+        if obj_eval.type not in GEOMETRY_TYPES:
+            return []
+        if not self._usable(matrix_world, obj_eval.name):
+            return []
+        parts = self.cache.get(obj_eval, f"evaluated mesh {self.mode}", lambda: self._evaluated_mesh(obj_eval), own)
         shapes = []
         for index, data in sorted(parts.items()):
             shapes.append(self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=data,
                                            material=self._slot_material(obj_eval, index)))
         if not top_level and len(shapes) > 1:
             # A Boolean operand is one solid: keep it whole, with its first material.
-            merged = merge_mesh_data([s.mesh for s in shapes], self.model.MeshData)
+            merged = self.cache.get(obj_eval, f"merged mesh {self.mode}",
+                                    lambda: merge_mesh_data([s.mesh for s in shapes], self.model.MeshData), own)
             shapes = [self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=merged,
                                        material=shapes[0].material)]
         for shape in shapes:
@@ -245,6 +255,7 @@ class SceneBuilder:
         model = self.model
         objects, lights = [], []
         entries = []
+        self.cache.begin_build(self.depsgraph)
         for inst in (instances if instances is not None else self.depsgraph.object_instances):
             obj = inst.instance_object if inst.is_instance else inst.object
             original = obj.original
@@ -253,17 +264,21 @@ class SceneBuilder:
             if selected_only and not (inst.is_instance and inst.parent and inst.parent.original.select_get()) \
                     and not original.select_get():
                 continue
-            entries.append((obj, matrix_np(inst.matrix_world), inst.is_instance))
+            # An instance whose original is its instancer was made by geometry nodes: not that object's mesh.
+            own = not inst.is_instance or inst.parent is None or \
+                original.as_pointer() != inst.parent.original.as_pointer()
+            entries.append((obj, matrix_np(inst.matrix_world), own))
         # Import order first (so that files round-trip in their own order), then by name.
         entries.sort(key=lambda e: (e[0].original.get(OBJ_ORDER, math.inf), e[0].original.name))
         shape_entries = []
-        for obj, matrix, is_instance in entries:
+        for obj, matrix, own in entries:
             if obj.type == "LIGHT":
                 lights.append(self.light(obj, matrix))
             elif obj.type in GEOMETRY_TYPES:
-                shape_entries.append((obj, matrix, is_instance))
-        for obj, matrix, is_instance in shape_entries:
-            objects.extend(self.object_node(obj, matrix))
+                shape_entries.append((obj, matrix, own))
+        for obj, matrix, own in shape_entries:
+            objects.extend(self.object_node(obj, matrix, own=own))
+        self.cache.end_build()
         world = scene.world
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
                                         if hasattr(scene, "sdl_render") else 3)
@@ -306,6 +321,12 @@ def polygon_meshes(mesh) -> dict:
 def merge_mesh_data(parts, MeshData):
     """One MeshData from parts that share their vertex array (the pieces of one mesh)."""
     vertices = parts[0].vertices
+    FaceList = deps.module("model").FaceList
+    if all(isinstance(p.faces, FaceList) and p.normals is parts[0].normals for p in parts):
+        # triangle_meshes' parts: one normal array too, so their faces are simply put together
+        faces = FaceList(*(np.concatenate([getattr(p.faces, name) for p in parts])
+                           for name in ("sizes", "vertex_index", "normal_index")))
+        return MeshData(vertices=vertices, normals=parts[0].normals, faces=faces, origin=parts[0].origin)
     normals, faces, offset = [], [], 0
     for part in parts:
         normals.append(np.asarray(part.normals).reshape(-1, 3))

@@ -40,6 +40,9 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         row.active = settings.sampling == "ADAPTIVE"
         row.prop(settings, "threshold")
         layout.column().prop(settings, "target_error")
+        # Blender's own switch (Cycles shows it under Performance): keep this engine between final renders,
+        # so that F12 after moving a light or editing a material rebuilds only what changed.
+        layout.column().prop(context.scene.render, "use_persistent_data")
 
 
 class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
@@ -146,23 +149,29 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
 CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_light, SDL_PT_world, SDL_PT_object)
 
 
-def register() -> None:
-    from . import meshes
+def _cache_handlers() -> tuple:
+    """The handlers that keep the add-on's caches in step with Blender's data (panels' and engine's)."""
+    from . import meshes, object_cache
 
+    return meshes.HANDLERS + object_cache.HANDLERS
+
+
+def register() -> None:
     for cls in CLASSES:
         bpy.utils.register_class(cls)
-    for name, handler in meshes.HANDLERS:
+    for name, handler in _cache_handlers():
         getattr(bpy.app.handlers, name).append(handler)
 
 
 def unregister() -> None:
-    from . import meshes
+    from . import meshes, object_cache
 
-    for name, handler in meshes.HANDLERS:
+    for name, handler in _cache_handlers():
         handlers = getattr(bpy.app.handlers, name)
         while handler in handlers:
             handlers.remove(handler)
     meshes.forget_all()
+    object_cache.forget_everything()
     for cls in reversed(CLASSES):
         if cls.is_registered:
             bpy.utils.unregister_class(cls)

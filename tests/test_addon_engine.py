@@ -13,7 +13,7 @@ from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
 import tracer
-from addon import blocks, engine, raycam
+from addon import blocks, engine, object_cache, raycam
 from addon.scene_build import matrix_np
 from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
 
@@ -303,6 +303,7 @@ def test_viewport_refines_while_the_user_waits(monkeypatch):
 
         def __init__(self):
             self.redraws, self.frames = 0, []
+            self._geometry = object_cache.ObjectCache()
 
         def tag_redraw(self):
             self.redraws += 1

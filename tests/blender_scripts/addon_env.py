@@ -64,7 +64,8 @@ def render_rgba(engine_id: str, path: str | None = None) -> np.ndarray:
     """Render the scene with ``engine_id`` to an EXR and read it back: (height, width, 4) float32 linear,
     row 0 at the *top*."""
     scene = bpy.context.scene
-    scene.render.engine = engine_id
+    if scene.render.engine != engine_id:  # (setting it, even unchanged, frees the engine Persistent Data kept)
+        scene.render.engine = engine_id
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
     scene.view_settings.view_transform = "Standard"

@@ -214,7 +214,7 @@ class _TokenSource:
         return self._groups
 
     def in_macro(self) -> bool:
-        """Whether the token read last came from a macro body."""
+        """Whether a macro body is being read (a token read from the file itself always answers False)."""
         return len(self._frames) > 1
 
     def is_open(self, name: str) -> bool:
@@ -655,7 +655,8 @@ class _Reader:
     def _shape_location(self, at: int) -> SourceLocation:
         if not self.source.in_macro():
             return self._location(at)
-        # A macro used many times places its shapes at the same token each time: one location for all.
+        # A macro used many times places its shapes at the same token each time: one location for all (a
+        # shape that is a macro's last token may come here or above; either way its place is the same).
         location = self.macro_locations.get(at)
         if location is None:
             location = self.macro_locations[at] = self._location(at)

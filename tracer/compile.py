@@ -190,7 +190,7 @@ class Primitive:
         shape = table.shapes[index]
         self.shape, self.index, self.kind = shape, index, shape.kind
         self.material_id = int(table.material_ids[index])
-        self.matrix = table.matrices[index]
+        self.matrix = shape.matrix
         self.inverse = table.inverses[index]
         self.normal_matrix = self.inverse[:3, :3]
         self._take_kind(table.tolerances)
@@ -481,12 +481,14 @@ class PrimitiveTable:
     iter_shapes order over the scene's objects): what the NumPy path's Primitive objects read (each a view of
     its row, made only when asked for) and what flatten.py hands to the C core, computed once for all.
 
-    ``matrices`` and ``inverses`` (N, 4, 4); ``inverse_error`` (N,) (numerics.inverse_rounding);
-    ``inverse_norms`` (N, 2) (Primitive.inverse_norms); ``generic_size`` (N,); ``centers`` (N, 3) and
-    ``radii`` (N,), the world bounding spheres (radius inf and centre 0 for unbounded shapes);
-    ``material_ids`` (N,); ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``top`` (N,), a
-    tapered cylinder's small radius (0 for other kinds); ``meshes``: the TriangleMesh of each mesh by the
-    id of its MeshData."""
+    ``inverses`` (N, 4, 4); ``inverse_error`` (N,) (numerics.inverse_rounding); ``inverse_norms`` (N, 2)
+    (Primitive.inverse_norms); ``generic_size`` (N,); ``spheres`` (N, 4), the world bounding spheres'
+    centres and radii (radius inf and centre 0 for unbounded shapes; ``centers`` and ``radii`` are views of
+    it); ``boxes`` (N, 6), world boxes (lo, hi) of the points the spheres are made from (the generic box's
+    corners, a mesh's vertices; not padded, meaningless for unbounded shapes); ``material_ids`` (N,);
+    ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``top`` (N,), a tapered cylinder's small
+    radius (0 for other kinds); ``meshes``: the TriangleMesh of each mesh by the id of its MeshData.  The
+    matrices themselves are the shapes' own (not kept twice)."""
 
     def __init__(self, shapes: list[Shape], kinds: Sequence[str], tapered_radii: Sequence[float],
                  stack: Optional[np.ndarray], material_ids: np.ndarray):
@@ -505,7 +507,7 @@ class PrimitiveTable:
             stack = np.stack([np.asarray(s.matrix, dtype=np.float64) for s in shapes])
         for i in self.rows(MESH_KINDS).tolist():
             self._build_mesh(shapes[i])
-        self.matrices, self.inverses = stack, inverses
+        self.inverses = inverses
         self.top = np.zeros(n)
         tapered = self.rows(_TAPERED_KINDS)
         if tapered.size:
@@ -518,8 +520,11 @@ class PrimitiveTable:
             self.inverse_norms[rows, 0] = np.abs(inverse[:, :3, :3]).sum(axis=2).max(axis=1)
             self.inverse_norms[rows, 1] = np.abs(inverse[:, :3, 3]).max(axis=1)
         self.generic_size = np.ones(n)
-        self.centers, self.radii = np.zeros((n, 3)), np.full(n, np.inf)
-        self._fill_sizes_and_bounds()
+        self.spheres = np.zeros((n, 4))
+        self.spheres[:, 3] = np.inf
+        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
+        self.boxes = np.zeros((n, 6))
+        self._fill_sizes_and_bounds(stack)
 
     def __len__(self) -> int:
         return len(self.shapes)
@@ -533,14 +538,14 @@ class PrimitiveTable:
         if shape.kind in MESH_KINDS and id(shape.mesh) not in self.meshes:
             self.meshes[id(shape.mesh)] = shared_triangle_mesh(shape.mesh)
 
-    def _fill_sizes_and_bounds(self) -> None:
+    def _fill_sizes_and_bounds(self, matrices: np.ndarray) -> None:
         """generic_size and the bounding spheres, a batch per kind (the kinds with a fixed generic box), per
         chunk of tapered cylinders, and per mesh (or polyhedron vertex set) with its instances."""
         for kind, corners in _BOX_CORNERS.items():
             rows = self.rows([kind])
             if rows.size:
                 self.generic_size[rows] = 1.0 + TORUS_TUBE_RADIUS if kind == "torus" else np.max(np.abs(corners))
-                self._bound(rows, corners)
+                self._bound(matrices, rows, corners)
         rows = self.rows(_TAPERED_KINDS)
         if rows.size:
             top = np.maximum(self.top[rows], 0.0)
@@ -548,7 +553,7 @@ class PrimitiveTable:
             for part in row_chunks(rows.size):
                 points = np.broadcast_to(_TAPERED_POINTS, (len(top[part]), 8, 3)).copy()
                 points[:, 4:, :2] *= top[part, None, None]
-                self._bound(rows[part], points)
+                self._bound(matrices, rows[part], points)
         groups: dict = {}
         for i in self.rows(POLYHEDRON_KINDS + MESH_KINDS).tolist():
             mesh = self.shapes[i].mesh
@@ -562,17 +567,18 @@ class PrimitiveTable:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
             per_chunk = max(1, _CHUNK // max(1, len(vertices)))
             for start in range(0, len(rows), per_chunk):
-                self._bound(rows[start:start + per_chunk], vertices)
+                self._bound(matrices, rows[start:start + per_chunk], vertices)
 
-    def _bound(self, rows: np.ndarray, points: np.ndarray) -> None:
-        """Bounding spheres of ``rows`` whose generic solids lie in the hull of ``points`` ((K, 3) for all,
+    def _bound(self, matrices: np.ndarray, rows: np.ndarray, points: np.ndarray) -> None:
+        """World boxes and bounding spheres of ``rows`` whose generic solids lie in the hull of ``points`` ((K, 3) for all,
         or (len(rows), K, 3)), carried to the world by one stacked product: what transform_points and
         _sphere_around give, to rounding in the last place (which the radius's 1e-9 padding covers)."""
         for part in row_chunks(len(rows)):
-            m = self.matrices[rows[part]]
+            m = matrices[rows[part]]
             p = points if points.ndim == 2 else points[part]
             world = p @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
             lo, hi = world.min(axis=1), world.max(axis=1)
+            self.boxes[rows[part], :3], self.boxes[rows[part], 3:] = lo, hi
             self.centers[rows[part]] = 0.5 * (lo + hi)
             extent = hi - lo
             self.radii[rows[part]] = np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)
@@ -599,10 +605,10 @@ class PrimitiveList(Sequence):
 
     def __init__(self, table: PrimitiveTable):
         self.table = table
-        self._made: list[Optional[Primitive]] = [None] * len(table)
+        self._made: dict[int, Primitive] = {}
 
     def __len__(self) -> int:
-        return len(self._made)
+        return len(self.table)
 
     def __getitem__(self, index):
         if isinstance(index, slice):
@@ -610,7 +616,9 @@ class PrimitiveList(Sequence):
         index = operator.index(index)
         if index < 0:
             index += len(self)
-        prim = self._made[index]
+        if not 0 <= index < len(self.table):
+            raise IndexError("primitive index out of range")
+        prim = self._made.get(index)
         if prim is None:
             prim = self._made[index] = Primitive.of_row(self.table, index)
         return prim
@@ -888,10 +896,16 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
     first use).  Shapes share an id when they share the material object (as the shapes read from one SDL
     state do); two equal materials of their own get two ids, which changes no colour, and spares hashing
     every material by value, which took longer than the rest of compiling a scene of 100,000 spheres."""
-    distinct = dict(zip(map(id, materials), materials))  # in order of first use
-    number = dict(zip(distinct, range(len(distinct))))
-    ids = np.fromiter(map(number.__getitem__, map(id, materials)), dtype=np.int32, count=len(materials))
-    return ids, list(distinct.values())
+    n = len(materials)
+    if n == 0:
+        return np.zeros(0, dtype=np.int32), []
+    # (the objects' addresses sorted, not a dict of them: a million shapes in a fifth of the time)
+    _, first, which = np.unique(np.fromiter(map(id, materials), dtype=np.uint64, count=n), return_index=True,
+                                return_inverse=True)
+    order = np.argsort(first)
+    number = np.empty(len(order), dtype=np.int32)
+    number[order] = np.arange(len(order), dtype=np.int32)
+    return number[which], list(map(materials.__getitem__, first[order].tolist()))
 
 
 def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:

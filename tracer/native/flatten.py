@@ -16,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..compile import CompiledScene, Primitive, PrimitiveTable, row_chunks, fold_tree
+from ..compile import CompiledScene, Primitive, PrimitiveTable, fold_tree
 from ..geometry.polyhedra import face_planes
 from ..intersect.mesh import NODE, MeshArrays
 from .. import numerics, shapes
@@ -86,46 +86,20 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     return None
 
 
-#: Per shape registry entry: its C kind code, and its generic box (centre, half extents) when it has a
-#: fixed one (tapered cylinders get theirs from their small radius, meshes and polyhedra from their
-#: vertices, the plane has none).
+#: Per shape registry entry: its C kind code, and whether it is bounded.
 _CODE_OF_ENTRY = np.array([KIND_CODES[e.keyword] for e in shapes.REGISTRY], dtype=np.int32)
-_FIXED_BOX = np.array([e.box is not None for e in shapes.REGISTRY])
-_BOX_CENTRE = np.array([e.box[0] if e.box else (0.0, 0.0, 0.0) for e in shapes.REGISTRY], dtype=np.float64)
-_BOX_HALF = np.array([e.box[1] if e.box else (0.0, 0.0, 0.0) for e in shapes.REGISTRY], dtype=np.float64)
 _BOUNDED = np.array([e.bounded for e in shapes.REGISTRY])
 
 
-def _generic_boxes(table: PrimitiveTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per primitive: generic box centre (P, 3), half extents (P, 3), and whether it is bounded (P,)."""
-    centre, half = _BOX_CENTRE[table.kind], _BOX_HALF[table.kind]
-    bounded = _BOUNDED[table.kind]
-    tapered = np.flatnonzero(_CODE_OF_ENTRY[table.kind] == KIND["TAPERED"])
-    if tapered.size:
-        r = np.maximum(1.0, table.top[tapered])
-        centre[tapered] = (0.0, 0.0, 0.5)
-        half[tapered] = np.stack([r, r, np.full(len(r), 0.5)], axis=1)
-    for vertices, rows in table.vertex_groups:
-        v = vertices.reshape(-1, 3)
-        lo, hi = (v.min(axis=0), v.max(axis=0)) if len(v) else (np.zeros(3), np.zeros(3))
-        centre[rows], half[rows] = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    return centre, half, bounded
-
-
-def _world_boxes(table: PrimitiveTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World boxes (lo, hi, bounded) of the primitives: the generic box through each matrix (its exact
-    bounding box is centre A c + t, half extents |A| h), padded relatively."""
-    centre, half, bounded = _generic_boxes(table)
-    lo, hi = np.empty((len(table), 3)), np.empty((len(table), 3))
-    for rows in row_chunks(len(table)):
-        m = table.matrices[rows]
-        a = m[:, :3, :3]
-        world_centre = np.einsum("nij,nj->ni", a, centre[rows]) + m[:, :3, 3]
-        world_half = np.einsum("nij,nj->ni", np.abs(a), half[rows])
-        lo[rows], hi[rows] = world_centre - world_half, world_centre + world_half
+def _padded_boxes(table: PrimitiveTable) -> np.ndarray:
+    """The primitives' world boxes (P, 6: lo, hi), padded relatively (meaningless for unbounded shapes)."""
+    boxes = table.boxes.copy()
+    lo, hi = boxes[:, :3], boxes[:, 3:]
     scale = np.maximum(np.abs(lo).max(axis=1), np.abs(hi).max(axis=1)) + (hi - lo).max(axis=1)
     pad = (BOX_PADDING * scale)[:, None]
-    return lo - pad, hi + pad, bounded
+    lo -= pad
+    hi += pad
+    return boxes
 
 
 def _box(node, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
@@ -160,8 +134,8 @@ class FlatScene:
         codes = _CODE_OF_ENTRY[table.kind]
         a["prim_kind"] = codes
         a["prim_inverse"] = table.inverses.reshape(n, 16)  # (a view: the C core reads the table's own inverses)
-        a["prim_sphere"] = np.concatenate([table.centers, table.radii[:, None]], axis=1)
-        a["prim_param"] = np.where(codes == KIND["TAPERED"], table.top, 0.0)
+        a["prim_sphere"] = table.spheres
+        a["prim_param"] = table.top  # (0 but for tapered cylinders)
         a["prim_material"] = table.material_ids
         rounding = numerics.gamma(table.tolerances.hit_ulps) + table.inverse_error  # (Primitive.rounding)
         a["prim_rounding"] = np.concatenate([(rounding / table.generic_size)[:, None], table.generic_size[:, None],
@@ -198,15 +172,19 @@ class FlatScene:
             csg_right.append(right)
             return -len(csg_op)  # node k is ref -k - 1
 
-        prim_lo, prim_hi, prim_bounded = _world_boxes(table)
+        prim_box, prim_bounded = _padded_boxes(table), _BOUNDED[table.kind]
+        prim_lo, prim_hi = prim_box[:, :3], prim_box[:, 3:]
         objects = compiled.objects
         index = objects.primitive_index
-        plain = np.flatnonzero(index >= 0)
-        object_ref = index.copy()
-        object_box = np.zeros((len(index), 6))
-        bounded = np.zeros(len(index), dtype=bool)
-        bounded[plain] = prim_bounded[index[plain]]
-        object_box[plain, :3], object_box[plain, 3:] = prim_lo[index[plain]], prim_hi[index[plain]]
+        if not objects.booleans:  # object k is primitive k: its tables are the primitives'
+            object_ref, object_box, bounded = index, prim_box, prim_bounded
+        else:
+            plain = np.flatnonzero(index >= 0)
+            object_ref = index.copy()
+            object_box = np.zeros((len(index), 6))
+            bounded = np.zeros(len(index), dtype=bool)
+            bounded[plain] = prim_bounded[index[plain]]
+            object_box[plain] = prim_box[index[plain]]
         for k, obj in objects.booleans.items():
             object_ref[k] = fold_tree(obj, lambda prim: prim.index, boolean_ref)
             box = _box(obj, prim_lo, prim_hi, prim_bounded)

@@ -131,6 +131,13 @@ def test_texture_must_be_whole():
     assert (err.column, err.token) == (9, "1.5")
 
 
+def test_texture_number_beyond_the_material_table_is_an_error():
+    # A whole number too big for the tables' 32-bit texture column once reached compile as an OverflowError.
+    err = error("texture 1e30 sphere")
+    assert (err.column, err.token) == (9, "1e30") and "out of range" in err.message
+    assert parse("texture -3 sphere").objects[0].material.texture == -3
+
+
 # --- transforms --------------------------------------------------------------------------------------------
 
 def test_translate_then_scale_gives_t_times_s():

@@ -39,7 +39,7 @@ from ..bulk import collector_paused
 from ..errors import SDLError
 from ..meshio import read_3vn
 from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
-                     Material, MeshData, Scene, SceneObject, Shape, SourceLocation)
+                     Material, MeshData, Scene, SceneObject, Shape, SourceLocation, TEXTURE_NUMBERS)
 from ..userfiles import read_text
 from .lexer import Tokens, to_float, to_floats
 
@@ -528,6 +528,9 @@ class _Reader:
         value, number = self._number_token(keyword, at)
         if not value.is_integer():
             return self._report(self._error(number, "texture number must be a whole number"))
+        if int(value) not in TEXTURE_NUMBERS:
+            return self._report(self._error(number, "texture number out of range",
+                                            expected="-1, -2, -3 or a makePixmap number"))
         self._set_material("texture", int(value))
 
     def _parameters(self, keyword: str, at: int, groups) -> None:

@@ -84,3 +84,24 @@ def test_images_of_another_shape_are_refused(tmp_path):
     with pytest.raises(ValueError, match="height, width, 3"):
         save_image(np.zeros((4, 4)), tmp_path / "out.png")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("height,width", [(1, 1), (37, 23), (700, 13)])  # (700 x 13 x 3: several pages)
+def test_releasing_rows_while_writing_gives_the_same_file(tmp_path, monkeypatch, height, width):
+    """An image of new_8bit_image gives its rows back as Pillow takes them (it reads as 0 afterwards); the file
+    is the one written from the whole image.  Other arrays, and views of such an image, are left alone."""
+    monkeypatch.setattr(imageio, "BAND_VALUES", 5 * width * 3)
+    pixels = np.random.default_rng(width).integers(0, 256, size=(height, width, 3), dtype=np.uint8)
+    expected = save_image(pixels, tmp_path / "kept.png").read_bytes()
+    mapped = imageio.new_8bit_image(height, width)
+    mapped[:] = pixels
+    assert save_image(mapped, tmp_path / "released.png", release=True).read_bytes() == expected
+    if mapped.nbytes >= 2 * 4096:  # whole pages of it were copied: given back, they read as zeros
+        assert not mapped[: 4096 // (3 * width)].any()
+    plain = pixels.copy()
+    save_image(plain, tmp_path / "plain.png", release=True)
+    mapped[:] = pixels
+    flipped = mapped[::-1]
+    assert save_image(flipped, tmp_path / "flipped.png", release=True).read_bytes() == \
+        save_image(pixels[::-1], tmp_path / "expected.png").read_bytes()
+    assert np.array_equal(plain, pixels) and np.array_equal(mapped, pixels)

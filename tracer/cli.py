@@ -230,7 +230,7 @@ def _render(args) -> int:
                         eight_bit=True)  # (the file's bytes are all that is kept: 3 bytes a pixel)
     finally:
         progress.close()
-    save_image(result.image, args.output)
+    save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
     if result.error_estimate is not None and not args.quiet:
         from .target import MAX_SAMPLES
         e = result.error_estimate
@@ -278,7 +278,7 @@ def _render_job(args) -> int:
     rays, backends = RayCounts(), set()
 
     def write(index, image, counts, backend):
-        save_image(image, outputs[index])
+        save_image(image, outputs[index], release=True)
         backends.add(backend)
         rays.add(counts)
 

@@ -452,14 +452,15 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
     ``eight_bit``: as for :func:`tracer.render.render`, keep only the 8-bit values (each tile converted as it
     arrives, unless adaptive sampling needs the float film) and hand uint8 images to ``on_frame``."""
     distributed = require_dask()
-    from .imageio import to_8bit
+    from .imageio import new_8bit_image, to_8bit
     from .render import TileUpdate
 
     plan = job.plan()
     bytes_on_arrival = eight_bit and not plan.adaptive
     [bundle_future] = client.scatter([bundle], broadcast=True, hash=False)
-    frames = [_Frame(i, t, np.zeros((job.height, job.width, 3), np.uint8 if bytes_on_arrival else np.float32),
-                     len(plan.rects)) for i, t in enumerate(times)]
+    blank = (lambda: new_8bit_image(job.height, job.width)) if bytes_on_arrival else \
+        (lambda: np.zeros((job.height, job.width, 3), np.float32))
+    frames = [_Frame(i, t, blank(), len(plan.rects)) for i, t in enumerate(times)]
     total = len(frames) * len(plan.rects) * (1 + plan.adaptive)
     meta: dict = {}
     tasks = distributed.as_completed()
@@ -502,8 +503,9 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
                     submit(frame, (r0, c0, r1, c1), np.ascontiguousarray(mask[r0:r1, c0:c1]))
                 continue
             image, frame.image = frame.image, np.empty((0, 0, 3), np.float32)  # (no finished frame is kept)
-            on_frame(frame.index, to_8bit(image) if eight_bit and not bytes_on_arrival else image, frame.rays,
-                     backend)
+            if eight_bit and not bytes_on_arrival:
+                image = to_8bit(image, out=new_8bit_image(job.height, job.width))
+            on_frame(frame.index, image, frame.rays, backend)
     finally:
         for future in list(tasks.futures):
             future.cancel()

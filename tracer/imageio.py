@@ -3,10 +3,13 @@
 A render's colours become bytes in one place, :func:`to_8bit`, whether a whole float film is converted when
 the file is written or each tile as it is traced (``tracer.render.render(..., eight_bit=True)``): both give
 the same bytes.  Nothing here makes a full-size float temporary: colours are converted a band of rows at a
-time, straight into Pillow's image.
+time, straight into Pillow's image.  Pillow keeps its own copy of the pixels (4 bytes each: it stores RGB
+as RGBX); an 8-bit image made by :func:`new_8bit_image` can give its rows back to the system as Pillow
+takes them (``save_image(..., release=True)``), so that the two are not held in full at once.
 """
 from __future__ import annotations
 
+import mmap
 import os
 from pathlib import Path
 
@@ -46,26 +49,61 @@ def to_8bit(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def pillow_image(image: np.ndarray):
+def new_8bit_image(height: int, width: int) -> np.ndarray:
+    """A zeroed (height, width, 3) uint8 image in an anonymous memory mapping of its own (pages are backed
+    by memory only once written), whose rows :func:`pillow_image` can release as it copies them."""
+    size = height * width * 3
+    # Private, not Python's default of shared: released pages of a shared mapping would stay in memory.
+    private = {"flags": mmap.MAP_PRIVATE} if hasattr(mmap, "MAP_PRIVATE") else {}
+    memory = mmap.mmap(-1, max(size, 1), **private)
+    return np.frombuffer(memory, dtype=np.uint8, count=size).reshape(height, width, 3)
+
+
+def _own_mapping(image: np.ndarray) -> mmap.mmap | None:
+    """The mapping that holds exactly ``image``'s pixels, in order (an image of :func:`new_8bit_image`), when
+    this system can release its pages; else None."""
+    base = image.base
+    while isinstance(base, np.ndarray):
+        base = base.base
+    base = base.obj if isinstance(base, memoryview) else base  # (np.frombuffer keeps a view of the buffer)
+    if not (isinstance(base, mmap.mmap) and hasattr(base, "madvise") and image.flags.c_contiguous):
+        return None
+    return base if np.frombuffer(base, np.uint8, count=1).ctypes.data == image.ctypes.data else None
+
+
+def pillow_image(image: np.ndarray, release: bool = False):
     """A Pillow RGB image of a (height, width, 3) image, float colours (converted by :func:`to_8bit`) or
-    uint8, filled a band of rows at a time: besides Pillow's own pixels (4 bytes each) only a band is made."""
+    uint8, filled a band of rows at a time: besides Pillow's own pixels (4 bytes each) only a band is made.
+
+    ``release``: give the memory of the rows already copied back to the system as the copy goes on (an image
+    of :func:`new_8bit_image` only; its pixels then read as 0), so that the peak is Pillow's pixels, not
+    Pillow's and the image's.
+    """
     from PIL import Image
 
     if image.ndim != 3 or image.shape[2] != 3:
         raise ValueError(f"expected a (height, width, 3) image, not an array of shape {image.shape}")
     height, width = image.shape[:2]
-    picture = Image.new("RGB", (width, height))
+    mapping = _own_mapping(image) if release else None
+    released = 0  # bytes of the mapping already given back: a whole number of pages
+    picture = Image.new("RGB", (width, height), None)  # (not filled: its pages are backed as bands arrive)
     rows = band_rows(image)
     for top in range(0, height, rows):
         band = image[top:top + rows]
         band = np.ascontiguousarray(band) if band.dtype == np.uint8 else to_8bit(band)
         picture.paste(Image.fromarray(band), (0, top))
+        if mapping is not None:
+            copied = min(top + rows, height) * width * 3 // mmap.PAGESIZE * mmap.PAGESIZE
+            if copied > released:
+                mapping.madvise(mmap.MADV_DONTNEED, released, copied - released)
+                released = copied
     return picture
 
 
-def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:
+def save_image(image: np.ndarray, path: str | os.PathLike, release: bool = False) -> Path:
     """Save a (height, width, 3) image, row 0 at the top: float colours (linear, clipped to [0, 1]) or the
     uint8 values of :func:`to_8bit`; the format follows the file extension (png, bmp, ppm, jpg, tif).
+    ``release``: as for :func:`pillow_image` (for an image that is not needed afterwards).
 
     The file appears complete or not at all: it is written beside the target and renamed over it.
     """
@@ -78,5 +116,5 @@ def save_image(image: np.ndarray, path: str | os.PathLike) -> Path:
     # render: 0.07 s against 0.15 s), which is what a renderer that writes many frames wants.
     options = {"compress_level": 3} if ext == "png" else {}
     with replacing(path) as temp, open(temp, "wb") as handle:
-        pillow_image(image).save(handle, format=known[ext], **options)
+        pillow_image(image, release).save(handle, format=known[ext], **options)
     return path

@@ -19,7 +19,7 @@ import numpy as np
 from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
 from .errors import RenderCancelled, TracerError
-from .imageio import to_8bit
+from .imageio import new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
@@ -94,8 +94,9 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     at most this (see :mod:`tracer.target`; block size, samples and sampling mode are then not used).
     ``eight_bit``: keep only the 8-bit values an image file gets (3 bytes a pixel instead of 12), each tile
     converted as it is traced; the image is then uint8, the bytes :func:`tracer.imageio.to_8bit` gives for
-    the float image.  (Adaptive sampling judges its refinement on the whole float film, and sampling to an
-    error target keeps per-pixel sums: those two keep floats while tracing and convert at the end.)
+    the float image, in memory that :func:`tracer.imageio.save_image` can release as it writes.  (Adaptive
+    sampling judges its refinement on the whole float film, and sampling to an error target keeps per-pixel
+    sums: those two keep floats while tracing and convert at the end.)
     """
     check_size(width, height)
     if target_error is not None:
@@ -105,7 +106,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         result = render_to_error(compiled, width, height, target_error, backend=backend, threads=threads,
                                  seed=seed, savings=savings, cancel=cancel)
         if eight_bit:
-            result.image = to_8bit(result.image)
+            result.image = to_8bit(result.image, out=new_8bit_image(height, width))
         return result
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
@@ -117,7 +118,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
-    shown = np.zeros((height, width, 3), dtype=np.uint8 if bytes_while_tracing else np.float32)
+    shown = new_8bit_image(height, width) if bytes_while_tracing else np.zeros((height, width, 3), np.float32)
     film = shown[::-1]
     refine = None
     for done, item in enumerate(plan.items, 1):
@@ -132,6 +133,6 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
                                tiles_done=done, tiles_total=len(plan.items), image=shown))
     refine = None  # (the mask is not kept through the conversion below)
     if eight_bit and not bytes_while_tracing:
-        shown = to_8bit(shown)
+        shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)

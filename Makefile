@@ -38,6 +38,8 @@ accuracy: setup
 # peak memory of 960x540 to 4K renders in full-frame buffers (bench/results/memory.json). bench/scale.py:
 # 1e4..1e6 triangles and 1e3..1e6 spheres against POV-Ray, time and peak memory, the read/build/trace/write
 # split and Embree's primary-ray rate (bench/results/scale.json, docs/performance-scale.png; tens of minutes).
+# bench/sdl_read.py: reading SDL files of 1e4..1e6 spheres, seconds and bytes per shape (bench/results/
+# sdl_read.json; --against DIR times another checkout in turn with this one).
 # Rendering on a Dask cluster (bench/cluster.py): the 4K glass.sdl table of docs/distributed.md, plain local
 # against --scheduler local:1 and local:2, and the per-tile overhead (bench/results/distributed.json).
 .PHONY: bench-cluster
@@ -49,6 +51,7 @@ bench: setup
 	$(PY) bench/run.py
 	$(PY) bench/memory.py
 	$(PY) bench/scale.py
+	$(PY) bench/sdl_read.py
 
 # The Blender extension zips in dist/: linux-x64 and windows-x64 with the C core prebuilt (Windows
 # cross-compiled with mingw-w64 and smoke-tested under Wine when installed), one for other platforms

@@ -1,6 +1,7 @@
 """Reading big SDL files: N small spheres, one line each (bench/big_scenes.py), parsed and modelled.
 
-    python3 bench/sdl_read.py [--counts 1e4,1e5,1e6] [--repeat 3] [--against DIR] [--out bench/results]
+    python3 bench/sdl_read.py [--counts 1e4,1e5,1e6] [--repeat 3] [--against DIR] [--memory all|this|none]
+                              [--out bench/results]
 
 Each read is ``tracer.load`` in a fresh process, timed inside it (wall and CPU seconds; Python's start-up
 and imports not counted).  A second process per count measures memory with tracemalloc: the bytes per shape
@@ -8,7 +9,9 @@ the loaded Scene keeps, and the peak above the file's text while reading (tracem
 it is never timed).  With ``--against DIR``, DIR is another checkout (a folder holding its ``tracer``
 package, e.g. ``git worktree add /tmp/before <commit>``): its reader and this one run in turn, interleaved,
 ``--repeat`` times each, so that both see the same load on a shared machine; the tables give the fastest run
-of each and the ratio of the medians.  Writes sdl_read.json into --out.
+of each and the ratio of the medians.  ``--memory this`` measures memory for this checkout only (an old
+reader under tracemalloc may need several times the memory of the read itself).  Writes the rows into
+sdl_read.json in --out, replacing rows of the same size from earlier runs and keeping the others.
 """
 from __future__ import annotations
 
@@ -71,31 +74,36 @@ def main(argv=None) -> int:
     p.add_argument("--counts", default="1e4,1e5,1e6", help="numbers of spheres, comma-separated")
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--against", type=Path, help="another checkout to time in turn with this one")
-    p.add_argument("--no-memory", action="store_true", help="skip the tracemalloc runs")
+    p.add_argument("--memory", choices=("all", "this", "none"), default="all",
+                   help="which sides get the tracemalloc run")
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     args = p.parse_args(argv)
     sides = {"this": ROOT} | ({"against": args.against.resolve()} if args.against else {})
-    results = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M:%S"), "sides": {k: str(v) for k, v in sides.items()},
-               "load_average_start": os.getloadavg(), "rows": []}
+    out_file = args.out / "sdl_read.json"
+    results = json.loads(out_file.read_text()) if out_file.exists() else {"rows": []}
+    results["machine"] = machine()
     with tempfile.TemporaryDirectory() as tmp:
         for count in (int(float(c)) for c in args.counts.split(",")):
             path = Path(tmp) / f"spheres{count}.sdl"
             path.write_text(sphere_scene(count))
-            row = {"spheres": count, "megabytes": path.stat().st_size / 1e6}
+            row = {"spheres": count, "megabytes": path.stat().st_size / 1e6, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+                   "sides": {side: str(checkout) for side, checkout in sides.items()},
+                   "load_average_start": os.getloadavg()}
             runs = {side: [] for side in sides}
             for _ in range(args.repeat):
                 for side, checkout in sides.items():
                     runs[side].append(run_child(_TIMED, checkout, path))
             for side in sides:
                 row[side] = {"wall": [r["wall"] for r in runs[side]], "cpu": [r["cpu"] for r in runs[side]]}
-                if not args.no_memory:
+                if args.memory == "all" or (args.memory == "this" and side == "this"):
                     row[side].update(run_child(_MEMORY, sides[side], path))
-            row["load_average"] = os.getloadavg()
-            results["rows"].append(row)
+            row["load_average_end"] = os.getloadavg()
+            results["rows"] = sorted([r for r in results["rows"] if r["spheres"] != count] + [row],
+                                     key=lambda r: r["spheres"])
             print(describe(row, sides), flush=True)
             path.unlink()
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "sdl_read.json").write_text(json.dumps(results, indent=1))
+            args.out.mkdir(parents=True, exist_ok=True)
+            out_file.write_text(json.dumps(results, indent=1))
     return 0
 
 

@@ -56,28 +56,34 @@ def client():
     assert {p.pid for p in _children()} - before == set()
 
 
-def _cluster_render(client, path, job, times=(None,), on_tile=None):
+def _cluster_render(client, path, job, times=(None,), on_tile=None, eight_bit=False):
     scene = dist.read_scene(path, time=times[0])
     frames = {}
     dist.render_frames(client, dist.SceneBundle.of(path, scene), job, list(times),
-                       lambda i, image, rays, backend: frames.__setitem__(i, (image, rays)), on_tile)
+                       lambda i, image, rays, backend: frames.__setitem__(i, (image, rays)), on_tile,
+                       eight_bit=eight_bit)
     return [frames[i] for i in range(len(times))]
 
 
-def _local_render(path, job, time=None):
+def _local_render(path, job, time=None, eight_bit=False):
     return tracer.render(dist.read_scene(path, time=time), job.width, job.height, block_size=job.block_size,
                          progressive=job.progressive, tile=job.tile, samples=job.samples,
-                         sampling_mode=job.sampling_mode, threshold=job.threshold, seed=job.seed)
+                         sampling_mode=job.sampling_mode, threshold=job.threshold, seed=job.seed,
+                         eight_bit=eight_bit)
 
 
+@pytest.mark.parametrize("eight_bit", [False, True])
 @pytest.mark.parametrize("job", [
     dist.Job(64, 48, samples=4, tile=16),  # jittered
     dist.Job(64, 48, samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),
     dist.Job(50, 30, block_size=8, progressive=True, tile=16),
 ])
-def test_cluster_render_equals_local_bytes(client, job):
-    [(image, rays)] = _cluster_render(client, SCENES / "glass.sdl", job)
-    local = _local_render(SCENES / "glass.sdl", job)
+def test_cluster_render_equals_local_bytes(client, job, eight_bit):
+    """The float image, or (as the command line keeps it) its 8-bit values with each tile converted as it
+    arrives, is the local render's."""
+    [(image, rays)] = _cluster_render(client, SCENES / "glass.sdl", job, eight_bit=eight_bit)
+    local = _local_render(SCENES / "glass.sdl", job, eight_bit=eight_bit)
+    assert image.dtype == (np.uint8 if eight_bit else np.float32)
     assert image.any() and np.array_equal(image, local.image)
     assert rays == local.rays  # each pixel traced once (no tile lost or doubled), the same rays skipped
 

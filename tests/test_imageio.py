@@ -1,10 +1,13 @@
 """Writing images: the 8-bit conversion (NaN, clipping, rounding, banding) and atomic saves."""
+import io
+
 import numpy as np
 import pytest
 from PIL import Image
 
+from tracer import imageio
 from tracer.errors import TracerError
-from tracer.imageio import ROWS_PER_CHUNK, save_image, to_8bit
+from tracer.imageio import band_rows, save_image, to_8bit
 
 
 def test_to_8bit_clips_rounds_and_zeroes_nan():
@@ -16,7 +19,7 @@ def test_to_8bit_clips_rounds_and_zeroes_nan():
 
 def test_to_8bit_bands_cover_every_row_and_leave_the_film_alone():
     rng = np.random.default_rng(0)
-    image = rng.uniform(-0.2, 1.2, size=(2 * ROWS_PER_CHUNK + 7, 5, 3)).astype(np.float32)
+    image = rng.uniform(-0.2, 1.2, size=(2 * band_rows(np.zeros((1, 5, 3))) + 7, 5, 3)).astype(np.float32)
     before = image.copy()
     out = to_8bit(image)
     expected = np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)
@@ -40,4 +43,44 @@ def test_unknown_type_and_missing_folder_are_clear_errors(tmp_path):
         save_image(image, tmp_path / "out.xyz")
     with pytest.raises(TracerError, match="does not exist"):
         save_image(image, tmp_path / "nowhere" / "out.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_float64_colours_get_the_bytes_of_their_float32_film():
+    """A tile converted as it is traced (float64 colours) gets what the float32 film converted later got,
+    also where the two precisions round to different bytes."""
+    rng = np.random.default_rng(1)
+    steps = (np.arange(256) + 0.5) / 255  # halfway between two bytes: where float32 rounding decides
+    colours = np.concatenate([steps + rng.uniform(-1e-8, 1e-8, steps.size) for _ in range(30)])
+    colours = np.concatenate([colours, [np.nan, np.inf, -np.inf, 1e39, -1e39]]).reshape(-1, 1, 1).repeat(3, 2)
+    with np.errstate(over="ignore"):
+        film = colours.astype(np.float32)
+    assert np.array_equal(to_8bit(colours), to_8bit(film))
+    assert not np.array_equal(to_8bit(colours), np.rint(np.clip(np.nan_to_num(colours), 0, 1) * 255))
+
+
+@pytest.mark.parametrize("suffix,options", [(".png", {"compress_level": 3}), (".bmp", {}), (".tif", {}),
+                                            (".ppm", {}), (".jpg", {})])
+@pytest.mark.parametrize("height,width", [(37, 23), (5, 41), (1, 1)])
+def test_banded_writing_gives_the_whole_frame_file_byte_for_byte(tmp_path, monkeypatch, suffix, options, height,
+                                                                 width):
+    """The file made a band of rows at a time (bands that do not divide the height), from floats or from
+    bytes, is the file Pillow writes from the whole 8-bit frame at once."""
+    rng = np.random.default_rng(height * width)
+    image = rng.uniform(-0.1, 1.1, size=(height, width, 3)).astype(np.float32)
+    image[0, 0] = np.nan
+    whole = io.BytesIO()
+    Image.fromarray(to_8bit(image)).save(whole, format=Image.registered_extensions()[suffix], **options)
+    monkeypatch.setattr(imageio, "BAND_VALUES", 4 * width * 3)  # four rows a band
+    assert band_rows(image) == 4
+    from_floats = save_image(image, tmp_path / f"floats{suffix}").read_bytes()
+    from_bytes = save_image(to_8bit(image), tmp_path / f"bytes{suffix}").read_bytes()
+    upside_down = to_8bit(image)[::-1]  # a film counted from the bottom, seen through a flipped view
+    from_view = save_image(upside_down[::-1], tmp_path / f"view{suffix}").read_bytes()
+    assert from_floats == from_bytes == from_view == whole.getvalue()
+
+
+def test_images_of_another_shape_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="height, width, 3"):
+        save_image(np.zeros((4, 4)), tmp_path / "out.png")
     assert list(tmp_path.iterdir()) == []

@@ -291,6 +291,22 @@ def test_c_builder_builds_the_numpy_builders_tree(monkeypatch, shape, leaf_size,
     assert in_c.node_count.max() <= leaf_size
 
 
+def test_the_c_builder_builds_the_same_tree_on_any_number_of_threads():
+    """Past BVH_PARALLEL_MIN triangles the C builder builds subtrees on several threads and numbers their
+    nodes as one thread would: the tree must not depend on the thread count."""
+    native = pytest.importorskip("tracer.native")
+    if native.load_error is not None:
+        pytest.skip(f"no C core: {native.load_error}")
+    rng = np.random.default_rng(7)
+    count = 70_000  # above bvh_build.h's BVH_PARALLEL_MIN
+    vertices = rng.normal(size=(count // 2, 3))
+    tri = rng.integers(0, len(vertices), size=(count, 3)).astype(np.int32)
+    trees = [native.build_mesh_bvh(vertices, tri, 8, 16, 1e-9, threads) for threads in (1, 2, 3, 8)]
+    for nodes, order in trees[1:]:
+        assert nodes.tobytes() == trees[0][0].tobytes() and np.array_equal(order, trees[0][1])
+    assert sorted(trees[0][1].tolist()) == list(range(count))
+
+
 # ----------------------------------------------------------------------------------------- against brute force
 
 

@@ -11,6 +11,7 @@ from helpers import Camera, Light, rotation, scaling, scene_of, shape, translati
 from tracer.camera import CameraFrame, framing_camera
 from tracer.compile import compile_scene
 from tracer.errors import RenderCancelled, TracerError
+from tracer.imageio import to_8bit
 from tracer.render import block_passes, render
 from tracer.backend import make_tracer
 
@@ -159,3 +160,29 @@ def test_rays_go_through_pixel_centres():
     # 4 columns span [-W, W] = [-2, 2]: the first centre is at -2 + 0.5; 2 rows over [-1, 1]: -0.5.
     assert d == pytest.approx([-1.5, -0.5, -1.0])
     assert frame.half_height == pytest.approx(math.tan(math.radians(45)))
+
+
+@pytest.mark.parametrize("settings", [
+    dict(),
+    dict(block_size=4),
+    dict(block_size=8, progressive=True, tile=16),
+    dict(samples=4, sampling_mode="jittered", tile=16),
+    dict(samples=4, sampling_mode="regular", block_size=2, progressive=True),
+    dict(samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),
+    dict(target_error=0.05),
+])
+def test_eight_bit_render_keeps_the_bytes_of_the_float_film(settings):
+    """What the command line keeps (each tile's 8-bit values as it is traced, or the float film converted at
+    the end where the mode needs floats) is the float image converted, byte for byte, in every mode; and the
+    tile updates show the film so far in the same type."""
+    scene = compile_scene(_scene())
+    floats = render(scene, 37, 23, **settings)
+    updates = []
+    eight = render(scene, 37, 23, eight_bit=True, on_tile=updates.append, **settings)
+    assert floats.image.dtype == np.float32 and floats.image.flags.c_contiguous
+    assert eight.image.dtype == np.uint8 and eight.image.shape == (23, 37, 3)
+    assert np.array_equal(eight.image, to_8bit(floats.image))
+    assert eight.rays == floats.rays
+    assert len(np.unique(eight.image)) > 20  # a picture, not a blank
+    if updates:
+        assert updates[-1].image.dtype == (np.float32 if settings.get("sampling_mode") == "adaptive" else np.uint8)

@@ -1,4 +1,6 @@
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -127,6 +129,13 @@ def test_parameters_more_than_ten_is_an_error():
 def test_texture_must_be_whole():
     err = error("texture 1.5")
     assert (err.column, err.token) == (9, "1.5")
+
+
+def test_texture_number_beyond_the_material_table_is_an_error():
+    # A whole number too big for the tables' 32-bit texture column once reached compile as an OverflowError.
+    err = error("texture 1e30 sphere")
+    assert (err.column, err.token) == (9, "1e30") and "out of range" in err.message
+    assert parse("texture -3 sphere").objects[0].material.texture == -3
 
 
 # --- transforms --------------------------------------------------------------------------------------------
@@ -724,4 +733,22 @@ def test_the_block_size_changes_nothing(words, separator):
     whole = [_outcome(text, strict) for strict in (True, False)]
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(lexer, "BLOCK_CHARS", 1)
+        patch.setattr(lexer, "_FAR", 1)  # and every token's place from its line's token starts
         assert [_outcome(text, strict) for strict in (True, False)] == whole
+
+
+def test_a_whole_scene_on_one_line():
+    """Places far along one long line, with uneven spaces: found from where each token starts."""
+    words = []
+    for k in range(3_000):
+        words += ["push", "translate", str(k), "0", "0", "sphere", "pop"] + (["union"] if k % 7 == 0 else [])
+    separators = [" ", "  ", "\t", " \r "]
+    line = "".join(word + separators[k % 4] for k, word in enumerate(words)) + "sphere ! the end"
+    scene = parse(line)
+    starts = [m.start() + 1 for m, word in zip(re.finditer(r"\S+", line), words + ["sphere"])]
+    placed = {obj.source.column: obj for obj in scene.shapes()}
+    expected = {column for column, word in zip(starts, words + ["sphere"]) if word == "sphere"}
+    assert set(placed) == expected and len(expected) == 3_001
+    assert all(obj.source.line == 1 for obj in scene.shapes())
+    unions = [obj for obj in scene.objects if isinstance(obj, CSG)]
+    assert {u.source.column for u in unions} == {c for c, w in zip(starts, words) if w == "union"}

@@ -111,3 +111,37 @@ def test_the_addon_traces_the_same_pixels_as_the_command_line(compiled):
     renderer.run()
     expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=4, progressive=True, samples=4, seed=7).image
     assert np.array_equal(renderer.color, expected[::-1])
+
+
+@pytest.mark.parametrize("rows_a_band", [1, 2, 5, HEIGHT])
+def test_refinement_mask_judged_in_bands_is_the_whole_film_mask(monkeypatch, rows_a_band):
+    """The mask is judged a band of rows at a time (no full-size float temporaries): bands of any height,
+    not dividing the image's, mark exactly the pixels the whole film's contrast marks."""
+    from tracer import imageio
+
+    rng = np.random.default_rng(rows_a_band)
+    film = rng.uniform(0, 1, size=(HEIGHT, WIDTH, 4)).astype(np.float32)  # (a fourth channel is not judged)
+    film[..., :3] = np.where(rng.uniform(size=(HEIGHT, WIDTH, 1)) < 0.9, 0.5, film[..., :3])
+    plan = tiles.TilePlan(WIDTH, HEIGHT, samples=4, sampling_mode="adaptive", threshold=0.1)
+    monkeypatch.setattr(imageio, "BAND_VALUES", rows_a_band * WIDTH * 4)
+    expected = sampling.contrast_mask(film[..., :3], 0.1)
+    assert expected.any() and not expected.all()
+    assert np.array_equal(plan.refine_mask(film), expected)
+    assert np.array_equal(plan.refine_mask(film[::-1]), expected[::-1])  # a film seen through a flipped view
+    with pytest.raises(ValueError, match="float film"):
+        plan.refine_mask(film.astype(np.uint8))
+
+
+def test_an_eight_bit_film_gets_the_bytes_of_the_float_film(compiled):
+    """Tiles traced into an 8-bit film pass by pass (a later pass copying earlier samples as bytes) give the
+    float film's bytes."""
+    from tracer.imageio import to_8bit
+
+    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=8, progressive=True, tile=16, samples=4)
+    shade = _shade(compiled, plan)
+    floats = np.zeros((HEIGHT, WIDTH, 3), np.float32)
+    eight = np.zeros((HEIGHT, WIDTH, 3), np.uint8)
+    for item in plan.items:
+        tiles.trace_tile(plan, item, floats, shade)
+        tiles.trace_tile(plan, item, eight, shade)
+    assert np.array_equal(eight, to_8bit(floats))

@@ -226,7 +226,8 @@ def _render(args) -> int:
         result = render(scene, args.width, args.height, block_size=args.block_size,
                         progressive=args.progressive, on_tile=progress, samples=args.samples,
                         sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                        threads=args.threads, savings=savings, target_error=args.target_error)
+                        threads=args.threads, savings=savings, target_error=args.target_error,
+                        eight_bit=True)  # (the file's bytes are all that is kept: 3 bytes a pixel)
     finally:
         progress.close()
     save_image(result.image, args.output)
@@ -292,14 +293,14 @@ def _render_job(args) -> int:
                 result = render(scene, args.width, args.height, block_size=args.block_size,
                                 progressive=args.progressive, tile=tile, on_tile=progress, samples=args.samples,
                                 sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                                threads=args.threads, savings=job.savings)
+                                threads=args.threads, savings=job.savings, eight_bit=True)
                 write(index, result.image, result.rays, result.backend)
         else:
             bundle = dist.SceneBundle.of(args.scene, scene, args.lenient)
             threads = args.threads or dist.local_threads(args.scheduler)
             with dist.connect(args.scheduler) as client:
                 dist.render_frames(client, bundle, dataclasses.replace(job, threads=threads), times, write,
-                                   progress)
+                                   progress, eight_bit=True)
     finally:
         progress.close()
     if args.stats:

@@ -428,29 +428,38 @@ def local_threads(address: str) -> Optional[int]:
 
 @dataclass
 class _Frame:
-    """A frame being assembled on the client."""
+    """A frame being assembled on the client: its image, row 0 at the top (``film`` is the same pixels
+    counted from the bottom, as tiles are)."""
 
     index: int
     time: Optional[float]
-    film: np.ndarray
+    image: np.ndarray
     waiting: int
     refining: bool = False
     rays: RayCounts = field(default_factory=RayCounts)
 
+    @property
+    def film(self) -> np.ndarray:
+        return self.image[::-1]
+
 
 def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optional[float]],
                   on_frame: Callable[[int, np.ndarray, RayCounts, str], None],
-                  on_tile: Optional[Callable] = None) -> None:
+                  on_tile: Optional[Callable] = None, eight_bit: bool = False) -> None:
     """Render the frames at ``times`` (None: the scene as read) on the cluster.  Each finished frame goes to
-    ``on_frame(index, image, rays, backend)`` (image top row first, float32), in order of completion;
-    ``on_tile`` gets a :class:`tracer.render.TileUpdate` as each tile arrives (image: that frame so far)."""
+    ``on_frame(index, image, rays, backend)`` (image row 0 at the top, float32), in order of completion;
+    ``on_tile`` gets a :class:`tracer.render.TileUpdate` as each tile arrives (image: that frame so far).
+    ``eight_bit``: as for :func:`tracer.render.render`, keep only the 8-bit values (each tile converted as it
+    arrives, unless adaptive sampling needs the float film) and hand uint8 images to ``on_frame``."""
     distributed = require_dask()
+    from .imageio import to_8bit
     from .render import TileUpdate
 
     plan = job.plan()
+    bytes_on_arrival = eight_bit and not plan.adaptive
     [bundle_future] = client.scatter([bundle], broadcast=True, hash=False)
-    frames = [_Frame(i, t, np.zeros((job.height, job.width, 3), np.float32), len(plan.rects))
-              for i, t in enumerate(times)]
+    frames = [_Frame(i, t, np.zeros((job.height, job.width, 3), np.uint8 if bytes_on_arrival else np.float32),
+                     len(plan.rects)) for i, t in enumerate(times)]
     total = len(frames) * len(plan.rects) * (1 + plan.adaptive)
     meta: dict = {}
     tasks = distributed.as_completed()
@@ -472,7 +481,7 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
             window, rays, backend = _result(future, "a tile")
             r0, c0, r1, c1 = rect
             if refine is None:
-                frame.film[r0:r1, c0:c1] = window
+                frame.film[r0:r1, c0:c1] = to_8bit(window) if bytes_on_arrival else window
             else:
                 frame.film[r0:r1, c0:c1][refine] = window[refine]
             frame.rays.add(rays)
@@ -482,7 +491,7 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
                 on_tile(TileUpdate(x0=c0, y0=job.height - r1, x1=c1, y1=job.height - r0, block_size=1,
                                    pass_index=plan.pass_count - 1 if refine is not None else 0,
                                    pass_count=plan.pass_count, tiles_done=done, tiles_total=total,
-                                   image=frame.film[::-1]))
+                                   image=frame.image))
             if frame.waiting:
                 continue
             if plan.adaptive and not frame.refining:
@@ -492,8 +501,9 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
                 for r0, c0, r1, c1 in plan.rects:
                     submit(frame, (r0, c0, r1, c1), np.ascontiguousarray(mask[r0:r1, c0:c1]))
                 continue
-            on_frame(frame.index, np.ascontiguousarray(frame.film[::-1]), frame.rays, backend)
-            frame.film = np.empty((0, 0, 3), np.float32)  # (a long sequence keeps no finished films)
+            image, frame.image = frame.image, np.empty((0, 0, 3), np.float32)  # (no finished frame is kept)
+            on_frame(frame.index, to_8bit(image) if eight_bit and not bytes_on_arrival else image, frame.rays,
+                     backend)
     finally:
         for future in list(tasks.futures):
             future.cancel()

@@ -42,6 +42,12 @@ class SourceLocation:
         return f"{name}:{self.line}:{self.column}" if self.column else f"{name}:{self.line}"
 
 
+#: Texture numbers a material may hold: the material tables keep them as 32-bit integers (the C core's
+#: ``mat_texture``).  Only -3..-1 and the makePixmap numbers mean something; the rest are reported as unknown
+#: textures, but a number beyond these would not even fit the table.
+TEXTURE_NUMBERS = range(-2**31, 2**31)
+
+
 @dataclass(frozen=True, slots=True)  # slots: a scene of 10^5 shapes may hold as many materials
 class Material:
     """Surface properties; SDL's defaults (see docs/sdl.md)."""

@@ -19,6 +19,7 @@ import numpy as np
 from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
 from .errors import RenderCancelled, TracerError
+from .imageio import to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
@@ -43,7 +44,8 @@ class TileUpdate:
     pass_count: int
     tiles_done: int  # over all passes, this one included
     tiles_total: int
-    image: np.ndarray  # the whole film so far, (height, width, 3) float32, row 0 at the top (a view)
+    image: np.ndarray  # the whole film so far, (height, width, 3), row 0 at the top (a view): float32, or
+    # uint8 (the file's bytes) in a render with eight_bit=True (float32 until its refinement pass ends)
 
     @property
     def fraction(self) -> float:
@@ -52,7 +54,8 @@ class TileUpdate:
 
 @dataclass
 class RenderResult:
-    image: np.ndarray  # (height, width, 3) float32, row 0 at the top, linear colour, not clipped
+    image: np.ndarray  # (height, width, 3), row 0 at the top: float32 linear colour, not clipped; or, when
+    # rendered with eight_bit=True, uint8, the values the image file gets (tracer.imageio.to_8bit)
     rays: RayCounts
     seconds: float
     backend: str = "numpy"
@@ -81,7 +84,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
            threads: Optional[int] = None, savings: Optional[RaySavings] = None,
-           target_error: Optional[float] = None) -> RenderResult:
+           target_error: Optional[float] = None, eight_bit: bool = False) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
@@ -89,14 +92,21 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     ``savings``: which rays that cannot change the image are skipped (default: tracer.savings' defaults).
     ``target_error``: instead of a fixed number of samples, sample each pixel until its estimated error is
     at most this (see :mod:`tracer.target`; block size, samples and sampling mode are then not used).
+    ``eight_bit``: keep only the 8-bit values an image file gets (3 bytes a pixel instead of 12), each tile
+    converted as it is traced; the image is then uint8, the bytes :func:`tracer.imageio.to_8bit` gives for
+    the float image.  (Adaptive sampling judges its refinement on the whole float film, and sampling to an
+    error target keeps per-pixel sums: those two keep floats while tracing and convert at the end.)
     """
     check_size(width, height)
     if target_error is not None:
         from .target import check, render_to_error
         check(target_error)
         compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
-        return render_to_error(compiled, width, height, target_error, backend=backend, threads=threads, seed=seed,
-                               savings=savings, cancel=cancel)
+        result = render_to_error(compiled, width, height, target_error, backend=backend, threads=threads,
+                                 seed=seed, savings=savings, cancel=cancel)
+        if eight_bit:
+            result.image = to_8bit(result.image)
+        return result
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
     started = time.perf_counter()
@@ -104,9 +114,11 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
     tracer = make_tracer(compiled, backend, threads, savings)
     shade = PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
-    # The film is stored bottom row first, as the lecture counts rows; the caller sees it flipped.
-    film = np.zeros((height, width, 3), dtype=np.float32)
-    shown = film[::-1]
+    # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
+    # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
+    bytes_while_tracing = eight_bit and not plan.adaptive
+    shown = np.zeros((height, width, 3), dtype=np.uint8 if bytes_while_tracing else np.float32)
+    film = shown[::-1]
     refine = None
     for done, item in enumerate(plan.items, 1):
         if cancel is not None and cancel():
@@ -118,5 +130,8 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
             on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
                                block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
                                tiles_done=done, tiles_total=len(plan.items), image=shown))
-    return RenderResult(image=np.ascontiguousarray(shown), rays=tracer.counts,
+    refine = None  # (the mask is not kept through the conversion below)
+    if eight_bit and not bytes_while_tracing:
+        shown = to_8bit(shown)
+    return RenderResult(image=shown, rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)

@@ -26,6 +26,7 @@ import numpy as np
 
 from . import sampling
 from .errors import TracerError
+from .imageio import band_rows, to_8bit
 
 DEFAULT_TILE = 64
 
@@ -128,9 +129,20 @@ class TilePlan:
         return [Tile(p, stride, *rect) for p, stride in enumerate(self.passes)]
 
     def refine_mask(self, film: np.ndarray) -> np.ndarray:
-        """The pixels the refinement pass traces again, judged on the colour of the film after the block
-        passes (which crosses tile borders, so the whole film is needed)."""
-        return sampling.contrast_mask(film[..., :3], self.threshold)
+        """The pixels the refinement pass traces again, judged on the colour of the float film after the
+        block passes (which crosses tile borders, so the whole film is needed).  Judged a band of rows at a
+        time, each with the rows either side of it, so that no full-size float temporary is made."""
+        if film.dtype == np.uint8:
+            raise ValueError("the refinement mask is judged on a float film, not an 8-bit one")
+        height = film.shape[0]
+        mask = np.empty(film.shape[:2], dtype=bool)
+        rows = band_rows(film)
+        for top in range(0, height, rows):
+            bottom = min(top + rows, height)
+            above, below = max(top - 1, 0), min(bottom + 1, height)
+            band = sampling.contrast_mask(film[above:below, :, :3], self.threshold)
+            mask[top:bottom] = band[top - above: bottom - above]
+        return mask
 
     def sample_positions(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int):
         """(rows, cols, dy, dx) of every ray of the given pixels, ``per_pixel`` consecutive rays per pixel."""
@@ -144,7 +156,9 @@ def trace_tile(plan: TilePlan, item: Tile, film: np.ndarray, shade: Shade,
                refine: Optional[np.ndarray] = None, at: tuple[int, int] = (0, 0)) -> None:
     """Trace one tile of one pass into ``film`` (rows from the bottom, any number of channels).
 
-    ``film`` may be a window of the image whose pixel (0, 0) is image pixel ``at`` (row, column); it must
+    A float film gets the colours; a uint8 film gets their 8-bit values (:func:`tracer.imageio.to_8bit`),
+    the bytes that converting the float film afterwards would give (a later pass copies an earlier pass's
+    sample as its byte, which is the byte of its colour).  ``film`` may be a window of the image whose pixel (0, 0) is image pixel ``at`` (row, column); it must
     cover the tile.  A refinement tile needs ``refine``, the mask of :meth:`TilePlan.refine_mask`, indexed
     like ``film``.
     """
@@ -155,20 +169,25 @@ def trace_tile(plan: TilePlan, item: Tile, film: np.ndarray, shade: Shade,
             raise ValueError("a refinement tile needs the refinement mask")
         rr, cc = np.nonzero(refine[r0:r1, c0:c1])
         if rr.size:
-            film[rr + r0, cc + c0] = shade(rr + item.r0, cc + item.c0, plan.samples)
+            film[rr + r0, cc + c0] = _in_film(shade(rr + item.r0, cc + item.c0, plan.samples), film)
         return
     if item.stride == 1 and item.pass_index == 0:  # every pixel new: no earlier samples to keep
         rows, cols = np.arange(item.r0, item.r1), np.arange(item.c0, item.c1)
         values = shade(np.repeat(rows, cols.size), np.tile(cols, rows.size), plan.per_pixel)
-        film[r0:r1, c0:c1] = values.reshape(rows.size, cols.size, -1)
+        film[r0:r1, c0:c1] = _in_film(values, film).reshape(rows.size, cols.size, -1)
         return
     grid_r, grid_c, new = item.positions()
     values = film[grid_r - at[0], grid_c - at[1]]  # earlier passes' samples keep their value
     if new.any():
-        values[new] = shade(grid_r[new], grid_c[new], plan.per_pixel)
+        values[new] = _in_film(shade(grid_r[new], grid_c[new], plan.per_pixel), film)
     s = item.stride
     block = np.repeat(np.repeat(values, s, axis=0), s, axis=1)
     film[r0:r1, c0:c1] = block[: r1 - r0, : c1 - c0]
+
+
+def _in_film(colours: np.ndarray, film: np.ndarray) -> np.ndarray:
+    """Shaded colours as ``film`` keeps them: as they are in a float film, as bytes in an 8-bit one."""
+    return to_8bit(colours) if film.dtype == np.uint8 else colours
 
 
 def trace_rect(plan: TilePlan, rect: tuple[int, int, int, int], shade: Shade, channels: int = 3) -> np.ndarray:

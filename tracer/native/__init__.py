@@ -93,7 +93,7 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_scan_3vn_end.argtypes = [_i64p, ctypes.c_int]
     lib.rt_build_mesh_bvh.restype = ctypes.c_int64
     lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _i32p, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
-                                      _i32p, ctypes.POINTER(ctypes.c_void_p)]
+                                      ctypes.c_int64, _i32p, ctypes.POINTER(ctypes.c_void_p)]
     lib.rt_free.restype = None
     lib.rt_free.argtypes = [ctypes.c_void_p]
     lib.rt_desc_layout.restype = ctypes.c_int64
@@ -239,11 +239,12 @@ def _last_space(block: bytes) -> int:
     return max(block.rfind(bytes([space])) for space in _SPACE)
 
 
-def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int, bins: int,
-                   pad: float) -> tuple[np.ndarray, np.ndarray]:
+def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int, bins: int, pad: float,
+                   threads: Optional[int] = None) -> tuple[np.ndarray, np.ndarray]:
     """(nodes, tri_order) of TriangleMesh's builder (the same tree, see bvh_build.h), built in C over the
     triangles ``tri_vertex`` ((T, 3) indices, in range) of ``vertices`` ((V, 3)): NODE records with boxes
-    grown by ``pad`` and rounded outward, and the leaf order (int32).  Needs the C core."""
+    grown by ``pad`` and rounded outward, and the leaf order (int32).  On ``threads`` threads (default:
+    default_threads()); the tree does not depend on how many.  Needs the C core."""
     from ..intersect.mesh import NODE
 
     if _lib is None:
@@ -254,8 +255,9 @@ def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int,
     order = np.empty(n, np.int32)
     buffer = ctypes.c_void_p()
     count = _lib.rt_build_mesh_bvh(n, _ptr(vertices, ctypes.c_double), _ptr(tri_vertex, ctypes.c_int32),
-                                   int(leaf_size), int(bins), float(pad), _ptr(order, ctypes.c_int32),
-                                   ctypes.byref(buffer))
+                                   int(leaf_size), int(bins), float(pad),
+                                   int(default_threads() if threads is None else threads),
+                                   _ptr(order, ctypes.c_int32), ctypes.byref(buffer))
     if count < 0:
         raise MemoryError("the C core ran out of memory building a mesh BVH")
     try:

@@ -10,6 +10,8 @@
 #define RT_BVH_BUILD_H
 
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -17,6 +19,7 @@
 #include "mesh.h"
 
 #define BVH_MAX_BINS 64
+#define BVH_MAX_THREADS 256
 
 /* The nearest float at or below / at or above x (mesh.py's _single_outward): node boxes are kept in
  * single precision, rounded outward so that they still hold every triangle.  NaN stays NaN. */
@@ -94,12 +97,279 @@ static inline double bvh_centroid(const double *vertices, const int32_t *tri, in
             vertices[3 * (int64_t)tri[3 * t + 2] + k]) / 3.0;
 }
 
-/* Build over the n triangles tri (3 vertex indices each, checked by the caller) of the vertices.  Writes
- * order (n) and, into a buffer it allocates (*nodes_out, to be released with rt_free), the MeshNode records
- * with their boxes grown by `pad` and rounded outward.  Returns the number of nodes, or -1 when memory runs
- * out or the arguments are out of range. */
+/* What every part of a build reads and writes: the triangles, the parameters, the leaf order (each subtree
+ * rearranges only its own range of it) and a scratch array of the same length (likewise). */
+typedef struct {
+    const double *vertices;
+    const int32_t *tri;
+    int64_t leaf_size, bins;
+    double pad;
+    int32_t *order, *scratch;
+} BvhInput;
+
+/* A node's record (its box, and a leaf's range) from the triangles order[start, end); returns where its
+ * range splits (the left child takes [start, middle)), or -1 for a leaf.  *axis_out: the split axis. */
+static int64_t bvh_node(const BvhInput *in, int64_t start, int64_t end, MeshNode *record, int *axis_out)
+{
+    const double *vertices = in->vertices;
+    const int32_t *tri = in->tri;
+    int32_t *order = in->order, *scratch = in->scratch;
+    int64_t bins = in->bins;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double c_lo[3] = {INFINITY, INFINITY, INFINITY}, c_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int64_t i = start; i < end; i++) {
+        int64_t t = order[i];
+        double t_lo[3], t_hi[3];
+        bvh_box(vertices, tri, t, t_lo, t_hi);
+        for (int k = 0; k < 3; k++) {
+            double a = t_lo[k], b = t_hi[k], c = bvh_centroid(vertices, tri, t, k);
+            lo[k] = a < lo[k] ? a : lo[k];
+            hi[k] = b > hi[k] ? b : hi[k];
+            c_lo[k] = c < c_lo[k] ? c : c_lo[k];
+            c_hi[k] = c > c_hi[k] ? c : c_hi[k];
+        }
+    }
+    memset(record, 0, sizeof(*record));
+    for (int k = 0; k < 3; k++) {
+        record->lo[k] = bvh_single_below(lo[k] - in->pad);
+        record->hi[k] = bvh_single_above(hi[k] + in->pad);
+    }
+    int64_t size = end - start;
+    if (size <= in->leaf_size) {
+        record->offset = (int32_t)start;
+        record->count = (uint16_t)size;
+        record->axis = -1;
+        return -1;
+    }
+    int axis = 0;
+    for (int k = 1; k < 3; k++)
+        if (c_hi[k] - c_lo[k] > c_hi[axis] - c_lo[axis])
+            axis = k;
+    double width = c_hi[axis] - c_lo[axis];
+    double scale = (double)bins / width;
+    int64_t middle;
+    if (!(width > 0.0) || !isfinite(scale)) {
+        middle = start + size / 2;  /* all centroids in one place: halve the range */
+    } else {
+        double box_lo[BVH_MAX_BINS][3], box_hi[BVH_MAX_BINS][3];
+        int64_t in_bin[BVH_MAX_BINS] = {0};
+        for (int64_t b = 0; b < bins; b++)
+            for (int k = 0; k < 3; k++)
+                box_lo[b][k] = INFINITY, box_hi[b][k] = -INFINITY;
+        for (int64_t i = start; i < end; i++) {
+            int64_t t = order[i];
+            int64_t b = bvh_bucket(bvh_centroid(vertices, tri, t, axis), c_lo[axis], scale, bins);
+            double t_lo[3], t_hi[3];
+            bvh_box(vertices, tri, t, t_lo, t_hi);
+            in_bin[b]++;
+            for (int k = 0; k < 3; k++) {
+                double a = t_lo[k], c = t_hi[k];
+                box_lo[b][k] = a < box_lo[b][k] ? a : box_lo[b][k];
+                box_hi[b][k] = c > box_hi[b][k] ? c : box_hi[b][k];
+            }
+        }
+        /* Candidate k splits after bucket k: areas of the prefix and suffix boxes. */
+        double right_area[BVH_MAX_BINS];
+        double acc_lo[3] = {INFINITY, INFINITY, INFINITY}, acc_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (int64_t b = bins - 1; b >= 1; b--) {
+            for (int k = 0; k < 3; k++) {
+                acc_lo[k] = box_lo[b][k] < acc_lo[k] ? box_lo[b][k] : acc_lo[k];
+                acc_hi[k] = box_hi[b][k] > acc_hi[k] ? box_hi[b][k] : acc_hi[k];
+            }
+            right_area[b - 1] = bvh_half_area(acc_lo, acc_hi);
+        }
+        for (int k = 0; k < 3; k++)
+            acc_lo[k] = INFINITY, acc_hi[k] = -INFINITY;
+        int64_t best = -1, left_count = 0;
+        double best_cost = INFINITY;
+        for (int64_t b = 0; b + 1 < bins; b++) {
+            for (int k = 0; k < 3; k++) {
+                acc_lo[k] = box_lo[b][k] < acc_lo[k] ? box_lo[b][k] : acc_lo[k];
+                acc_hi[k] = box_hi[b][k] > acc_hi[k] ? box_hi[b][k] : acc_hi[k];
+            }
+            left_count += in_bin[b];
+            int64_t right_count = size - left_count;
+            double cost = (left_count == 0 || right_count == 0)
+                              ? INFINITY
+                              : bvh_half_area(acc_lo, acc_hi) * (double)left_count +
+                                    right_area[b] * (double)right_count;
+            if (best < 0 || cost < best_cost) {  /* np.argmin: the first minimum */
+                best = b;
+                best_cost = cost;
+            }
+        }
+        /* Stable partition: the left buckets keep their order at the front, the rest follows. */
+        int64_t kept = start, moved = 0;
+        for (int64_t i = start; i < end; i++) {
+            int64_t t = order[i];
+            if (bvh_bucket(bvh_centroid(vertices, tri, t, axis), c_lo[axis], scale, bins) <= best)
+                order[kept++] = t;
+            else
+                scratch[start + moved++] = t;
+        }
+        for (int64_t i = 0; i < moved; i++)
+            order[kept + i] = scratch[start + i];
+        middle = kept;
+    }
+    *axis_out = axis;
+    return middle;
+}
+
+/* A subtree still to be built: over order[start, end), its nodes (its root first, then its descendants in
+ * the order the sequential builder numbers them) into its own buffer. */
+typedef struct {
+    int64_t start, end;
+    MeshNode *nodes;
+    int64_t count, capacity;
+    int failed;
+} BvhTask;
+
+/* Marks a node record as standing for task k (until the tasks' nodes are put in place). */
+#define BVH_DEFERRED (-2)
+
+/* The sequential builder over order[start, end): the root at index 0 of *out, each node's children
+ * numbered together when it splits, a left subtree's nodes all before its right sibling's (the numbering
+ * of _build_bvh_numpy).  A node other than the root with at most `defer` triangles is not built: its record
+ * says BVH_DEFERRED with the index of the task appended to *tasks for it.  Returns the number of nodes, or -1
+ * when memory runs out. */
+static int64_t bvh_build_range(const BvhInput *in, int64_t start, int64_t end, int64_t defer, MeshNode **out,
+                               int64_t *capacity, BvhTask **tasks, int64_t *n_tasks, int64_t *task_capacity)
+{
+    int64_t stack_capacity = 3 * 64, top = 0, nodes = 1;
+    int64_t *stack = (int64_t *)malloc((size_t)stack_capacity * sizeof(int64_t));
+    if (!stack || !bvh_reserve(out, capacity, 2 * ((end - start) / (in->leaf_size + 1)) + 1)) {
+        free(stack);
+        return -1;
+    }
+    stack[top++] = 0, stack[top++] = start, stack[top++] = end;
+    while (top) {
+        int64_t hi_end = stack[--top], lo_start = stack[--top], node = stack[--top];
+        if (node > 0 && hi_end - lo_start <= defer) {
+            if (*n_tasks == *task_capacity) {
+                int64_t cap = *task_capacity ? 2 * *task_capacity : 16;
+                BvhTask *p = (BvhTask *)realloc(*tasks, (size_t)cap * sizeof(BvhTask));
+                if (!p) {
+                    free(stack);
+                    return -1;
+                }
+                *tasks = p;
+                *task_capacity = cap;
+            }
+            BvhTask *task = &(*tasks)[*n_tasks];
+            memset(task, 0, sizeof(*task));
+            task->start = lo_start;
+            task->end = hi_end;
+            memset(&(*out)[node], 0, sizeof(MeshNode));
+            (*out)[node].offset = (int32_t)(*n_tasks)++;
+            (*out)[node].axis = BVH_DEFERRED;
+            continue;
+        }
+        int axis = 0;
+        int64_t middle = bvh_node(in, lo_start, hi_end, &(*out)[node], &axis);
+        if (middle < 0)
+            continue;
+        if (!bvh_reserve(out, capacity, nodes + 2) ||
+            (top + 6 > stack_capacity && !bvh_grow_stack(&stack, &stack_capacity))) {
+            free(stack);
+            return -1;
+        }
+        MeshNode *record = &(*out)[node];
+        int64_t l = nodes++, r = nodes++;
+        record->offset = (int32_t)l;
+        record->count = 0;
+        record->axis = (int8_t)axis;
+        stack[top++] = r, stack[top++] = middle, stack[top++] = hi_end;
+        stack[top++] = l, stack[top++] = lo_start, stack[top++] = middle;
+    }
+    free(stack);
+    return nodes;
+}
+
+typedef struct {
+    const BvhInput *in;
+    BvhTask *tasks;
+    int64_t n_tasks;
+    _Atomic int64_t next;
+} BvhJob;
+
+static void *bvh_worker(void *arg)
+{
+    BvhJob *job = (BvhJob *)arg;
+    for (;;) {
+        int64_t k = atomic_fetch_add(&job->next, 1);
+        if (k >= job->n_tasks)
+            return NULL;
+        BvhTask *task = &job->tasks[k];
+        task->count = bvh_build_range(job->in, task->start, task->end, 0, &task->nodes, &task->capacity, NULL,
+                                      NULL, NULL);
+        task->failed = task->count < 0;
+    }
+}
+
+static int bvh_larger_task_first(const void *a, const void *b)
+{
+    int64_t x = ((const BvhTask *)a)->end - ((const BvhTask *)a)->start;
+    int64_t y = ((const BvhTask *)b)->end - ((const BvhTask *)b)->start;
+    return (x < y) - (x > y);
+}
+
+/* The top part's nodes and the tasks' nodes numbered as the sequential builder numbers them, into one
+ * buffer: walking the top part depth first, a task's root takes its place and its descendants the next
+ * indices.  Returns the buffer (count in *total), or NULL when memory runs out. */
+static MeshNode *bvh_stitch(const MeshNode *top, BvhTask *tasks, int64_t *total)
+{
+    MeshNode *out = (MeshNode *)malloc((size_t)*total * sizeof(MeshNode));
+    int64_t capacity = 3 * 64, sp = 0, nodes = 1;
+    int64_t *stack = (int64_t *)malloc((size_t)capacity * sizeof(int64_t));
+    if (!out || !stack) {
+        free(out);
+        free(stack);
+        return NULL;
+    }
+    stack[sp++] = 0, stack[sp++] = 0;  /* (node in the top part, its final index) */
+    while (sp) {
+        int64_t g = stack[--sp], t = stack[--sp];
+        if (top[t].axis == BVH_DEFERRED) {
+            const BvhTask *task = &tasks[top[t].offset];
+            int64_t base = nodes - 1;  /* a task's node j >= 1 goes to base + j */
+            for (int64_t j = 0; j < task->count; j++) {
+                MeshNode record = task->nodes[j];
+                if (record.count == 0)
+                    record.offset = (int32_t)(base + record.offset);
+                out[j == 0 ? g : base + j] = record;
+            }
+            nodes += task->count - 1;
+            continue;
+        }
+        out[g] = top[t];
+        if (top[t].count)
+            continue;
+        if (sp + 4 > capacity && !bvh_grow_stack(&stack, &capacity)) {
+            free(out);
+            free(stack);
+            return NULL;
+        }
+        int64_t l = nodes;
+        nodes += 2;
+        out[g].offset = (int32_t)l;
+        stack[sp++] = top[t].offset + 1, stack[sp++] = l + 1;
+        stack[sp++] = top[t].offset, stack[sp++] = l;
+    }
+    free(stack);
+    return out;
+}
+
+/* Below this many triangles a build runs on one thread. */
+#define BVH_PARALLEL_MIN 65536
+
+/* Build over the n triangles tri (3 vertex indices each, checked by the caller) of the vertices, on up to
+ * `threads` threads: the top of the tree on one, then its subtrees of at most n / (8 threads) triangles
+ * on all, then their nodes numbered as one thread numbers them, so that the tree is the same whatever the
+ * thread count.  Writes order (n) and, into a buffer it allocates (*nodes_out, to be released with
+ * rt_free), the MeshNode records with their boxes grown by `pad` and rounded outward.  Returns the number of
+ * nodes, or -1 when memory runs out or the arguments are out of range. */
 int64_t rt_build_mesh_bvh(int64_t n, const double *vertices, const int32_t *tri, int64_t leaf_size, int64_t bins,
-                          double pad, int32_t *order, MeshNode **nodes_out)
+                          double pad, int64_t threads, int32_t *order, MeshNode **nodes_out)
 {
     *nodes_out = NULL;
     if (n < 0 || n > INT32_MAX || leaf_size < 1 || leaf_size > UINT16_MAX || bins < 2 || bins > BVH_MAX_BINS)
@@ -108,137 +378,76 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *vertices, const int32_t *tri,
         order[i] = (int32_t)i;
     if (n == 0)
         return 0;
-    MeshNode *out = NULL;
-    int64_t capacity = 0, stack_capacity = 3 * 64;
+    if (threads > BVH_MAX_THREADS)
+        threads = BVH_MAX_THREADS;
     int32_t *scratch = (int32_t *)malloc((size_t)n * sizeof(int32_t));
-    int64_t *stack = (int64_t *)malloc((size_t)stack_capacity * sizeof(int64_t));
-    if (!scratch || !stack || !bvh_reserve(&out, &capacity, 2 * (n / (leaf_size + 1)) + 1)) {
-        free(scratch);
-        free(stack);
-        free(out);
+    if (!scratch)
         return -1;
+    BvhInput in = {vertices, tri, leaf_size, bins, pad, order, scratch};
+    MeshNode *top = NULL;
+    BvhTask *tasks = NULL;
+    int64_t capacity = 0, n_tasks = 0, task_capacity = 0, result = -1;
+    int64_t defer = threads > 1 && n >= BVH_PARALLEL_MIN ? n / (8 * threads) : 0;
+    int64_t count = bvh_build_range(&in, 0, n, defer, &top, &capacity, &tasks, &n_tasks, &task_capacity);
+    if (count < 0)
+        goto done;
+    if (n_tasks == 0) {
+        *nodes_out = top;
+        top = NULL;
+        result = count;
+        goto done;
     }
-    int64_t nodes = 1, top = 0;
-    memset(&out[0], 0, sizeof(MeshNode));
-    stack[top++] = 0, stack[top++] = 0, stack[top++] = n;
-    while (top) {
-        int64_t end = stack[--top], start = stack[--top], node = stack[--top];
-        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        double c_lo[3] = {INFINITY, INFINITY, INFINITY}, c_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        for (int64_t i = start; i < end; i++) {
-            int64_t t = order[i];
-            double t_lo[3], t_hi[3];
-            bvh_box(vertices, tri, t, t_lo, t_hi);
-            for (int k = 0; k < 3; k++) {
-                double a = t_lo[k], b = t_hi[k], c = bvh_centroid(vertices, tri, t, k);
-                lo[k] = a < lo[k] ? a : lo[k];
-                hi[k] = b > hi[k] ? b : hi[k];
-                c_lo[k] = c < c_lo[k] ? c : c_lo[k];
-                c_hi[k] = c > c_hi[k] ? c : c_hi[k];
-            }
+    {
+        /* (the tasks are numbered in the top part's records: sorting them needs their numbers kept) */
+        int64_t *number = (int64_t *)malloc((size_t)n_tasks * sizeof(int64_t));
+        BvhTask *sorted = (BvhTask *)malloc((size_t)n_tasks * sizeof(BvhTask));
+        if (!number || !sorted) {
+            free(number);
+            free(sorted);
+            goto done;
         }
-        MeshNode *record = &out[node];
-        for (int k = 0; k < 3; k++) {
-            record->lo[k] = bvh_single_below(lo[k] - pad);
-            record->hi[k] = bvh_single_above(hi[k] + pad);
+        for (int64_t k = 0; k < n_tasks; k++) {
+            sorted[k] = tasks[k];
+            sorted[k].count = k;  /* its number, until built */
         }
-        int64_t size = end - start;
-        if (size <= leaf_size) {
-            record->offset = (int32_t)start;
-            record->count = (uint16_t)size;
-            record->axis = -1;
-            continue;
-        }
-        int axis = 0;
-        for (int k = 1; k < 3; k++)
-            if (c_hi[k] - c_lo[k] > c_hi[axis] - c_lo[axis])
-                axis = k;
-        double width = c_hi[axis] - c_lo[axis];
-        double scale = (double)bins / width;
-        int64_t middle;
-        if (!(width > 0.0) || !isfinite(scale)) {
-            middle = start + size / 2;  /* all centroids in one place: halve the range */
-        } else {
-            double box_lo[BVH_MAX_BINS][3], box_hi[BVH_MAX_BINS][3];
-            int64_t in_bin[BVH_MAX_BINS] = {0};
-            for (int64_t b = 0; b < bins; b++)
-                for (int k = 0; k < 3; k++)
-                    box_lo[b][k] = INFINITY, box_hi[b][k] = -INFINITY;
-            for (int64_t i = start; i < end; i++) {
-                int64_t t = order[i];
-                int64_t b = bvh_bucket(bvh_centroid(vertices, tri, t, axis), c_lo[axis], scale, bins);
-                double t_lo[3], t_hi[3];
-                bvh_box(vertices, tri, t, t_lo, t_hi);
-                in_bin[b]++;
-                for (int k = 0; k < 3; k++) {
-                    double a = t_lo[k], c = t_hi[k];
-                    box_lo[b][k] = a < box_lo[b][k] ? a : box_lo[b][k];
-                    box_hi[b][k] = c > box_hi[b][k] ? c : box_hi[b][k];
-                }
-            }
-            /* Candidate k splits after bucket k: areas of the prefix and suffix boxes. */
-            double right_area[BVH_MAX_BINS];
-            double acc_lo[3] = {INFINITY, INFINITY, INFINITY}, acc_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-            for (int64_t b = bins - 1; b >= 1; b--) {
-                for (int k = 0; k < 3; k++) {
-                    acc_lo[k] = box_lo[b][k] < acc_lo[k] ? box_lo[b][k] : acc_lo[k];
-                    acc_hi[k] = box_hi[b][k] > acc_hi[k] ? box_hi[b][k] : acc_hi[k];
-                }
-                right_area[b - 1] = bvh_half_area(acc_lo, acc_hi);
-            }
-            for (int k = 0; k < 3; k++)
-                acc_lo[k] = INFINITY, acc_hi[k] = -INFINITY;
-            int64_t best = -1, left_count = 0;
-            double best_cost = INFINITY;
-            for (int64_t b = 0; b + 1 < bins; b++) {
-                for (int k = 0; k < 3; k++) {
-                    acc_lo[k] = box_lo[b][k] < acc_lo[k] ? box_lo[b][k] : acc_lo[k];
-                    acc_hi[k] = box_hi[b][k] > acc_hi[k] ? box_hi[b][k] : acc_hi[k];
-                }
-                left_count += in_bin[b];
-                int64_t right_count = size - left_count;
-                double cost = (left_count == 0 || right_count == 0)
-                                  ? INFINITY
-                                  : bvh_half_area(acc_lo, acc_hi) * (double)left_count +
-                                        right_area[b] * (double)right_count;
-                if (best < 0 || cost < best_cost) {  /* np.argmin: the first minimum */
-                    best = b;
-                    best_cost = cost;
-                }
-            }
-            /* Stable partition: the left buckets keep their order at the front, the rest follows. */
-            int64_t kept = start, moved = 0;
-            for (int64_t i = start; i < end; i++) {
-                int64_t t = order[i];
-                if (bvh_bucket(bvh_centroid(vertices, tri, t, axis), c_lo[axis], scale, bins) <= best)
-                    order[kept++] = t;
-                else
-                    scratch[moved++] = t;
-            }
-            for (int64_t i = 0; i < moved; i++)
-                order[kept + i] = scratch[i];
-            middle = kept;
-        }
-        if (!bvh_reserve(&out, &capacity, nodes + 2) ||
-            (top + 6 > stack_capacity && !bvh_grow_stack(&stack, &stack_capacity))) {
-            free(scratch);
-            free(stack);
-            free(out);
-            return -1;
-        }
-        record = &out[node];  /* (the buffer may have moved) */
-        int64_t l = nodes++, r = nodes++;
-        memset(&out[l], 0, 2 * sizeof(MeshNode));
-        record->offset = (int32_t)l;
-        record->count = 0;
-        record->axis = (int8_t)axis;
-        stack[top++] = r, stack[top++] = middle, stack[top++] = end;
-        stack[top++] = l, stack[top++] = start, stack[top++] = middle;
+        qsort(sorted, (size_t)n_tasks, sizeof(BvhTask), bvh_larger_task_first);  /* biggest first: balance */
+        for (int64_t k = 0; k < n_tasks; k++)
+            number[sorted[k].count] = k;
+        for (int64_t k = 0; k < count; k++)
+            if (top[k].axis == BVH_DEFERRED)
+                top[k].offset = (int32_t)number[top[k].offset];
+        free(number);
+        free(tasks);
+        tasks = sorted;
+        for (int64_t k = 0; k < n_tasks; k++)
+            tasks[k].count = 0;
     }
+    BvhJob job = {&in, tasks, n_tasks, 0};
+    pthread_t ids[BVH_MAX_THREADS];
+    int started[BVH_MAX_THREADS] = {0};
+    for (int64_t k = 1; k < threads; k++)
+        started[k] = pthread_create(&ids[k], NULL, bvh_worker, &job) == 0;
+    bvh_worker(&job);
+    for (int64_t k = 1; k < threads; k++)
+        if (started[k])
+            pthread_join(ids[k], NULL);
+    int64_t total = count;
+    int failed = 0;
+    for (int64_t k = 0; k < n_tasks; k++) {
+        failed |= tasks[k].failed;
+        total += tasks[k].count - 1;
+    }
+    if (!failed) {
+        *nodes_out = bvh_stitch(top, tasks, &total);
+        result = *nodes_out ? total : -1;
+    }
+done:
+    for (int64_t k = 0; k < n_tasks; k++)
+        free(tasks[k].nodes);
+    free(tasks);
+    free(top);
     free(scratch);
-    free(stack);
-    *nodes_out = out;
-    return nodes;
+    return result;
 }
 
 #endif

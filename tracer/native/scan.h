@@ -172,16 +172,6 @@ static int scan_next(ScanCursor *c, double *value)
     return ok ? 1 : -1;
 }
 
-/* The next word as a whole number in [low, high] ("3.0" is one); 0 if it is not that. */
-static int scan_whole(ScanCursor *c, double low, double high, int64_t *out)
-{
-    double v;
-    if (scan_next(c, &v) != 1 || v != floor(v) || v < low || v > high)
-        return 0;
-    *out = (int64_t)v;
-    return 1;
-}
-
 #define SCAN_BIG 2147483647.0 /* meshio._BIG: larger counts are certainly corrupt */
 
 /* The reader's state between pieces of a file (an int64 array on the Python side, so that a file is read a

@@ -8,7 +8,7 @@ A comment ``! name: text`` is kept aside: it names the next shape.
 The lexer does not decide what a token means: a file name such as ``../meshes/pawn.3vn`` is one token like
 any other, and the parser decides whether a token is a keyword, a number or a name.
 
-A scene of a million shapes is some 2.4·10^7 tokens, so the reader gets them from :class:`Tokens` as plain
+A scene of a million shapes is some 1.5·10^7 tokens, so the reader gets them from :class:`Tokens` as plain
 strings, a block of lines at a time, numbered in reading order; it asks where a token is (its line and
 column) only for what it records or reports (a shape's source, an error), and that question re-reads the
 token's line.  :func:`tokenize` gives every token with its place, for tests and small texts.
@@ -20,7 +20,7 @@ import re
 from array import array
 from bisect import bisect_right
 from dataclasses import dataclass
-from itertools import accumulate, chain
+from itertools import accumulate, chain, islice
 from typing import NamedTuple, Optional, Union
 
 
@@ -41,6 +41,9 @@ NUMBER_RE = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
 #: ``! name: text``, the comment that names the next shape (an extension: other readers skip it).
 _NAME_COMMENT_RE = re.compile(r"!\s*name:\s*(.*?)\s*$")
+
+#: Tokens into a line beyond which a token's place is looked up in the line's token starts, worked out once.
+_FAR = 64
 
 #: About how many characters of text are split into tokens at a time: enough that the per-block work is
 #: nothing, few enough that a block's tokens (some 60 bytes each as strings) stay a few megabytes.
@@ -74,6 +77,7 @@ class Tokens:
         self._block_bases: list[int] = []  # the number of each block's first token, for bisect
         self._lines: dict[int, list[str]] = {}  # the lines of the last blocks asked about, by block number
         self._tokens: list[str] = []  # the last block's
+        self._far: dict[tuple[int, int], list[int]] = {}  # (block, line) -> where its tokens start, for long lines
         #: Tokens split so far.
         self.count = 0
         #: The name comments of the last block: (number of the token after the comment, the name).
@@ -106,6 +110,7 @@ class Tokens:
         self._blocks.append(_Block(start, end, self._next_line, starts))
         self._lines = {len(self._blocks) - 1: lines}
         self._tokens = tokens
+        self._far = {}
         self._next_start = end + 1
         self._next_line += len(lines)
         self.count += len(tokens)
@@ -141,25 +146,29 @@ class Tokens:
         index = last if number >= self._block_bases[last] else bisect_right(self._block_bases, number) - 1
         block = self._blocks[index]
         row = bisect_right(block.starts, number) - 1
-        first = block.starts[row]  # the number of the first token on its line
+        n = number - block.starts[row]  # the token is the n-th (from 0) on its line
         lines = self._lines.get(index)
         if lines is None:  # an earlier block (a macro body defined there): split its lines again
             lines = self._lines[index] = self._text[block.start:block.end].split("\n")
         line = lines[row]
+        if n >= _FAR:
+            # Far along a long line (a whole scene on one line, say): where each of its tokens starts is
+            # worked out once, so that placing all its shapes stays linear in its length.
+            line = _without_comment(line)
+            starts = self._far.get((index, row))
+            if starts is None:
+                starts = self._far[(index, row)] = [m.start() for m in _TOKEN_RE.finditer(line)]
+            return _TOKEN_RE.match(line, starts[n]).group(), block.first_line + row, starts[n] + 1
         if index == last:
+            # Most lines are written with single spaces and no indent: then the column is the length of the
+            # words before the token, joined by spaces, if the line does start with just that.
             base = self._block_bases[last]
-            words = self._tokens[first - base:number - base + 1]
-        else:
-            words = _TOKEN_RE.findall(_without_comment(line), 0)[:number - first + 1]
-        # Most lines are written with single spaces and no indent: then the column is the length of the
-        # words before the token, joined by spaces, if the line does start with just that.
-        before = " ".join(words[:-1]) + " " if len(words) > 1 else ""
-        if line.startswith(before) and line.startswith(words[-1], len(before)):
-            column = len(before) + 1
-        else:
-            column = next(match.start() + 1 for k, match in enumerate(_TOKEN_RE.finditer(_without_comment(line)))
-                          if k == len(words) - 1)
-        return words[-1], block.first_line + row, column
+            words = self._tokens[number - n - base:number - base + 1]
+            before = " ".join(words[:-1]) + " " if n else ""
+            if line.startswith(before) and line.startswith(words[-1], len(before)):
+                return words[-1], block.first_line + row, len(before) + 1
+        match = next(islice(_TOKEN_RE.finditer(_without_comment(line)), n, None))
+        return match.group(), block.first_line + row, match.start() + 1
 
 
 def _without_comment(line: str) -> str:

@@ -10,6 +10,12 @@ The reader is one loop over statements.  Two things make SDL more than a flat li
 
 Neither needs Python recursion, so deep nesting in a file cannot crash the reader.
 
+A file of 10^5 shapes is some 1.5·10^6 tokens in 6·10^5 statements, so the per-statement work is kept to
+plain Python values: tokens are strings, each known by its number in the file (lexer.Tokens splits the file a
+block of lines at a time), and a token's line and column are found only for what is kept or reported (a
+shape's source, an error); a statement's numbers are converted together; the current transform is 12 floats
+(transforms.Affine), made a matrix once per shape; equal materials are one Material.
+
 Errors come in two kinds.  *Syntax* problems (a word where a number belongs, an unknown keyword) abandon the
 statement: in strict mode they raise :class:`SDLError`; in lenient mode they become one warning and reading
 resumes at the next keyword.  *Semantic* problems (a missing mesh file, ``pop`` with nothing pushed) are found
@@ -33,7 +39,7 @@ from ..bulk import collector_paused
 from ..errors import SDLError
 from ..meshio import read_3vn
 from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
-                     Material, MeshData, Scene, SceneObject, Shape, SourceLocation)
+                     Material, MeshData, Scene, SceneObject, Shape, SourceLocation, TEXTURE_NUMBERS)
 from ..userfiles import read_text
 from .lexer import Tokens, to_float, to_floats
 
@@ -208,7 +214,7 @@ class _TokenSource:
         return self._groups
 
     def in_macro(self) -> bool:
-        """Whether the token read last came from a macro body."""
+        """Whether a macro body is being read (a token read from the file itself always answers False)."""
         return len(self._frames) > 1
 
     def is_open(self, name: str) -> bool:
@@ -522,6 +528,9 @@ class _Reader:
         value, number = self._number_token(keyword, at)
         if not value.is_integer():
             return self._report(self._error(number, "texture number must be a whole number"))
+        if int(value) not in TEXTURE_NUMBERS:
+            return self._report(self._error(number, "texture number out of range",
+                                            expected="-1, -2, -3 or a makePixmap number"))
         self._set_material("texture", int(value))
 
     def _parameters(self, keyword: str, at: int, groups) -> None:
@@ -649,7 +658,8 @@ class _Reader:
     def _shape_location(self, at: int) -> SourceLocation:
         if not self.source.in_macro():
             return self._location(at)
-        # A macro used many times places its shapes at the same token each time: one location for all.
+        # A macro used many times places its shapes at the same token each time: one location for all (a
+        # shape that is a macro's last token may come here or above; either way its place is the same).
         location = self.macro_locations.get(at)
         if location is None:
             location = self.macro_locations[at] = self._location(at)

@@ -91,13 +91,13 @@ def sealed_lights(compiled: CompiledScene) -> np.ndarray:
     index = objects.primitive_index
     plain = np.flatnonzero(index >= 0)
     rows = index[plain]
-    closed = np.isin(table.kind[rows], [k for k, e in enumerate(shapes.REGISTRY) if e.closed])
-    candidates = plain[transparent[table.material_ids[rows]] & closed].tolist()
+    closed = np.zeros(len(table), dtype=bool)
+    closed[table.rows(CLOSED_KINDS)] = True
+    candidates = plain[transparent[table.material_ids[rows]] & closed[rows]].tolist()
     for k, obj in objects.booleans.items():
         if any(transparent[p.material_id] for p in obj.leaves()) and _closed(obj):
             candidates.append(k)
-    for index in sorted(candidates):
-        obj = objects[index]
+    for k in sorted(candidates):
         for light in range(n_lights):
-            sealed[index, light] = _contains(obj, compiled.light_positions[light]) is False
+            sealed[k, light] = _contains(objects[k], compiled.light_positions[light]) is False
     return sealed

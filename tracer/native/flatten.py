@@ -22,7 +22,7 @@ from ..intersect.mesh import NODE, MeshArrays
 from .. import numerics, shapes
 from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
 from . import contract
-from .contract import EFFECT_BITS, KIND, KIND_CODES, OP_CODES
+from .contract import EFFECT_BITS, KIND_CODES, OP_CODES
 
 #: Effects the C core implements; any other live effect sends the scene to the NumPy path.
 HANDLED_EFFECTS = frozenset(EFFECT_BITS) | {"csg"} | {f"shape:{kind}" for kind in KIND_CODES}

@@ -1,9 +1,10 @@
 """Peak memory of a render against the size of one full frame (``make bench`` runs it).
 
 Each size is rendered by the command line in a fresh Python process that reports its own peak resident set
-size; a process that only imports the tracer gives the baseline.  The renderer streams blocks into one
-float32 film, so the peak above the baseline should stay within a few full-frame buffers (12 bytes per
-pixel each) however large the image is.
+size; a process that only imports the tracer gives the baseline.  The command line keeps each tile's 8-bit
+values (3 bytes a pixel) and hands their rows to Pillow's image (4 bytes a pixel) as it writes, so the peak
+above the baseline should stay near 4 bytes a pixel, a third of one float32 frame (12 bytes a pixel),
+however large the image is.
 """
 from __future__ import annotations
 

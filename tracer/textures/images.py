@@ -10,6 +10,7 @@ copy of it is ever made.  The size a file declares is checked before anything is
 """
 from __future__ import annotations
 
+import os
 import warnings
 from pathlib import Path
 from typing import Callable, Optional
@@ -54,7 +55,7 @@ def load_image(path: str | Path) -> np.ndarray:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            with open_regular(path, "texture image") as handle, Image.open(handle) as picture:
+            with open_regular(path, "texture image") as handle, Image.open(_ReadsWithinFile(handle)) as picture:
                 width, height = picture.size  # from the header: nothing decoded yet
                 _check_size(name, width, height)
                 rgb = picture.convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM)
@@ -76,6 +77,25 @@ def load_image(path: str | Path) -> np.ndarray:
             continue  # the size check above has already refused such a picture
         warnings.warn(ImageWarning(f"{name}: {record.message}"), stacklevel=2)
     return texels
+
+
+class _ReadsWithinFile:
+    """A picture file whose ``read(n)`` never asks for more bytes than are left in it.
+
+    Pillow's PNG reader reads a chunk's declared length in one call, and a damaged length (4 GB) would
+    allocate that much before finding the file short: a MemoryError under a memory limit, a 4 GB mapping
+    without one.  Everything else is the file's own."""
+
+    def __init__(self, handle):
+        self._handle = handle
+        self._size = os.fstat(handle.fileno()).st_size
+
+    def read(self, size: Optional[int] = -1) -> bytes:
+        left = max(0, self._size - self._handle.tell())
+        return self._handle.read(left if size is None or size < 0 else min(size, left))
+
+    def __getattr__(self, name):
+        return getattr(self._handle, name)
 
 
 def _from_fallback(name: str, rgb) -> np.ndarray:

@@ -18,8 +18,9 @@ import numpy as np
 from .atomic import replacing
 from .errors import TracerError
 
-#: Values (rows x columns x channels) converted at a time: a band of 4 MB of float32, whatever the width.
-BAND_VALUES = 1 << 20
+#: Values (rows x columns x channels) converted or judged at a time: a band of 1 MB of float32, whatever the
+#: width (a band's temporaries, a few times that, are all a full-size step adds to the peak).
+BAND_VALUES = 1 << 18
 
 
 def band_rows(image: np.ndarray) -> int:

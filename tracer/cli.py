@@ -199,9 +199,10 @@ def _savings(args):
 
 def _render(args) -> int:
     from .backend import load_core
-    from .imageio import save_image
+    from .imageio import output_format, save_image
     from .render import render
 
+    output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing, not after)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
             raise TracerError("--target-error cannot be combined with --scheduler or --frames")

@@ -167,6 +167,23 @@ def test_unreadable_file_leaves_the_scene_untouched(tmp_path):
     assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
 
 
+@pytest.mark.parametrize("strict", [False, True], ids=["lenient", "strict"])
+def test_a_folder_or_fifo_is_one_clean_error(tmp_path, capfd, strict):
+    import_sdl(SCENES / "csg.sdl")
+    before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
+    folder = tmp_path / "dir.sdl"
+    folder.mkdir()
+    fifo = tmp_path / "pipe.sdl"
+    os.mkfifo(fifo)
+    capfd.readouterr()
+    for path, what in ((folder, "folder"), (fifo, "FIFO")):
+        with pytest.raises(RuntimeError, match=rf"Cannot import {path.name}: .*{what}"):
+            bpy.ops.import_scene.sdl(filepath=str(path), strict=strict)
+    assert "Traceback" not in capfd.readouterr().err
+    assert _counts() == before
+    assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
+
+
 def test_lenient_import_reports_problems(tmp_path):
     messy = tmp_path / "messy.sdl"
     messy.write_text("sphere\nfrobnicate 1 2\npush translate 3 0 0 cube pop\n")

@@ -6,11 +6,12 @@ import ctypes
 import importlib
 import warnings
 
+import numpy as np
 import pytest
 
 import tracer
 from tracer import cli, native
-from tracer.backend import make_tracer
+from tracer.backend import MAX_CSG_DEPTH, make_tracer
 from tracer.compile import compile_scene
 from tracer.errors import FallbackWarning, RenderCancelled, TracerError
 
@@ -45,6 +46,25 @@ def test_a_scene_the_core_refuses_warns_with_the_reason():
     compiled.effects = compiled.effects | {"something new"}
     with pytest.warns(FallbackWarning, match="something new"):
         assert make_tracer(compiled, "auto").name == "numpy"
+
+
+def _nested_unions(levels: int) -> str:
+    """A scene whose one object is ``levels`` unions nested down the left, the first on line 2."""
+    return "light 1 2 3 1 1 1\n" + "union\n" * levels + "sphere " * (levels + 1)
+
+
+@pytest.mark.parametrize("backend", ["auto", "c", "numpy"])
+def test_booleans_nested_past_the_limit_are_refused_by_every_backend(backend):
+    with np.errstate(all="ignore"):  # (each level's bounding sphere is sqrt(3) times its child's: it overflows)
+        deepest = compile_scene(tracer.parse_sdl(_nested_unions(MAX_CSG_DEPTH)))
+        too_deep = compile_scene(tracer.parse_sdl(_nested_unions(MAX_CSG_DEPTH + 1)))
+    with pytest.raises(TracerError, match=rf":2:1: union: booleans nested {MAX_CSG_DEPTH + 1} deep; "
+                                          rf"the tracer follows at most {MAX_CSG_DEPTH}"):
+        make_tracer(too_deep, backend)
+    if backend == "numpy" or native.load_error is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # the deepest accepted tree is no fallback either
+            make_tracer(deepest, backend)
 
 
 @requires_core

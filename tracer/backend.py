@@ -12,12 +12,31 @@ from __future__ import annotations
 import warnings
 from typing import Optional
 
-from .compile import CompiledScene
+from .compile import CompiledScene, fold_tree
 from .errors import FallbackWarning, TracerError
+from .model import CSG, Scene
 from .savings import RaySavings
 from .trace import Tracer
 
 BACKENDS = ("auto", "c", "numpy")
+
+#: The deepest nesting of booleans any backend traces.  The C core evaluates a boolean tree recursively,
+#: about 100 bytes of a worker's stack per level; the NumPy path walks it iteratively but its time grows with
+#: pixels x depth (5,000 levels at 64x48: 48 s), so a deeper tree (only ever seen in generated or hostile
+#: files) is refused up front rather than traced for hours.
+MAX_CSG_DEPTH = 2000
+
+
+def check_boolean_depth(scene: Scene) -> None:
+    """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep."""
+    for obj in scene.objects:
+        if not isinstance(obj, CSG):
+            continue
+        depth = fold_tree(obj, lambda _: 0, lambda _, left, right: 1 + max(left, right))
+        if depth > MAX_CSG_DEPTH:
+            where = f"{obj.source}: " if obj.source is not None else ""
+            raise TracerError(f"{where}{obj.op}: booleans nested {depth} deep; the tracer follows at most "
+                              f"{MAX_CSG_DEPTH}")
 
 
 def load_core(backend: str = "auto") -> None:
@@ -38,6 +57,7 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
         raise TracerError(f"threads must be 1 or more, not {threads}")
     if backend not in BACKENDS:
         raise TracerError(f"unknown backend {backend!r} (use one of {', '.join(BACKENDS)})")
+    check_boolean_depth(compiled.scene)
     if backend in ("auto", "c"):
         try:
             from .native import NativeTracer

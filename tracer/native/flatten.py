@@ -16,6 +16,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..backend import MAX_CSG_DEPTH  # (make_tracer refuses deeper trees, for every backend)
 from ..compile import CompiledScene, Primitive, PrimitiveTable, fold_tree
 from ..geometry.polyhedra import face_planes
 from ..intersect.mesh import NODE, MeshArrays
@@ -45,10 +46,6 @@ TEX_PARAMS = _SHARED["TEX_PARAMS"]
 class SceneDesc(ctypes.Structure):
     _fields_ = contract.ctypes_fields()
 
-
-#: The C core evaluates a boolean tree recursively, about 100 bytes of a worker's stack per level: deeper trees
-#: (only ever seen in generated or hostile files) are traced by the NumPy path, which walks them iteratively.
-MAX_CSG_DEPTH = 2000
 
 
 def unsupported_reason(compiled: CompiledScene) -> Optional[str]:

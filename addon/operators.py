@@ -63,7 +63,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         for path in self._paths():  # read every file before creating anything
             try:
                 parsed.append((path, importer.read_scene(path, strict=self.strict)))
-            except errors.SDLError as exc:
+            except errors.TracerError as exc:  # SDLError and the rest of the tracer's errors (a folder, a FIFO)
                 self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
                 return {"CANCELLED"}
         total = 0

@@ -24,9 +24,16 @@ MAX_PARAMETERS = 10
 LIGHT_WATTS = 1000.0
 
 
+#: Materials whose SDL properties are being filled in code (set_material): their update callbacks wait, and
+#: the filler syncs the Principled BSDF once at the end.  Each sync sets about eight node inputs, and each
+#: such set costs Blender time in proportion to the file's node trees, so a sync per property made an
+#: import of n materials take time in n squared.
+_filling: set = set()
+
+
 def _sync_material(self, context) -> None:
     material = self.id_data
-    if isinstance(material, bpy.types.Material):
+    if isinstance(material, bpy.types.Material) and material.as_pointer() not in _filling:
         apply_principled(material)
 
 
@@ -209,10 +216,11 @@ def take_base_color_edit(material) -> bool:
     return True
 
 
-def apply_principled(material) -> None:
+def apply_principled(material, take_edits: bool = True) -> None:
     """Make the Principled BSDF and the viewport colour look like the SDL material (after taking a Base
-    Color the user edited into it)."""
-    take_base_color_edit(material)
+    Color the user edited into it, unless ``take_edits`` is False: the SDL values were just set in code)."""
+    if take_edits:
+        take_base_color_edit(material)
     s = material.sdl
     diffuse = tuple(s.diffuse)
     material.diffuse_color = (*[min(c, 1.0) for c in diffuse], 1.0)
@@ -235,7 +243,18 @@ def apply_principled(material) -> None:
 
 
 def set_material(material, sdl_material) -> None:
-    """Fill ``material.sdl`` from a tracer Material, keeping the exact values."""
+    """Fill ``material.sdl`` from a tracer Material, keeping the exact values (the Principled BSDF synced
+    once, not once a property)."""
+    key = material.as_pointer()
+    _filling.add(key)
+    try:
+        _fill_sdl(material, sdl_material)
+    finally:
+        _filling.discard(key)
+    apply_principled(material, take_edits=False)  # the diffuse just set wins over an older Base Color edit
+
+
+def _fill_sdl(material, sdl_material) -> None:
     s = material.sdl
     for name in COLOR_FIELDS:
         setattr(s, name, getattr(sdl_material, name))
@@ -249,7 +268,6 @@ def set_material(material, sdl_material) -> None:
     values = {name: getattr(sdl_material, name) for name in COLOR_FIELDS + FLOAT_FIELDS}
     values["parameters"] = tuple(params) + (0.0,) * (MAX_PARAMETERS - len(params))
     store_exact(material, s, values)
-    apply_principled(material)
 
 
 def material_to_sdl(material):

@@ -167,6 +167,46 @@ def test_unreadable_file_leaves_the_scene_untouched(tmp_path):
     assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
 
 
+@pytest.mark.parametrize("strict", [False, True], ids=["lenient", "strict"])
+def test_a_folder_or_fifo_is_one_clean_error(tmp_path, capfd, strict):
+    import_sdl(SCENES / "csg.sdl")
+    before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
+    folder = tmp_path / "dir.sdl"
+    folder.mkdir()
+    fifo = tmp_path / "pipe.sdl"
+    os.mkfifo(fifo)
+    capfd.readouterr()
+    for path, what in ((folder, "folder"), (fifo, "FIFO")):
+        with pytest.raises(RuntimeError, match=rf"Cannot import {path.name}: .*{what}"):
+            bpy.ops.import_scene.sdl(filepath=str(path), strict=strict)
+    assert "Traceback" not in capfd.readouterr().err
+    assert _counts() == before
+    assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
+
+
+def test_import_syncs_each_material_once(tmp_path, monkeypatch):
+    # A sync per SDL property set (about ten a material) made imports quadratic in the number of materials.
+    synced = []
+    real = props.apply_principled
+    monkeypatch.setattr(props, "apply_principled", lambda material, *a, **k: (synced.append(material.name),
+                                                                              real(material, *a, **k))[1])
+    many = tmp_path / "many.sdl"
+    many.write_text("".join(f"diffuse {i / 10} 0.5 0.25 specular 0.3 0.3 0.3 exponent {i + 2} reflectivity 0.{i}\n"
+                            f"push translate {3 * i} 0 0 sphere pop\n" for i in range(6)))
+    import_sdl(many)
+    materials = {o.material_slots[0].material.name for o in shape_objects()}
+    assert len(materials) == 6
+    assert sorted(synced) == sorted(materials)  # each imported material synced exactly once
+    # and each still shows its SDL values; a later edit in the UI still syncs at once
+    mat = bpy.data.materials[sorted(materials)[-1]]
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    np.testing.assert_allclose(tuple(bsdf.inputs["Base Color"].default_value)[:3], (0.5, 0.5, 0.25), atol=1e-6)
+    synced.clear()
+    mat.sdl.diffuse = (0.1, 0.2, 0.3)
+    assert synced == [mat.name]
+    np.testing.assert_allclose(tuple(bsdf.inputs["Base Color"].default_value)[:3], (0.1, 0.2, 0.3), atol=1e-6)
+
+
 def test_lenient_import_reports_problems(tmp_path):
     messy = tmp_path / "messy.sdl"
     messy.write_text("sphere\nfrobnicate 1 2\npush translate 3 0 0 cube pop\n")

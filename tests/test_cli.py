@@ -89,6 +89,20 @@ def test_bad_requests_get_one_line(args, fragment):
     _assert_one_line_error(run(*args), fragment)
 
 
+def test_target_error_names_the_options_it_replaces(tmp_path):
+    common = ("render", ROOT / "scenes" / "csg.sdl", "-o", tmp_path / "x.png", "--width", 8, "--height", 6, "-q",
+              "--target-error", 0.05)
+    proc = run(*common, "--samples", 9, "--sampling", "regular", "--block-size", 4, "--progressive")
+    assert proc.returncode == 0, proc.stderr
+    warnings = [line for line in proc.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == ["warning: --target-error chooses the samples itself: --block-size, --progressive, "
+                        "--samples, --sampling ignored"], proc.stderr
+    proc = run(*common, "--samples", 4)  # only what was given is named
+    assert proc.stderr.splitlines() == ["warning: --target-error chooses the samples itself: --samples ignored"]
+    proc = run(*common)
+    assert proc.returncode == 0 and "warning:" not in proc.stderr, proc.stderr
+
+
 # Runs the CLI as an installation without Pillow would: importing PIL fails, and tracing (which must not
 # start) exits with a message of its own.
 _WITHOUT_PILLOW = """

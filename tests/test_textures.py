@@ -11,6 +11,7 @@ import tracer
 from helpers import Light, scene_of, shape, translation
 from tracer.compile import compile_scene
 from tracer.errors import TracerError
+from tracer.sdl.parser import load as load_sdl
 from tracer.textures.images import sample_bilinear
 from tracer.textures.mapping import surface_uv
 from tracer.textures.noise import noise, turbulence
@@ -143,6 +144,19 @@ def test_missing_pixmap_is_a_clear_error():
     scene = scene_of(shape("sphere", texture=4))
     with pytest.raises(TracerError, match="makePixmap 4"):
         compile_scene(scene)
+
+
+def test_a_file_that_is_no_picture_is_named_at_its_makepixmap(tmp_path):
+    (tmp_path / "binary.sdl").write_bytes(bytes(range(256)) * 2)
+    scene_file = tmp_path / "badpix.sdl"
+    scene_file.write_text("light 2 3 4 1 1 1\n\nmakePixmap 1 binary.sdl\ntexture 1\nsphere\n")
+    scene = load_sdl(scene_file)
+    with pytest.raises(TracerError) as raised:
+        compile_scene(scene)
+    message = str(raised.value)
+    assert message.startswith(f"{scene_file}:3:1: makePixmap 1: ")  # the makePixmap, not the sphere on line 5
+    assert message.endswith("binary.sdl: not a picture format Pillow reads")
+    assert " object at 0x" not in message
 
 
 def test_cook_torrance_at_normal_incidence():

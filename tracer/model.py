@@ -314,6 +314,9 @@ class Scene:
     settings: Settings = field(default_factory=Settings)
     #: makePixmap: image number -> file path (resolved against the scene file's folder).
     pixmaps: dict[int, str] = field(default_factory=dict)
+    #: Where each makePixmap was read (image number -> place), for messages about its picture; not part of
+    #: what the scene is, so not compared.
+    pixmap_sources: dict[int, SourceLocation] = field(default_factory=dict, compare=False)
     #: The file this scene was read from, if any.
     source: Optional[Path] = None
     #: Problems found while reading in lenient mode, one message each ("file:line:col: what").

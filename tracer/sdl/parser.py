@@ -486,6 +486,7 @@ class _Reader:
                 index_number, "makePixmap image number out of range",
                 expected=f"a whole number {PIXMAP_RANGE.start}..{PIXMAP_RANGE.stop - 1}"))
         self.scene.pixmaps[int(index)] = str(self._resolve(name))
+        self.scene.pixmap_sources[int(index)] = self._location(at)
 
     def _camera(self, keyword: str, at: int, groups) -> None:
         numbers = self._numbers(keyword, at, 10)

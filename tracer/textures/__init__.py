@@ -63,11 +63,14 @@ def _texture_problem(scene, shapes, number: int) -> str | None:
 
 
 def _load_for(scene, shapes, number: int) -> np.ndarray:
-    """The picture of texture ``number``; an error names where the texture is used, then the image file."""
+    """The picture of texture ``number``; an error names the makePixmap that asked for it (where the reader
+    recorded it; else where the texture is first used), then the image file."""
     try:
         return load_image(scene.pixmaps[number])
     except TracerError as err:
-        raise TracerError(f"{_where_used(scene, shapes, number)}: {err}") from None
+        made_at = scene.pixmap_sources.get(number)
+        where = f"{made_at}: makePixmap {number}" if made_at is not None else _where_used(scene, shapes, number)
+        raise TracerError(f"{where}: {err}") from None
 
 
 class TextureSet:

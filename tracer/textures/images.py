@@ -66,6 +66,8 @@ def load_image(path: str | Path) -> np.ndarray:
             raise TracerError(f"{name}: image too large for a texture (more than {MAX_TEXELS} pixels)") from None
         except TracerError:
             raise
+        except Image.UnidentifiedImageError:  # (its own message names the file object Pillow was given)
+            raise TracerError(f"{name}: not a picture format Pillow reads") from None
         except OSError as err:
             raise TracerError(f"{name}: cannot read texture image ({err.strerror or err})") from None
         # A hostile file can make a decoder fail in many ways besides OSError (ValueError from a PPM header,

@@ -89,6 +89,48 @@ def test_bad_requests_get_one_line(args, fragment):
     _assert_one_line_error(run(*args), fragment)
 
 
+def test_target_error_names_the_options_it_replaces(tmp_path):
+    common = ("render", ROOT / "scenes" / "csg.sdl", "-o", tmp_path / "x.png", "--width", 8, "--height", 6, "-q",
+              "--target-error", 0.05)
+    proc = run(*common, "--samples", 9, "--sampling", "regular", "--block-size", 4, "--progressive")
+    assert proc.returncode == 0, proc.stderr
+    warnings = [line for line in proc.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == ["warning: --target-error chooses the samples itself: --block-size, --progressive, "
+                        "--samples, --sampling ignored"], proc.stderr
+    proc = run(*common, "--samples", 4)  # only what was given is named
+    assert proc.stderr.splitlines() == ["warning: --target-error chooses the samples itself: --samples ignored"]
+    proc = run(*common)
+    assert proc.returncode == 0 and "warning:" not in proc.stderr, proc.stderr
+
+
+# Runs the CLI as an installation without Pillow would: importing PIL fails, and tracing (which must not
+# start) exits with a message of its own.
+_WITHOUT_PILLOW = """
+import sys
+
+class RefusePillow:
+    def find_spec(self, name, path=None, target=None):
+        if name == "PIL" or name.startswith("PIL."):
+            raise ImportError(f"No module named {name!r}")
+        return None
+
+sys.meta_path.insert(0, RefusePillow())
+import tracer.render
+tracer.render.render = lambda *args, **kwargs: sys.exit("traced before checking for Pillow")
+from tracer.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_missing_pillow_is_one_error_before_tracing(tmp_path):
+    out = tmp_path / "x.png"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run([sys.executable, "-c", _WITHOUT_PILLOW, "render", str(ROOT / "scenes" / "lecture.sdl"),
+                           "-o", str(out), "-q"], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    _assert_one_line_error(proc, str(out), "needs Pillow", "pip install Pillow")
+    assert not out.exists()
+
+
 def test_thread_count_does_not_change_the_image(tmp_path):
     images = []
     for threads in (1, 2, 3):

@@ -64,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--target-error", type=float, default=None, metavar="E",
                    help="sample each pixel until its estimated error (standard error of its mean, linear "
                         "colour; 1/255 is one 8-bit step) is at most E, and report the estimate "
-                        "(replaces --samples, --sampling and --block-size)")
+                        "(replaces --samples, --sampling, --threshold, --block-size and --progressive)")
     r.add_argument("--cutoff", type=float, default=None, metavar="W",
                    help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
                         "(default 1/512; 0 traces them all)")
@@ -197,15 +197,33 @@ def _savings(args):
     return savings
 
 
+#: The fixed-sampling options that --target-error replaces (argparse names), in the order --help lists them.
+REPLACED_BY_TARGET_ERROR = ("block_size", "progressive", "samples", "sampling", "threshold")
+
+
+def _replaced_options_given(args) -> list[str]:
+    """The options --target-error replaces that this command line set to something other than their default
+    (one left at its default changes nothing, so it is not reported), as the user spelled them."""
+    defaults = build_parser().parse_args(["render", args.scene, "-o", args.output])
+    return ["--" + name.replace("_", "-") for name in REPLACED_BY_TARGET_ERROR
+            if getattr(args, name) != getattr(defaults, name)]
+
+
 def _render(args) -> int:
     from .backend import load_core
-    from .imageio import save_image
+    from .imageio import output_format, save_image
     from .render import render
 
+    output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing, not after)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
             raise TracerError("--target-error cannot be combined with --scheduler or --frames")
         return _render_job(args)
+    if args.target_error is not None:
+        replaced = _replaced_options_given(args)
+        if replaced:
+            print(f"warning: --target-error chooses the samples itself: {', '.join(replaced)} ignored",
+                  file=sys.stderr)
     scene = _load(args)
     if args.lenient:
         from .textures import drop_unreadable_textures

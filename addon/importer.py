@@ -32,8 +32,17 @@ class ImportResult:
 
 
 def read_scene(filepath: str, strict: bool = False):
-    """Parse the file (raises tracer's SDLError if it cannot be read)."""
-    return deps.module("sdl.parser").load(filepath, strict=strict)
+    """Parse the file (raises tracer's TracerError, an SDLError for a problem in it, if it cannot be read).
+    A lenient read skips the statements it cannot read; when that leaves no shape, light or camera and
+    there were problems (a binary file, a file in another format), the file is refused as a strict read
+    would refuse it, so that importing it changes nothing rather than adding a camera that frames nothing."""
+    scene = deps.module("sdl.parser").load(filepath, strict=strict)
+    if scene.warnings and not scene.shapes() and not scene.lights and scene.camera is None:
+        extra = len(scene.warnings) - 1
+        more = f" (and {extra} more problem{'s' if extra > 1 else ''})" if extra else ""
+        raise deps.module("errors").TracerError(
+            f"nothing in the file could be read as SDL: {scene.warnings[0]}{more}")
+    return scene
 
 
 def camera_matrix(camera) -> np.ndarray:

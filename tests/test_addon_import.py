@@ -215,6 +215,25 @@ def test_lenient_import_reports_problems(tmp_path):
     assert len(result.warnings) == 1 and "frobnicate" in result.warnings[0]
 
 
+def test_lenient_import_refuses_a_file_with_nothing_readable(tmp_path):
+    import_sdl(SCENES / "csg.sdl")
+    before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
+    binary = tmp_path / "photo.sdl"
+    binary.write_bytes(bytes(range(256)) * 4)
+    other_format = tmp_path / "notes.sdl"
+    other_format.write_text("frobnicate 1 2\nhello world\n")
+    for path in (binary, other_format):
+        with pytest.raises(RuntimeError, match=rf"Cannot import {path.name}: nothing in the file could be read"):
+            bpy.ops.import_scene.sdl(filepath=str(path))  # the default, lenient import
+    assert _counts() == before
+    assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
+    # a file with something readable beside its problems still imports what it can
+    lit = tmp_path / "lit.sdl"
+    lit.write_text("frobnicate 1 2\nlight 1 2 3 1 1 1\n")
+    assert bpy.ops.import_scene.sdl(filepath=str(lit)) == {"FINISHED"}
+    assert _counts()["lights"] == before["lights"] + 1
+
+
 def test_failure_half_way_removes_what_was_made(monkeypatch):
     before = _counts()
 

@@ -77,7 +77,8 @@ class Tokens:
         self._block_bases: list[int] = []  # the number of each block's first token, for bisect
         self._lines: dict[int, list[str]] = {}  # the lines of the last blocks asked about, by block number
         self._tokens: list[str] = []  # the last block's
-        self._far: dict[tuple[int, int], list[int]] = {}  # (block, line) -> where its tokens start, for long lines
+        # (block, line) -> (the line without its comment, where its tokens start), for long lines
+        self._far: dict[tuple[int, int], tuple[str, list[int]]] = {}
         #: Tokens split so far.
         self.count = 0
         #: The name comments of the last block: (number of the token after the comment, the name).
@@ -153,11 +154,13 @@ class Tokens:
         line = lines[row]
         if n >= _FAR:
             # Far along a long line (a whole scene on one line, say): where each of its tokens starts is
-            # worked out once, so that placing all its shapes stays linear in its length.
-            line = _without_comment(line)
-            starts = self._far.get((index, row))
-            if starts is None:
-                starts = self._far[(index, row)] = [m.start() for m in _TOKEN_RE.finditer(line)]
+            # worked out once, with the line cut at its comment, so that placing all its shapes stays linear in
+            # its length.
+            far = self._far.get((index, row))
+            if far is None:
+                line = _without_comment(line)
+                far = self._far[(index, row)] = (line, [m.start() for m in _TOKEN_RE.finditer(line)])
+            line, starts = far
             return _TOKEN_RE.match(line, starts[n]).group(), block.first_line + row, starts[n] + 1
         if index == last:
             # Most lines are written with single spaces and no indent: then the column is the length of the

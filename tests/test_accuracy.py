@@ -16,6 +16,7 @@ from tracer.accuracy import (TRADE_GROUPS, BenchConfig, default_settings, errors
                              plot_targets, reference_image, write_report)
 from tracer.cli import main
 from tracer.render import render
+import tracer.target as target_sampling
 from tracer.target import FIRST_BATCH, sample_to_error, standard_error
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -138,6 +139,19 @@ def test_sampling_stops_when_the_estimate_reaches_the_target():
     assert estimate.samples[:, 2:].min() >= needed // 2 and estimate.worst <= target
     assert np.abs(film - 0.5).max() < 5 * target
     assert estimate.rms == pytest.approx(np.sqrt(np.mean(estimate.per_pixel ** 2)))
+
+
+def test_sampling_to_a_target_gives_the_same_answer_in_any_batch_size(monkeypatch):
+    """The rays of a round go to the tracer in batches, and estimates and the film are made in pieces, to
+    bound memory: neither may change a value (with at most 7 rays a call, each call traces one pixel)."""
+    scene = tracer.load(ROOT / "scenes" / "glass.sdl")
+    whole = render(scene, 24, 18, target_error=0.02, seed=3)
+    monkeypatch.setattr(target_sampling, "MAX_RAYS_PER_CALL", 7)
+    pieces = render(scene, 24, 18, target_error=0.02, seed=3)
+    assert np.array_equal(whole.image, pieces.image)
+    assert np.array_equal(whole.error_estimate.per_pixel, pieces.error_estimate.per_pixel)
+    assert np.array_equal(whole.error_estimate.samples, pieces.error_estimate.samples)
+    assert whole.error_estimate.samples_mean > FIRST_BATCH  # more than one round was traced
 
 
 @pytest.mark.parametrize("name", ["lecture", "glass"])

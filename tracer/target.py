@@ -25,7 +25,7 @@ from .errors import RenderCancelled, TracerError
 
 FIRST_BATCH = 16  # enough samples for a variance, one 4 x 4 grid of strata
 MAX_SAMPLES = sampling.MAX_SAMPLES
-MAX_RAYS_PER_CALL = 1 << 20  # bounds the memory of one batch of rays
+MAX_RAYS_PER_CALL = 1 << 18  # bounds the memory of one batch of rays (about 240 bytes a ray, C core included)
 
 
 def check(target: float) -> None:
@@ -76,11 +76,12 @@ def sample_to_error(camera_rays: Callable[[np.ndarray, np.ndarray], np.ndarray],
     """The film (rows from the bottom, float32) and its estimate.  ``camera_rays(origins, directions)``
     shades rays; ``rays_for(rows, cols, dy, dx)`` makes the rays through film pixels (tracer.tiles)."""
     check(target)
-    rows, cols = np.divmod(np.arange(width * height), width)
-    pixels = rows.size
+    pixels = width * height
+    # Per pixel only what the rounds need (68 bytes): the float64 sums and squares, the count, the estimate
+    # and the active list.  Rows and columns, means and variances are made a chunk of pixels at a time.
     total = np.zeros((pixels, 3))
     squares = np.zeros((pixels, 3))
-    count = np.zeros(pixels, dtype=np.int64)
+    count = np.zeros(pixels, dtype=np.int32)
     estimate = np.full(pixels, np.inf)
     active = np.arange(pixels)
     batch, round_index = FIRST_BATCH, 0
@@ -90,21 +91,27 @@ def sample_to_error(camera_rays: Callable[[np.ndarray, np.ndarray], np.ndarray],
             if cancel is not None and cancel():
                 raise RenderCancelled("render cancelled")
             chunk = active[start:start + step]
-            dy, dx = sampling.offsets(batch, True, rows[chunk], cols[chunk], seed + round_index)
-            origins, directions = rays_for(np.repeat(rows[chunk], batch), np.repeat(cols[chunk], batch),
-                                           dy.ravel(), dx.ravel())
+            rows, cols = np.divmod(chunk, width)
+            dy, dx = sampling.offsets(batch, True, rows, cols, seed + round_index)
+            origins, directions = rays_for(np.repeat(rows, batch), np.repeat(cols, batch), dy.ravel(), dx.ravel())
             colors = np.asarray(camera_rays(origins, directions), dtype=np.float64).reshape(-1, batch, 3)
             total[chunk] += colors.sum(axis=1)
             squares[chunk] += (colors * colors).sum(axis=1)
             count[chunk] += batch
-        estimate[active] = standard_error(total[active], squares[active], count[active])
+        for start in range(0, active.size, MAX_RAYS_PER_CALL):
+            part = active[start:start + MAX_RAYS_PER_CALL]
+            estimate[part] = standard_error(total[part], squares[part], count[part])
         active = _still_uncertain(active, estimate, target, width, height)
         active = active[count[active] < MAX_SAMPLES]
         if active.size:  # every active pixel has the same count: double it, up to the limit
             done = int(count[active[0]])
             batch = min(done, MAX_SAMPLES - done)
             round_index += 1
-    film = (total / count[:, None]).astype(np.float32).reshape(height, width, 3)
+    film = np.empty((pixels, 3), dtype=np.float32)
+    for start in range(0, pixels, MAX_RAYS_PER_CALL):
+        part = slice(start, start + MAX_RAYS_PER_CALL)
+        film[part] = total[part] / count[part, None]
+    film = film.reshape(height, width, 3)
     shown = lambda a: np.ascontiguousarray(a.reshape(height, width)[::-1])  # noqa: E731 (row 0 at the top)
     result = ErrorEstimate(target=float(target), rms=float(np.sqrt(np.mean(estimate ** 2))),
                            worst=float(estimate.max()), samples_mean=float(count.mean()),

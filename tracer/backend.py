@@ -12,7 +12,7 @@ from __future__ import annotations
 import warnings
 from typing import Optional
 
-from .compile import CompiledScene, fold_tree
+from .compile import CompiledScene, boolean_depth
 from .errors import FallbackWarning, TracerError
 from .model import CSG, Scene
 from .savings import RaySavings
@@ -32,7 +32,7 @@ def check_boolean_depth(scene: Scene) -> None:
     for obj in scene.objects:
         if not isinstance(obj, CSG):
             continue
-        depth = fold_tree(obj, lambda _: 0, lambda _, left, right: 1 + max(left, right))
+        depth = boolean_depth(obj)
         if depth > MAX_CSG_DEPTH:
             where = f"{obj.source}: " if obj.source is not None else ""
             raise TracerError(f"{where}{obj.op}: booleans nested {depth} deep; the tracer follows at most "

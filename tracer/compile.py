@@ -414,6 +414,11 @@ def fold_tree(root, leaf: Callable, join: Callable):
     return values[0]
 
 
+def boolean_depth(root) -> int:
+    """How deeply booleans nest in ``root`` (0 for a primitive), for a compiled or a model tree."""
+    return fold_tree(root, lambda _: 0, lambda _, left, right: 1 + max(left, right))
+
+
 _COLOR_FIELDS = ("ambient", "diffuse", "specular", "emissive")
 _NUMBER_FIELDS = ("specular_exponent", "specular_fraction", "surface_roughness", "reflectivity", "transparency",
                   "speed_of_light")

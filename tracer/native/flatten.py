@@ -17,7 +17,7 @@ from typing import Optional
 import numpy as np
 
 from ..backend import MAX_CSG_DEPTH  # (make_tracer refuses deeper trees, for every backend)
-from ..compile import CompiledScene, Primitive, PrimitiveTable, fold_tree
+from ..compile import CompiledScene, Primitive, PrimitiveTable, boolean_depth, fold_tree
 from ..geometry.polyhedra import face_planes
 from ..intersect.mesh import NODE, MeshArrays
 from .. import numerics, shapes
@@ -73,7 +73,7 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
         reason = fold_tree(obj, check, check_boolean)
         if reason:
             return reason
-        if fold_tree(obj, lambda _: 0, lambda _, l, r: 1 + max(l, r)) > MAX_CSG_DEPTH:
+        if boolean_depth(obj) > MAX_CSG_DEPTH:
             return f"booleans nested more than {MAX_CSG_DEPTH} deep"
     if table.meshes:
         from ..intersect import mesh as mesh_module

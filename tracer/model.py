@@ -280,7 +280,7 @@ class ShapeColumns:
         the built-in mesh of a polyhedron or the teapot)."""
         i = range(len(self))[i]  # (negative from the end; IndexError)
         kind = _KEYWORD_OF_CODE[self.kinds[i]]
-        matrix = _matrices(self.affines[i:i + 1])[0]
+        matrix = matrices_of_affines(self.affines[i:i + 1])[0]
         mesh = None
         if kind in POLYHEDRON_KINDS or kind == "teapot":
             from .geometry import builtin_mesh
@@ -301,7 +301,7 @@ class ShapeColumns:
         with collector_paused():
             for start in range(0, len(self), _ROWS_AT_ONCE):
                 rows = slice(start, start + _ROWS_AT_ONCE)
-                matrices = _matrices(self.affines[rows])
+                matrices = matrices_of_affines(self.affines[rows])
                 for i, (kind, matrix, material, taper, line, column) in enumerate(zip(
                         map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()), matrices,
                         map(self.materials.__getitem__, self.material_ids[rows].tolist()),
@@ -329,7 +329,7 @@ class ShapeColumns:
 _ROWS_AT_ONCE = 1 << 15
 
 
-def _matrices(affines: np.ndarray) -> np.ndarray:
+def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
     """(N, 4, 4) matrices of (N, 12) affines (the bottom rows 0 0 0 1)."""
     out = np.zeros((len(affines), 4, 4))
     out[:, :3, :] = affines.reshape(-1, 3, 4)

@@ -115,20 +115,33 @@ class RefusePillow:
         return None
 
 sys.meta_path.insert(0, RefusePillow())
-import tracer.render
-tracer.render.render = lambda *args, **kwargs: sys.exit("traced before checking for Pillow")
+if sys.argv[-1] == "--refuse-tracing":
+    import tracer.render
+    tracer.render.render = lambda *args, **kwargs: sys.exit("traced before checking for Pillow")
 from tracer.cli import main
-sys.exit(main(sys.argv[1:]))
+sys.exit(main(sys.argv[1:-1]))
 """
 
 
-def test_missing_pillow_is_one_error_before_tracing(tmp_path):
-    out = tmp_path / "x.png"
+def test_missing_pillow_is_one_error_before_tracing_for_formats_that_need_it(tmp_path):
+    out = tmp_path / "x.jpg"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run([sys.executable, "-c", _WITHOUT_PILLOW, "render", str(ROOT / "scenes" / "lecture.sdl"),
-                           "-o", str(out), "-q"], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+                           "-o", str(out), "-q", "--refuse-tracing"],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
     _assert_one_line_error(proc, str(out), "needs Pillow", "pip install Pillow")
     assert not out.exists()
+
+
+def test_png_is_written_without_pillow(tmp_path):
+    """tracer.png writes PNG files itself: the same file as with Pillow installed."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    args = ["render", str(ROOT / "scenes" / "lecture.sdl"), "--width", "40", "--height", "30", "-q"]
+    without = subprocess.run([sys.executable, "-c", _WITHOUT_PILLOW, *args, "-o", str(tmp_path / "a.png"), "--"],
+                             capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert without.returncode == 0, without.stderr
+    assert run(*args, "-o", tmp_path / "b.png").returncode == 0
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
 
 
 def test_thread_count_does_not_change_the_image(tmp_path):

@@ -142,9 +142,16 @@ def output_format(path: str | os.PathLike) -> str:
     image_format = OUTPUT_FORMATS[ext]
     # (PNG is written without Pillow; the others need it.  Looked for, not imported: loading it is a cost
     # that a render paid before tracing, on top of the scene's memory.)
-    if image_format != "PNG" and importlib.util.find_spec("PIL") is None:
+    if image_format != "PNG" and not _have_pillow():
         raise TracerError(f"{path}: writing {image_format} images needs Pillow (pip install Pillow)")
     return image_format
+
+
+def _have_pillow() -> bool:
+    try:
+        return importlib.util.find_spec("PIL") is not None
+    except ImportError:  # (a finder that refuses it)
+        return False
 
 
 def save_image(image: np.ndarray, path: str | os.PathLike, release: bool = False) -> Path:

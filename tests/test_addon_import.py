@@ -368,3 +368,24 @@ def test_add_shape_reuses_one_material_and_undoes_a_failure(monkeypatch):
     with pytest.raises(RuntimeError, match="simulated failure"):
         bpy.ops.object.sdl_add_shape(kind="cone")
     assert _counts() == before  # neither the object nor the default material it made is left
+
+
+def test_a_scene_read_as_a_shape_table_imports_as_its_list(monkeypatch):
+    """The fast SDL reader hands over a ShapeTable: importing it gives what the list of Shapes gives."""
+    from tracer.model import ShapeTable
+    from tracer.sdl import parser
+
+    path = SCENES / "shapes.sdl"
+    import_sdl(path)
+    expected = [(o["sdl_kind"], list(o["sdl_matrix"])) for o in shape_objects()]
+    fresh()
+    real_load = parser.load
+
+    def load_as_table(*args, **kwargs):
+        scene = real_load(*args, **kwargs)
+        scene.objects = ShapeTable.of_shapes(scene.objects)
+        return scene
+
+    monkeypatch.setattr(parser, "load", load_as_table)
+    import_sdl(path)
+    assert [(o["sdl_kind"], list(o["sdl_matrix"])) for o in shape_objects()] == expected

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -115,20 +116,33 @@ class RefusePillow:
         return None
 
 sys.meta_path.insert(0, RefusePillow())
-import tracer.render
-tracer.render.render = lambda *args, **kwargs: sys.exit("traced before checking for Pillow")
+if sys.argv[-1] == "--refuse-tracing":
+    import tracer.render
+    tracer.render.render = lambda *args, **kwargs: sys.exit("traced before checking for Pillow")
 from tracer.cli import main
-sys.exit(main(sys.argv[1:]))
+sys.exit(main(sys.argv[1:-1]))
 """
 
 
-def test_missing_pillow_is_one_error_before_tracing(tmp_path):
-    out = tmp_path / "x.png"
+def test_missing_pillow_is_one_error_before_tracing_for_formats_that_need_it(tmp_path):
+    out = tmp_path / "x.jpg"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run([sys.executable, "-c", _WITHOUT_PILLOW, "render", str(ROOT / "scenes" / "lecture.sdl"),
-                           "-o", str(out), "-q"], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+                           "-o", str(out), "-q", "--refuse-tracing"],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
     _assert_one_line_error(proc, str(out), "needs Pillow", "pip install Pillow")
     assert not out.exists()
+
+
+def test_png_is_written_without_pillow(tmp_path):
+    """tracer.png writes PNG files itself: the same file as with Pillow installed."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    args = ["render", str(ROOT / "scenes" / "lecture.sdl"), "--width", "40", "--height", "30", "-q"]
+    without = subprocess.run([sys.executable, "-c", _WITHOUT_PILLOW, *args, "-o", str(tmp_path / "a.png"), "--"],
+                             capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert without.returncode == 0, without.stderr
+    assert run(*args, "-o", tmp_path / "b.png").returncode == 0
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
 
 
 def test_thread_count_does_not_change_the_image(tmp_path):
@@ -218,3 +232,40 @@ def test_convert_and_render_usd_leniently(tmp_path):
                "--height", 6, "-q")
     assert proc.returncode == 0 and len(proc.stderr.splitlines()) == 1
     assert (tmp_path / "x.png").exists()
+
+
+#: What ``render`` to a .png must not load (tests below): OpenSSL's hashlib module (numpy.random's seeding
+#: would pull it in), Pillow, and the parts of the tracer and the optional packages other commands use.
+NOT_LOADED_BY_A_PNG_RENDER = ("_hashlib", "PIL", "tracer.distributed", "tracer.accuracy", "tracer.target",
+                              "tracer.sdl.writer", "tracer.usd.reader", "tracer.usd.writer", "pxr", "dask",
+                              "distributed", "scipy", "skimage", "matplotlib")
+
+
+def _loaded_modules(python_verbose_stderr: str) -> set:
+    """The modules a ``python -v`` run loaded (a module marked absent in sys.modules is not listed)."""
+    return set(re.findall(r"^import '([\w.]+)' #", python_verbose_stderr, re.M)) | \
+        set(re.findall(r"^# extension module '([\w.]+)' loaded", python_verbose_stderr, re.M))
+
+
+def test_a_png_render_loads_only_what_it_uses(tmp_path):
+    """The imports are most of a small render's peak memory (docs/performance.md), so the floor is kept from
+    creeping back: ``python -m tracer render`` to a .png loads none of NOT_LOADED_BY_A_PNG_RENDER."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run([sys.executable, "-v", "-m", "tracer", "render", str(ROOT / "scenes" / "shapes.sdl"),
+                           "-o", str(tmp_path / "x.png"), "--width", "16", "--height", "12", "-q"],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    loaded = _loaded_modules(proc.stderr)
+    assert {"numpy", "tracer.render", "tracer.png", "_blake2"} <= loaded  # (the listing sees what is loaded)
+    assert sorted(m for m in loaded if m.split(".")[0] in NOT_LOADED_BY_A_PNG_RENDER
+                  or any(m == name or m.startswith(name + ".") for name in NOT_LOADED_BY_A_PNG_RENDER)) == []
+
+
+def test_importing_the_tracer_as_a_library_leaves_openssl_alone():
+    """Only the command line leaves OpenSSL out (tracer/startup.py); a program importing the tracer keeps
+    hashlib's OpenSSL functions."""
+    code = "import tracer, hashlib; print(hashlib.sha256 is not None and 'pbkdf2_hmac' in dir(hashlib))"
+    proc = subprocess.run([sys.executable, "-v", "-c", code], capture_output=True, text=True, cwd=ROOT,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
+    assert proc.returncode == 0 and proc.stdout.strip() == "True", proc.stderr[-2000:]
+    assert "_hashlib" in _loaded_modules(proc.stderr)

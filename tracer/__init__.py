@@ -5,6 +5,11 @@
     >>> [round(h.t, 4) for h in tracer.hits(scene, (3, 2, 3), (-3, -2, -3))]
     [0.7868, 1.2132]
 """
+from . import startup as _startup
+
+if _startup.started_as_the_program():  # (before NumPy is imported: see tracer/startup.py)
+    _startup.leave_out_openssl()
+
 from .errors import RenderCancelled, SDLError, TracerError
 from .model import CSG, Camera, Light, Material, MeshData, Scene, Settings, Shape
 from .query import Hit, hits

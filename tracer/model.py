@@ -6,9 +6,10 @@ coordinates (column vectors: ``world = matrix @ generic``).
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Sequence
+from collections.abc import MutableSequence, Sequence
 from typing import Optional, Union
 
 import numpy as np
@@ -221,6 +222,18 @@ class Shape:
         # (16 numbers are reshaped and copied again: a reshaped view would keep a second array per shape.)
         self.matrix = matrix if matrix.shape == (4, 4) else matrix.reshape(4, 4).copy()
 
+    def __eq__(self, other) -> bool:
+        # (by value, matrix and mesh included: the generated __eq__ would compare the matrices as a tuple
+        # field, which NumPy refuses to turn into one bool)
+        if not isinstance(other, Shape):
+            return NotImplemented
+        return (self.kind == other.kind and np.array_equal(self.matrix, other.matrix)
+                and self.material == other.material and self.tapered_radius == other.tapered_radius
+                and _same_mesh(self.mesh, other.mesh) and self.mesh_file == other.mesh_file
+                and self.groups == other.groups and self.source == other.source and self.name == other.name)
+
+    __hash__ = None  # (mutable)
+
     @property
     def small_radius(self) -> float:
         """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
@@ -229,6 +242,289 @@ class Shape:
     @property
     def inverse(self) -> np.ndarray:
         return np.linalg.inv(self.matrix)
+
+
+def _same_mesh(a: Optional[MeshData], b: Optional[MeshData]) -> bool:
+    """Whether two shapes' meshes are equal: the same object (a cached built-in mesh) or equal arrays."""
+    if a is b:
+        return True
+    if a is None or b is None:
+        return False
+    return (np.array_equal(a.vertices, b.vertices) and np.array_equal(a.normals, b.normals)
+            and (a.faces == b.faces if isinstance(a.faces, FaceList) else b.faces == a.faces))
+
+
+#: The SDL keyword of each shape kind code (tracer.shapes.REGISTRY's order; ShapeTable.kinds).
+_KEYWORD_OF_CODE = tuple(e.keyword for e in shapes.REGISTRY)
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeColumns:
+    """The arrays of a :class:`ShapeTable` (see there), read-only: row i is shape i."""
+
+    kinds: np.ndarray  # (N,) int16
+    affines: np.ndarray  # (N, 12) float64
+    material_ids: np.ndarray  # (N,) int32
+    materials: tuple[Material, ...]
+    tapered_radii: np.ndarray  # (N,) float64
+    lines: np.ndarray  # (N,) int32
+    columns: np.ndarray  # (N,) int32
+    file: Optional[str] = None
+    names: Optional[dict[int, str]] = None
+
+    def __len__(self) -> int:
+        return len(self.kinds)
+
+    def shape(self, i: int) -> Shape:
+        """Shape i, made anew (as the Python reader makes it: its own matrix, the shared material object,
+        the built-in mesh of a polyhedron or the teapot)."""
+        i = range(len(self))[i]  # (negative from the end; IndexError)
+        kind = _KEYWORD_OF_CODE[self.kinds[i]]
+        matrix = matrices_of_affines(self.affines[i:i + 1])[0]
+        mesh = None
+        if kind in POLYHEDRON_KINDS or kind == "teapot":
+            from .geometry import builtin_mesh
+            mesh = builtin_mesh(kind)
+        return Shape(kind, matrix, self.materials[self.material_ids[i]], float(self.tapered_radii[i]), mesh,
+                     None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
+                     None if self.names is None else self.names.get(i))
+
+    def shapes(self) -> list[Shape]:
+        """Every row's Shape, in order (as shape() makes them; a chunk of rows' matrices at a time, with the
+        collector paused: a million new objects would otherwise run it hundreds of times)."""
+        from .bulk import collector_paused
+        from .geometry import builtin_mesh
+        used = set(np.unique(self.kinds).tolist())
+        meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
+        names = self.names or {}
+        out: list[Shape] = []
+        with collector_paused():
+            for start in range(0, len(self), _ROWS_AT_ONCE):
+                rows = slice(start, start + _ROWS_AT_ONCE)
+                matrices = matrices_of_affines(self.affines[rows])
+                for i, (kind, matrix, material, taper, line, column) in enumerate(zip(
+                        map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()), matrices,
+                        map(self.materials.__getitem__, self.material_ids[rows].tolist()),
+                        self.tapered_radii[rows].tolist(), self.lines[rows].tolist(),
+                        self.columns[rows].tolist()), start):
+                    out.append(Shape(kind, matrix, material, taper, meshes.get(kind), None, (),
+                                     SourceLocation(self.file, line, column), names.get(i)))
+        return out
+
+    def digest(self) -> bytes:
+        """A digest of what compiling reads from the rows: kinds, matrices, material ids and tapers (the
+        materials themselves are compared by value by whoever uses this).  Kept once computed: the arrays
+        are read-only."""
+        kept = self.__dict__.get("_digest")
+        if kept is None:
+            h = hashlib.blake2b(digest_size=20)
+            for array in (self.kinds, self.affines, self.material_ids, self.tapered_radii):
+                h.update(repr((array.dtype.str, array.shape)).encode())
+                h.update(np.ascontiguousarray(array))
+            kept = self.__dict__["_digest"] = h.digest()
+        return kept
+
+
+#: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
+_ROWS_AT_ONCE = 1 << 15
+
+
+def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) matrices of (N, 12) affines (the bottom rows 0 0 0 1)."""
+    out = np.zeros((len(affines), 4, 4))
+    out[:, :3, :] = affines.reshape(-1, 3, 4)
+    out[:, 3, 3] = 1.0
+    return out
+
+
+#: The code of each shape kind (the index of its keyword in tracer.shapes.REGISTRY).
+_KIND_CODE = {keyword: code for code, keyword in enumerate(_KEYWORD_OF_CODE)}
+
+
+def _read_only(array, dtype, shape: tuple, what: str) -> np.ndarray:
+    """``array`` as a read-only C-contiguous array of this dtype and shape (a view where it already is one)."""
+    out = np.ascontiguousarray(array, dtype=dtype)
+    if out.shape != shape:
+        try:
+            out = out.reshape(shape)
+        except ValueError:
+            raise ValueError(f"ShapeTable: {what} has shape {out.shape}, not {shape}") from None
+    out = out.view()
+    out.setflags(write=False)
+    return out
+
+
+class ShapeTable(MutableSequence):
+    """A scene's shapes kept as columns (one row per shape) until someone needs them as Shape objects: how a
+    fast reader hands over a million shapes without making a million objects (a Shape with its matrix takes
+    ~700 bytes; a row here takes ~120).
+
+    ``kinds`` (N,) int16, each shape's kind as its index in tracer.shapes.REGISTRY; ``affines`` (N, 12)
+    float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1);
+    ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects); ``tapered_radii``
+    (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
+    shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
+    polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
+    the arrays over: nobody may change them afterwards.
+
+    It reads as the list of those Shapes.  len() makes nothing; the first access to an element (indexing,
+    iteration, any change, ==) makes every Shape once, and from then on the table is a plain list of them
+    (:attr:`columns` is then None).  :meth:`shape_at` makes one Shape without making the rest.  Pickled and
+    copied as the arrays while nothing has been made (scenes travel to Dask workers)."""
+
+    def __init__(self, kinds, affines, material_ids, materials, tapered_radii, lines, columns,
+                 file=None, names=None):
+        kinds = np.asarray(kinds)
+        n = len(kinds)
+        kinds = _read_only(kinds, np.int16, (n,), "kinds")
+        material_ids = _read_only(material_ids, np.int32, (n,), "material_ids")
+        materials = tuple(materials)
+        if n and not (0 <= kinds.min() and kinds.max() < len(_KEYWORD_OF_CODE)):
+            raise ValueError("ShapeTable: a kind code is not in tracer.shapes.REGISTRY")
+        if n and not (0 <= material_ids.min() and material_ids.max() < len(materials)):
+            raise ValueError("ShapeTable: a material id is not an index into materials")
+        self._columns: Optional[ShapeColumns] = ShapeColumns(
+            kinds, _read_only(affines, np.float64, (n, 12), "affines"), material_ids, materials,
+            _read_only(tapered_radii, np.float64, (n,), "tapered_radii"),
+            _read_only(lines, np.int32, (n,), "lines"), _read_only(columns, np.int32, (n,), "columns"),
+            file, None if names is None else dict(names))
+        self._shapes: Optional[list[SceneObject]] = None
+
+    @classmethod
+    def of_shapes(cls, shapes: Sequence[Shape]) -> "ShapeTable":
+        """The table of these shapes' columns (shapes sharing a material object share its id).  Each must be
+        a row a table can hold: no groups, no mesh file, its kind's built-in mesh or none, and all from one
+        file; a ValueError says which is not."""
+        from .geometry import builtin_mesh
+        n = len(shapes)
+        files = {s.source.file for s in shapes if isinstance(s, Shape) and s.source is not None}
+        for i, s in enumerate(shapes):
+            if not isinstance(s, Shape) or s.groups or s.mesh_file is not None or s.source is None or (
+                    s.mesh is not (builtin_mesh(s.kind) if s.kind in POLYHEDRON_KINDS + ("teapot",) else None)) or (
+                    np.asarray(s.matrix)[3].tolist() != [0.0, 0.0, 0.0, 1.0]):
+                raise ValueError(f"ShapeTable.of_shapes: object {i} cannot be a row of a table")
+        if len(files) > 1:
+            raise ValueError("ShapeTable.of_shapes: the shapes come from more than one file")
+        material_index: dict[int, int] = {}
+        materials = []
+        for s in shapes:
+            if id(s.material) not in material_index:
+                material_index[id(s.material)] = len(materials)
+                materials.append(s.material)
+        return cls(np.array([_KIND_CODE[s.kind] for s in shapes], dtype=np.int16).reshape(n),
+                   np.array([np.asarray(s.matrix, dtype=np.float64)[:3].reshape(12) for s in shapes]).reshape(n, 12),
+                   np.array([material_index[id(s.material)] for s in shapes], dtype=np.int32).reshape(n), materials,
+                   np.array([s.tapered_radius for s in shapes], dtype=np.float64).reshape(n),
+                   np.array([s.source.line for s in shapes], dtype=np.int32).reshape(n),
+                   np.array([s.source.column for s in shapes], dtype=np.int32).reshape(n),
+                   files.pop() if files else None,
+                   {i: s.name for i, s in enumerate(shapes) if s.name is not None} or None)
+
+    @classmethod
+    def _of_list(cls, objects: list) -> "ShapeTable":
+        """A table already made into this list (how a made table is unpickled)."""
+        self = cls.__new__(cls)
+        self._columns, self._shapes = None, objects
+        return self
+
+    @property
+    def columns(self) -> Optional[ShapeColumns]:
+        """The arrays, while no Shape has been made of them; None after."""
+        return self._columns
+
+    def shape_at(self, i: int) -> Shape:
+        """Shape i (negative from the end), without making the others (the list's element once made)."""
+        if self._shapes is not None:
+            return self._shapes[i]
+        return self._columns.shape(i)
+
+    def _made(self) -> list:
+        """The list of Shapes, made on first use."""
+        if self._shapes is None:
+            self._shapes = self._columns.shapes()
+            self._columns = None
+        return self._shapes
+
+    def __len__(self) -> int:
+        return len(self._shapes) if self._shapes is not None else len(self._columns)
+
+    def __getitem__(self, index):
+        return self._made()[index]
+
+    def __setitem__(self, index, value) -> None:
+        self._made()[index] = value
+
+    def __delitem__(self, index) -> None:
+        del self._made()[index]
+
+    def insert(self, index, value) -> None:
+        self._made().insert(index, value)
+
+    def __iter__(self):
+        return iter(self._made())
+
+    def __reversed__(self):
+        return reversed(self._made())
+
+    def __contains__(self, value) -> bool:
+        return value in self._made()
+
+    def index(self, value, *args) -> int:
+        return self._made().index(value, *args)
+
+    def count(self, value) -> int:
+        return self._made().count(value)
+
+    def append(self, value) -> None:
+        self._made().append(value)
+
+    def extend(self, values) -> None:
+        self._made().extend(values)
+
+    def clear(self) -> None:
+        self._made().clear()
+
+    def copy(self) -> list:
+        return self._made().copy()
+
+    def sort(self, *args, **kwargs) -> None:
+        self._made().sort(*args, **kwargs)
+
+    def __iadd__(self, values):
+        self._made().extend(values)
+        return self
+
+    def __add__(self, other):
+        return self._made() + list(other) if isinstance(other, (list, ShapeTable)) else NotImplemented
+
+    def __radd__(self, other):
+        return other + self._made() if isinstance(other, list) else NotImplemented
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, ShapeTable):
+            return self._made() == other._made()
+        if isinstance(other, list):
+            return self._made() == other
+        return NotImplemented
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        if self._shapes is None:
+            return f"<ShapeTable of {len(self)} shapes>"
+        return repr(self._shapes)
+
+    def __copy__(self) -> "ShapeTable":
+        # (a list of its own once made, as list.copy gives; the same read-only arrays before)
+        return ShapeTable._of_list(list(self._shapes)) if self._shapes is not None else ShapeTable(
+            *self.__reduce__()[1])
+
+    def __reduce__(self):
+        c = self._columns
+        if c is None:
+            return ShapeTable._of_list, (self._shapes,)
+        return ShapeTable, (c.kinds, c.affines, c.material_ids, list(c.materials), c.tapered_radii, c.lines,
+                            c.columns, c.file, c.names)
 
 
 @dataclass

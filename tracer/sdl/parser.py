@@ -25,7 +25,6 @@ statement or shape.
 from __future__ import annotations
 
 import difflib
-import functools
 import math
 import os
 from dataclasses import dataclass, field, fields
@@ -37,6 +36,7 @@ import numpy as np
 from .. import transforms
 from ..bulk import collector_paused
 from ..errors import SDLError
+from ..geometry import builtin_mesh  # (its home; imported under this name by the add-on and tests)
 from ..meshio import read_3vn
 from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
                      Material, MeshData, Scene, SceneObject, Shape, SourceLocation, TEXTURE_NUMBERS)
@@ -85,20 +85,6 @@ FAST_MIN_CHARS = 1 << 16
 
 #: A transform whose linear part is this badly conditioned is treated as singular (e.g. ``scale 1 1 0``).
 MAX_CONDITION = 1e12
-
-
-@functools.lru_cache(maxsize=None)
-def builtin_mesh(kind: str) -> MeshData:
-    """The mesh of a built-in polyhedron or the teapot.
-
-    Imported here, not at the top, so that the parser works (and its tests run) without the geometry
-    modules, and cached because a scene may hold hundreds of copies of one polyhedron.
-    """
-    if kind == "teapot":
-        from ..geometry.teapot import teapot_mesh
-        return teapot_mesh()
-    from ..geometry.polyhedra import polyhedron_mesh
-    return polyhedron_mesh(kind)
 
 
 # ---------------------------------------------------------------------------------------------------------

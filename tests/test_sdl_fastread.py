@@ -283,11 +283,13 @@ def random_statement(rng: random.Random) -> str:
     if choice == 7:
         return f"translate {moderate()} {moderate()} {moderate()}"
     if choice == 8:
-        return f"scale {' '.join(rng.choice(['1', '2', '0.5', '-1', '3e-3', '1.5', '-0.25', '0.75']) for _ in range(3))}"
+        factors = ['1', '2', '0.5', '-1', '3e-3', '1.5', '-0.25', '0.75']
+        return f"scale {' '.join(rng.choice(factors) for _ in range(3))}"
     if choice == 9:
         return f"rotate {number()} {rng.choice(['1 0 0', '0 1 0', '0 0 1', numbers(3), '-0 0 1e-150'])}"
     if choice == 10:  # (pops follow pushes, nearly always: a pop too many is declined, so rare here)
-        return rng.choice(["push", "push pop", "push", "identityAffine", "defaultMaterials", "pop" * (rng.random() < 0.1)])
+        return rng.choice(["push", "push pop", "push", "identityAffine", "defaultMaterials",
+                           "pop" * (rng.random() < 0.1)])
     if choice == 11:
         return f"! name: shape {rng.randrange(100)}\n"
     if choice == 12:

@@ -88,6 +88,7 @@ typedef struct {
     /* Working state, not read by the caller. */
     int64_t shape_capacity, material_capacity, light_capacity, camera_capacity, name_capacity;
     int32_t *material_table;  /* open addressing: material id + 1, 0 for empty */
+    uint64_t *material_hashes;  /* of each material row */
     int64_t table_size;
     double *stack;            /* transform stack, depth x 12 */
     int64_t depth, stack_capacity;
@@ -106,6 +107,16 @@ static int sdl_reserve(void **buffer, int64_t *capacity, int64_t need, size_t si
         return 0;
     *buffer = moved;
     *capacity = grown;
+    return 1;
+}
+
+/* Reallocates *buffer to capacity items of size bytes; 0 when out of memory (the old buffer stays). */
+static int sdl_resize(void **buffer, int64_t capacity, size_t size)
+{
+    void *moved = realloc(*buffer, (size_t)capacity * size);
+    if (moved == NULL)
+        return 0;
+    *buffer = moved;
     return 1;
 }
 
@@ -361,15 +372,18 @@ static int sdl_clearly_invertible(const double *m)
 
 static uint64_t sdl_hash_material(const double *row)
 {
-    uint64_t h = 1469598103934665603ull;
+    uint64_t h = 0;
     for (int i = 0; i < SDL_MATERIAL_WIDTH; i++) {
         double v = row[i] == 0.0 ? 0.0 : row[i];  /* -0.0 and 0.0 are one key */
         uint64_t bits;
         memcpy(&bits, &v, sizeof bits);
-        h = (h ^ bits) * 1099511628211ull;
-        h ^= h >> 29;
+        h = (h ^ bits) * 0x9e3779b97f4a7c15ull;
+        h ^= h >> 32;
     }
-    return h;
+    /* (splitmix64's finaliser: every bit of every field reaches the low bits the table uses) */
+    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+    return h ^ (h >> 31);
 }
 
 static int sdl_same_material(const double *a, const double *b)
@@ -389,7 +403,7 @@ static int32_t sdl_material_id(SdlResult *res, const double *row)
         if (table == NULL)
             return -1;
         for (int64_t id = 0; id < res->materials; id++) {
-            uint64_t slot = sdl_hash_material(res->material_rows + id * SDL_MATERIAL_WIDTH) & (uint64_t)(size - 1);
+            uint64_t slot = res->material_hashes[id] & (uint64_t)(size - 1);
             while (table[slot])
                 slot = (slot + 1) & (uint64_t)(size - 1);
             table[slot] = (int32_t)(id + 1);
@@ -398,18 +412,25 @@ static int32_t sdl_material_id(SdlResult *res, const double *row)
         res->material_table = table;
         res->table_size = size;
     }
-    uint64_t mask = (uint64_t)(res->table_size - 1), slot = sdl_hash_material(row) & mask;
+    uint64_t hash = sdl_hash_material(row), mask = (uint64_t)(res->table_size - 1), slot = hash & mask;
     while (res->material_table[slot]) {
         int32_t id = res->material_table[slot] - 1;
-        if (sdl_same_material(res->material_rows + (int64_t)id * SDL_MATERIAL_WIDTH, row))
+        if (res->material_hashes[id] == hash &&
+            sdl_same_material(res->material_rows + (int64_t)id * SDL_MATERIAL_WIDTH, row))
             return id;
         slot = (slot + 1) & mask;
     }
-    if (res->materials >= INT32_MAX - 1 ||
-        !sdl_reserve((void **)&res->material_rows, &res->material_capacity, res->materials + 1,
-                     SDL_MATERIAL_WIDTH * sizeof(double)))
+    if (res->materials >= INT32_MAX - 1)
         return -1;
+    if (res->materials == res->material_capacity) {  /* rows and hashes grow together */
+        int64_t capacity = res->materials < 64 ? 64 : 2 * res->materials;
+        if (!sdl_resize((void **)&res->material_rows, capacity, SDL_MATERIAL_WIDTH * sizeof(double)) ||
+            !sdl_resize((void **)&res->material_hashes, capacity, sizeof(uint64_t)))
+            return -1;
+        res->material_capacity = capacity;
+    }
     memcpy(res->material_rows + res->materials * SDL_MATERIAL_WIDTH, row, SDL_MATERIAL_WIDTH * sizeof(double));
+    res->material_hashes[res->materials] = hash;
     res->material_table[slot] = (int32_t)(res->materials + 1);
     return (int32_t)res->materials++;
 }
@@ -419,16 +440,6 @@ static int32_t sdl_material_id(SdlResult *res, const double *row)
 static int sdl_whole(double value)
 {
     return value == floor(value);  /* (values are finite here) */
-}
-
-/* Reallocates *buffer to capacity items of size bytes; 0 when out of memory (the old buffer stays). */
-static int sdl_resize(void **buffer, int64_t capacity, size_t size)
-{
-    void *moved = realloc(*buffer, (size_t)capacity * size);
-    if (moved == NULL)
-        return 0;
-    *buffer = moved;
-    return 1;
 }
 
 static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int32_t material, double taper,
@@ -676,13 +687,15 @@ void rt_sdl_free(SdlResult *res)
     free(res->camera_rows);
     free(res->name_rows);
     free(res->material_table);
+    free(res->material_hashes);
     free(res->stack);
     free(res);
 }
 
 /* Reads text[0, length).  words/codes/count: the vocabulary (see sdl_vocabulary); defaults: the default
- * material row; shared_libm: whether the caller's cos and sin are this library's (see sdl_read).  Returns a result for rt_sdl_free whose status says whether it was read (NULL only when
- * out of memory); a declined result keeps nothing but its reason and place. */
+ * material row; shared_libm: whether the caller's cos and sin are this library's (see sdl_read).
+ * Returns a result for rt_sdl_free whose status says whether it was read (NULL only when out of memory); a
+ * declined result keeps nothing but its reason and place. */
 SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int64_t words_length,
                        const int32_t *codes, int64_t count, const double *defaults, int64_t shared_libm)
 {

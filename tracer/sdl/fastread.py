@@ -27,8 +27,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .. import shapes as shape_registry
-from .. import transforms
-from ..model import Camera, Light, Material, Scene, Shape, SourceLocation
+from ..model import Camera, Light, Material, Scene, ShapeTable
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
 #: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
@@ -96,20 +95,34 @@ class _MaterialLayout:
                 row[self.slots[f.name]] = value
         return row
 
-    def material(self, row: list[float]) -> Material:
-        values = {}
+    def materials(self, rows: np.ndarray) -> list[Material]:
+        """The Materials of material rows (M, width), made a field at a time: a million of them is most of
+        reading a million spheres of their own colours, so the per-row work is Material() alone (and a field
+        with the same bits in every row is one object for all)."""
+        count = len(rows)
+        values = []
         for f in fields(Material):
-            at = self.slots.get(f.name)
             if f.name == "texture":
-                values[f.name] = int(row[self.texture])
+                values.append(rows[:, self.texture].astype(np.int64).tolist())  # (int(-0.0) is 0)
             elif f.name == "parameters":
-                count = int(row[self.parameters])
-                values[f.name] = tuple(row[self.parameters + 1:self.parameters + 1 + count])
+                sizes = rows[:, self.parameters].astype(np.int64)
+                first = self.parameters + 1
+                values.append([()] * count if not sizes.any() else
+                              [tuple(row[first:first + size]) for row, size in zip(rows.tolist(), sizes.tolist())])
             elif f.name in self.colours:
-                values[f.name] = tuple(row[at:at + 3])
+                values.append(_same_or_each(rows[:, self.slots[f.name]:self.slots[f.name] + 3]))
             else:
-                values[f.name] = row[at]
-        return Material(**values)
+                values.append(_same_or_each(rows[:, self.slots[f.name]]))
+        return list(map(Material, *values))
+
+
+def _same_or_each(block: np.ndarray) -> list:
+    """Each row of ``block`` (M, 3) as a tuple, or each value of ``block`` (M,) as a float; one object for
+    all when every row has the first one's bits."""
+    if len(block) and (block.view(np.int64) == block[:1].view(np.int64)).all():
+        first = block[0].tolist()
+        return [tuple(first) if block.ndim == 2 else first] * len(block)
+    return list(zip(*block.T.tolist())) if block.ndim == 2 else block.tolist()
 
 
 def _material_layout(width: int, max_parameters: int) -> _MaterialLayout:
@@ -244,8 +257,7 @@ def _columns(res: _Result, text: str, layout: _MaterialLayout) -> Columns:
     n = res.shapes
     name_rows = _array(res.name_rows, (res.names, 3), np.int64).tolist()
     names = {row: text[start:start + length] for row, start, length in name_rows} or None
-    materials = [layout.material(row) for row in _array(res.material_rows, (res.materials, layout.width),
-                                                         np.float64).tolist()]
+    materials = layout.materials(_array(res.material_rows, (res.materials, layout.width), np.float64))
     lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _array(res.light_rows, (res.lights, 6),
                                                                         np.float64).tolist()]
     cameras = [tuple(row) for row in _array(res.camera_rows, (res.cameras, 10), np.float64).tolist()]
@@ -277,27 +289,12 @@ def read(text: str, file: Optional[str] = None) -> Optional[Scene]:
         for numbers in columns.cameras:  # one the Python reader would refuse: its message is the parser's
             if camera_problem(numbers[0:3], numbers[3:6], numbers[6:9], numbers[9]) is not None:
                 return None
-    scene = Scene(objects=_shapes(columns, file), lights=columns.lights)
+    shapes = ShapeTable(columns.kinds, columns.affines, columns.material_ids, columns.materials, columns.tapered_radii,
+                        columns.lines, columns.columns, file, columns.names)
+    scene = Scene(objects=shapes, lights=columns.lights)
     if columns.cameras:
         numbers = columns.cameras[-1]
         scene.camera = Camera(eye=numbers[0:3], look=numbers[3:6], up=numbers[6:9], view_angle=numbers[9])
     for name, value in columns.settings.items():
         setattr(scene.settings, name, value)
     return scene
-
-
-def _shapes(columns: Columns, file: Optional[str]) -> list[Shape]:
-    """The shapes of the columns, as the Python reader makes them."""
-    from .parser import builtin_mesh
-    registry = shape_registry.REGISTRY
-    names = columns.names or {}
-    shapes = []
-    for row, (kind, affine, material, taper, line, column) in enumerate(zip(
-            columns.kinds.tolist(), columns.affines.tolist(), columns.material_ids.tolist(),
-            columns.tapered_radii.tolist(), columns.lines.tolist(), columns.columns.tolist())):
-        keyword = registry[kind].keyword
-        family = registry[kind].family
-        mesh = builtin_mesh(keyword) if family != "analytic" else None
-        shapes.append(Shape(keyword, transforms.affine_entries(tuple(affine)), columns.materials[material], taper,
-                            mesh, None, (), SourceLocation(file, line, column), names.get(row)))
-    return shapes

@@ -11,7 +11,8 @@ import pytest
 
 from tracer import transforms
 from tracer.errors import SDLError
-from tracer.model import CSG, Camera, Light, Material, Scene, Settings, Shape, SourceLocation
+from tracer.model import CSG, Camera, Light, Material, Scene, Settings, Shape, ShapeTable
+from tracer.shapes import REGISTRY
 from tracer.sdl import fastread, parser
 from tracer.sdl.parser import KEYWORDS, load, parse_sdl
 from tracer.sdl.writer import write_sdl
@@ -22,6 +23,7 @@ from run import sphere_scene  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not fastread.available(), reason="the C core is not loaded")
 
+REGISTRY_CODES = {entry.keyword: code for code, entry in enumerate(REGISTRY)}
 SHAPE_WORDS = parser.ANALYTIC_KINDS + parser.POLYHEDRON_KINDS + ("teapot",)
 
 
@@ -131,6 +133,21 @@ def test_bench_sphere_scenes_are_read_by_the_c_reader():
     for count, seed in ((0, 1), (1, 2), (3000, 3)):
         scene = assert_read_fast(sphere_scene(count, seed))
         assert len(scene.objects) == count + 1
+
+
+def test_the_shapes_stay_columns_until_asked_for():
+    text = "! name: ball\nsphere diffuse 1 0 0 cube translate 1 2 3 taperedCylinder 0.5"
+    scene = fastread.read(text, "scene.sdl")
+    assert isinstance(scene.objects, ShapeTable) and len(scene.objects) == 3
+    columns = scene.objects.columns
+    assert columns is not None  # nothing made yet
+    assert columns.kinds.tolist() == [REGISTRY_CODES[k] for k in ("sphere", "cube", "taperedCylinder")]
+    assert columns.material_ids.tolist() == [0, 1, 1] and len(columns.materials) == 2
+    assert columns.tapered_radii.tolist() == [1.0, 1.0, 0.5]
+    assert columns.affines[2].tolist() == [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 2.0, 0.0, 0.0, 1.0, 3.0]
+    assert (columns.lines.tolist(), columns.columns.tolist()) == ([2, 2, 2], [1, 22, 43])
+    assert columns.names == {0: "ball"} and columns.file == "scene.sdl"
+    assert_same_scene(scene, parse_sdl(text, file="scene.sdl", fast=False))
 
 
 def test_big_texts_go_to_the_c_reader_by_default(monkeypatch):

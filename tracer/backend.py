@@ -14,7 +14,7 @@ from typing import Optional
 
 from .compile import CompiledScene, boolean_depth
 from .errors import FallbackWarning, TracerError
-from .model import CSG, Scene
+from .model import CSG, Scene, ShapeTable
 from .savings import RaySavings
 from .trace import Tracer
 
@@ -29,6 +29,8 @@ MAX_CSG_DEPTH = 2000
 
 def check_boolean_depth(scene: Scene) -> None:
     """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep."""
+    if isinstance(scene.objects, ShapeTable) and scene.objects.columns is not None:
+        return  # (a table's rows are shapes: looking would make them into Shape objects for nothing)
     for obj in scene.objects:
         if not isinstance(obj, CSG):
             continue

@@ -28,7 +28,7 @@ from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
 from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
-                    TORUS_TUBE_RADIUS)
+                    ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
 from .transforms import transform_points
 
 
@@ -119,6 +119,17 @@ def _stacked_matrices(shapes: list[Shape]) -> Optional[np.ndarray]:
             or set(map(attrgetter("shape"), matrices)) != {(4, 4)}):
         return None
     return np.concatenate(matrices).reshape(-1, 4, 4)
+
+
+def _stack_checked(shapes: Sequence[Shape]) -> np.ndarray:
+    """The shapes' matrices stacked as float64 (N, 4, 4), for shapes of which some matrix is not a float64
+    4x4 array: each is checked on its own, in order (with its mesh built), so that the first bad one raises
+    _checked_inverse's error naming it."""
+    for shape in shapes:
+        _checked_inverse(shape)
+        if shape.kind in MESH_KINDS:
+            shared_triangle_mesh(shape.mesh)
+    return np.stack([np.asarray(s.matrix, dtype=np.float64) for s in shapes]) if len(shapes) else np.zeros((0, 4, 4))
 
 
 def _batched_inverses(stack: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -496,62 +507,112 @@ class PrimitiveTable:
     radius (0 for other kinds); ``meshes``: the TriangleMesh of each mesh by the id of its MeshData.  The
     matrices themselves are the shapes' own (not kept twice)."""
 
-    def __init__(self, shapes: list[Shape], kinds: Sequence[str], tapered_radii: Sequence[float],
-                 stack: Optional[np.ndarray], material_ids: np.ndarray):
+    def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, tapered_radii: np.ndarray,
+                 matrices: Optional[np.ndarray], material_ids: np.ndarray):
+        """``shapes``: a list of Shapes, or a _RowShapes that makes them from a ShapeTable's rows when asked
+        (the table is then compiled without making any); ``kind`` (N,) their kind codes; ``tapered_radii``
+        (N,) their Shape.tapered_radius; ``matrices``: (N, 4, 4) stacked (see _stacked_matrices) or a
+        table's (N, 12) affines, None when some matrix is not a float64 4x4."""
         n = len(shapes)
         self.shapes = shapes
         self.tolerances = numerics.TOLERANCES
         self.material_ids = material_ids
-        self.kind = np.fromiter(map(_KIND_INDEX.__getitem__, kinds), dtype=np.int16, count=n)
+        self.kind = np.asarray(kind, dtype=np.int16)
         self.meshes: dict[int, object] = {}
-        inverses = _batched_inverses(stack)
-        if inverses is None:  # some matrix fails the checks: find the first, in order, for its message
-            inverses = np.zeros((n, 4, 4))
-            for i, shape in enumerate(shapes):
-                inverses[i] = _checked_inverse(shape)
-                self._build_mesh(shape)
-            stack = np.stack([np.asarray(s.matrix, dtype=np.float64) for s in shapes])
-        for i in self.rows(MESH_KINDS).tolist():
-            self._build_mesh(shapes[i])
-        self.inverses = inverses
-        self.top = np.zeros(n)
-        tapered = self.rows(_TAPERED_KINDS)
-        if tapered.size:
-            self.top[tapered] = [shapes[i].small_radius for i in tapered.tolist()]
+        if matrices is None:  # (a matrix that is not a float64 4x4: _checked_inverse says which, or copes)
+            matrices = _stack_checked(shapes)
+        self._matrices = matrices
+        self.inverses = np.empty((n, 4, 4))
         self.inverse_error, self.inverse_norms = np.empty(n), np.empty((n, 2))
         for rows in row_chunks(n):
-            inverse = inverses[rows]
-            self.inverse_error[rows] = numerics.inverse_rounding(inverse, stack[rows])
+            matrix = self.matrix_rows(rows)
+            inverse = _batched_inverses(matrix)
+            if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
+                inverse = self._checked_inverses(rows)
+            self.inverses[rows] = inverse
+            self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
             # (the sums in Primitive's order: rows of three, left to right)
             self.inverse_norms[rows, 0] = np.abs(inverse[:, :3, :3]).sum(axis=2).max(axis=1)
             self.inverse_norms[rows, 1] = np.abs(inverse[:, :3, 3]).max(axis=1)
+        for mesh, _ in self.mesh_groups():
+            self._build_mesh(mesh)
+        # a tapered cylinder's small radius (Shape.small_radius), 0 for the other kinds
+        self.top = np.where(self.kind == _KIND_INDEX["taperedCylinder"], tapered_radii, 0.0)
+        self.top[self.kind == _KIND_INDEX["cylinder"]] = 1.0
         self.generic_size = np.ones(n)
         self.spheres = np.zeros((n, 4))
         self.spheres[:, 3] = np.inf
         self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
         self.boxes = np.zeros((n, 6))
-        self._fill_sizes_and_bounds(stack)
+        self._fill_sizes_and_bounds()
+        self._matrices = None  # (the shapes' or the table's own: not kept twice)
 
     def __len__(self) -> int:
         return len(self.shapes)
+
+    def matrix_rows(self, rows) -> np.ndarray:
+        """The (k, 4, 4) matrices of these rows (a slice or an index array)."""
+        m = self._matrices
+        return m[rows] if m.ndim == 3 else _matrices_of_affines(m[rows])
+
+    def _checked_inverses(self, rows: slice) -> np.ndarray:
+        """The inverses of a chunk of rows one by one, as Primitive computes them: the first bad matrix
+        raises _checked_inverse's error naming its shape.  (Meshes are built on the way, in order, as
+        they were when every shape was checked this way: an earlier bad mesh is still reported first.)"""
+        for mesh, mesh_rows in self.mesh_groups():
+            if mesh_rows.size and mesh_rows[0] < rows.start:
+                self._build_mesh(mesh)
+        out = np.empty((rows.stop - rows.start, 4, 4))
+        for k, i in enumerate(range(rows.start, rows.stop)):
+            shape = self.shapes[i]
+            out[k] = _checked_inverse(shape)
+            if shape.kind in MESH_KINDS:
+                self._build_mesh(shape.mesh)
+        return out
 
     def rows(self, kinds) -> np.ndarray:
         """The rows of the shapes of these kinds (SDL keywords), in order."""
         codes = [_KIND_INDEX[k] for k in kinds]
         return np.flatnonzero(np.isin(self.kind, codes)) if len(self.kind) else np.zeros(0, dtype=np.int64)
 
-    def _build_mesh(self, shape: Shape) -> None:
-        if shape.kind in MESH_KINDS and id(shape.mesh) not in self.meshes:
-            self.meshes[id(shape.mesh)] = shared_triangle_mesh(shape.mesh)
+    def mesh_of(self, i: int) -> Optional[MeshData]:
+        """The MeshData of row i (None for the closed-form kinds)."""
+        shapes = self.shapes
+        return shapes.mesh_of(i) if isinstance(shapes, _RowShapes) else shapes[i].mesh
 
-    def _fill_sizes_and_bounds(self, matrices: np.ndarray) -> None:
+    def mesh_groups(self) -> list[tuple[MeshData, np.ndarray]]:
+        """(mesh, rows) of each mesh the mesh-kind rows (teapots, meshes) hold: rows of one MeshData
+        together, in order of first use."""
+        kept = self.__dict__.get("_mesh_groups")
+        if kept is None:
+            kept = self.__dict__["_mesh_groups"] = self._groups(MESH_KINDS)
+        return kept
+
+    def _groups(self, kinds) -> list[tuple[MeshData, np.ndarray]]:
+        """(mesh, rows) of the rows of these kinds, a group per MeshData object, in order of first use."""
+        rows = self.rows(kinds)
+        if isinstance(self.shapes, _RowShapes):  # (a table's rows of a kind share its built-in mesh)
+            codes = self.kind[rows]
+            return [(self.shapes.mesh_of(int(rows[codes == code][0])), rows[codes == code])
+                    for code in dict.fromkeys(codes.tolist())]
+        groups: dict[int, tuple[MeshData, list]] = {}
+        for i in rows.tolist():
+            mesh = self.shapes[i].mesh
+            groups.setdefault(id(mesh), (mesh, []))[1].append(i)
+        return [(mesh, np.array(members, dtype=np.int64)) for mesh, members in groups.values()]
+
+    def _build_mesh(self, mesh: MeshData) -> None:
+        if id(mesh) not in self.meshes:
+            self.meshes[id(mesh)] = shared_triangle_mesh(mesh)
+
+    def _fill_sizes_and_bounds(self) -> None:
         """generic_size and the bounding spheres, a batch per kind (the kinds with a fixed generic box), per
         chunk of tapered cylinders, and per mesh (or polyhedron vertex set) with its instances."""
         for kind, corners in _BOX_CORNERS.items():
             rows = self.rows([kind])
             if rows.size:
                 self.generic_size[rows] = 1.0 + TORUS_TUBE_RADIUS if kind == "torus" else np.max(np.abs(corners))
-                self._bound(matrices, rows, corners)
+                self._bound(rows, corners)
         rows = self.rows(_TAPERED_KINDS)
         if rows.size:
             top = np.maximum(self.top[rows], 0.0)
@@ -559,29 +620,29 @@ class PrimitiveTable:
             for part in row_chunks(rows.size):
                 points = np.broadcast_to(_TAPERED_POINTS, (len(top[part]), 8, 3)).copy()
                 points[:, 4:, :2] *= top[part, None, None]
-                self._bound(matrices, rows[part], points)
+                self._bound(rows[part], points)
         groups: dict = {}
-        for i in self.rows(POLYHEDRON_KINDS + MESH_KINDS).tolist():
-            mesh = self.shapes[i].mesh
+        for mesh, rows in self._groups(POLYHEDRON_KINDS) + self.mesh_groups():
             vertices = np.asarray(mesh.vertices, dtype=np.float64)
-            # (each polyhedron has a MeshData of its own: the same vertices, grouped by their bytes)
-            key = id(mesh) if self.shapes[i].kind in MESH_KINDS else vertices.tobytes()
-            groups.setdefault(key, (vertices, []))[1].append(i)
+            # (polyhedra read elsewhere may each have a MeshData of their own: the same vertices, grouped by
+            # their bytes)
+            key = id(mesh) if len(rows) and self.kind[rows[0]] in _MESH_CODES else vertices.tobytes()
+            groups.setdefault(key, (vertices, []))[1].append(rows)
         #: (vertices, rows) of each mesh and each polyhedron vertex set, with the rows of its instances
-        self.vertex_groups = [(vertices, np.array(rows)) for vertices, rows in groups.values()]
+        self.vertex_groups = [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]
         for vertices, rows in self.vertex_groups:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
             per_chunk = max(1, _CHUNK // max(1, len(vertices)))
             for start in range(0, len(rows), per_chunk):
-                self._bound(matrices, rows[start:start + per_chunk], vertices)
+                self._bound(rows[start:start + per_chunk], vertices)
 
-    def _bound(self, matrices: np.ndarray, rows: np.ndarray, points: np.ndarray) -> None:
+    def _bound(self, rows: np.ndarray, points: np.ndarray) -> None:
         """World boxes and bounding spheres of ``rows`` whose generic solids lie in the hull of ``points``
         ((K, 3) for all, or (len(rows), K, 3)), carried to the world by one stacked product: what
         transform_points and _sphere_around give, to rounding in the last place (which the radius's 1e-9
         padding covers)."""
         for part in row_chunks(len(rows)):
-            m = matrices[rows[part]]
+            m = self.matrix_rows(rows[part])
             p = points if points.ndim == 2 else points[part]
             world = p @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
             lo, hi = world.min(axis=1), world.max(axis=1)
@@ -593,6 +654,8 @@ class PrimitiveTable:
 
 #: Index of each kind in the shape registry (PrimitiveTable.kind).
 _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
+_KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
+_MESH_CODES = frozenset(_KIND_INDEX[k] for k in MESH_KINDS)
 _TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
 #: The generic points of a tapered cylinder of top radius 1: the squares round its two discs (the frustum
 #: lies in their hull; the top's x and y are scaled by the top radius).
@@ -798,15 +861,61 @@ def content_key(scene: Scene) -> tuple:
 
 @dataclass
 class _Columns:
-    """What _content gathers from a scene's shapes (in iter_shapes order) on its way, for _compile."""
+    """What _content gathers from a scene's shapes (in iter_shapes order) on its way, for _compile: from a
+    list of objects, per-shape tuples; from a ShapeTable not yet made into Shapes, its arrays (``table``)."""
 
-    nodes: list  # every node of every object, depth first (shapes and booleans)
-    shapes: list[Shape]
+    nodes: list  # what the key's ids stand for, kept alive with it: every node (or the table's columns)
+    shapes: Sequence[Shape]  # a list, or a _RowShapes that makes a table's rows into Shapes when asked
     any_boolean: bool
-    stack: Optional[np.ndarray]  # the shapes' matrices (see _stacked_matrices)
-    kinds: tuple[str, ...]
-    materials: tuple[Material, ...]
-    tapered_radii: tuple[float, ...]
+    matrices: Optional[np.ndarray]  # (N, 4, 4) (see _stacked_matrices), or a table's (N, 12) affines
+    kinds: tuple[str, ...] = ()
+    materials: tuple[Material, ...] = ()
+    tapered_radii: tuple[float, ...] = ()
+    table: Optional[ShapeColumns] = None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, list[Material], np.ndarray]:
+        """(kind codes, material ids, the materials by id, tapered radii) of the shapes."""
+        table = self.table
+        if table is not None:
+            ids, materials = table.material_ids, list(table.materials)
+            used = np.bincount(ids, minlength=len(materials)) > 0
+            if not used.all():  # (only the materials in use, as from a list: they decide the live effects)
+                ids = (np.cumsum(used) - 1)[ids].astype(np.int32)
+                materials = [m for m, kept in zip(materials, used.tolist()) if kept]
+            return table.kinds, ids, materials, table.tapered_radii
+        n = len(self.kinds)
+        material_ids, materials = _material_ids(self.materials)
+        return (np.fromiter(map(_KIND_INDEX.__getitem__, self.kinds), dtype=np.int16, count=n), material_ids,
+                materials, np.fromiter(self.tapered_radii, dtype=np.float64, count=n))
+
+
+class _RowShapes(Sequence):
+    """A ShapeTable's rows as Shapes, each made when first asked for (ShapeColumns.shape) and the same object
+    after: what a compiled table's Primitives (the NumPy path's) are made of."""
+
+    def __init__(self, columns: ShapeColumns):
+        self.columns = columns
+        self._made: dict[int, Shape] = {}
+
+    def __len__(self) -> int:
+        return len(self.columns)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        index = _position(index, len(self))
+        shape = self._made.get(index)
+        if shape is None:
+            shape = self._made[index] = self.columns.shape(index)
+        return shape
+
+    def mesh_of(self, index: int) -> Optional[MeshData]:
+        """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
+        kind = _KEYWORDS[self.columns.kinds[index]]
+        if kind in POLYHEDRON_KINDS or kind == "teapot":
+            from .geometry import builtin_mesh
+            return builtin_mesh(kind)
+        return None
 
 
 def _walk(objects: list[SceneObject]) -> tuple[list, list[Shape], list[tuple]]:
@@ -837,6 +946,9 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
     modification time.  The key holds no scene object but materials (compared by value): ids stay
     meaningful because the cached entry keeps the objects alive (see compile_scene).  Returns (key, columns):
     the columns keep the nodes alive and hold what _compile needs."""
+    table = scene.objects.columns if isinstance(scene.objects, ShapeTable) else None
+    if table is not None:
+        return _table_content(scene, table)
     nodes, shapes, structure = _walk(scene.objects)
     stack = _stacked_matrices(shapes)
     matrices = hashlib.blake2b(digest_size=20)
@@ -847,6 +959,39 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
     mesh_list = list(map(attrgetter("mesh"), shapes))
     meshes = dict(zip(map(id, mesh_list), mesh_list))
     meshes.pop(id(None), None)
+    columns = _Columns(nodes, shapes, bool(structure), stack,
+                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius")))
+    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
+           _ids_digest(mesh_list), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
+           matrices.digest()) + _scene_wide_key(scene)
+    return key, columns
+
+
+def _table_content(scene: Scene, table: ShapeColumns) -> tuple[tuple, _Columns]:
+    """_content of a scene whose objects are a ShapeTable not yet made into Shapes: the table's identity,
+    a digest of its arrays (kept on its read-only columns) and its materials by value, without a Python
+    object per shape.  (Once the table is made into Shapes, _content reads those: another key, and a new
+    compile from them.)"""
+    shapes = _RowShapes(table)
+    meshes = {id(mesh): mesh for mesh in map(shapes.mesh_of, _builtin_mesh_rows(table))}
+    key = ("table", id(table), table.digest(), table.materials,
+           tuple((k, mesh_digest(m)) for k, m in meshes.items())) + _scene_wide_key(scene)
+    return key, _Columns([table], shapes, False, table.affines, table=table)
+
+
+def _builtin_mesh_rows(table: ShapeColumns) -> list[int]:
+    """One row of each kind present in the table that holds a built-in mesh (polyhedra, the teapot)."""
+    codes = [_KIND_INDEX[k] for k in POLYHEDRON_KINDS + ("teapot",)]
+    present = np.isin(table.kinds, codes)
+    if not present.any():
+        return []
+    _, first = np.unique(table.kinds[present], return_index=True)
+    return np.flatnonzero(present)[first].tolist()
+
+
+def _scene_wide_key(scene: Scene) -> tuple:
+    """The part of _content's key that is not about the shapes: lights, camera, settings, the pixmap files
+    (with their sizes and modification times), the tolerances."""
     pixmaps = []
     for number, path in sorted(scene.pixmaps.items()):
         try:
@@ -854,13 +999,7 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
             pixmaps.append((number, str(path), stat.st_size, stat.st_mtime_ns))
         except (OSError, ValueError):  # (a missing file, a name with a NUL: compiling reports it)
             pixmaps.append((number, str(path), None, None))
-    columns = _Columns(nodes, shapes, bool(structure), stack,
-                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius")))
-    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
-           _ids_digest(mesh_list), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
-           matrices.digest(), tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps),
-           numerics.TOLERANCES)
-    return key, columns
+    return tuple(scene.lights), scene.camera, astuple(scene.settings), tuple(pixmaps), numerics.TOLERANCES
 
 
 def _ids_digest(objects: list) -> bytes:
@@ -928,12 +1067,13 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     if columns is None:
         columns = _content(scene)[1]
     shapes = columns.shapes
-    material_ids, materials = _material_ids(columns.materials)
-    table = PrimitiveTable(shapes, columns.kinds, columns.tapered_radii, columns.stack, material_ids)
+    kind, material_ids, materials, tapered_radii = columns.arrays()
+    table = PrimitiveTable(shapes, kind, tapered_radii, columns.matrices, material_ids)
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
     material_table = MaterialTable(materials or [Material()])
-    effects = _effects(scene, set(columns.kinds), material_table if shapes else None, columns.any_boolean)
+    kinds = {_KEYWORDS[code] for code in np.unique(kind).tolist()}
+    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean)
     textures = None
     if "textures" in effects:
         from .textures import TextureSet

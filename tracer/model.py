@@ -278,10 +278,9 @@ class ShapeColumns:
     def shape(self, i: int) -> Shape:
         """Shape i, made anew (as the Python reader makes it: its own matrix, the shared material object,
         the built-in mesh of a polyhedron or the teapot)."""
+        i = range(len(self))[i]  # (negative from the end; IndexError)
         kind = _KEYWORD_OF_CODE[self.kinds[i]]
-        matrix = np.empty((4, 4))
-        matrix[:3].flat = self.affines[i]
-        matrix[3] = (0.0, 0.0, 0.0, 1.0)
+        matrix = matrices_of_affines(self.affines[i:i + 1])[0]
         mesh = None
         if kind in POLYHEDRON_KINDS or kind == "teapot":
             from .geometry import builtin_mesh
@@ -291,19 +290,25 @@ class ShapeColumns:
                      None if self.names is None else self.names.get(i))
 
     def shapes(self) -> list[Shape]:
-        """Every row's Shape, in order (as shape() makes them, a row at a time through plain Python values)."""
+        """Every row's Shape, in order (as shape() makes them; a chunk of rows' matrices at a time, with the
+        collector paused: a million new objects would otherwise run it hundreds of times)."""
+        from .bulk import collector_paused
         from .geometry import builtin_mesh
         used = set(np.unique(self.kinds).tolist())
         meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
         names = self.names or {}
-        keywords = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds.tolist()))
-        out = []
-        bottom = (0.0, 0.0, 0.0, 1.0)
-        for i, (kind, affine, material, taper, line, column) in enumerate(zip(
-                keywords, self.affines.tolist(), map(self.materials.__getitem__, self.material_ids.tolist()),
-                self.tapered_radii.tolist(), self.lines.tolist(), self.columns.tolist())):
-            out.append(Shape(kind, affine + list(bottom), material, taper, meshes.get(kind), None, (),
-                             SourceLocation(self.file, line, column), names.get(i)))
+        out: list[Shape] = []
+        with collector_paused():
+            for start in range(0, len(self), _ROWS_AT_ONCE):
+                rows = slice(start, start + _ROWS_AT_ONCE)
+                matrices = matrices_of_affines(self.affines[rows])
+                for i, (kind, matrix, material, taper, line, column) in enumerate(zip(
+                        map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()), matrices,
+                        map(self.materials.__getitem__, self.material_ids[rows].tolist()),
+                        self.tapered_radii[rows].tolist(), self.lines[rows].tolist(),
+                        self.columns[rows].tolist()), start):
+                    out.append(Shape(kind, matrix, material, taper, meshes.get(kind), None, (),
+                                     SourceLocation(self.file, line, column), names.get(i)))
         return out
 
     def digest(self) -> bytes:
@@ -318,6 +323,18 @@ class ShapeColumns:
                 h.update(np.ascontiguousarray(array))
             kept = self.__dict__["_digest"] = h.digest()
         return kept
+
+
+#: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
+_ROWS_AT_ONCE = 1 << 15
+
+
+def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) matrices of (N, 12) affines (the bottom rows 0 0 0 1)."""
+    out = np.zeros((len(affines), 4, 4))
+    out[:, :3, :] = affines.reshape(-1, 3, 4)
+    out[:, 3, 3] = 1.0
+    return out
 
 
 #: The code of each shape kind (the index of its keyword in tracer.shapes.REGISTRY).
@@ -419,7 +436,7 @@ class ShapeTable(MutableSequence):
         """Shape i (negative from the end), without making the others (the list's element once made)."""
         if self._shapes is not None:
             return self._shapes[i]
-        return self._columns.shape(range(len(self._columns))[i])
+        return self._columns.shape(i)
 
     def _made(self) -> list:
         """The list of Shapes, made on first use."""

@@ -21,7 +21,7 @@ from ..compile import CompiledScene, Primitive, PrimitiveTable, boolean_depth, f
 from ..geometry.polyhedra import face_planes
 from ..intersect.mesh import NODE, MeshArrays
 from .. import numerics, shapes
-from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
+from ..model import POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
 from . import contract
 from .contract import EFFECT_BITS, KIND_CODES, OP_CODES
 
@@ -66,9 +66,9 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
     # Every primitive is a row of the table: its kind has a C code (checked above), a polyhedron has its
     # kind's face planes; only a mesh's triangles can be missing.
     table = compiled.table
-    for i in table.rows(MESH_KINDS).tolist():
-        if id(table.shapes[i].mesh) not in table.meshes:
-            return f"{table.shapes[i].kind} has no triangle mesh"
+    for mesh, rows in table.mesh_groups():
+        if id(mesh) not in table.meshes:
+            return f"{shapes.REGISTRY[table.kind[rows[0]]].keyword} has no triangle mesh"
     for obj in compiled.objects.booleans.values():
         reason = fold_tree(obj, check, check_boolean)
         if reason:
@@ -149,12 +149,12 @@ class FlatScene:
                 planes.append(np.c_[np.asarray(normals, dtype=np.float64), np.asarray(offsets, dtype=np.float64)])
                 first_plane += len(offsets)
         meshes, mesh_index = [], {}
-        for i in table.rows(MESH_KINDS).tolist():
-            mesh = table.meshes[id(table.shapes[i].mesh)]
-            if id(mesh) not in mesh_index:
+        for data, rows in table.mesh_groups():  # (in order of first use)
+            mesh = table.meshes[id(data)]
+            if id(mesh) not in mesh_index:  # (meshes of equal content share one TriangleMesh)
                 mesh_index[id(mesh)] = len(meshes)
                 meshes.append(mesh.arrays())
-            aux[i, 0] = mesh_index[id(mesh)]
+            aux[rows, 0] = mesh_index[id(mesh)]
         a["prim_aux"] = aux
         a["planes"] = np.concatenate(planes) if planes else np.zeros((0, 4))
         self._flatten_meshes(meshes)

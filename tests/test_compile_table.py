@@ -1,0 +1,147 @@
+"""Compiling a scene whose objects are a ShapeTable: from its columns, without making a Shape, to the same
+numbers and the same images as the scene of the list of Shapes it reads as."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tracer import compile as compile_module
+from tracer.compile import compile_scene
+from tracer.errors import TracerError
+from tracer.model import Material, Shape, ShapeTable
+from tracer.render import render
+from tracer.sdl.parser import parse_sdl
+
+#: Every closed-form kind, tapers, polyhedra, the teapot; reflective, transparent and plain materials.
+TEXT = """\
+camera 0 3 12  0 0.5 0  0 1 0  40
+light 5 8 6  1 1 1
+light -6 4 3  0.3 0.3 0.4
+background 0.1 0.1 0.2
+push diffuse 0.6 0.6 0.6 rotate -90 1 0 0 scale 8 8 8 square pop
+diffuse 0.9 0.2 0.2 specular 0.5 0.5 0.5 specularExponent 20
+push translate -3 1 0 sphere pop
+push translate -1 1 0 rotate 30 0 1 0 scale 0.7 0.7 0.7 cube pop
+diffuse 0.2 0.8 0.3 reflectivity 0.5
+push translate 1 0 0 rotate -90 1 0 0 taperedCylinder 0.4 pop
+push translate 3 0 0 rotate -90 1 0 0 scale 0.6 0.6 1.5 cone pop
+push translate 3 0 -3 rotate -90 1 0 0 scale 0.5 0.5 1 cylinder pop
+reflectivity 0 transparency 0.7 speedOfLight 0.8 diffuse 0.2 0.2 0.9
+push translate 0 2.5 -1 scale 0.8 0.8 0.8 octahedron pop
+push translate -2 2.5 -2 dodecahedron pop
+transparency 0 diffuse 0.9 0.9 0.2
+push translate 0 0.6 2 scale 0.4 0.4 0.4 teapot pop
+push translate -3 0.3 2.5 rotate -90 1 0 0 scale 0.6 0.6 0.6 torus pop
+"""
+
+
+def scenes(text: str = TEXT):
+    """(the scene as the Python reader gives it, the same scene with its shapes as a table)"""
+    listed, tabled = parse_sdl(text, file="t.sdl"), parse_sdl(text, file="t.sdl")
+    tabled.objects = ShapeTable.of_shapes(tabled.objects)
+    return listed, tabled
+
+
+@pytest.fixture
+def shapes_made(monkeypatch):
+    """How many Shape objects are made during the test."""
+    made = {"count": 0}
+    real = Shape.__post_init__
+
+    def counting(self):
+        made["count"] += 1
+        real(self)
+
+    monkeypatch.setattr(Shape, "__post_init__", counting)
+    return made
+
+
+def test_the_table_compiles_to_the_lists_numbers(shapes_made):
+    listed, tabled = scenes()
+    a = compile_scene(listed)
+    shapes_made["count"] = 0
+    b = compile_scene(tabled)
+    assert shapes_made["count"] == 0 and tabled.objects.columns is not None
+    for name in ("inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes", "kind", "top",
+                 "material_ids"):
+        assert np.array_equal(getattr(a.table, name), getattr(b.table, name)), name
+    assert a.effects == b.effects
+    assert a.materials.materials == b.materials.materials
+    assert sorted(m.origin for m in (s.mesh for s in listed.objects) if m) == sorted(
+        b.table.mesh_of(i).origin for i in range(len(tabled.objects)) if b.table.mesh_of(i) is not None)
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_the_table_renders_the_lists_image(backend, shapes_made):
+    listed, tabled = scenes()
+    expected = render(listed, 48, 36, backend=backend, threads=2).image
+    shapes_made["count"] = 0
+    image = render(tabled, 48, 36, backend=backend, threads=2).image
+    assert np.array_equal(image, expected)
+    assert tabled.objects.columns is not None  # never made into a list of Shapes
+    if backend == "c":
+        # the C core reads the arrays; only the two transparent solids are probed by the NumPy path for
+        # whether a light is inside them (tracer.savings.sealed_lights), each from its own Shape
+        assert shapes_made["count"] == 2
+    else:  # the NumPy path's primitives make their own shape each (shape_at), once
+        assert shapes_made["count"] == len(tabled.objects)
+
+
+def test_primitives_of_a_table_are_its_rows():
+    listed, tabled = scenes()
+    compiled = compile_scene(tabled)
+    for i, prim in enumerate(compiled.primitives):
+        assert prim.shape == listed.objects[i] and prim.kind == listed.objects[i].kind
+        assert np.array_equal(prim.inverse, compiled.table.inverses[i])
+    assert compiled.primitives[-2].triangle_mesh is not None  # the teapot's
+
+
+def test_compiled_once_until_the_table_changes():
+    _, tabled = scenes()
+    first = compile_scene(tabled)
+    assert compile_scene(tabled) is first
+    list(tabled.objects)  # made into Shapes: compiled anew from them, to the same numbers
+    again = compile_scene(tabled)
+    assert again is not first and np.array_equal(again.table.inverses, first.table.inverses)
+    tabled.objects[1].matrix[0, 3] += 1.0  # an edit in place
+    edited = compile_scene(tabled)
+    assert edited is not again and edited.table.spheres[1, 0] == again.table.spheres[1, 0] + 1.0
+
+
+def test_tables_of_other_content_have_other_keys():
+    _, a = scenes()
+    _, b = scenes(TEXT.replace("translate -3 1 0 sphere", "translate -3 1.5 0 sphere"))
+    _, c = scenes(TEXT.replace("reflectivity 0.5", "reflectivity 0.6"))
+    keys = [compile_module.content_key(s) for s in (a, b, c)]
+    assert len(set(keys)) == 3
+    _, a_again = scenes()
+    assert compile_module.content_key(a_again)[2:] == keys[0][2:]  # (another table: its id differs only)
+
+
+def test_unused_materials_of_a_table_do_not_make_effects():
+    _, tabled = scenes("light 1 1 1 1 1 1\nsphere\n")
+    c = tabled.objects.columns
+    table = ShapeTable(c.kinds, c.affines, [1], [Material(reflectivity=0.9), c.materials[0]], c.tapered_radii,
+                       c.lines, c.columns, c.file)
+    tabled.objects = table
+    compiled = compile_scene(tabled)
+    assert "reflection" not in compiled.effects and compiled.materials.materials == [c.materials[0]]
+
+
+@pytest.mark.parametrize("bad, message", [
+    (np.zeros(12), "t.sdl:3:7: sphere has a singular transform (a scale of 0?)"),
+    (np.r_[np.nan, np.zeros(11)], "t.sdl:3:7: sphere has a transform that is not a finite affine matrix"),
+])
+def test_a_bad_matrix_names_the_shapes_place(bad, message):
+    n = 70_000  # (more than a chunk of rows: the bad one is in the third)
+    affines = np.tile(np.eye(4)[:3].reshape(12), (n, 1))
+    affines[66_000] = bad
+    lines = np.full(n, 1, dtype=np.int32)
+    lines[66_000] = 3
+    table = ShapeTable(np.zeros(n, dtype=np.int16), affines, np.zeros(n, dtype=np.int32), [Material()],
+                       np.ones(n), lines, np.full(n, 7, dtype=np.int32), "t.sdl")
+    scene = parse_sdl("light 1 1 1 1 1 1\n")
+    scene.objects = table
+    with pytest.raises(TracerError) as info:
+        compile_scene(scene)
+    assert str(info.value) == message

@@ -269,3 +269,45 @@ def test_importing_the_tracer_as_a_library_leaves_openssl_alone():
                           env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert proc.returncode == 0 and proc.stdout.strip() == "True", proc.stderr[-2000:]
     assert "_hashlib" in _loaded_modules(proc.stderr)
+
+
+@pytest.mark.parametrize("options", [[], ["--block-size", "8", "--progressive"], ["--samples", "4"],
+                                     ["--samples", "4", "--sampling", "adaptive"]])
+def test_the_png_written_band_by_band_is_the_rendered_image(tmp_path, options):
+    """A .png render writes bands of rows as they are traced (no whole image kept): the file is the one
+    save_image writes from the image render() returns, and no temporary is left."""
+    import tracer
+    from tracer.imageio import save_image
+
+    out = tmp_path / "streamed.png"
+    proc = run("render", ROOT / "scenes" / "lecture.sdl", "-o", out, "--width", 70, "--height", 150, "-q",
+               *options)
+    assert proc.returncode == 0, proc.stderr
+    settings = dict(zip(options[::2], options[1::2]))
+    kept = tracer.render(tracer.load(ROOT / "scenes" / "lecture.sdl"), 70, 150, eight_bit=True,
+                         block_size=int(settings.get("--block-size", 1)), progressive="--progressive" in options,
+                         samples=int(settings.get("--samples", 1)), sampling_mode=settings.get("--sampling", "jittered"))
+    assert out.read_bytes() == save_image(kept.image, tmp_path / "kept.png").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.png", "streamed.png"]
+
+
+def test_a_render_that_fails_while_streaming_leaves_no_file(tmp_path):
+    """A .png whose header is already written when tracing stops (here: cancelled) is removed, not left half
+    written, and a file that was there before is kept."""
+    out = tmp_path / "x.png"
+    out.write_bytes(b"before")
+    code = ("import sys\nimport tracer\nfrom tracer.errors import RenderCancelled\n"
+            "module = sys.modules['tracer.render']\nreal = module.render\n"
+            "def render(*args, on_rows, **kwargs):\n"
+            "    def first_band_then_stop(rows):\n"
+            "        on_rows(rows)\n"
+            "        raise RenderCancelled('render cancelled')\n"
+            "    return real(*args, on_rows=first_band_then_stop, **kwargs)\n"
+            "module.render = render\n"
+            "from tracer.cli import main\nsys.exit(main(sys.argv[1:]))\n")
+    proc = subprocess.run([sys.executable, "-c", code, "render", str(ROOT / "scenes" / "lecture.sdl"), "-o", str(out),
+                           "--width", "64", "--height", "200", "-q", "--tile", "16"],
+                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                          timeout=300)
+    assert proc.returncode == 130 and "cancelled" in proc.stderr, proc.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["x.png"] and out.read_bytes() == b"before"

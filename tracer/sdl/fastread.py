@@ -235,6 +235,7 @@ def scan(text: str) -> Union[Columns, Declined, None]:
     pointer = lib.rt_sdl_read(data, len(data), setup.words, len(setup.words),
                               setup.codes.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)), len(setup.codes),
                               setup.defaults.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), SHARED_LIBM)
+    del data  # (a copy of the text: 100 MB for a million spheres, not needed while the columns are made)
     if not pointer:
         return Declined("memory", 0)
     try:
@@ -247,20 +248,26 @@ def scan(text: str) -> Union[Columns, Declined, None]:
 
 
 def _array(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
-    """A copy of the C buffer behind ``pointer`` (which is freed afterwards)."""
+    """A copy of the C buffer behind ``pointer``, which is freed after the read."""
+    return _view(pointer, shape, dtype).copy()
+
+
+def _view(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """The C buffer behind ``pointer`` as an array, valid until the read's result is freed."""
     if shape[0] == 0:
         return np.zeros(shape, dtype=dtype)
-    return np.ctypeslib.as_array(pointer, shape=shape).astype(dtype, copy=True)
+    return np.ctypeslib.as_array(pointer, shape=shape)  # (of the pointer's type, which is dtype)
 
 
 def _columns(res: _Result, text: str, layout: _MaterialLayout) -> Columns:
     n = res.shapes
-    name_rows = _array(res.name_rows, (res.names, 3), np.int64).tolist()
+    # (what becomes Python objects is read in place; what the scene keeps as arrays is copied)
+    name_rows = _view(res.name_rows, (res.names, 3), np.int64).tolist()
     names = {row: text[start:start + length] for row, start, length in name_rows} or None
-    materials = layout.materials(_array(res.material_rows, (res.materials, layout.width), np.float64))
-    lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _array(res.light_rows, (res.lights, 6),
-                                                                        np.float64).tolist()]
-    cameras = [tuple(row) for row in _array(res.camera_rows, (res.cameras, 10), np.float64).tolist()]
+    materials = layout.materials(_view(res.material_rows, (res.materials, layout.width), np.float64))
+    lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _view(res.light_rows, (res.lights, 6),
+                                                                       np.float64).tolist()]
+    cameras = [tuple(row) for row in _view(res.camera_rows, (res.cameras, 10), np.float64).tolist()]
     settings: dict[str, object] = {}
     if res.settings_set & _SET_GLOBAL_AMBIENT:
         settings["global_ambient"] = tuple(res.global_ambient)

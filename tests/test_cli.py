@@ -235,10 +235,11 @@ def test_convert_and_render_usd_leniently(tmp_path):
 
 
 #: What ``render`` to a .png must not load (tests below): OpenSSL's hashlib module (numpy.random's seeding
-#: would pull it in), Pillow, and the parts of the tracer and the optional packages other commands use.
+#: would pull it in), Pillow, the parts of the tracer and the optional packages other commands use, and the
+#: C compiler's tools (subprocess: only a build of the C core runs one).
 NOT_LOADED_BY_A_PNG_RENDER = ("_hashlib", "PIL", "tracer.distributed", "tracer.accuracy", "tracer.target",
                               "tracer.sdl.writer", "tracer.usd.reader", "tracer.usd.writer", "pxr", "dask",
-                              "distributed", "scipy", "skimage", "matplotlib")
+                              "distributed", "scipy", "skimage", "matplotlib", "subprocess")
 
 
 def _loaded_modules(python_verbose_stderr: str) -> set:

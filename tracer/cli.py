@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import signal
@@ -261,6 +260,8 @@ def _render(args) -> int:
               f"{e.samples_mean:.1f} rays per pixel on average, {e.pixels_at_limit} pixels at the "
               f"{MAX_SAMPLES}-ray limit", file=sys.stderr)
     if args.stats:
+        import json
+
         print(json.dumps(result.stats()))
     return 0
 
@@ -327,6 +328,8 @@ def _render_job(args) -> int:
     finally:
         progress.close()
     if args.stats:
+        import json
+
         print(json.dumps({"rays": rays.as_dict(), "skipped": rays.skipped(),
                           "seconds": round(time.perf_counter() - started, 6),
                           "backend": ",".join(sorted(backends)), "width": args.width, "height": args.height,
@@ -366,6 +369,8 @@ def describe(scene) -> dict:
 def _info(args) -> int:
     info = describe(_load(args))
     if args.json:
+        import json
+
         try:
             print(json.dumps(info, indent=2))
         except RecursionError:  # json's encoder recurses per level of nesting

@@ -236,13 +236,14 @@ def test_convert_and_render_usd_leniently(tmp_path):
 
 #: What ``render`` to a .png must not load (tests below): OpenSSL's hashlib module, the code of the NumPy
 #: subpackages the program defers (tracer/startup.py; their first modules), the secrets module, Pillow, the
-#: parts of the tracer and the optional packages other commands use, and the C compiler's tools
-#: (subprocess: only a build of the C core runs one).
+#: parts of the tracer and the optional packages other commands use, the C compiler's tools (subprocess:
+#: only a build of the C core runs one), difflib (suggestions for a mistyped keyword) and Python's threading
+#: (the C core runs its own threads).
 NOT_LOADED_BY_A_PNG_RENDER = ("_hashlib", "numpy.random.mtrand", "numpy.random._generator", "numpy.ma.core",
                               "numpy.polynomial.polynomial", "numpy.fft._pocketfft", "secrets", "PIL",
                               "tracer.distributed", "tracer.accuracy", "tracer.target", "tracer.sdl.writer",
                               "tracer.usd.reader", "tracer.usd.writer", "pxr", "dask", "distributed", "scipy",
-                              "skimage", "matplotlib", "subprocess")
+                              "skimage", "matplotlib", "subprocess", "difflib", "threading")
 
 
 def _loaded_modules(python_verbose_stderr: str) -> set:

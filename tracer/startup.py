@@ -19,7 +19,6 @@ A program that imports the tracer as a library keeps its process as it is.
 """
 from __future__ import annotations
 
-import importlib.abc
 import importlib.machinery
 import importlib.util
 import os
@@ -52,9 +51,10 @@ def leave_out_openssl() -> None:
     sys.modules.setdefault("_hashlib", None)
 
 
-class DeferredImports(importlib.abc.MetaPathFinder):
-    """Finds the named modules as the standard path finder does, with a loader that runs a module's code
-    only when one of its names is first used."""
+class DeferredImports:
+    """A finder for sys.meta_path (not derived from importlib.abc's, whose import costs more than this
+    module): finds the named modules as the standard path finder does, with a loader that runs a module's
+    code only when one of its names is first used."""
 
     def __init__(self, names):
         self.names = frozenset(names)

@@ -10,7 +10,6 @@ import math
 import os
 import signal
 import sys
-import threading
 from dataclasses import replace
 from typing import Optional, Sequence
 
@@ -452,10 +451,14 @@ def _bench(args) -> int:
 def _terminate_like_interrupt():
     """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
     removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
-    if threading.current_thread() is not threading.main_thread():
+    try:
+        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+        installed = True
+    except ValueError:  # not the main thread (told this way, without loading the threading module)
+        installed = False
+    if not installed:
         yield
         return
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         yield
     finally:

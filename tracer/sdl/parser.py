@@ -24,7 +24,6 @@ statement or shape.
 """
 from __future__ import annotations
 
-import difflib
 import math
 import os
 from dataclasses import dataclass, field, fields
@@ -398,6 +397,8 @@ class _Reader:
             return self._error(at, "a number where a keyword belongs (too many numbers?)", expected="a keyword")
         if text in self.macros:
             return self._error(at, f"unknown keyword; to expand the macro write 'use {text}'")
+        import difflib  # (only for a file with a mistake: a render that reads well never loads it)
+
         # Keywords are case-sensitive; a wrong case is the likeliest typo of all.
         suggestion = [k for k in KEYWORDS if k.lower() == text.lower()] or \
             difflib.get_close_matches(text, sorted(KEYWORDS), n=1, cutoff=0.7)
@@ -708,6 +709,8 @@ class _Reader:
         name, name_at = self._name(keyword, at, "a macro name")
         macro = self.macros.get(name)
         if macro is None:
+            import difflib
+
             close = difflib.get_close_matches(name, sorted(self.macros), n=1, cutoff=0.7)
             hint = f", did you mean '{close[0]}'?" if close else ""
             raise self._error(name_at, f"undefined macro{hint}", expected="a name given by an earlier def")

@@ -14,7 +14,7 @@ import weakref
 from collections.abc import Sequence
 from dataclasses import astuple, dataclass, field
 from functools import cached_property
-from itertools import chain
+from itertools import chain, repeat
 from operator import attrgetter
 from typing import Callable, Optional, Union
 
@@ -454,24 +454,32 @@ class MaterialTable:
     texture: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        # (a pass over a chunk of materials, then np.fromiter per field: a hundred thousand materials in a
-        # tenth of the time np.array of a list of tuples per field takes; chunks keep the transposed
-        # tuples a few MB)
+        # A few thousand materials at a time (they stay in the cache while each of their fields is read:
+        # a million scattered objects read once per field would be a cache miss per field), a field at a
+        # time: either the one object they all hold is filled in (materials mostly differ in a colour or two;
+        # the rest is the object the reader's defaults or state gave them all) or np.fromiter reads them.
         n = len(self.materials)
         for name in _COLOR_FIELDS:
             setattr(self, name, np.empty((n, 3)))
         for name in _NUMBER_FIELDS:
             setattr(self, name, np.empty(n))
         self.texture = np.empty(n, dtype=np.int64)
-        fields = attrgetter(*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture")
-        for rows in row_chunks(n):
-            columns = list(zip(*map(fields, self.materials[rows])))
-            size = rows.stop - rows.start
-            for name, values in zip(_COLOR_FIELDS, columns):
-                getattr(self, name)[rows] = np.fromiter(chain.from_iterable(values), float, 3 * size).reshape(-1, 3)
-            for name, values in zip(_NUMBER_FIELDS, columns[len(_COLOR_FIELDS):]):
-                getattr(self, name)[rows] = np.fromiter(values, float, size)
-            self.texture[rows] = np.fromiter(columns[-1], np.int64, size)
+        for start in range(0, n, _MATERIALS_AT_ONCE):
+            rows = slice(start, min(n, start + _MATERIALS_AT_ONCE))
+            materials = self.materials[rows]
+            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+                values = list(map(attrgetter(name), materials))
+                column = getattr(self, name)
+                if all(map(operator.is_, values, repeat(values[0]))):
+                    column[rows] = values[0]
+                elif name in _COLOR_FIELDS:
+                    column[rows] = np.fromiter(chain.from_iterable(values), float, 3 * len(values)).reshape(-1, 3)
+                else:
+                    column[rows] = np.fromiter(values, column.dtype, len(values))
+
+
+#: Materials read at a time by MaterialTable (their objects stay in the cache while each field is read).
+_MATERIALS_AT_ONCE = 8192
 
 
 @dataclass
@@ -524,7 +532,12 @@ class PrimitiveTable:
         self._matrices = matrices
         self.inverses = np.empty((n, 4, 4))
         self.inverse_error, self.inverse_norms = np.empty(n), np.empty((n, 2))
-        for rows in row_chunks(n):
+        self.generic_size = np.ones(n)
+        self.spheres = np.zeros((n, 4))
+        self.spheres[:, 3] = np.inf
+        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
+        self.boxes = np.zeros((n, 6))
+        for rows in row_chunks(n):  # (each chunk's matrices made once, for all that is computed from them)
             matrix = self.matrix_rows(rows)
             inverse = _batched_inverses(matrix)
             if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
@@ -534,16 +547,12 @@ class PrimitiveTable:
             # (the sums in Primitive's order: rows of three, left to right)
             self.inverse_norms[rows, 0] = np.abs(inverse[:, :3, :3]).sum(axis=2).max(axis=1)
             self.inverse_norms[rows, 1] = np.abs(inverse[:, :3, 3]).max(axis=1)
+            self._bound_generic_boxes(rows, matrix)
         for mesh, _ in self.mesh_groups():
             self._build_mesh(mesh)
         # a tapered cylinder's small radius (Shape.small_radius), 0 for the other kinds
         self.top = np.where(self.kind == _KIND_INDEX["taperedCylinder"], tapered_radii, 0.0)
         self.top[self.kind == _KIND_INDEX["cylinder"]] = 1.0
-        self.generic_size = np.ones(n)
-        self.spheres = np.zeros((n, 4))
-        self.spheres[:, 3] = np.inf
-        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
-        self.boxes = np.zeros((n, 6))
         self._fill_sizes_and_bounds()
         self._matrices = None  # (the shapes' or the table's own: not kept twice)
 
@@ -606,13 +615,9 @@ class PrimitiveTable:
             self.meshes[id(mesh)] = shared_triangle_mesh(mesh)
 
     def _fill_sizes_and_bounds(self) -> None:
-        """generic_size and the bounding spheres, a batch per kind (the kinds with a fixed generic box), per
-        chunk of tapered cylinders, and per mesh (or polyhedron vertex set) with its instances."""
-        for kind, corners in _BOX_CORNERS.items():
-            rows = self.rows([kind])
-            if rows.size:
-                self.generic_size[rows] = 1.0 + TORUS_TUBE_RADIUS if kind == "torus" else np.max(np.abs(corners))
-                self._bound(rows, corners)
+        """generic_size and the bounding spheres of the kinds without a fixed generic box (those are done a
+        chunk at a time with the inverses): per chunk of tapered cylinders, and per mesh (or polyhedron
+        vertex set) with its instances."""
         rows = self.rows(_TAPERED_KINDS)
         if rows.size:
             top = np.maximum(self.top[rows], 0.0)
@@ -636,6 +641,36 @@ class PrimitiveTable:
             for start in range(0, len(rows), per_chunk):
                 self._bound(rows[start:start + per_chunk], vertices)
 
+    def _bound_generic_boxes(self, rows: slice, matrix: np.ndarray) -> None:
+        """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
+        box (``matrix``: the chunk's matrices).  Each world bound is the sum of the extreme terms, in the
+        order of the product (matrix row . corner, then the translation): the extreme of that sum over the
+        box's corners, since rounding is monotonic, without carrying the 8 corners through."""
+        codes = self.kind[rows]
+        local = np.flatnonzero(_HAS_BOX[codes])
+        if not local.size:
+            return
+        every = local.size == len(codes)
+        linear = matrix[:, :3, :3] if every else matrix[local, :3, :3]
+        translation = matrix[:, :3, 3] if every else matrix[local, :3, 3]
+        codes = codes if every else codes[local]
+        at_lo = linear * _BOX_LO[codes][:, None, :]  # (k, 3, 3): [r, j] = matrix[r, j] * corner j
+        at_hi = linear * _BOX_HI[codes][:, None, :]
+        low, high = np.minimum(at_lo, at_hi), np.maximum(at_lo, at_hi)
+        lo = low[:, :, 0] + low[:, :, 1] + low[:, :, 2] + translation
+        hi = high[:, :, 0] + high[:, :, 1] + high[:, :, 2] + translation
+        where = np.arange(rows.start, rows.stop) if every else rows.start + local
+        self.generic_size[where] = _BOX_SIZE[codes]
+        self._keep_bounds(where, lo, hi)
+
+    def _keep_bounds(self, rows, lo: np.ndarray, hi: np.ndarray) -> None:
+        """World boxes (lo, hi) of these rows, and the bounding spheres round them (radius padded by 1e-9
+        relatively, as _sphere_around does)."""
+        self.boxes[rows, :3], self.boxes[rows, 3:] = lo, hi
+        self.centers[rows] = 0.5 * (lo + hi)
+        extent = hi - lo
+        self.radii[rows] = np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)
+
     def _bound(self, rows: np.ndarray, points: np.ndarray) -> None:
         """World boxes and bounding spheres of ``rows`` whose generic solids lie in the hull of ``points``
         ((K, 3) for all, or (len(rows), K, 3)), carried to the world by one stacked product: what
@@ -645,11 +680,7 @@ class PrimitiveTable:
             m = self.matrix_rows(rows[part])
             p = points if points.ndim == 2 else points[part]
             world = p @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
-            lo, hi = world.min(axis=1), world.max(axis=1)
-            self.boxes[rows[part], :3], self.boxes[rows[part], 3:] = lo, hi
-            self.centers[rows[part]] = 0.5 * (lo + hi)
-            extent = hi - lo
-            self.radii[rows[part]] = np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)
+            self._keep_bounds(rows[part], world.min(axis=1), world.max(axis=1))
 
 
 #: Index of each kind in the shape registry (PrimitiveTable.kind).
@@ -657,6 +688,15 @@ _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
 _KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
 _MESH_CODES = frozenset(_KIND_INDEX[k] for k in MESH_KINDS)
 _TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
+#: Per kind code: whether the kind has a fixed generic box, the box's low and high corners, and the generic
+#: size (Primitive.generic_size) of such a kind.
+_HAS_BOX = np.array([e.keyword in _BOX_CORNERS for e in shapes.REGISTRY])
+_BOX_LO = np.array([_BOX_CORNERS[e.keyword].min(axis=0) if e.keyword in _BOX_CORNERS else np.zeros(3)
+                    for e in shapes.REGISTRY])
+_BOX_HI = np.array([_BOX_CORNERS[e.keyword].max(axis=0) if e.keyword in _BOX_CORNERS else np.zeros(3)
+                    for e in shapes.REGISTRY])
+_BOX_SIZE = np.array([(1.0 + TORUS_TUBE_RADIUS if e.keyword == "torus" else float(np.max(np.abs(_BOX_CORNERS[e.keyword]))))
+                      if e.keyword in _BOX_CORNERS else 1.0 for e in shapes.REGISTRY])
 #: The generic points of a tapered cylinder of top radius 1: the squares round its two discs (the frustum
 #: lies in their hull; the top's x and y are scaled by the top radius).
 _TAPERED_POINTS = np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX, np.ones(4)]])

@@ -544,9 +544,13 @@ class PrimitiveTable:
                 inverse = self._checked_inverses(rows)
             self.inverses[rows] = inverse
             self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
-            # (the sums in Primitive's order: rows of three, left to right)
-            self.inverse_norms[rows, 0] = np.abs(inverse[:, :3, :3]).sum(axis=2).max(axis=1)
-            self.inverse_norms[rows, 1] = np.abs(inverse[:, :3, 3]).max(axis=1)
+            # (the sums in Primitive's order: rows of three, left to right; spelt out, as NumPy's
+            # reductions over axes of three take several times longer)
+            linear, translation = np.abs(inverse[:, :3, :3]), np.abs(inverse[:, :3, 3])
+            sums = linear[:, :, 0] + linear[:, :, 1] + linear[:, :, 2]
+            self.inverse_norms[rows, 0] = np.maximum(np.maximum(sums[:, 0], sums[:, 1]), sums[:, 2])
+            self.inverse_norms[rows, 1] = np.maximum(np.maximum(translation[:, 0], translation[:, 1]),
+                                                     translation[:, 2])
             self._bound_generic_boxes(rows, matrix)
         for mesh, _ in self.mesh_groups():
             self._build_mesh(mesh)
@@ -582,7 +586,14 @@ class PrimitiveTable:
     def rows(self, kinds) -> np.ndarray:
         """The rows of the shapes of these kinds (SDL keywords), in order."""
         codes = [_KIND_INDEX[k] for k in kinds]
-        return np.flatnonzero(np.isin(self.kind, codes)) if len(self.kind) else np.zeros(0, dtype=np.int64)
+        if not self.kind_counts[codes].any():  # (no pass over a million rows for a kind that has none)
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(np.isin(self.kind, codes))
+
+    @cached_property
+    def kind_counts(self) -> np.ndarray:
+        """How many rows each kind code has."""
+        return np.bincount(self.kind, minlength=len(shapes.REGISTRY))
 
     def mesh_of(self, i: int) -> Optional[MeshData]:
         """The MeshData of row i (None for the closed-form kinds)."""
@@ -647,10 +658,11 @@ class PrimitiveTable:
         order of the product (matrix row . corner, then the translation): the extreme of that sum over the
         box's corners, since rounding is monotonic, without carrying the 8 corners through."""
         codes = self.kind[rows]
-        local = np.flatnonzero(_HAS_BOX[codes])
-        if not local.size:
+        has_box = _HAS_BOX[codes]
+        every = bool(has_box.all())
+        local = None if every else np.flatnonzero(has_box)
+        if not every and not local.size:
             return
-        every = local.size == len(codes)
         linear = matrix[:, :3, :3] if every else matrix[local, :3, :3]
         translation = matrix[:, :3, 3] if every else matrix[local, :3, 3]
         codes = codes if every else codes[local]

@@ -215,6 +215,7 @@ class Primitive:
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
         self.radius = float(table.radii[index]) if bounded else np.inf
+        self.__dict__["box"] = (table.boxes[index, :3], table.boxes[index, 3:]) if bounded else None
         # (the cached properties' values, from the table)
         self.__dict__["generic_size"] = float(table.generic_size[index])
         linear, translation = table.inverse_norms[index].tolist()
@@ -271,6 +272,12 @@ class Primitive:
         # (plus the shape's own root error, where it has one: the torus)
         return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
                                                         self.generic_size, self.rounding)
+
+    @cached_property
+    def box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """The world box (lo, hi) of the points the bounding sphere is made from; None when unbounded."""
+        corners = self.world_corners()
+        return None if corners is None else (corners.min(axis=0), corners.max(axis=0))
 
     def world_corners(self) -> Optional[np.ndarray]:
         pts = self._generic_points()
@@ -366,15 +373,13 @@ class CSGNode:
         self.center, self.radius = self._bound()
 
     def _bound(self):
-        if self.op == "union":
-            if not self.bounded:
-                return None, np.inf
-            lo = np.minimum(self.left.center - self.left.radius, self.right.center - self.right.radius)
-            hi = np.maximum(self.left.center + self.left.radius, self.right.center + self.right.radius)
-            return 0.5 * (lo + hi), float(np.linalg.norm(hi - lo) * 0.5)
-        if self.op == "intersection" and not self.left.bounded:
-            return self.right.center, self.right.radius
-        return self.left.center, self.left.radius
+        """The bounding sphere round the node's box (boolean_box of its children's): made from boxes, not
+        from the children's spheres, it does not grow with the nesting (a sphere round the box of two
+        spheres is up to sqrt(3) times larger than they are: 2,000 nested unions overflowed to inf)."""
+        self.box = boolean_box(self.op, self.left.box, self.right.box)
+        if self.box is None:
+            return None, np.inf
+        return _sphere_around(np.stack(self.box))
 
     def leaves(self):
         """The primitives under this node, left to right (without recursion, as everywhere a tree is walked:
@@ -403,6 +408,18 @@ class CSGNode:
 
 
 Node = Union[Primitive, CSGNode]
+
+
+def boolean_box(op: str, left, right):
+    """The world box (lo, hi) that holds a boolean's solid, from its operands' boxes (None: unbounded)."""
+    if op == "union":
+        return None if left is None or right is None else (np.minimum(left[0], right[0]),
+                                                           np.maximum(left[1], right[1]))
+    if op == "intersection":
+        if left is None or right is None:
+            return left if right is None else right
+        return np.maximum(left[0], right[0]), np.minimum(left[1], right[1])
+    return left  # difference: inside the left solid
 
 
 def fold_tree(root, leaf: Callable, join: Callable):

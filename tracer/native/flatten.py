@@ -17,7 +17,7 @@ from typing import Optional
 import numpy as np
 
 from ..backend import MAX_CSG_DEPTH  # (make_tracer refuses deeper trees, for every backend)
-from ..compile import CompiledScene, Primitive, PrimitiveTable, boolean_depth, fold_tree
+from ..compile import CompiledScene, Primitive, PrimitiveTable, boolean_box, boolean_depth, fold_tree
 from ..geometry.polyhedra import face_planes
 from ..intersect.mesh import NODE, MeshArrays
 from .. import numerics, shapes
@@ -110,14 +110,7 @@ def _primitive_box(prim, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
 
 
 def _boolean_box(node, left, right):
-    if node.op == "union":
-        return None if left is None or right is None else (np.minimum(left[0], right[0]),
-                                                           np.maximum(left[1], right[1]))
-    if node.op == "intersection":
-        if left is None or right is None:
-            return left if right is None else right
-        return np.maximum(left[0], right[0]), np.minimum(left[1], right[1])
-    return left  # difference: inside the left solid
+    return boolean_box(node.op, left, right)
 
 
 class FlatScene:

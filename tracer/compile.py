@@ -1037,13 +1037,13 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
 
 
 def _table_content(scene: Scene, table: ShapeColumns) -> tuple[tuple, _Columns]:
-    """_content of a scene whose objects are a ShapeTable not yet made into Shapes: the table's identity,
-    a digest of its arrays (kept on its read-only columns) and its materials by value, without a Python
-    object per shape.  (Once the table is made into Shapes, _content reads those: another key, and a new
-    compile from them.)"""
+    """_content of a scene whose objects are a ShapeTable not yet made into Shapes: the identity of its
+    columns (arrays nobody can change: see ShapeTable) and its materials by value, without a Python object
+    per shape and without hashing its arrays.  (Once the table is made into Shapes, _content reads those:
+    another key, and a new compile from them.)"""
     shapes = _RowShapes(table)
     meshes = {id(mesh): mesh for mesh in map(shapes.mesh_of, _builtin_mesh_rows(table))}
-    key = ("table", id(table), table.digest(), table.materials,
+    key = ("table", id(table), table.materials,
            tuple((k, mesh_digest(m)) for k, m in meshes.items())) + _scene_wide_key(scene)
     return key, _Columns([table], shapes, False, table.affines, table=table)
 

@@ -6,7 +6,6 @@ coordinates (column vectors: ``world = matrix @ generic``).
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import MutableSequence, Sequence
@@ -311,19 +310,6 @@ class ShapeColumns:
                                      SourceLocation(self.file, line, column), names.get(i)))
         return out
 
-    def digest(self) -> bytes:
-        """A digest of what compiling reads from the rows: kinds, matrices, material ids and tapers (the
-        materials themselves are compared by value by whoever uses this).  Kept once computed: the arrays
-        are read-only."""
-        kept = self.__dict__.get("_digest")
-        if kept is None:
-            h = hashlib.blake2b(digest_size=20)
-            for array in (self.kinds, self.affines, self.material_ids, self.tapered_radii):
-                h.update(repr((array.dtype.str, array.shape)).encode())
-                h.update(np.ascontiguousarray(array))
-            kept = self.__dict__["_digest"] = h.digest()
-        return kept
-
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
 _ROWS_AT_ONCE = 1 << 15
@@ -342,15 +328,23 @@ _KIND_CODE = {keyword: code for code, keyword in enumerate(_KEYWORD_OF_CODE)}
 
 
 def _read_only(array, dtype, shape: tuple, what: str) -> np.ndarray:
-    """``array`` as a read-only C-contiguous array of this dtype and shape (a view where it already is one)."""
+    """``array`` as a read-only C-contiguous array of this dtype and shape.  The table takes the memory over:
+    the array and the array that owns its memory are made read-only; memory that no array owns (a writable
+    buffer) is copied."""
     out = np.ascontiguousarray(array, dtype=dtype)
     if out.shape != shape:
         try:
             out = out.reshape(shape)
         except ValueError:
             raise ValueError(f"ShapeTable: {what} has shape {out.shape}, not {shape}") from None
-    out = out.view()
-    out.setflags(write=False)
+    chain = [out]
+    while isinstance(chain[-1].base, np.ndarray):
+        chain.append(chain[-1].base)
+    if chain[-1].base is not None and not isinstance(chain[-1].base, bytes) and chain[-1].flags.writeable:
+        out = out.copy()
+        chain = [out]
+    for part in chain:
+        part.setflags(write=False)
     return out
 
 
@@ -365,7 +359,9 @@ class ShapeTable(MutableSequence):
     (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
     shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
     polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
-    the arrays over: nobody may change them afterwards.
+    the arrays over: nobody may change them afterwards (compile_scene knows a table by its identity).  They,
+    and the arrays that own their memory, are made read-only; memory that no array owns (a writable buffer)
+    is copied.
 
     It reads as the list of those Shapes.  len() makes nothing; the first access to an element (indexing,
     iteration, any change, ==) makes every Shape once, and from then on the table is a plain list of them

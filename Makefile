@@ -68,7 +68,8 @@ extension: setup
 #                   render with the prebuilt core where no compiler is on PATH
 CMAKE ?= cmake
 SANITIZED := build/sanitize/_core.so
-SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py tests/fuzz
+SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py tests/fuzz \
+	tests/test_sdl_fastread.py
 
 .PHONY: warnings sanitize wheel contract
 warnings:

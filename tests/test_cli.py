@@ -234,11 +234,16 @@ def test_convert_and_render_usd_leniently(tmp_path):
     assert (tmp_path / "x.png").exists()
 
 
-#: What ``render`` to a .png must not load (tests below): OpenSSL's hashlib module (numpy.random's seeding
-#: would pull it in), Pillow, and the parts of the tracer and the optional packages other commands use.
-NOT_LOADED_BY_A_PNG_RENDER = ("_hashlib", "PIL", "tracer.distributed", "tracer.accuracy", "tracer.target",
-                              "tracer.sdl.writer", "tracer.usd.reader", "tracer.usd.writer", "pxr", "dask",
-                              "distributed", "scipy", "skimage", "matplotlib")
+#: What ``render`` to a .png must not load (tests below): OpenSSL's hashlib module, the code of the NumPy
+#: subpackages the program defers (tracer/startup.py; their first modules), the secrets module, Pillow, the
+#: parts of the tracer and the optional packages other commands use, the C compiler's tools (subprocess:
+#: only a build of the C core runs one), difflib (suggestions for a mistyped keyword) and Python's threading
+#: (the C core runs its own threads).
+NOT_LOADED_BY_A_PNG_RENDER = ("_hashlib", "numpy.random.mtrand", "numpy.random._generator", "numpy.ma.core",
+                              "numpy.polynomial.polynomial", "numpy.fft._pocketfft", "secrets", "PIL",
+                              "tracer.distributed", "tracer.accuracy", "tracer.target", "tracer.sdl.writer",
+                              "tracer.usd.reader", "tracer.usd.writer", "pxr", "dask", "distributed", "scipy",
+                              "skimage", "matplotlib", "subprocess", "difflib", "threading")
 
 
 def _loaded_modules(python_verbose_stderr: str) -> set:
@@ -261,11 +266,81 @@ def test_a_png_render_loads_only_what_it_uses(tmp_path):
                   or any(m == name or m.startswith(name + ".") for name in NOT_LOADED_BY_A_PNG_RENDER)) == []
 
 
-def test_importing_the_tracer_as_a_library_leaves_openssl_alone():
-    """Only the command line leaves OpenSSL out (tracer/startup.py); a program importing the tracer keeps
-    hashlib's OpenSSL functions."""
+def test_importing_the_tracer_as_a_library_leaves_the_process_alone():
+    """Only the command line leaves OpenSSL out and defers NumPy's parts (tracer/startup.py); a program
+    importing the tracer keeps hashlib's OpenSSL functions and NumPy as it loads itself."""
     code = "import tracer, hashlib; print(hashlib.sha256 is not None and 'pbkdf2_hmac' in dir(hashlib))"
     proc = subprocess.run([sys.executable, "-v", "-c", code], capture_output=True, text=True, cwd=ROOT,
                           env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert proc.returncode == 0 and proc.stdout.strip() == "True", proc.stderr[-2000:]
-    assert "_hashlib" in _loaded_modules(proc.stderr)
+    assert {"_hashlib", "numpy.random.mtrand", "numpy.ma.core"} <= _loaded_modules(proc.stderr)
+
+
+_DEFERRED_THEN_USED = """
+import importlib.util, sys
+spec = importlib.util.spec_from_file_location("startup", sys.argv[1])  # (not through the package: it imports NumPy)
+startup = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(startup)
+if sys.argv[2] == "deferred":
+    startup.prepare_the_program()
+import numpy as np
+import hashlib
+print("numpy.random.mtrand" in sys.modules, "numpy.ma.core" in sys.modules)
+print(np.random.default_rng(5).random(3).tolist(), np.random.RandomState(2).randint(0, 100, 3).tolist())
+print(float(np.ma.masked_array([1.0, 2.0, 4.0], mask=[0, 1, 0]).sum()), np.fft.rfft([1.0, 2.0, 3.0]).tolist())
+print(np.polynomial.Polynomial([1, 2, 3])(2.0), np.ctypeslib.as_array((np.ctypeslib.ctypes.c_double * 2)(1, 2)).tolist())
+print(hashlib.blake2b(b"x", digest_size=8).hexdigest(), hashlib.sha256(b"x").hexdigest()[:16])
+"""
+
+
+def test_deferred_numpy_parts_load_when_first_used_and_give_the_same_results():
+    results = {}
+    for mode in ("deferred", "plain"):
+        proc = subprocess.run([sys.executable, "-c", _DEFERRED_THEN_USED, str(ROOT / "tracer" / "startup.py"), mode],
+                              capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        results[mode] = proc.stdout.splitlines()
+    assert results["deferred"][0] == "False False" and results["plain"][0] == "True True"
+    assert results["deferred"][1:] == results["plain"][1:]
+
+
+@pytest.mark.parametrize("options", [[], ["--block-size", "8", "--progressive"], ["--samples", "4"],
+                                     ["--samples", "4", "--sampling", "adaptive"]])
+def test_the_png_written_band_by_band_is_the_rendered_image(tmp_path, options):
+    """A .png render writes bands of rows as they are traced (no whole image kept): the file is the one
+    save_image writes from the image render() returns, and no temporary is left."""
+    import tracer
+    from tracer.imageio import save_image
+
+    out = tmp_path / "streamed.png"
+    proc = run("render", ROOT / "scenes" / "lecture.sdl", "-o", out, "--width", 70, "--height", 150, "-q",
+               *options)
+    assert proc.returncode == 0, proc.stderr
+    settings = dict(zip(options[::2], options[1::2]))
+    kept = tracer.render(tracer.load(ROOT / "scenes" / "lecture.sdl"), 70, 150, eight_bit=True,
+                         block_size=int(settings.get("--block-size", 1)), progressive="--progressive" in options,
+                         samples=int(settings.get("--samples", 1)), sampling_mode=settings.get("--sampling", "jittered"))
+    assert out.read_bytes() == save_image(kept.image, tmp_path / "kept.png").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.png", "streamed.png"]
+
+
+def test_a_render_that_fails_while_streaming_leaves_no_file(tmp_path):
+    """A .png whose header is already written when tracing stops (here: cancelled) is removed, not left half
+    written, and a file that was there before is kept."""
+    out = tmp_path / "x.png"
+    out.write_bytes(b"before")
+    code = ("import sys\nimport tracer\nfrom tracer.errors import RenderCancelled\n"
+            "module = sys.modules['tracer.render']\nreal = module.render\n"
+            "def render(*args, on_rows, **kwargs):\n"
+            "    def first_band_then_stop(rows):\n"
+            "        on_rows(rows)\n"
+            "        raise RenderCancelled('render cancelled')\n"
+            "    return real(*args, on_rows=first_band_then_stop, **kwargs)\n"
+            "module.render = render\n"
+            "from tracer.cli import main\nsys.exit(main(sys.argv[1:]))\n")
+    proc = subprocess.run([sys.executable, "-c", code, "render", str(ROOT / "scenes" / "lecture.sdl"), "-o", str(out),
+                           "--width", "64", "--height", "200", "-q", "--tile", "16"],
+                          capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                          timeout=300)
+    assert proc.returncode == 130 and "cancelled" in proc.stderr, proc.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["x.png"] and out.read_bytes() == b"before"

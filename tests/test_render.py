@@ -13,6 +13,7 @@ from tracer.compile import compile_scene
 from tracer.errors import RenderCancelled, TracerError
 from tracer.imageio import to_8bit
 from tracer.render import block_passes, render
+from tracer.tiles import TilePlan
 from tracer.backend import make_tracer
 
 
@@ -186,3 +187,40 @@ def test_eight_bit_render_keeps_the_bytes_of_the_float_film(settings):
     assert len(np.unique(eight.image)) > 20  # a picture, not a blank
     if updates:
         assert updates[-1].image.dtype == (np.float32 if settings.get("sampling_mode") == "adaptive" else np.uint8)
+
+
+@pytest.mark.parametrize("settings", [
+    dict(),
+    dict(tile=8),  # bands that do not divide the height
+    dict(block_size=8, progressive=True, tile=16),
+    dict(samples=4, sampling_mode="jittered", tile=16),
+    dict(block_size=64),  # a block (and so a tile) taller than the image
+    dict(samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),  # rows given at the end
+    dict(target_error=0.05),
+])
+def test_rows_handed_over_as_bands_finish_are_the_eight_bit_image(settings):
+    """render(..., on_rows=...) keeps no image: its bands, top first, make up the eight_bit image byte for
+    byte, with the same ray counts and one update per tile; bands come while tracing (before the last
+    tile's update) except in the modes that need the whole film."""
+    scene = compile_scene(_scene())
+    whole = render(scene, 37, 23, eight_bit=True, **settings)
+    bands, events = [], []
+
+    def take(rows):
+        assert rows.dtype == np.uint8 and rows.shape[1:] == (37, 3)
+        bands.append(rows.copy())  # (the band's buffer is reused for the next one)
+        events.append("rows")
+
+    streamed = render(scene, 37, 23, on_rows=take, on_tile=lambda update: events.append(update), **settings)
+    assert streamed.image is None and streamed.stats()["width"] == 37 and streamed.stats()["height"] == 23
+    assert np.array_equal(np.concatenate(bands), whole.image)
+    assert streamed.rays == whole.rays
+    updates = [event for event in events if event != "rows"]
+    whole_film = settings.get("sampling_mode") == "adaptive" or "target_error" in settings
+    if not whole_film:
+        assert all(update.image is None for update in updates)
+        assert len(updates) == updates[-1].tiles_total == updates[-1].tiles_done
+        tile = TilePlan(37, 23, **settings).tile
+        assert [len(band) for band in bands] == [min(tile, 23 - r0) for r0 in reversed(range(0, 23, tile))]
+        if len(bands) > 1:  # the top band went out before the last tile was traced
+            assert events.index("rows") < events.index(updates[-1])

@@ -8,7 +8,7 @@
 from . import startup as _startup
 
 if _startup.started_as_the_program():  # (before NumPy is imported: see tracer/startup.py)
-    _startup.leave_out_openssl()
+    _startup.prepare_the_program()
 
 from .errors import RenderCancelled, SDLError, TracerError
 from .model import CSG, Camera, Light, Material, MeshData, Scene, Settings, Shape

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import secrets
 from pathlib import Path
 from typing import Iterator, Union
 
@@ -25,7 +24,7 @@ def replacing(target: PathLike, suffix: str = ".tmp") -> Iterator[Path]:
     if not target.parent.is_dir():  # (else the error would name the temporary file)
         raise TracerError(f"{target}: folder {str(target.parent)!r} does not exist")
     while True:
-        temp = target.with_name(f".{target.name}.{secrets.token_hex(4)}{suffix}")
+        temp = target.with_name(f".{target.name}.{os.urandom(4).hex()}{suffix}")
         try:
             os.close(os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
             break

@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import signal
 import sys
-import threading
 from dataclasses import replace
 from typing import Optional, Sequence
 
@@ -211,10 +209,10 @@ def _replaced_options_given(args) -> list[str]:
 
 def _render(args) -> int:
     from .backend import load_core
-    from .imageio import output_format, save_image
-    from .render import render
+    from .imageio import output_format, png_rows, save_image
+    from .render import check_size, render
 
-    output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing, not after)
+    image_format = output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
             raise TracerError("--target-error cannot be combined with --scheduler or --frames")
@@ -240,15 +238,20 @@ def _render(args) -> int:
     savings = _savings(args)
     load_core(args.backend)  # a first-use compile of the C core is not render time
     progress = _Progress(not args.quiet)
+    options = dict(block_size=args.block_size, progressive=args.progressive, on_tile=progress,
+                   samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
+                   backend=args.backend, threads=args.threads, savings=savings, target_error=args.target_error)
     try:
-        result = render(scene, args.width, args.height, block_size=args.block_size,
-                        progressive=args.progressive, on_tile=progress, samples=args.samples,
-                        sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                        threads=args.threads, savings=savings, target_error=args.target_error,
-                        eight_bit=True)  # (the file's bytes are all that is kept: 3 bytes a pixel)
+        if image_format == "PNG":  # the rows go into the file as bands of tiles are done: no whole image kept
+            check_size(args.width, args.height)
+            with png_rows(args.output, args.width, args.height) as add_rows:
+                result = render(scene, args.width, args.height, on_rows=add_rows, **options)
+        else:  # (Pillow writes these from the whole image: its 8-bit bytes, 3 a pixel, are all that is kept)
+            result = render(scene, args.width, args.height, eight_bit=True, **options)
     finally:
         progress.close()
-    save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
+    if result.image is not None:
+        save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
     if result.error_estimate is not None and not args.quiet:
         from .target import MAX_SAMPLES
         e = result.error_estimate
@@ -256,6 +259,8 @@ def _render(args) -> int:
               f"{e.samples_mean:.1f} rays per pixel on average, {e.pixels_at_limit} pixels at the "
               f"{MAX_SAMPLES}-ray limit", file=sys.stderr)
     if args.stats:
+        import json
+
         print(json.dumps(result.stats()))
     return 0
 
@@ -322,6 +327,8 @@ def _render_job(args) -> int:
     finally:
         progress.close()
     if args.stats:
+        import json
+
         print(json.dumps({"rays": rays.as_dict(), "skipped": rays.skipped(),
                           "seconds": round(time.perf_counter() - started, 6),
                           "backend": ",".join(sorted(backends)), "width": args.width, "height": args.height,
@@ -361,6 +368,8 @@ def describe(scene) -> dict:
 def _info(args) -> int:
     info = describe(_load(args))
     if args.json:
+        import json
+
         try:
             print(json.dumps(info, indent=2))
         except RecursionError:  # json's encoder recurses per level of nesting
@@ -442,10 +451,14 @@ def _bench(args) -> int:
 def _terminate_like_interrupt():
     """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
     removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
-    if threading.current_thread() is not threading.main_thread():
+    try:
+        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+        installed = True
+    except ValueError:  # not the main thread (told this way, without loading the threading module)
+        installed = False
+    if not installed:
         yield
         return
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         yield
     finally:

@@ -11,17 +11,18 @@ by :func:`new_8bit_image` can give its rows back to the system as they are writt
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import mmap
 import os
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
 from .atomic import replacing
 from .errors import TracerError
-from .png import write_png
+from .png import PngWriter, write_png
 
 #: Values (rows x columns x channels) converted or judged at a time: a band of 1 MB of float32, whatever the
 #: width (a band's temporaries, a few times that, are all a full-size step adds to the peak).
@@ -170,3 +171,16 @@ def save_image(image: np.ndarray, path: str | os.PathLike, release: bool = False
         else:
             pillow_image(image, release).save(handle, format=image_format)
     return path
+
+
+@contextlib.contextmanager
+def png_rows(path: str | os.PathLike, width: int, height: int) -> Iterator[Callable[[np.ndarray], None]]:
+    """Write a PNG file from rows handed over as they are made: the block gets a function taking the next
+    uint8 rows (rows, width, 3), top first, all ``height`` of them by the end of the block.  The file is the
+    one :func:`save_image` writes from the whole image, and, as there, appears complete or not at all (a
+    block that raises leaves no file)."""
+    path = Path(path)
+    with replacing(path) as temp, open(temp, "wb") as handle:
+        writer = PngWriter(handle, width, height, level=PNG_LEVEL)
+        yield writer.add_rows
+        writer.finish()

@@ -73,33 +73,54 @@ def filter_rows(rows: np.ndarray, above: np.ndarray) -> np.ndarray:
     return out
 
 
-def write_png(handle: BinaryIO, width: int, height: int, bands: Iterable[np.ndarray], level: int = 6) -> None:
-    """Write a PNG of ``bands``: uint8 arrays (rows, width, 3), top row first, ``height`` rows in all.
-    ``level``: zlib's compression level, 1 to 9 (Pillow's compress_level; its default, -1, is zlib's 6).
-    (Level 0 is left out: zlib's stored blocks follow how the input was cut, so they would not be Pillow's.)"""
-    if not 1 <= level <= 9:
-        raise ValueError(f"PNG compression level must be 1 to 9, not {level}")
-    handle.write(SIGNATURE)
-    write_chunk(handle, b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
-    compressor = zlib.compressobj(level, zlib.DEFLATED, 15, 9, zlib.Z_FILTERED)
-    chunk = idat_bytes(width)
-    pending = bytearray()
-    above = np.zeros(width * CHANNELS, dtype=np.uint8)
-    rows_written = 0
-    for band in bands:
-        band = np.asarray(band, dtype=np.uint8).reshape(len(band), width * CHANNELS)
+class PngWriter:
+    """A PNG file being written: the header now, rows as they come (:meth:`add_rows`, top first), the end
+    with :meth:`finish`.  ``level``: zlib's compression level, 1 to 9 (Pillow's compress_level; its default,
+    -1, is zlib's 6).  (Level 0 is left out: zlib's stored blocks follow how the input was cut, so they would
+    not be Pillow's.)"""
+
+    def __init__(self, handle: BinaryIO, width: int, height: int, level: int = 6):
+        if not 1 <= level <= 9:
+            raise ValueError(f"PNG compression level must be 1 to 9, not {level}")
+        self.handle, self.width, self.height = handle, int(width), int(height)
+        handle.write(SIGNATURE)
+        write_chunk(handle, b"IHDR", struct.pack(">IIBBBBB", self.width, self.height, 8, 2, 0, 0, 0))
+        self.compressor = zlib.compressobj(level, zlib.DEFLATED, 15, 9, zlib.Z_FILTERED)
+        self.chunk = idat_bytes(self.width)
+        self.pending = bytearray()  # compressed bytes not yet in a chunk: less than one chunk between calls
+        self.above = np.zeros(self.width * CHANNELS, dtype=np.uint8)
+        self.rows_written = 0
+
+    def add_rows(self, band: np.ndarray) -> None:
+        """The next rows: uint8 (rows, width, 3).  The band may be reused or released afterwards."""
+        band = np.asarray(band, dtype=np.uint8).reshape(len(band), self.width * CHANNELS)
         step = max(1, FILTER_BYTES // band.shape[1])
         for top in range(0, len(band), step):
             rows = band[top:top + step]
-            pending += compressor.compress(filter_rows(rows, above))
-            above = rows[-1].copy()  # (the caller may reuse or release the band)
-        rows_written += len(band)
-        while len(pending) >= chunk:  # (a full chunk is never the last one wrongly: the last may be full too)
-            write_chunk(handle, b"IDAT", bytes(pending[:chunk]))
-            del pending[:chunk]
-    if rows_written != height:
-        raise ValueError(f"PNG of {height} rows given {rows_written}")
-    pending += compressor.flush()
-    for start in range(0, len(pending), chunk):
-        write_chunk(handle, b"IDAT", bytes(pending[start:start + chunk]))
-    write_chunk(handle, b"IEND", b"")
+            self.pending += self.compressor.compress(filter_rows(rows, self.above))
+            self.above = rows[-1].copy()
+        self.rows_written += len(band)
+        self._write_full_chunks()
+
+    def finish(self) -> None:
+        """The last IDAT chunk (shorter than the others, unless it is full) and IEND."""
+        if self.rows_written != self.height:
+            raise ValueError(f"PNG of {self.height} rows given {self.rows_written}")
+        self.pending += self.compressor.flush()
+        self._write_full_chunks()
+        if self.pending:
+            write_chunk(self.handle, b"IDAT", bytes(self.pending))
+        write_chunk(self.handle, b"IEND", b"")
+
+    def _write_full_chunks(self) -> None:
+        while len(self.pending) >= self.chunk:
+            write_chunk(self.handle, b"IDAT", bytes(self.pending[:self.chunk]))
+            del self.pending[:self.chunk]
+
+
+def write_png(handle: BinaryIO, width: int, height: int, bands: Iterable[np.ndarray], level: int = 6) -> None:
+    """Write a PNG of ``bands``: uint8 arrays (rows, width, 3), top row first, ``height`` rows in all."""
+    writer = PngWriter(handle, width, height, level)
+    for band in bands:
+        writer.add_rows(band)
+    writer.finish()

@@ -19,7 +19,7 @@ import numpy as np
 from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
 from .errors import RenderCancelled, TracerError
-from .imageio import new_8bit_image, to_8bit
+from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
@@ -44,8 +44,9 @@ class TileUpdate:
     pass_count: int
     tiles_done: int  # over all passes, this one included
     tiles_total: int
-    image: np.ndarray  # the whole film so far, (height, width, 3), row 0 at the top (a view): float32, or
-    # uint8 (the file's bytes) in a render with eight_bit=True (float32 until its refinement pass ends)
+    image: Optional[np.ndarray]  # the whole film so far, (height, width, 3), row 0 at the top (a view):
+    # float32, or uint8 (the file's bytes) in a render with eight_bit=True (float32 until its refinement pass
+    # ends); None in a render that hands its rows to on_rows as they are done (it keeps no whole film)
 
     @property
     def fraction(self) -> float:
@@ -54,17 +55,20 @@ class TileUpdate:
 
 @dataclass
 class RenderResult:
-    image: np.ndarray  # (height, width, 3), row 0 at the top: float32 linear colour, not clipped; or, when
-    # rendered with eight_bit=True, uint8, the values the image file gets (tracer.imageio.to_8bit)
+    image: Optional[np.ndarray]  # (height, width, 3), row 0 at the top: float32 linear colour, not clipped;
+    # or, when rendered with eight_bit=True, uint8, the values the image file gets (tracer.imageio.to_8bit);
+    # None when the rows went to on_rows
     rays: RayCounts
     seconds: float
     backend: str = "numpy"
     effects: frozenset = field(default_factory=frozenset)
     error_estimate: Optional[object] = None  # tracer.target.ErrorEstimate, when rendered to an error target
+    size: Optional[tuple[int, int]] = None  # (width, height); by default the image's
 
     def stats(self) -> dict:
+        width, height = self.size or (self.image.shape[1], self.image.shape[0])
         out = {"rays": self.rays.as_dict(), "skipped": self.rays.skipped(), "seconds": round(self.seconds, 6),
-               "backend": self.backend, "width": int(self.image.shape[1]), "height": int(self.image.shape[0]),
+               "backend": self.backend, "width": int(width), "height": int(height),
                "effects": sorted(self.effects)}
         if self.error_estimate is not None:
             out["error"] = self.error_estimate.as_dict()
@@ -84,7 +88,8 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
            threads: Optional[int] = None, savings: Optional[RaySavings] = None,
-           target_error: Optional[float] = None, eight_bit: bool = False) -> RenderResult:
+           target_error: Optional[float] = None, eight_bit: bool = False,
+           on_rows: Optional[Callable[[np.ndarray], None]] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
@@ -97,7 +102,27 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     the float image, in memory that :func:`tracer.imageio.save_image` can release as it writes.  (Adaptive
     sampling judges its refinement on the whole float film, and sampling to an error target keeps per-pixel
     sums: those two keep floats while tracing and convert at the end.)
+    ``on_rows``: keep no image: hand its 8-bit rows (the bytes of eight_bit), top row first, to ``on_rows``
+    a band at a time (uint8 (rows, width, 3), a buffer reused for the next band); the result's image is then
+    None.  Each band of tiles is traced start to finish, from the top of the image down, and handed over as
+    soon as it is done, so that no whole film is ever held (the tiles' order does not change the pixels).
+    Adaptive sampling and an error target need the whole film: they give their rows at the end.
     """
+    if on_rows is not None:
+        check_size(width, height)
+        plan = None if target_error is not None else TilePlan(
+            width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
+            sampling_mode=sampling_mode, threshold=threshold, seed=seed)
+        if plan is not None and not plan.adaptive:
+            return _render_in_bands(scene, plan, on_rows, on_tile, cancel, backend, threads, savings)
+        result = render(scene, width, height, block_size=block_size, progressive=progressive, tile=tile,
+                        on_tile=on_tile, cancel=cancel, backend=backend, samples=samples,
+                        sampling_mode=sampling_mode, threshold=threshold, seed=seed, threads=threads,
+                        savings=savings, target_error=target_error, eight_bit=True)
+        for band in bands_8bit(result.image, release=True):
+            on_rows(band)
+        result.image, result.size = None, (width, height)
+        return result
     check_size(width, height)
     if target_error is not None:
         from .target import check, render_to_error
@@ -111,10 +136,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
     started = time.perf_counter()
-    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
-    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
-    tracer = make_tracer(compiled, backend, threads, savings)
-    shade = PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
     # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
@@ -136,3 +158,44 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)
+
+
+def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],
+             savings: Optional[RaySavings]) -> tuple[CompiledScene, object, PixelTracer]:
+    """The compiled scene, the backend's tracer and the pixel tracer of a render."""
+    width, height = plan.width, plan.height
+    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
+    tracer = make_tracer(compiled, backend, threads, savings)
+    return compiled, tracer, PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
+
+
+def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows: Callable[[np.ndarray], None],
+                     on_tile: Optional[Callable[[TileUpdate], None]], cancel: Optional[Callable[[], bool]],
+                     backend: str, threads: Optional[int], savings: Optional[RaySavings]) -> RenderResult:
+    """render(..., on_rows=...) for a plan without a refinement pass: the tiles one band of tile rows at a
+    time, from the top of the image, every pass of a tile before the next tile, into one band of 8-bit
+    rows that goes to ``on_rows`` when its tiles are done."""
+    started = time.perf_counter()
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    width, height = plan.width, plan.height
+    band = np.zeros((min(plan.tile, height), width, 3), dtype=np.uint8)  # row 0 at the top, as files want
+    done = 0
+    for r0 in reversed(range(0, height, plan.tile)):  # (tile rows are counted from the bottom)
+        r1 = min(r0 + plan.tile, height)
+        rows = band[:r1 - r0]
+        window = rows[::-1]  # the band as tiles are traced: rows from the bottom, image row r0 first
+        for rect in (rect for rect in plan.rects if rect[0] == r0):
+            for item in plan.rect_items(rect):
+                if cancel is not None and cancel():
+                    raise RenderCancelled("render cancelled")
+                trace_tile(plan, item, window, shade, at=(r0, 0))
+                done += 1
+                if on_tile is not None:
+                    on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
+                                       block_size=item.stride, pass_index=item.pass_index,
+                                       pass_count=plan.pass_count, tiles_done=done, tiles_total=len(plan.items),
+                                       image=None))
+        on_rows(rows)
+    return RenderResult(image=None, rays=tracer.counts, seconds=time.perf_counter() - started,
+                        backend=tracer.name, effects=compiled.effects, size=(width, height))

@@ -1,19 +1,34 @@
-"""What the command-line program sets before anything else is imported (the package imports this first).
+"""What the command-line program sets up before anything else is imported (the package imports this first).
 
-OpenSSL left out.  NumPy imports numpy.random, whose seeding imports the standard library's secrets module,
-whose hmac import loads ``_hashlib`` and with it OpenSSL's libcrypto: about 3.4 MB resident, a tenth of what
-importing the tracer costs, for nothing the program uses.  Without ``_hashlib``, hashlib and hmac fall
-back to Python's own implementations (among them sha256 and blake2b, the tracer's), so when this process
-is the program (``python -m tracer`` or the ``sdl-trace`` script) ``_hashlib`` is marked as absent before
-NumPy is imported.  A program that imports the tracer as a library keeps its process as it is.
+Importing NumPy and the tracer is most of a small render's peak memory (docs/performance.md), and part of
+it is for things the program never uses.  When this process is the program (``python -m tracer`` or the
+``sdl-trace`` script), :func:`prepare_the_program` therefore, before NumPy is imported:
+
+* Defers NumPy's subpackages that ``numpy/__init__.py`` imports but the program does not use
+  (:data:`DEFERRED_NUMPY_PARTS`: random, ma, polynomial, fft, ctypeslib; about 5.7 MB resident with NumPy
+  1.26, numpy.random's compiled modules the largest part).  They are loaded by the standard library's
+  ``importlib.util.LazyLoader``: each is a module object whose code runs the first time one of its names is
+  used, so code that does use one (a command that draws random numbers, a package that checks for masked
+  arrays) gets the same module, only later.
+* Leaves OpenSSL out: ``import hashlib`` (the tracer hashes scenes and sources with blake2b and sha256) and
+  the secrets module (numpy.random's seeding) load ``_hashlib`` and with it OpenSSL's libcrypto, about
+  3.4 MB resident.  Marked absent, ``_hashlib`` gives way to Python's own implementations of those hashes,
+  which hashlib and hmac fall back to.
+
+A program that imports the tracer as a library keeps its process as it is.
 """
 from __future__ import annotations
 
+import importlib.machinery
+import importlib.util
 import os
 import sys
 
 #: The installed command (pyproject.toml's [project.scripts]).
 SCRIPT = "sdl-trace"
+
+#: NumPy's subpackages that ``import numpy`` loads and the program does not use (loaded when first used).
+DEFERRED_NUMPY_PARTS = ("numpy.random", "numpy.ma", "numpy.polynomial", "numpy.fft", "numpy.ctypeslib")
 
 
 def started_as_the_program() -> bool:
@@ -25,6 +40,37 @@ def started_as_the_program() -> bool:
     return bool(sys.argv) and os.path.basename(sys.argv[0]) == SCRIPT
 
 
+def prepare_the_program() -> None:
+    """Both measures of the module's note (each only when nothing has loaded its modules yet)."""
+    leave_out_openssl()
+    defer_imports(DEFERRED_NUMPY_PARTS)
+
+
 def leave_out_openssl() -> None:
     """Mark ``_hashlib`` as absent, unless something has loaded it already (see the module's note)."""
     sys.modules.setdefault("_hashlib", None)
+
+
+class DeferredImports:
+    """A finder for sys.meta_path (not derived from importlib.abc's, whose import costs more than this
+    module): finds the named modules as the standard path finder does, with a loader that runs a module's
+    code only when one of its names is first used."""
+
+    def __init__(self, names):
+        self.names = frozenset(names)
+
+    def find_spec(self, name, path=None, target=None):
+        if name not in self.names:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        if spec is None or not hasattr(spec.loader, "exec_module"):
+            return None  # (found some other way: imported as usual)
+        spec.loader = importlib.util.LazyLoader(spec.loader)
+        return spec
+
+
+def defer_imports(names) -> None:
+    """Defer the named modules that are not imported yet (see :class:`DeferredImports`)."""
+    waiting = [name for name in names if name not in sys.modules]
+    if waiting:
+        sys.meta_path.insert(0, DeferredImports(waiting))

@@ -22,11 +22,12 @@ def scaling(sx: float, sy: float, sz: float) -> np.ndarray:
 
 def rotation(angle_degrees: float, ux: float, uy: float, uz: float) -> np.ndarray:
     """Right-handed rotation about the axis (ux, uy, uz), which is normalised here (Rodrigues' formula)."""
-    axis = np.array([ux, uy, uz], dtype=np.float64)
-    length = float(np.linalg.norm(axis))
+    # The length summed left to right (np.linalg.norm's order depends on the build): the C core's SDL reader
+    # (native/sdl_read.h) repeats these operations and must get the same bits.
+    length = math.sqrt(ux * ux + uy * uy + uz * uz)
     if length == 0.0 or not math.isfinite(length):
         raise SceneError("rotation axis must be a non-zero finite vector")
-    x, y, z = axis / length
+    x, y, z = ux / length, uy / length, uz / length
     a = math.radians(angle_degrees)
     c, s = math.cos(a), math.sin(a)
     # Snap the sine and cosine of exact multiples of 90 degrees so that common rotations stay exact.

@@ -22,15 +22,12 @@ import contextlib
 import hashlib
 import os
 import platform
-import shutil
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 SOURCES = ("core.c", "core.h", "contract.h", "numeric.h", "shapes.h", "mesh.h", "csg.h", "texture.h", "shade.h",
-           "scan.h", "bvh_build.h")
+           "scan.h", "bvh_build.h", "sdl_read.h")
 #: The library's file name: CMake (see CMakeLists.txt) and this module use the same one.
 LIBRARY_NAME = "_core.dll" if sys.platform == "win32" else "_core.so"
 MARKER_PREFIX = b"RT_SOURCE_HASH="
@@ -54,6 +51,8 @@ def find_compiler() -> str | None:
     env = os.environ.get("CC")
     if env:
         return env
+    import shutil  # (here, as the other tools of an actual build: a render that loads the library needs none)
+
     for name in ("cc", "gcc", "clang"):
         found = shutil.which(name)
         if found:
@@ -106,6 +105,8 @@ def is_current(path: Path, digest: str) -> bool:
 @contextlib.contextmanager
 def _build_lock(path: Path):
     """An exclusive lock for building ``path`` (a no-op where fcntl does not exist)."""
+    import tempfile
+
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
@@ -145,6 +146,8 @@ def build(force: bool = False, verbose: bool = False) -> Path:
             print(" ".join(command), file=sys.stderr)
         else:  # the first render would otherwise stall for many seconds without a word
             print(f"note: compiling the C core for this checkout (once): {path}", file=sys.stderr, flush=True)
+        import subprocess
+
         try:
             result = subprocess.run(command, cwd=HERE, capture_output=True, text=True, timeout=300)
         except (OSError, subprocess.SubprocessError) as err:

@@ -25,6 +25,7 @@
 #include "csg.h"
 #include "scan.h"
 #include "bvh_build.h"
+#include "sdl_read.h"
 
 #ifndef RT_SOURCE_HASH
 #define RT_SOURCE_HASH "unknown"

@@ -24,7 +24,6 @@ statement or shape.
 """
 from __future__ import annotations
 
-import difflib
 import math
 import os
 from dataclasses import dataclass, field, fields
@@ -78,6 +77,10 @@ KEYWORDS = frozenset(USAGE)
 #: A guard against macros that do not recurse but still multiply (each using the previous one twice, thirty
 #: deep, is a billion tokens): no real scene splices anywhere near this many tokens.
 MAX_SPLICED_TOKENS = 2_000_000
+
+#: Texts at least this long are offered to the C core's reader first (parse_sdl): below it, the C side's
+#: set-up costs more than it saves.
+FAST_MIN_CHARS = 1 << 16
 
 #: A transform whose linear part is this badly conditioned is treated as singular (e.g. ``scale 1 1 0``).
 MAX_CONDITION = 1e12
@@ -394,6 +397,8 @@ class _Reader:
             return self._error(at, "a number where a keyword belongs (too many numbers?)", expected="a keyword")
         if text in self.macros:
             return self._error(at, f"unknown keyword; to expand the macro write 'use {text}'")
+        import difflib  # (only for a file with a mistake: a render that reads well never loads it)
+
         # Keywords are case-sensitive; a wrong case is the likeliest typo of all.
         suggestion = [k for k in KEYWORDS if k.lower() == text.lower()] or \
             difflib.get_close_matches(text, sorted(KEYWORDS), n=1, cutoff=0.7)
@@ -478,14 +483,7 @@ class _Reader:
         numbers = self._numbers(keyword, at, 10)
         eye, look, up = numbers[0:3], numbers[3:6], numbers[6:9]
         angle = numbers[9]
-        forward = np.subtract(look, eye)
-        problem = None
-        if not np.any(forward):
-            problem = "camera eye and look-at point are the same"
-        elif np.linalg.norm(np.cross(forward, up)) <= 1e-12 * np.linalg.norm(forward) * np.linalg.norm(up):
-            problem = "camera up vector is zero or points along the view direction"
-        elif not 0.0 < angle < 180.0:
-            problem = "camera view angle must be between 0 and 180 degrees"
+        problem = camera_problem(eye, look, up, angle)
         if problem:
             return self._report(self._error(at, problem))
         self.scene.camera = Camera(eye=eye, look=look, up=up, view_angle=angle)
@@ -711,6 +709,8 @@ class _Reader:
         name, name_at = self._name(keyword, at, "a macro name")
         macro = self.macros.get(name)
         if macro is None:
+            import difflib
+
             close = difflib.get_close_matches(name, sorted(self.macros), n=1, cutoff=0.7)
             hint = f", did you mean '{close[0]}'?" if close else ""
             raise self._error(name_at, f"undefined macro{hint}", expected="a name given by an earlier def")
@@ -798,6 +798,18 @@ def _chain(names: tuple[str, ...], shown: int = 6) -> str:
     return " -> ".join(names)
 
 
+def camera_problem(eye: Sequence[float], look: Sequence[float], up: Sequence[float], angle: float) -> Optional[str]:
+    """Why a camera statement's numbers make no camera, or None if they do."""
+    forward = np.subtract(look, eye)
+    if not np.any(forward):
+        return "camera eye and look-at point are the same"
+    if np.linalg.norm(np.cross(forward, up)) <= 1e-12 * np.linalg.norm(forward) * np.linalg.norm(up):
+        return "camera up vector is zero or points along the view direction"
+    if not 0.0 < angle < 180.0:
+        return "camera view angle must be between 0 and 180 degrees"
+    return None
+
+
 def _clearly_invertible(matrix: np.ndarray) -> bool:
     """A cheap, pure-Python sufficient condition for is_singular(matrix) to be False.
 
@@ -854,20 +866,31 @@ def _numpy_is_singular(matrix: np.ndarray) -> bool:
 # Public entry points.
 
 def parse_sdl(text: str, base_dir: Optional[PathLike] = None, file: Optional[str] = None,
-              strict: bool = True) -> Scene:
+              strict: bool = True, fast: Optional[bool] = None) -> Scene:
     """Read SDL ``text``.
 
     ``base_dir`` is where ``mesh`` and ``makePixmap`` file names are looked up (the current folder if None);
     ``file`` names the text in messages.  With ``strict`` False, problems in the text never raise: each
     becomes one message in ``scene.warnings`` and reading goes on.
+
+    A text of :data:`FAST_MIN_CHARS` characters or more is first offered to the C core's reader (tracer.sdl.fastread),
+    which gives the same scene or declines, and then this reader reads it; ``fast`` True offers any text to
+    it, False none (for tests).
     """
+    if fast is None:
+        fast = len(text) >= FAST_MIN_CHARS
     # Huge scales may overflow a transform to inf: the shape under it is reported as an error; NumPy's
     # overflow warning on the way would only repeat that.
     with collector_paused(), np.errstate(over="ignore", invalid="ignore"):
+        if fast:
+            from . import fastread  # (imports the C core: only for texts big enough to need it)
+            scene = fastread.read(text, file)
+            if scene is not None:
+                return scene
         return _Reader(text, base_dir, file, strict).read()
 
 
-def load(path: PathLike, strict: bool = True) -> Scene:
+def load(path: PathLike, strict: bool = True, fast: Optional[bool] = None) -> Scene:
     """Read an SDL file; names in it are relative to its folder.  A file that cannot be read raises SDLError."""
     path = Path(path)
     try:
@@ -875,6 +898,6 @@ def load(path: PathLike, strict: bool = True) -> Scene:
         text = read_text(path, "scene file")
     except OSError as exc:
         raise SDLError(f"cannot read scene file: {exc.strerror or exc}", file=str(path)) from exc
-    scene = parse_sdl(text, base_dir=path.parent, file=str(path), strict=strict)
+    scene = parse_sdl(text, base_dir=path.parent, file=str(path), strict=strict, fast=fast)
     scene.source = path
     return scene

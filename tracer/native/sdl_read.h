@@ -1,0 +1,744 @@
+/* Reading big SDL files at I/O speed: a one-pass scanner for the statements that generated scenes use
+ * (tracer/sdl/fastread.py is its Python side, tracer/sdl/parser.py the reference it must equal).
+ *
+ * It either reads the whole text into columns (one row per shape: kind, the top three rows of its matrix,
+ * material, taper, line and column of its keyword; plus lights, cameras, settings and name comments), or it
+ * declines: it stops at the first thing outside its subset (a def, a brace, a boolean, a mesh, an unknown
+ * word, a word where a number belongs, a statement cut short by the end of the text, a pop without a push,
+ * a transform that is not clearly invertible, a value the Python reader would refuse or clamp) and says why
+ * and where, and the Python reader reads the text instead.  So it never has to produce a message: every
+ * error and warning stays the Python reader's.
+ *
+ * Bit for bit the same scene as the Python reader:
+ * - tokens: runs of bytes that are not white space (scan_is_space, str.split's ASCII set), cut by '!', which
+ *   starts a comment up to the next '\n'; lines are counted at '\n' only; columns are 1-based bytes (the
+ *   caller hands over ASCII text only, so bytes are characters);
+ * - numbers: scan.h's scan_word, NUMBER_RE's grammar with Python float()'s correctly rounded value;
+ * - transforms: the operations of transforms.affine_translate, affine_scale, affine_times and rotation(), in
+ *   the same order (the core is built with -ffp-contract=off, so no product is fused into a sum), the
+ *   "+ 0.0" terms included;
+ * - materials: one row per distinct value of the fields (compared with ==, so -0.0 equals 0.0 and the first
+ *   value seen is kept), as the Python reader's dict of Materials;
+ * - ``! name: text`` comments name the next shape keyword (a later one before it wins).
+ *
+ * The keywords come from the caller (its vocabulary: word, action, argument), so the tables of material
+ * keywords and shape kinds are the Python reader's own; the actions are named in sdl_action_names.
+ * Memory is O(text size); there is no recursion. */
+#ifndef RT_SDL_READ_H
+#define RT_SDL_READ_H
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum {
+    SDL_LIGHT, SDL_GLOBAL_AMBIENT, SDL_BACKGROUND, SDL_MIN_REFLECTIVITY, SDL_MIN_TRANSPARENCY,
+    SDL_MAX_RECURSION_DEPTH, SDL_CAMERA, SDL_COLOR_MATERIAL, SDL_FLOAT_MATERIAL, SDL_TEXTURE, SDL_PARAMETERS,
+    SDL_DEFAULT_MATERIALS, SDL_TRANSLATE, SDL_SCALE, SDL_ROTATE, SDL_PUSH, SDL_POP, SDL_IDENTITY, SDL_SHAPE,
+    SDL_TAPERED_SHAPE, SDL_ACTIONS
+};
+
+/* In the enum's order: the Python side finds each action's code by its name here. */
+static const char sdl_action_names[] =
+    "light globalAmbient background minReflectivity minTransparency maxRecursionDepth camera colorMaterial "
+    "floatMaterial texture parameters defaultMaterials translate scale rotate push pop identityAffine shape "
+    "taperedShape";
+
+/* Why a text was declined (0: read). */
+enum {
+    SDL_READ = 0, SDL_DECLINE_WORD, SDL_DECLINE_BRACE, SDL_DECLINE_NUMBER, SDL_DECLINE_END, SDL_DECLINE_VALUE,
+    SDL_DECLINE_POP, SDL_DECLINE_AXIS, SDL_DECLINE_TRANSFORM, SDL_DECLINE_SIZE, SDL_DECLINE_MEMORY,
+    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE
+};
+
+static const char sdl_decline_names[] =
+    "read word brace number end value pop axis transform size memory vocabulary angle";
+
+/* A material row: the Material's fields in its order (four colours, six numbers), then the texture, the
+ * count of parameters and the parameters (unused ones 0). */
+#define SDL_MATERIAL_TEXTURE 18
+#define SDL_MATERIAL_COUNT 19
+#define SDL_MATERIAL_PARAMETERS 20
+#define SDL_MAX_PARAMETERS 10
+#define SDL_MATERIAL_WIDTH (SDL_MATERIAL_PARAMETERS + SDL_MAX_PARAMETERS)
+#define SDL_MAX_DEPTH 64
+
+/* Settings the text set (bits of SdlResult.settings_set). */
+enum { SDL_SET_GLOBAL_AMBIENT = 1, SDL_SET_BACKGROUND = 2, SDL_SET_MIN_REFLECTIVITY = 4,
+       SDL_SET_MIN_TRANSPARENCY = 8, SDL_SET_MAX_RECURSION_DEPTH = 16 };
+
+/* What one read gives; fastread.py mirrors it with ctypes (every field 8 bytes, in this order). */
+typedef struct {
+    int64_t status;          /* SDL_READ or a decline reason */
+    int64_t decline_offset;  /* the byte where it declined */
+    int64_t shapes, materials, lights, cameras, names;
+    int16_t *kinds;          /* shapes */
+    double *affines;         /* shapes x 12 */
+    int32_t *material_ids;   /* shapes */
+    double *tapered_radii;   /* shapes */
+    int32_t *lines, *columns;
+    double *material_rows;   /* materials x SDL_MATERIAL_WIDTH */
+    double *light_rows;      /* lights x 6 */
+    double *camera_rows;     /* cameras x 10 */
+    int64_t *name_rows;      /* names x 3: shape row, start and length of the name in the text */
+    int64_t settings_set;
+    double global_ambient[3], background[3], min_reflectivity, min_transparency;
+    int64_t max_recursion_depth;
+    /* Working state, not read by the caller. */
+    int64_t shape_capacity, material_capacity, light_capacity, camera_capacity, name_capacity;
+    int32_t *material_table;  /* open addressing: material id + 1, 0 for empty */
+    uint64_t *material_hashes;  /* of each material row */
+    int64_t table_size;
+    double *stack;            /* transform stack, depth x 12 */
+    int64_t depth, stack_capacity;
+} SdlResult;
+
+/* Grows *buffer (of *capacity items of size bytes) to hold at least need items; 0 when out of memory. */
+static int sdl_reserve(void **buffer, int64_t *capacity, int64_t need, size_t size)
+{
+    if (need <= *capacity)
+        return 1;
+    int64_t grown = *capacity < 16 ? 16 : *capacity * 2;
+    if (grown < need)
+        grown = need;
+    void *moved = realloc(*buffer, (size_t)grown * size);
+    if (moved == NULL)
+        return 0;
+    *buffer = moved;
+    *capacity = grown;
+    return 1;
+}
+
+/* Reallocates *buffer to capacity items of size bytes; 0 when out of memory (the old buffer stays). */
+static int sdl_resize(void **buffer, int64_t capacity, size_t size)
+{
+    void *moved = realloc(*buffer, (size_t)capacity * size);
+    if (moved == NULL)
+        return 0;
+    *buffer = moved;
+    return 1;
+}
+
+/* ---- the vocabulary: word -> (action, argument), an open-addressing table of the caller's words ---- */
+
+#define SDL_VOCABULARY_SLOTS 512
+
+typedef struct {
+    const char *word[SDL_VOCABULARY_SLOTS];
+    int32_t length[SDL_VOCABULARY_SLOTS];
+    int32_t action[SDL_VOCABULARY_SLOTS];  /* -1: empty */
+    int32_t argument[SDL_VOCABULARY_SLOTS];
+} SdlVocabulary;
+
+static uint32_t sdl_hash_word(const char *word, int64_t length)
+{
+    uint32_t h = 2166136261u;
+    for (int64_t i = 0; i < length; i++)
+        h = (h ^ (unsigned char)word[i]) * 16777619u;
+    return h;
+}
+
+/* words: the words, each ended by a NUL; codes: (action, argument) for each.  0 if they do not fit. */
+static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_length, const int32_t *codes,
+                          int64_t count)
+{
+    for (int i = 0; i < SDL_VOCABULARY_SLOTS; i++)
+        v->action[i] = -1;
+    if (count <= 0 || count > SDL_VOCABULARY_SLOTS / 2)
+        return 0;
+    int64_t at = 0;
+    for (int64_t n = 0; n < count; n++) {
+        const char *end = at < words_length ? memchr(words + at, '\0', (size_t)(words_length - at)) : NULL;
+        if (end == NULL || codes[2 * n] < 0 || codes[2 * n] >= SDL_ACTIONS)
+            return 0;
+        int64_t length = end - (words + at);
+        uint32_t slot = sdl_hash_word(words + at, length) & (SDL_VOCABULARY_SLOTS - 1);
+        while (v->action[slot] >= 0)
+            slot = (slot + 1) & (SDL_VOCABULARY_SLOTS - 1);
+        v->word[slot] = words + at;
+        v->length[slot] = (int32_t)length;
+        v->action[slot] = codes[2 * n];
+        v->argument[slot] = codes[2 * n + 1];
+        at += length + 1;
+    }
+    return 1;
+}
+
+/* The slot of a word, or -1 when it is not in the vocabulary. */
+static int sdl_lookup(const SdlVocabulary *v, const char *word, int64_t length)
+{
+    uint32_t slot = sdl_hash_word(word, length) & (SDL_VOCABULARY_SLOTS - 1);
+    while (v->action[slot] >= 0) {
+        if (v->length[slot] == length && memcmp(v->word[slot], word, (size_t)length) == 0)
+            return (int)slot;
+        slot = (slot + 1) & (SDL_VOCABULARY_SLOTS - 1);
+    }
+    return -1;
+}
+
+/* ---- tokens ---- */
+
+typedef struct {
+    const char *text;
+    int64_t length, pos;
+    int64_t line, line_start;    /* the current line (1-based) and where it starts */
+    int64_t name_start, name_length;  /* the name comment waiting for a shape; length 0: none */
+    int non_ascii;               /* a byte outside ASCII was met (the caller should have checked) */
+} SdlLexer;
+
+static int sdl_is_regex_space(unsigned char c)
+{
+    /* Python's re \s on ASCII text: the same set as str.split's */
+    return scan_is_space(c);
+}
+
+/* Skips the comment starting at '!' (text[i]); keeps its name if it is a ``! name: text`` comment with a
+ * non-empty name (lexer._NAME_COMMENT_RE).  Returns where its line ends. */
+static int64_t sdl_comment(SdlLexer *lx, int64_t i)
+{
+    const char *t = lx->text;
+    const char *newline = memchr(t + i, '\n', (size_t)(lx->length - i));
+    int64_t end = newline != NULL ? newline - t : lx->length;
+    for (int64_t j = i; j < end; j++)
+        if ((unsigned char)t[j] >= 0x80)
+            lx->non_ascii = 1;
+    int64_t p = i + 1;
+    while (p < end && sdl_is_regex_space((unsigned char)t[p]))
+        p++;
+    if (end - p >= 5 && memcmp(t + p, "name:", 5) == 0) {
+        p += 5;
+        while (p < end && sdl_is_regex_space((unsigned char)t[p]))
+            p++;
+        int64_t q = end;
+        while (q > p && sdl_is_regex_space((unsigned char)t[q - 1]))
+            q--;
+        if (q > p) {  /* an empty name names nothing (and leaves an earlier one waiting) */
+            lx->name_start = p;
+            lx->name_length = q - p;
+        }
+    }
+    return end;
+}
+
+/* The next token [*start, *end): 1; 0 at the end of the text; -1 at a brace. */
+static int sdl_next(SdlLexer *lx, int64_t *start, int64_t *end)
+{
+    const char *t = lx->text;
+    int64_t n = lx->length, i = lx->pos;
+    for (;;) {
+        while (i < n && scan_is_space((unsigned char)t[i])) {
+            if (t[i] == '\n') {
+                lx->line++;
+                lx->line_start = i + 1;
+            }
+            i++;
+        }
+        if (i < n && t[i] == '!') {
+            i = sdl_comment(lx, i);
+            continue;
+        }
+        break;
+    }
+    lx->pos = i;
+    if (i == n)
+        return 0;
+    if (t[i] == '{' || t[i] == '}')
+        return -1;
+    *start = i;
+    while (i < n && !scan_is_space((unsigned char)t[i]) && t[i] != '!' && t[i] != '{' && t[i] != '}') {
+        if ((unsigned char)t[i] >= 0x80)
+            lx->non_ascii = 1;
+        i++;
+    }
+    *end = i;
+    lx->pos = i;
+    return 1;
+}
+
+/* The next `count` tokens as numbers into out; SDL_READ or why not. */
+static int sdl_numbers(SdlLexer *lx, int count, double *out)
+{
+    for (int k = 0; k < count; k++) {
+        int64_t start, end;
+        int got = sdl_next(lx, &start, &end);
+        if (got == 0)
+            return SDL_DECLINE_END;
+        if (got < 0)
+            return SDL_DECLINE_BRACE;
+        int ok;
+        out[k] = scan_word(lx->text + start, lx->text + end, &ok);
+        if (!ok)
+            return SDL_DECLINE_NUMBER;
+    }
+    return SDL_READ;
+}
+
+/* ---- transforms: transforms.py's operations, in its order ---- */
+
+static const double sdl_identity[12] = {1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0};
+
+/* m times translation(dx, dy, dz) (transforms.affine_translate) */
+static void sdl_translate(double *m, double dx, double dy, double dz)
+{
+    for (int r = 0; r < 3; r++) {
+        double *row = m + 4 * r;
+        row[3] = row[0] * dx + row[1] * dy + row[2] * dz + row[3];
+    }
+}
+
+/* m times scaling(sx, sy, sz) (transforms.affine_scale) */
+static void sdl_scale(double *m, double sx, double sy, double sz)
+{
+    for (int r = 0; r < 3; r++) {
+        double *row = m + 4 * r;
+        row[0] = row[0] * sx + 0.0;
+        row[1] = row[1] * sy + 0.0;
+        row[2] = row[2] * sz + 0.0;
+    }
+}
+
+/* Called through volatile pointers so that the compiler cannot merge them into one sincos call: the values
+ * must be those of libm's cos and sin, which Python's math module calls. */
+static double (*volatile sdl_cos)(double) = cos;
+static double (*volatile sdl_sin)(double) = sin;
+
+/* The 3x3 of transforms.rotation (row after row); 0 when its axis has no finite non-zero length. */
+static int sdl_rotation(double angle, double ux, double uy, double uz, double *out)
+{
+    double length = sqrt(ux * ux + uy * uy + uz * uz);
+    if (length == 0.0 || !(length - length == 0.0))
+        return 0;
+    double x = ux / length, y = uy / length, z = uz / length;
+    static const double degrees_to_radians = 3.14159265358979323846 / 180.0;  /* math.radians */
+    double a = angle * degrees_to_radians;
+    double c = sdl_cos(a), s = sdl_sin(a);
+    if (fmod(angle, 90.0) == 0.0) {  /* Python's round(): half to even, and an int (so never -0.0) */
+        c = nearbyint(c) + 0.0;
+        s = nearbyint(s) + 0.0;
+    }
+    double k = 1.0 - c;
+    out[0] = c + x * x * k;
+    out[1] = x * y * k - z * s;
+    out[2] = x * z * k + y * s;
+    out[3] = y * x * k + z * s;
+    out[4] = c + y * y * k;
+    out[5] = y * z * k - x * s;
+    out[6] = z * x * k - y * s;
+    out[7] = z * y * k + x * s;
+    out[8] = c + z * z * k;
+    return 1;
+}
+
+/* m times the 4x4 whose linear part is r and whose translation is 0 (transforms.affine_times) */
+static void sdl_times(double *m, const double *r)
+{
+    for (int row = 0; row < 3; row++) {
+        double *e = m + 4 * row;
+        double a = e[0], b = e[1], c = e[2], x = e[3];
+        e[0] = a * r[0] + b * r[3] + c * r[6] + 0.0;
+        e[1] = a * r[1] + b * r[4] + c * r[7] + 0.0;
+        e[2] = a * r[2] + b * r[5] + c * r[8] + 0.0;
+        e[3] = a * 0.0 + b * 0.0 + c * 0.0 + x;
+    }
+}
+
+/* parser._affine_clearly_invertible, where it says yes; 0 also for a few affines it might take (entries
+ * beyond 1e300, whose sum could overflow in one summation order and not in another): the Python reader
+ * then decides. */
+static int sdl_clearly_invertible(const double *m)
+{
+    double sum = 0.0;
+    for (int i = 0; i < 12; i++) {
+        if (!(fabs(m[i]) <= 1e300))
+            return 0;
+        sum += m[i];
+    }
+    if (!(sum - sum == 0.0))
+        return 0;
+    double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+    double size = fabs(a);
+    const double others[8] = {fabs(b), fabs(c), fabs(d), fabs(e), fabs(f), fabs(g), fabs(h), fabs(i)};
+    for (int k = 0; k < 8; k++)
+        if (others[k] > size)
+            size = others[k];
+    if (!(1e-80 <= size && size <= 1e80))
+        return 0;
+    double det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g);
+    return fabs(det) >= 1e-9 * size * size * size;
+}
+
+/* ---- materials ---- */
+
+static uint64_t sdl_hash_material(const double *row)
+{
+    uint64_t h = 0;
+    for (int i = 0; i < SDL_MATERIAL_WIDTH; i++) {
+        double v = row[i] == 0.0 ? 0.0 : row[i];  /* -0.0 and 0.0 are one key */
+        uint64_t bits;
+        memcpy(&bits, &v, sizeof bits);
+        h = (h ^ bits) * 0x9e3779b97f4a7c15ull;
+        h ^= h >> 32;
+    }
+    /* (splitmix64's finaliser: every bit of every field reaches the low bits the table uses) */
+    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+    return h ^ (h >> 31);
+}
+
+static int sdl_same_material(const double *a, const double *b)
+{
+    for (int i = 0; i < SDL_MATERIAL_WIDTH; i++)
+        if (!(a[i] == b[i]))
+            return 0;
+    return 1;
+}
+
+/* The id of the material `row` (added if new), or -1 when out of memory. */
+static int32_t sdl_material_id(SdlResult *res, const double *row)
+{
+    if (2 * (res->materials + 1) > res->table_size) {  /* keep the table at most half full */
+        int64_t size = res->table_size ? res->table_size * 2 : 64;
+        int32_t *table = calloc((size_t)size, sizeof *table);
+        if (table == NULL)
+            return -1;
+        for (int64_t id = 0; id < res->materials; id++) {
+            uint64_t slot = res->material_hashes[id] & (uint64_t)(size - 1);
+            while (table[slot])
+                slot = (slot + 1) & (uint64_t)(size - 1);
+            table[slot] = (int32_t)(id + 1);
+        }
+        free(res->material_table);
+        res->material_table = table;
+        res->table_size = size;
+    }
+    uint64_t hash = sdl_hash_material(row), mask = (uint64_t)(res->table_size - 1), slot = hash & mask;
+    while (res->material_table[slot]) {
+        int32_t id = res->material_table[slot] - 1;
+        if (res->material_hashes[id] == hash &&
+            sdl_same_material(res->material_rows + (int64_t)id * SDL_MATERIAL_WIDTH, row))
+            return id;
+        slot = (slot + 1) & mask;
+    }
+    if (res->materials >= INT32_MAX - 1)
+        return -1;
+    if (res->materials == res->material_capacity) {  /* rows and hashes grow together */
+        int64_t capacity = res->materials < 64 ? 64 : 2 * res->materials;
+        if (!sdl_resize((void **)&res->material_rows, capacity, SDL_MATERIAL_WIDTH * sizeof(double)) ||
+            !sdl_resize((void **)&res->material_hashes, capacity, sizeof(uint64_t)))
+            return -1;
+        res->material_capacity = capacity;
+    }
+    memcpy(res->material_rows + res->materials * SDL_MATERIAL_WIDTH, row, SDL_MATERIAL_WIDTH * sizeof(double));
+    res->material_hashes[res->materials] = hash;
+    res->material_table[slot] = (int32_t)(res->materials + 1);
+    return (int32_t)res->materials++;
+}
+
+/* ---- the reader ---- */
+
+static int sdl_whole(double value)
+{
+    return value == floor(value);  /* (values are finite here) */
+}
+
+static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int32_t material, double taper,
+                         int64_t line, int64_t column)
+{
+    int64_t n = res->shapes;
+    if (n == res->shape_capacity) {  /* the shape columns grow together */
+        int64_t capacity = n < 1024 ? 1024 : 2 * n;
+        if (!sdl_resize((void **)&res->kinds, capacity, sizeof(int16_t)) ||
+            !sdl_resize((void **)&res->affines, capacity, 12 * sizeof(double)) ||
+            !sdl_resize((void **)&res->material_ids, capacity, sizeof(int32_t)) ||
+            !sdl_resize((void **)&res->tapered_radii, capacity, sizeof(double)) ||
+            !sdl_resize((void **)&res->lines, capacity, sizeof(int32_t)) ||
+            !sdl_resize((void **)&res->columns, capacity, sizeof(int32_t)))
+            return 0;
+        res->shape_capacity = capacity;
+    }
+    res->kinds[n] = kind;
+    memcpy(res->affines + 12 * n, affine, 12 * sizeof(double));
+    res->material_ids[n] = material;
+    res->tapered_radii[n] = taper;
+    res->lines[n] = (int32_t)line;
+    res->columns[n] = (int32_t)column;
+    res->shapes = n + 1;
+    return 1;
+}
+
+static int sdl_add_row(double **rows, int64_t *count, int64_t *capacity, const double *values, int width)
+{
+    if (!sdl_reserve((void **)rows, capacity, *count + 1, (size_t)width * sizeof(double)))
+        return 0;
+    memcpy(*rows + *count * width, values, (size_t)width * sizeof(double));
+    ++*count;
+    return 1;
+}
+
+/* A rotation whose sine and cosine every libm gives alike: a multiple of 90 degrees not too far from 0,
+ * whose cosine and sine lie within far less than 1/2 of the integers they are rounded to. */
+static int sdl_libm_free(double angle)
+{
+    return fmod(angle, 90.0) == 0.0 && fabs(angle) <= 1e6;
+}
+
+/* Reads text into res (zeroed by the caller); returns SDL_READ or why it declined.  With shared_libm 0
+ * (the caller's math library may not be this library's: Python's cos and sin could differ in the last
+ * bit), rotations by angles other than sdl_libm_free ones are declined. */
+static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabulary, const double *defaults,
+                    int shared_libm)
+{
+    double material[SDL_MATERIAL_WIDTH];
+    memcpy(material, defaults, sizeof material);
+    int32_t material_id = -1;  /* of `material`, once a shape needed it */
+    if (!sdl_reserve((void **)&res->stack, &res->stack_capacity, 1, 12 * sizeof(double)))
+        return SDL_DECLINE_MEMORY;
+    memcpy(res->stack, sdl_identity, sizeof sdl_identity);
+    res->depth = 1;
+    int checked = 0;  /* whether the top transform was found clearly invertible */
+    double v[10];
+    for (;;) {
+        int64_t start, end;
+        int got = sdl_next(lx, &start, &end);
+        if (got == 0)
+            return lx->non_ascii ? SDL_DECLINE_WORD : SDL_READ;
+        res->decline_offset = lx->pos;
+        if (got < 0)
+            return SDL_DECLINE_BRACE;
+        res->decline_offset = start;
+        int slot = sdl_lookup(vocabulary, lx->text + start, end - start);
+        if (slot < 0 || lx->non_ascii)
+            return SDL_DECLINE_WORD;
+        int argument = vocabulary->argument[slot];
+        double *top = res->stack + 12 * (res->depth - 1);
+        int status = SDL_READ;
+        switch (vocabulary->action[slot]) {
+        case SDL_LIGHT:
+            if ((status = sdl_numbers(lx, 6, v)) == SDL_READ &&
+                !sdl_add_row(&res->light_rows, &res->lights, &res->light_capacity, v, 6))
+                status = SDL_DECLINE_MEMORY;
+            break;
+        case SDL_GLOBAL_AMBIENT:
+            if ((status = sdl_numbers(lx, 3, res->global_ambient)) == SDL_READ)
+                res->settings_set |= SDL_SET_GLOBAL_AMBIENT;
+            break;
+        case SDL_BACKGROUND:
+            if ((status = sdl_numbers(lx, 3, res->background)) == SDL_READ)
+                res->settings_set |= SDL_SET_BACKGROUND;
+            break;
+        case SDL_MIN_REFLECTIVITY:
+            if ((status = sdl_numbers(lx, 1, &res->min_reflectivity)) == SDL_READ)
+                res->settings_set |= SDL_SET_MIN_REFLECTIVITY;
+            break;
+        case SDL_MIN_TRANSPARENCY:
+            if ((status = sdl_numbers(lx, 1, &res->min_transparency)) == SDL_READ)
+                res->settings_set |= SDL_SET_MIN_TRANSPARENCY;
+            break;
+        case SDL_MAX_RECURSION_DEPTH:
+            /* beyond the limit the Python reader warns and clamps; not whole or negative is an error */
+            if ((status = sdl_numbers(lx, 1, v)) == SDL_READ) {
+                if (!sdl_whole(v[0]) || v[0] < 0.0 || v[0] > SDL_MAX_DEPTH)
+                    status = SDL_DECLINE_VALUE;
+                else {
+                    res->max_recursion_depth = (int64_t)v[0];
+                    res->settings_set |= SDL_SET_MAX_RECURSION_DEPTH;
+                }
+            }
+            break;
+        case SDL_CAMERA:  /* checked by the caller, as parser._camera checks it */
+            if ((status = sdl_numbers(lx, 10, v)) == SDL_READ &&
+                !sdl_add_row(&res->camera_rows, &res->cameras, &res->camera_capacity, v, 10))
+                status = SDL_DECLINE_MEMORY;
+            break;
+        case SDL_COLOR_MATERIAL:
+            if (argument < 0 || argument + 3 > SDL_MATERIAL_TEXTURE)
+                return SDL_DECLINE_VOCABULARY;
+            if ((status = sdl_numbers(lx, 3, material + argument)) == SDL_READ)
+                material_id = -1;
+            break;
+        case SDL_FLOAT_MATERIAL:
+            if (argument < 0 || argument >= SDL_MATERIAL_TEXTURE)
+                return SDL_DECLINE_VOCABULARY;
+            if ((status = sdl_numbers(lx, 1, material + argument)) == SDL_READ)
+                material_id = -1;
+            break;
+        case SDL_TEXTURE:
+            if ((status = sdl_numbers(lx, 1, v)) == SDL_READ) {
+                if (!sdl_whole(v[0]) || v[0] < -2147483648.0 || v[0] > 2147483647.0)
+                    status = SDL_DECLINE_VALUE;
+                else {
+                    material[SDL_MATERIAL_TEXTURE] = v[0] + 0.0;  /* int(-0.0) is 0 */
+                    material_id = -1;
+                }
+            }
+            break;
+        case SDL_PARAMETERS:
+            if ((status = sdl_numbers(lx, 1, v)) != SDL_READ)
+                break;
+            if (!sdl_whole(v[0]) || v[0] < 0.0 || v[0] > SDL_MAX_PARAMETERS) {
+                status = SDL_DECLINE_VALUE;
+                break;
+            }
+            {
+                int count = (int)v[0];
+                double values[SDL_MAX_PARAMETERS] = {0.0};
+                if ((status = sdl_numbers(lx, count, values)) == SDL_READ) {
+                    material[SDL_MATERIAL_COUNT] = count;
+                    memcpy(material + SDL_MATERIAL_PARAMETERS, values, sizeof values);
+                    material_id = -1;
+                }
+            }
+            break;
+        case SDL_DEFAULT_MATERIALS:
+            memcpy(material, defaults, sizeof material);
+            material_id = -1;
+            break;
+        case SDL_TRANSLATE:
+            if ((status = sdl_numbers(lx, 3, v)) == SDL_READ) {
+                sdl_translate(top, v[0], v[1], v[2]);
+                checked = 0;
+            }
+            break;
+        case SDL_SCALE:
+            if ((status = sdl_numbers(lx, 3, v)) == SDL_READ) {
+                sdl_scale(top, v[0], v[1], v[2]);
+                checked = 0;
+            }
+            break;
+        case SDL_ROTATE:
+            if ((status = sdl_numbers(lx, 4, v)) == SDL_READ) {
+                double r[9];
+                if (!shared_libm && !sdl_libm_free(v[0]))
+                    status = SDL_DECLINE_ANGLE;
+                else if (!sdl_rotation(v[0], v[1], v[2], v[3], r))
+                    status = SDL_DECLINE_AXIS;
+                else {
+                    sdl_times(top, r);
+                    checked = 0;
+                }
+            }
+            break;
+        case SDL_PUSH:
+            if (!sdl_reserve((void **)&res->stack, &res->stack_capacity, res->depth + 1, 12 * sizeof(double)))
+                return SDL_DECLINE_MEMORY;
+            memcpy(res->stack + 12 * res->depth, res->stack + 12 * (res->depth - 1), 12 * sizeof(double));
+            res->depth++;
+            break;
+        case SDL_POP:
+            if (res->depth == 1)
+                return SDL_DECLINE_POP;
+            res->depth--;
+            checked = 0;
+            break;
+        case SDL_IDENTITY:
+            memcpy(top, sdl_identity, sizeof sdl_identity);
+            checked = 0;
+            break;
+        case SDL_SHAPE:
+        case SDL_TAPERED_SHAPE: {
+            int64_t line = lx->line, column = start - lx->line_start + 1;
+            int64_t name_start = lx->name_start, name_length = lx->name_length;
+            lx->name_length = 0;  /* a name comment names the first shape keyword after it */
+            double taper = 1.0;
+            if (vocabulary->action[slot] == SDL_TAPERED_SHAPE && (status = sdl_numbers(lx, 1, &taper)) != SDL_READ)
+                break;
+            if (!checked && !sdl_clearly_invertible(top))
+                return SDL_DECLINE_TRANSFORM;
+            checked = 1;
+            if (line > INT32_MAX || column > INT32_MAX || argument < 0 || argument > INT16_MAX)
+                return SDL_DECLINE_SIZE;
+            if (material_id < 0 && (material_id = sdl_material_id(res, material)) < 0)
+                return SDL_DECLINE_MEMORY;
+            if (name_length > 0) {
+                int64_t row[3] = {res->shapes, name_start, name_length};
+                if (!sdl_reserve((void **)&res->name_rows, &res->name_capacity, res->names + 1, sizeof row))
+                    return SDL_DECLINE_MEMORY;
+                memcpy(res->name_rows + 3 * res->names++, row, sizeof row);
+            }
+            if (!sdl_add_shape(res, (int16_t)argument, top, material_id, taper, line, column))
+                return SDL_DECLINE_MEMORY;
+            break;
+        }
+        default:
+            return SDL_DECLINE_VOCABULARY;
+        }
+        if (status != SDL_READ) {
+            if (status != SDL_DECLINE_END)
+                res->decline_offset = lx->pos;
+            return status;
+        }
+    }
+}
+
+/* Frees a result of rt_sdl_read (NULL is fine). */
+void rt_sdl_free(SdlResult *res)
+{
+    if (res == NULL)
+        return;
+    free(res->kinds);
+    free(res->affines);
+    free(res->material_ids);
+    free(res->tapered_radii);
+    free(res->lines);
+    free(res->columns);
+    free(res->material_rows);
+    free(res->light_rows);
+    free(res->camera_rows);
+    free(res->name_rows);
+    free(res->material_table);
+    free(res->material_hashes);
+    free(res->stack);
+    free(res);
+}
+
+/* Reads text[0, length).  words/codes/count: the vocabulary (see sdl_vocabulary); defaults: the default
+ * material row; shared_libm: whether the caller's cos and sin are this library's (see sdl_read).
+ * Returns a result for rt_sdl_free whose status says whether it was read (NULL only when out of memory); a
+ * declined result keeps nothing but its reason and place. */
+SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int64_t words_length,
+                       const int32_t *codes, int64_t count, const double *defaults, int64_t shared_libm)
+{
+    SdlResult *res = calloc(1, sizeof *res);
+    if (res == NULL)
+        return NULL;
+    SdlVocabulary *vocabulary = malloc(sizeof *vocabulary);
+    if (vocabulary == NULL) {
+        free(res);
+        return NULL;
+    }
+    if (!sdl_vocabulary(vocabulary, words, words_length, codes, count) || length < 0) {
+        res->status = SDL_DECLINE_VOCABULARY;
+    } else {
+        SdlLexer lx = {text, length, 0, 1, 0, 0, 0, 0};
+        res->status = sdl_read(res, &lx, vocabulary, defaults, shared_libm != 0);
+    }
+    free(vocabulary);
+    if (res->status != SDL_READ) {  /* keep nothing but the reason */
+        int64_t status = res->status, offset = res->decline_offset;
+        rt_sdl_free(res);
+        res = calloc(1, sizeof *res);
+        if (res == NULL)
+            return NULL;
+        res->status = status;
+        res->decline_offset = offset;
+    }
+    return res;
+}
+
+const char *rt_sdl_action_names(void)
+{
+    return sdl_action_names;
+}
+
+const char *rt_sdl_decline_names(void)
+{
+    return sdl_decline_names;
+}
+
+int64_t rt_sdl_material_width(void)
+{
+    return SDL_MATERIAL_WIDTH;
+}
+
+#endif

@@ -1,0 +1,307 @@
+"""Big SDL files read by the C core (tracer/native/sdl_read.h), with the Python reader as its reference.
+
+The C scanner reads the statements generated scenes are made of (settings, lights, camera, materials,
+transforms and every shape but ``mesh``) in one pass into columns, or declines the text: at the first
+thing outside that subset (a ``def``, a brace, a boolean, an unknown word, a word where a number belongs, a
+statement cut short, a value the Python reader would refuse, clamp or warn about, a transform that is not
+clearly invertible) it stops and :func:`read` answers None, and :func:`tracer.sdl.parser.parse_sdl` reads
+the text with the Python reader as before.  So every message stays the Python reader's, strict or lenient.
+
+What it reads equals what the Python reader makes of the same text, bit for bit: the same shapes (kind,
+matrix, material by value, taper, place, name), lights, camera and settings (tests/test_sdl_fastread.py
+compares the two).  The shapes come as columns, which the scene holds without making a Shape per row.
+
+The keyword tables are the parser's: each keyword the C side knows is given to it with an action (named
+by the C side's ``sdl_action_names``) and an argument (a material field's slot, a shape's kind), so a
+material keyword or shape kind added to the parser's tables reaches the C side without a change there; a
+keyword the parser learns otherwise is declined until :func:`_vocabulary` gives it an action.
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import sys
+from dataclasses import dataclass, fields
+from typing import Optional, Union
+
+import numpy as np
+
+from .. import shapes as shape_registry
+from ..model import Camera, Light, Material, Scene, ShapeTable
+
+#: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
+#: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
+#: whose sine and cosine are not plain 0 or +-1.
+SHARED_LIBM = sys.platform != "win32"
+
+#: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
+DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference"))
+
+
+@dataclass(frozen=True)
+class Declined:
+    """Why the C reader left a text to the Python reader (sdl_read.h's reason) and where (a character
+    offset)."""
+
+    reason: str
+    offset: int
+
+
+class _Result(ctypes.Structure):
+    """sdl_read.h's SdlResult, up to the fields the caller reads."""
+
+    _fields_ = [("status", ctypes.c_int64), ("decline_offset", ctypes.c_int64),
+                ("shapes", ctypes.c_int64), ("materials", ctypes.c_int64), ("lights", ctypes.c_int64),
+                ("cameras", ctypes.c_int64), ("names", ctypes.c_int64),
+                ("kinds", ctypes.POINTER(ctypes.c_int16)), ("affines", ctypes.POINTER(ctypes.c_double)),
+                ("material_ids", ctypes.POINTER(ctypes.c_int32)),
+                ("tapered_radii", ctypes.POINTER(ctypes.c_double)),
+                ("lines", ctypes.POINTER(ctypes.c_int32)), ("columns", ctypes.POINTER(ctypes.c_int32)),
+                ("material_rows", ctypes.POINTER(ctypes.c_double)),
+                ("light_rows", ctypes.POINTER(ctypes.c_double)), ("camera_rows", ctypes.POINTER(ctypes.c_double)),
+                ("name_rows", ctypes.POINTER(ctypes.c_int64)),
+                ("settings_set", ctypes.c_int64), ("global_ambient", ctypes.c_double * 3),
+                ("background", ctypes.c_double * 3), ("min_reflectivity", ctypes.c_double),
+                ("min_transparency", ctypes.c_double), ("max_recursion_depth", ctypes.c_int64)]
+
+
+# sdl_read.h's SDL_SET_* bits: which settings the text set.
+_SET_GLOBAL_AMBIENT, _SET_BACKGROUND, _SET_MIN_REFLECTIVITY, _SET_MIN_TRANSPARENCY, _SET_MAX_DEPTH = 1, 2, 4, 8, 16
+
+
+@dataclass(frozen=True)
+class _MaterialLayout:
+    """Where each Material field is in a material row of sdl_read.h: colours take three slots, numbers one,
+    then the texture, the count of parameters and the parameters."""
+
+    slots: dict[str, int]
+    colours: frozenset[str]
+    texture: int
+    parameters: int  # the count's slot; the values follow it
+    width: int
+
+    def row(self, material: Material) -> list[float]:
+        row = [0.0] * self.width
+        for f in fields(Material):
+            value = getattr(material, f.name)
+            if f.name == "texture":
+                row[self.texture] = float(value)
+            elif f.name == "parameters":
+                row[self.parameters] = float(len(value))
+                row[self.parameters + 1:self.parameters + 1 + len(value)] = value
+            elif f.name in self.colours:
+                row[self.slots[f.name]:self.slots[f.name] + 3] = value
+            else:
+                row[self.slots[f.name]] = value
+        return row
+
+    def materials(self, rows: np.ndarray) -> list[Material]:
+        """The Materials of material rows (M, width), made a field at a time: a million of them is most of
+        reading a million spheres of their own colours, so the per-row work is Material() alone (and a field
+        with the same bits in every row is one object for all)."""
+        count = len(rows)
+        values = []
+        for f in fields(Material):
+            if f.name == "texture":
+                values.append(rows[:, self.texture].astype(np.int64).tolist())  # (int(-0.0) is 0)
+            elif f.name == "parameters":
+                sizes = rows[:, self.parameters].astype(np.int64)
+                first = self.parameters + 1
+                values.append([()] * count if not sizes.any() else
+                              [tuple(row[first:first + size]) for row, size in zip(rows.tolist(), sizes.tolist())])
+            elif f.name in self.colours:
+                values.append(_same_or_each(rows[:, self.slots[f.name]:self.slots[f.name] + 3]))
+            else:
+                values.append(_same_or_each(rows[:, self.slots[f.name]]))
+        return list(map(Material, *values))
+
+
+def _same_or_each(block: np.ndarray) -> list:
+    """Each row of ``block`` (M, 3) as a tuple, or each value of ``block`` (M,) as a float; one object for
+    all when every row has the first one's bits."""
+    if len(block) and (block.view(np.int64) == block[:1].view(np.int64)).all():
+        first = block[0].tolist()
+        return [tuple(first) if block.ndim == 2 else first] * len(block)
+    return list(zip(*block.T.tolist())) if block.ndim == 2 else block.tolist()
+
+
+def _material_layout(width: int, max_parameters: int) -> _MaterialLayout:
+    slots, colours, at = {}, set(), 0
+    for f in fields(Material):
+        if f.name in ("texture", "parameters"):
+            continue
+        slots[f.name] = at
+        if isinstance(f.default, tuple):
+            colours.add(f.name)
+            at += 3
+        else:
+            at += 1
+    layout = _MaterialLayout(slots, frozenset(colours), at, at + 1, width)
+    if at + 2 + max_parameters != width:  # the C side's row does not fit the Material: read nothing with it
+        raise RuntimeError("sdl_read.h's material row does not match tracer.model.Material")
+    return layout
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every read hands the C side: the library, the vocabulary and the default material."""
+
+    lib: ctypes.CDLL
+    words: bytes
+    codes: np.ndarray  # (action, argument) per word, int32
+    defaults: np.ndarray  # the default material's row
+    layout: _MaterialLayout
+    reasons: tuple[str, ...]
+
+
+@functools.lru_cache(maxsize=1)
+def _setup() -> Optional[_Setup]:
+    """None when the C core is not loaded (then the Python reader reads everything)."""
+    from .. import native  # here, not at the top: the parser must not import the C core for small texts
+    if native.load_error is not None or native._lib is None:
+        return None
+    lib = native._lib
+    lib.rt_sdl_read.restype = ctypes.POINTER(_Result)
+    lib.rt_sdl_read.argtypes = [ctypes.c_char_p, ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64,
+                                ctypes.POINTER(ctypes.c_int32), ctypes.c_int64, ctypes.POINTER(ctypes.c_double),
+                                ctypes.c_int64]
+    lib.rt_sdl_free.restype = None
+    lib.rt_sdl_free.argtypes = [ctypes.POINTER(_Result)]
+    for name in ("rt_sdl_action_names", "rt_sdl_decline_names"):
+        getattr(lib, name).restype = ctypes.c_char_p
+        getattr(lib, name).argtypes = []
+    lib.rt_sdl_material_width.restype = ctypes.c_int64
+    lib.rt_sdl_material_width.argtypes = []
+    from . import parser
+    layout = _material_layout(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
+    actions = {name: code for code, name in enumerate(lib.rt_sdl_action_names().decode().split())}
+    vocabulary = _vocabulary(layout)
+    words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
+    codes = np.array([(actions[action], argument) for action, argument in vocabulary.values()], dtype=np.int32)
+    defaults = np.array(layout.row(Material()), dtype=np.float64)
+    return _Setup(lib, words, codes, defaults, layout, tuple(lib.rt_sdl_decline_names().decode().split()))
+
+
+def _vocabulary(layout: _MaterialLayout) -> dict[str, tuple[str, int]]:
+    """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names) and argument."""
+    from . import parser
+    words = {keyword: (keyword, 0) for keyword in (
+        "light", "globalAmbient", "background", "minReflectivity", "minTransparency", "maxRecursionDepth",
+        "camera", "texture", "parameters", "defaultMaterials", "translate", "scale", "rotate", "push", "pop",
+        "identityAffine")}
+    for keyword, name in parser.COLOR_MATERIAL.items():
+        words[keyword] = ("colorMaterial", layout.slots[name])
+    for keyword, name in parser.FLOAT_MATERIAL.items():
+        words[keyword] = ("floatMaterial", layout.slots[name])
+    kind_codes = {entry.keyword: code for code, entry in enumerate(shape_registry.REGISTRY)}
+    for kind in parser.ANALYTIC_KINDS + parser.POLYHEDRON_KINDS + ("teapot",):
+        # (the parser's _read_shape reads a number after taperedCylinder alone)
+        words[kind] = ("taperedShape" if kind == "taperedCylinder" else "shape", kind_codes[kind])
+    return words
+
+
+def available() -> bool:
+    """Whether the C reader can be used (the C core is built and loaded)."""
+    return _setup() is not None
+
+
+@dataclass
+class Columns:
+    """What the C reader read: the shapes as columns (see tracer.model.ShapeTable) and the rest."""
+
+    kinds: np.ndarray  # (N,) int16, index into tracer.shapes.REGISTRY
+    affines: np.ndarray  # (N, 12) float64
+    material_ids: np.ndarray  # (N,) int32
+    materials: list[Material]
+    tapered_radii: np.ndarray  # (N,) float64
+    lines: np.ndarray  # (N,) int32
+    columns: np.ndarray  # (N,) int32
+    names: Optional[dict[int, str]]
+    lights: list[Light]
+    cameras: list[tuple[float, ...]]  # every camera statement's ten numbers, in order
+    settings: dict[str, object]  # the settings the text set
+
+
+def scan(text: str) -> Union[Columns, Declined, None]:
+    """The C reader's reading of ``text``; a :class:`Declined` when it leaves the text to the Python reader;
+    None when the C core is not loaded."""
+    setup = _setup()
+    if setup is None:
+        return None
+    if not text.isascii():  # (columns are counted in characters; ASCII makes them bytes)
+        return Declined("ascii", next(i for i, ch in enumerate(text) if not ch.isascii()))
+    data = text.encode("ascii")
+    lib = setup.lib
+    pointer = lib.rt_sdl_read(data, len(data), setup.words, len(setup.words),
+                              setup.codes.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)), len(setup.codes),
+                              setup.defaults.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), SHARED_LIBM)
+    del data  # (a copy of the text: 100 MB for a million spheres, not needed while the columns are made)
+    if not pointer:
+        return Declined("memory", 0)
+    try:
+        res = pointer.contents
+        if res.status != 0:
+            return Declined(setup.reasons[res.status], int(res.decline_offset))
+        return _columns(res, text, setup.layout)
+    finally:
+        lib.rt_sdl_free(pointer)
+
+
+def _array(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """A copy of the C buffer behind ``pointer``, which is freed after the read."""
+    return _view(pointer, shape, dtype).copy()
+
+
+def _view(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """The C buffer behind ``pointer`` as an array, valid until the read's result is freed."""
+    if shape[0] == 0:
+        return np.zeros(shape, dtype=dtype)
+    return np.ctypeslib.as_array(pointer, shape=shape)  # (of the pointer's type, which is dtype)
+
+
+def _columns(res: _Result, text: str, layout: _MaterialLayout) -> Columns:
+    n = res.shapes
+    # (what becomes Python objects is read in place; what the scene keeps as arrays is copied)
+    name_rows = _view(res.name_rows, (res.names, 3), np.int64).tolist()
+    names = {row: text[start:start + length] for row, start, length in name_rows} or None
+    materials = layout.materials(_view(res.material_rows, (res.materials, layout.width), np.float64))
+    lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _view(res.light_rows, (res.lights, 6),
+                                                                       np.float64).tolist()]
+    cameras = [tuple(row) for row in _view(res.camera_rows, (res.cameras, 10), np.float64).tolist()]
+    settings: dict[str, object] = {}
+    if res.settings_set & _SET_GLOBAL_AMBIENT:
+        settings["global_ambient"] = tuple(res.global_ambient)
+    if res.settings_set & _SET_BACKGROUND:
+        settings["background"] = tuple(res.background)
+    if res.settings_set & _SET_MIN_REFLECTIVITY:
+        settings["min_reflectivity"] = res.min_reflectivity
+    if res.settings_set & _SET_MIN_TRANSPARENCY:
+        settings["min_transparency"] = res.min_transparency
+    if res.settings_set & _SET_MAX_DEPTH:
+        settings["max_recursion_depth"] = int(res.max_recursion_depth)
+    return Columns(_array(res.kinds, (n,), np.int16), _array(res.affines, (n, 12), np.float64),
+                   _array(res.material_ids, (n,), np.int32), materials, _array(res.tapered_radii, (n,), np.float64),
+                   _array(res.lines, (n,), np.int32), _array(res.columns, (n,), np.int32), names, lights, cameras,
+                   settings)
+
+
+def read(text: str, file: Optional[str] = None) -> Optional[Scene]:
+    """The scene in ``text`` as the Python reader would make it, or None when the C reader declines it (or
+    the C core is not loaded)."""
+    columns = scan(text)
+    if not isinstance(columns, Columns):
+        return None
+    from .parser import camera_problem
+    with np.errstate(over="ignore", invalid="ignore"):  # (huge numbers: the checks' answer is what counts)
+        for numbers in columns.cameras:  # one the Python reader would refuse: its message is the parser's
+            if camera_problem(numbers[0:3], numbers[3:6], numbers[6:9], numbers[9]) is not None:
+                return None
+    shapes = ShapeTable(columns.kinds, columns.affines, columns.material_ids, columns.materials, columns.tapered_radii,
+                        columns.lines, columns.columns, file, columns.names)
+    scene = Scene(objects=shapes, lights=columns.lights)
+    if columns.cameras:
+        numbers = columns.cameras[-1]
+        scene.camera = Camera(eye=numbers[0:3], look=numbers[3:6], up=numbers[6:9], view_angle=numbers[9])
+    for name, value in columns.settings.items():
+        setattr(scene.settings, name, value)
+    return scene

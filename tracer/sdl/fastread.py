@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import re
 import sys
 from dataclasses import dataclass
 from typing import Optional, Union
@@ -33,6 +34,8 @@ from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
 #: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
 #: whose sine and cosine are not plain 0 or +-1.
 SHARED_LIBM = sys.platform != "win32"
+
+_NON_ASCII = re.compile(r"[^\x00-\x7f]")
 
 #: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
 DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference"))
@@ -161,7 +164,7 @@ def scan(text: str) -> Union[Columns, Declined, None]:
     if setup is None:
         return None
     if not text.isascii():  # (columns are counted in characters; ASCII makes them bytes)
-        return Declined("ascii", next(i for i, ch in enumerate(text) if not ch.isascii()))
+        return Declined("ascii", _NON_ASCII.search(text).start())
     data = text.encode("ascii")
     lib = setup.lib
     pointer = lib.rt_sdl_read(data, len(data), setup.words, len(setup.words),

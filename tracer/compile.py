@@ -27,8 +27,8 @@ from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
-                    ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
+from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
+                    Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
 from .transforms import transform_points
 
 
@@ -456,7 +456,7 @@ _NUMBER_FIELDS = ("specular_exponent", "specular_fraction", "surface_roughness",
 class MaterialTable:
     """Materials as arrays indexed by material id (so shading gathers per ray)."""
 
-    materials: list[Material]
+    materials: Sequence[Material]  # a list, or a MaterialRows
     ambient: np.ndarray = field(init=False)
     diffuse: np.ndarray = field(init=False)
     specular: np.ndarray = field(init=False)
@@ -475,6 +475,10 @@ class MaterialTable:
         # a million scattered objects read once per field would be a cache miss per field), a field at a
         # time: either the one object they all hold is filled in (materials mostly differ in a colour or two;
         # the rest is the object the reader's defaults or state gave them all) or np.fromiter reads them.
+        if isinstance(self.materials, MaterialRows):  # (columns already: a million materials read as rows)
+            for name in _COLOR_FIELDS + _NUMBER_FIELDS + ("texture",):
+                setattr(self, name, self.materials.column(name))
+            return
         n = len(self.materials)
         for name in _COLOR_FIELDS:
             setattr(self, name, np.empty((n, 3)))
@@ -946,11 +950,12 @@ class _Columns:
         """(kind codes, material ids, the materials by id, tapered radii) of the shapes."""
         table = self.table
         if table is not None:
-            ids, materials = table.material_ids, list(table.materials)
+            ids, materials = table.material_ids, table.materials
             used = np.bincount(ids, minlength=len(materials)) > 0
             if not used.all():  # (only the materials in use, as from a list: they decide the live effects)
                 ids = (np.cumsum(used) - 1)[ids].astype(np.int32)
-                materials = [m for m, kept in zip(materials, used.tolist()) if kept]
+                materials = (materials.used(used) if isinstance(materials, MaterialRows) else
+                             [m for m, kept in zip(materials, used.tolist()) if kept])
             return table.kinds, ids, materials, table.tapered_radii
         n = len(self.kinds)
         material_ids, materials = _material_ids(self.materials)

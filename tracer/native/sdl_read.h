@@ -87,8 +87,7 @@ typedef struct {
     int64_t max_recursion_depth;
     /* Working state, not read by the caller. */
     int64_t shape_capacity, material_capacity, light_capacity, camera_capacity, name_capacity;
-    int32_t *material_table;  /* open addressing: material id + 1, 0 for empty */
-    uint64_t *material_hashes;  /* of each material row */
+    uint64_t *material_table;  /* open addressing (see sdl_table_entry) */
     int64_t table_size;
     double *stack;            /* transform stack, depth x 12 */
     int64_t depth, stack_capacity;
@@ -394,44 +393,49 @@ static int sdl_same_material(const double *a, const double *b)
     return 1;
 }
 
+/* The material table's entries: the top 32 bits of a row's hash (which also choose its slot, so the table
+ * grows without the rows) over its id + 1; 0 for an empty slot.  One probe reads one entry, and a row is
+ * compared only when its hash's bits match. */
+static uint64_t sdl_table_entry(uint64_t hash, int64_t id)
+{
+    return (hash >> 32 << 32) | (uint64_t)(id + 1);
+}
+
 /* The id of the material `row` (added if new), or -1 when out of memory. */
 static int32_t sdl_material_id(SdlResult *res, const double *row)
 {
     if (2 * (res->materials + 1) > res->table_size) {  /* keep the table at most half full */
         int64_t size = res->table_size ? res->table_size * 2 : 64;
-        int32_t *table = calloc((size_t)size, sizeof *table);
+        if (size > ((int64_t)1 << 32))
+            return -1;
+        uint64_t *table = calloc((size_t)size, sizeof *table), mask = (uint64_t)(size - 1);
         if (table == NULL)
             return -1;
-        for (int64_t id = 0; id < res->materials; id++) {
-            uint64_t slot = res->material_hashes[id] & (uint64_t)(size - 1);
+        for (int64_t old = 0; old < res->table_size; old++) {
+            uint64_t entry = res->material_table[old];
+            if (entry == 0)
+                continue;
+            uint64_t slot = (entry >> 32) & mask;
             while (table[slot])
-                slot = (slot + 1) & (uint64_t)(size - 1);
-            table[slot] = (int32_t)(id + 1);
+                slot = (slot + 1) & mask;
+            table[slot] = entry;
         }
         free(res->material_table);
         res->material_table = table;
         res->table_size = size;
     }
-    uint64_t hash = sdl_hash_material(row), mask = (uint64_t)(res->table_size - 1), slot = hash & mask;
-    while (res->material_table[slot]) {
-        int32_t id = res->material_table[slot] - 1;
-        if (res->material_hashes[id] == hash &&
-            sdl_same_material(res->material_rows + (int64_t)id * SDL_MATERIAL_WIDTH, row))
-            return id;
-        slot = (slot + 1) & mask;
+    uint64_t hash = sdl_hash_material(row), mask = (uint64_t)(res->table_size - 1), slot = (hash >> 32) & mask;
+    for (uint64_t entry; (entry = res->material_table[slot]) != 0; slot = (slot + 1) & mask) {
+        int64_t id = (int64_t)(entry & 0xffffffffu) - 1;
+        if (entry >> 32 == hash >> 32 && sdl_same_material(res->material_rows + id * SDL_MATERIAL_WIDTH, row))
+            return (int32_t)id;
     }
-    if (res->materials >= INT32_MAX - 1)
+    if (res->materials >= INT32_MAX - 1 ||
+        !sdl_reserve((void **)&res->material_rows, &res->material_capacity, res->materials + 1,
+                     SDL_MATERIAL_WIDTH * sizeof(double)))
         return -1;
-    if (res->materials == res->material_capacity) {  /* rows and hashes grow together */
-        int64_t capacity = res->materials < 64 ? 64 : 2 * res->materials;
-        if (!sdl_resize((void **)&res->material_rows, capacity, SDL_MATERIAL_WIDTH * sizeof(double)) ||
-            !sdl_resize((void **)&res->material_hashes, capacity, sizeof(uint64_t)))
-            return -1;
-        res->material_capacity = capacity;
-    }
     memcpy(res->material_rows + res->materials * SDL_MATERIAL_WIDTH, row, SDL_MATERIAL_WIDTH * sizeof(double));
-    res->material_hashes[res->materials] = hash;
-    res->material_table[slot] = (int32_t)(res->materials + 1);
+    res->material_table[slot] = sdl_table_entry(hash, res->materials);
     return (int32_t)res->materials++;
 }
 
@@ -687,7 +691,6 @@ void rt_sdl_free(SdlResult *res)
     free(res->camera_rows);
     free(res->name_rows);
     free(res->material_table);
-    free(res->material_hashes);
     free(res->stack);
     free(res);
 }

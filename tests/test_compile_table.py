@@ -66,7 +66,7 @@ def test_the_table_compiles_to_the_lists_numbers(shapes_made):
                  "material_ids"):
         assert np.array_equal(getattr(a.table, name), getattr(b.table, name)), name
     assert a.effects == b.effects
-    assert a.materials.materials == b.materials.materials
+    assert list(a.materials.materials) == list(b.materials.materials)
     assert sorted(m.origin for m in (s.mesh for s in listed.objects) if m) == sorted(
         b.table.mesh_of(i).origin for i in range(len(tabled.objects)) if b.table.mesh_of(i) is not None)
 
@@ -125,7 +125,7 @@ def test_unused_materials_of_a_table_do_not_make_effects():
                        c.lines, c.columns, c.file)
     tabled.objects = table
     compiled = compile_scene(tabled)
-    assert "reflection" not in compiled.effects and compiled.materials.materials == [c.materials[0]]
+    assert "reflection" not in compiled.effects and list(compiled.materials.materials) == [c.materials[0]]
 
 
 @pytest.mark.parametrize("bad, message", [

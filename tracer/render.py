@@ -180,12 +180,15 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
     width, height = plan.width, plan.height
     band = np.zeros((min(plan.tile, height), width, 3), dtype=np.uint8)  # row 0 at the top, as files want
+    rects_from = {}  # each band's tiles, by their first row
+    for rect in plan.rects:
+        rects_from.setdefault(rect[0], []).append(rect)
     done = 0
-    for r0 in reversed(range(0, height, plan.tile)):  # (tile rows are counted from the bottom)
+    for r0 in sorted(rects_from, reverse=True):  # (tile rows are counted from the bottom)
         r1 = min(r0 + plan.tile, height)
         rows = band[:r1 - r0]
         window = rows[::-1]  # the band as tiles are traced: rows from the bottom, image row r0 first
-        for rect in (rect for rect in plan.rects if rect[0] == r0):
+        for rect in rects_from[r0]:
             for item in plan.rect_items(rect):
                 if cancel is not None and cancel():
                     raise RenderCancelled("render cancelled")

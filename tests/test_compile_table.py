@@ -66,7 +66,7 @@ def test_the_table_compiles_to_the_lists_numbers(shapes_made):
                  "material_ids"):
         assert np.array_equal(getattr(a.table, name), getattr(b.table, name)), name
     assert a.effects == b.effects
-    assert a.materials.materials == b.materials.materials
+    assert list(a.materials.materials) == list(b.materials.materials)
     assert sorted(m.origin for m in (s.mesh for s in listed.objects) if m) == sorted(
         b.table.mesh_of(i).origin for i in range(len(tabled.objects)) if b.table.mesh_of(i) is not None)
 
@@ -125,7 +125,7 @@ def test_unused_materials_of_a_table_do_not_make_effects():
                        c.lines, c.columns, c.file)
     tabled.objects = table
     compiled = compile_scene(tabled)
-    assert "reflection" not in compiled.effects and compiled.materials.materials == [c.materials[0]]
+    assert "reflection" not in compiled.effects and list(compiled.materials.materials) == [c.materials[0]]
 
 
 @pytest.mark.parametrize("bad, message", [
@@ -145,3 +145,46 @@ def test_a_bad_matrix_names_the_shapes_place(bad, message):
     with pytest.raises(TracerError) as info:
         compile_scene(scene)
     assert str(info.value) == message
+
+
+def test_nested_unions_keep_a_tight_bound():
+    """A boolean's bounding sphere is made from the box of its operands' boxes: it does not grow with the
+    nesting (from spheres round spheres' boxes it grew by up to sqrt(3) a level, and 2,000 levels
+    overflowed)."""
+    import warnings
+
+    from helpers import scaling, scene_of, shape, translation
+    from tracer.backend import MAX_CSG_DEPTH
+    from tracer.model import CSG
+
+    node = shape("sphere", translation(0, 0, 0) @ scaling(0.5, 0.5, 0.5))
+    for k in range(1, MAX_CSG_DEPTH + 1):  # a chain of unions along x, each adding a ball
+        node = CSG("union", node, shape("sphere", translation(k * 1e-3, 0, 0) @ scaling(0.5, 0.5, 0.5)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (no overflow on the way)
+        compiled = compile_scene(scene_of(node))
+    root = compiled.objects[0]
+    reach = MAX_CSG_DEPTH * 1e-3
+    assert np.allclose(root.center, (reach / 2, 0, 0))
+    # the sphere round the box [-0.5, reach + 0.5] x [-0.5, 0.5]^2, padded by 1e-9 relatively
+    expected = 0.5 * np.linalg.norm([reach + 1.0, 1.0, 1.0])
+    assert expected <= root.radius <= expected * (1 + 1e-8)
+    intersection = compile_scene(scene_of(CSG("intersection", shape("plane"), shape("cube")))).objects[0]
+    assert intersection.radius == pytest.approx(np.sqrt(3), rel=1e-8)  # the cube's, not unbounded
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_nested_booleans_render_as_before(backend):
+    """Tighter boolean bounds change no pixel: the culling only skips rays that miss."""
+    from helpers import Camera, Light, scaling, scene_of, shape, translation
+    from tracer.model import CSG
+
+    node = shape("cube", scaling(0.4, 0.4, 0.4), diffuse=(0.9, 0.3, 0.2))
+    for k in range(1, 40):
+        other = shape("sphere", translation(0.05 * k - 1, 0.02 * k, 0) @ scaling(0.3, 0.3, 0.3), diffuse=(0.2, 0.9, 0.3))
+        node = CSG("difference" if k % 3 == 0 else "union", node, other)
+    scene = scene_of(node, lights=[Light((3, 4, 5), (1, 1, 1))], camera=Camera((0, 1, 4), (0, 0, 0), (0, 1, 0), 50))
+    image = render(scene, 40, 30, backend=backend, threads=2).image
+    assert image.std() > 0.01  # (something is drawn)
+    baseline = render(scene, 40, 30, backend="c" if backend == "numpy" else "numpy", threads=2).image
+    assert np.abs(image - baseline).max() <= 1 / 255

@@ -446,6 +446,31 @@ def test_results_do_not_depend_on_the_thread_count():
 
 
 @requires_core
+def test_the_object_hierarchy_is_the_same_tree_on_any_number_of_threads():
+    """Past OBJECT_PARALLEL_MIN objects (bvh_build.h) the C core builds the object hierarchy's subtrees on
+    several threads and numbers their nodes as one thread would: the tree must not depend on the count."""
+    from tracer.model import Material, Scene, ShapeTable
+
+    rng = np.random.default_rng(11)
+    n = 70_000
+    affines = np.zeros((n, 3, 4))
+    scale = rng.uniform(0.01, 0.2, n)
+    affines[:, 0, 0], affines[:, 1, 1], affines[:, 2, 2] = scale, scale * rng.uniform(0.5, 2, n), scale
+    affines[:, :, 3] = rng.uniform(-20, 20, (n, 3))
+    affines[::7, :, 3] *= 1e-3  # (clusters, and some coincident centres)
+    affines[::11, :, 3] = 1.0
+    kinds = np.where(rng.random(n) < 0.8, 0, 1).astype(np.int16)  # spheres and cubes
+    kinds[::97] = 3  # planes: unbounded, kept out of the tree
+    table = ShapeTable(kinds, affines.reshape(n, 12), np.zeros(n, dtype=np.int32), [Material()], np.ones(n),
+                       np.arange(1, n + 1, dtype=np.int32), np.ones(n, dtype=np.int32))
+    compiled = compile_scene(Scene(objects=table, lights=[Light((0, 30, 0), (1, 1, 1))]))
+    trees = [native.NativeTracer(compiled, threads=threads).object_tree() for threads in (1, 2, 3, 8)]
+    for pairs, items, root in trees[1:]:
+        assert pairs == trees[0][0] and np.array_equal(items, trees[0][1]) and root == trees[0][2]
+    assert sorted(trees[0][1].tolist()) == np.flatnonzero(kinds != 3).tolist()
+
+
+@requires_core
 def test_many_objects_use_the_object_hierarchy_correctly():
     # 400 small spheres and cubes in a grid: the BVH over objects must find exactly what the loop finds.
     rng = np.random.default_rng(2)

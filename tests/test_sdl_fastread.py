@@ -425,8 +425,8 @@ def test_a_def_is_declined_where_it_stands():
 def test_every_keyword_of_the_python_reader_is_read_or_declined():
     """A keyword added to the parser reaches the C reader only through fastread's vocabulary: until then it
     is declined, so the Python reader keeps reading it."""
-    setup = fastread._setup()
-    vocabulary = fastread._vocabulary(setup.layout)
+    assert fastread.available()
+    vocabulary = fastread._vocabulary()
     assert set(vocabulary) | fastread.DECLINED == KEYWORDS
     assert not set(vocabulary) & fastread.DECLINED
     for keyword in KEYWORDS - set(vocabulary):

@@ -210,3 +210,20 @@ def test_cli_info_reads_a_table(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(parser, "load", load_as_table)
     cli.main(["info", str(path)])
     assert capsys.readouterr().out == expected
+
+
+def test_the_table_holds_arrays_nobody_can_change():
+    """compile_scene knows a table by its identity: what it holds must never change under it.  It takes the
+    arrays over (they and the arrays they are views of become read-only); a writable buffer is copied."""
+    c = table_of().columns
+    owner = np.array(c.affines).reshape(-1, 3, 4).copy()
+    table = ShapeTable(c.kinds, owner.reshape(-1, 12), c.material_ids, c.materials, c.tapered_radii, c.lines,
+                       c.columns)
+    assert np.shares_memory(table.columns.affines, owner)  # (no copy)
+    with pytest.raises(ValueError):
+        owner[0, 0, 3] = 5.0
+    buffer = bytearray(np.array(c.affines).tobytes())
+    table = ShapeTable(c.kinds, np.frombuffer(buffer).reshape(-1, 12), c.material_ids, c.materials,
+                       c.tapered_radii, c.lines, c.columns)
+    buffer[:8] = np.float64(7.0).tobytes()
+    assert np.array_equal(table.columns.affines, c.affines)

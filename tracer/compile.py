@@ -14,7 +14,7 @@ import weakref
 from collections.abc import Sequence
 from dataclasses import astuple, dataclass, field
 from functools import cached_property
-from itertools import chain
+from itertools import chain, repeat
 from operator import attrgetter
 from typing import Callable, Optional, Union
 
@@ -27,8 +27,8 @@ from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MeshData, Scene, SceneObject, Shape,
-                    ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
+from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
+                    Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
 from .transforms import transform_points
 
 
@@ -215,6 +215,7 @@ class Primitive:
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
         self.radius = float(table.radii[index]) if bounded else np.inf
+        self.__dict__["box"] = (table.boxes[index, :3], table.boxes[index, 3:]) if bounded else None
         # (the cached properties' values, from the table)
         self.__dict__["generic_size"] = float(table.generic_size[index])
         linear, translation = table.inverse_norms[index].tolist()
@@ -271,6 +272,12 @@ class Primitive:
         # (plus the shape's own root error, where it has one: the torus)
         return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
                                                         self.generic_size, self.rounding)
+
+    @cached_property
+    def box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """The world box (lo, hi) of the points the bounding sphere is made from; None when unbounded."""
+        corners = self.world_corners()
+        return None if corners is None else (corners.min(axis=0), corners.max(axis=0))
 
     def world_corners(self) -> Optional[np.ndarray]:
         pts = self._generic_points()
@@ -366,15 +373,13 @@ class CSGNode:
         self.center, self.radius = self._bound()
 
     def _bound(self):
-        if self.op == "union":
-            if not self.bounded:
-                return None, np.inf
-            lo = np.minimum(self.left.center - self.left.radius, self.right.center - self.right.radius)
-            hi = np.maximum(self.left.center + self.left.radius, self.right.center + self.right.radius)
-            return 0.5 * (lo + hi), float(np.linalg.norm(hi - lo) * 0.5)
-        if self.op == "intersection" and not self.left.bounded:
-            return self.right.center, self.right.radius
-        return self.left.center, self.left.radius
+        """The bounding sphere round the node's box (boolean_box of its children's): made from boxes, not
+        from the children's spheres, it does not grow with the nesting (a sphere round the box of two
+        spheres is up to sqrt(3) times larger than they are: 2,000 nested unions overflowed to inf)."""
+        self.box = boolean_box(self.op, self.left.box, self.right.box)
+        if self.box is None:
+            return None, np.inf
+        return _sphere_around(np.stack(self.box))
 
     def leaves(self):
         """The primitives under this node, left to right (without recursion, as everywhere a tree is walked:
@@ -403,6 +408,18 @@ class CSGNode:
 
 
 Node = Union[Primitive, CSGNode]
+
+
+def boolean_box(op: str, left, right):
+    """The world box (lo, hi) that holds a boolean's solid, from its operands' boxes (None: unbounded)."""
+    if op == "union":
+        return None if left is None or right is None else (np.minimum(left[0], right[0]),
+                                                           np.maximum(left[1], right[1]))
+    if op == "intersection":
+        if left is None or right is None:
+            return left if right is None else right
+        return np.maximum(left[0], right[0]), np.minimum(left[1], right[1])
+    return left  # difference: inside the left solid
 
 
 def fold_tree(root, leaf: Callable, join: Callable):
@@ -439,7 +456,7 @@ _NUMBER_FIELDS = ("specular_exponent", "specular_fraction", "surface_roughness",
 class MaterialTable:
     """Materials as arrays indexed by material id (so shading gathers per ray)."""
 
-    materials: list[Material]
+    materials: Sequence[Material]  # a list, or a MaterialRows
     ambient: np.ndarray = field(init=False)
     diffuse: np.ndarray = field(init=False)
     specular: np.ndarray = field(init=False)
@@ -454,24 +471,36 @@ class MaterialTable:
     texture: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        # (a pass over a chunk of materials, then np.fromiter per field: a hundred thousand materials in a
-        # tenth of the time np.array of a list of tuples per field takes; chunks keep the transposed
-        # tuples a few MB)
+        # A few thousand materials at a time (they stay in the cache while each of their fields is read:
+        # a million scattered objects read once per field would be a cache miss per field), a field at a
+        # time: either the one object they all hold is filled in (materials mostly differ in a colour or two;
+        # the rest is the object the reader's defaults or state gave them all) or np.fromiter reads them.
+        if isinstance(self.materials, MaterialRows):  # (columns already: a million materials read as rows)
+            for name in _COLOR_FIELDS + _NUMBER_FIELDS + ("texture",):
+                setattr(self, name, self.materials.column(name))
+            return
         n = len(self.materials)
         for name in _COLOR_FIELDS:
             setattr(self, name, np.empty((n, 3)))
         for name in _NUMBER_FIELDS:
             setattr(self, name, np.empty(n))
         self.texture = np.empty(n, dtype=np.int64)
-        fields = attrgetter(*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture")
-        for rows in row_chunks(n):
-            columns = list(zip(*map(fields, self.materials[rows])))
-            size = rows.stop - rows.start
-            for name, values in zip(_COLOR_FIELDS, columns):
-                getattr(self, name)[rows] = np.fromiter(chain.from_iterable(values), float, 3 * size).reshape(-1, 3)
-            for name, values in zip(_NUMBER_FIELDS, columns[len(_COLOR_FIELDS):]):
-                getattr(self, name)[rows] = np.fromiter(values, float, size)
-            self.texture[rows] = np.fromiter(columns[-1], np.int64, size)
+        for start in range(0, n, _MATERIALS_AT_ONCE):
+            rows = slice(start, min(n, start + _MATERIALS_AT_ONCE))
+            materials = self.materials[rows]
+            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+                values = list(map(attrgetter(name), materials))
+                column = getattr(self, name)
+                if all(map(operator.is_, values, repeat(values[0]))):
+                    column[rows] = values[0]
+                elif name in _COLOR_FIELDS:
+                    column[rows] = np.fromiter(chain.from_iterable(values), float, 3 * len(values)).reshape(-1, 3)
+                else:
+                    column[rows] = np.fromiter(values, column.dtype, len(values))
+
+
+#: Materials read at a time by MaterialTable (their objects stay in the cache while each field is read).
+_MATERIALS_AT_ONCE = 8192
 
 
 @dataclass
@@ -524,26 +553,31 @@ class PrimitiveTable:
         self._matrices = matrices
         self.inverses = np.empty((n, 4, 4))
         self.inverse_error, self.inverse_norms = np.empty(n), np.empty((n, 2))
-        for rows in row_chunks(n):
+        self.generic_size = np.ones(n)
+        self.spheres = np.zeros((n, 4))
+        self.spheres[:, 3] = np.inf
+        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
+        self.boxes = np.zeros((n, 6))
+        for rows in row_chunks(n):  # (each chunk's matrices made once, for all that is computed from them)
             matrix = self.matrix_rows(rows)
             inverse = _batched_inverses(matrix)
             if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
                 inverse = self._checked_inverses(rows)
             self.inverses[rows] = inverse
             self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
-            # (the sums in Primitive's order: rows of three, left to right)
-            self.inverse_norms[rows, 0] = np.abs(inverse[:, :3, :3]).sum(axis=2).max(axis=1)
-            self.inverse_norms[rows, 1] = np.abs(inverse[:, :3, 3]).max(axis=1)
+            # (the sums in Primitive's order: rows of three, left to right; spelt out, as NumPy's
+            # reductions over axes of three take several times longer)
+            linear, translation = np.abs(inverse[:, :3, :3]), np.abs(inverse[:, :3, 3])
+            sums = linear[:, :, 0] + linear[:, :, 1] + linear[:, :, 2]
+            self.inverse_norms[rows, 0] = np.maximum(np.maximum(sums[:, 0], sums[:, 1]), sums[:, 2])
+            self.inverse_norms[rows, 1] = np.maximum(np.maximum(translation[:, 0], translation[:, 1]),
+                                                     translation[:, 2])
+            self._bound_generic_boxes(rows, matrix)
         for mesh, _ in self.mesh_groups():
             self._build_mesh(mesh)
         # a tapered cylinder's small radius (Shape.small_radius), 0 for the other kinds
         self.top = np.where(self.kind == _KIND_INDEX["taperedCylinder"], tapered_radii, 0.0)
         self.top[self.kind == _KIND_INDEX["cylinder"]] = 1.0
-        self.generic_size = np.ones(n)
-        self.spheres = np.zeros((n, 4))
-        self.spheres[:, 3] = np.inf
-        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
-        self.boxes = np.zeros((n, 6))
         self._fill_sizes_and_bounds()
         self._matrices = None  # (the shapes' or the table's own: not kept twice)
 
@@ -573,7 +607,14 @@ class PrimitiveTable:
     def rows(self, kinds) -> np.ndarray:
         """The rows of the shapes of these kinds (SDL keywords), in order."""
         codes = [_KIND_INDEX[k] for k in kinds]
-        return np.flatnonzero(np.isin(self.kind, codes)) if len(self.kind) else np.zeros(0, dtype=np.int64)
+        if not self.kind_counts[codes].any():  # (no pass over a million rows for a kind that has none)
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(np.isin(self.kind, codes))
+
+    @cached_property
+    def kind_counts(self) -> np.ndarray:
+        """How many rows each kind code has."""
+        return np.bincount(self.kind, minlength=len(shapes.REGISTRY))
 
     def mesh_of(self, i: int) -> Optional[MeshData]:
         """The MeshData of row i (None for the closed-form kinds)."""
@@ -606,13 +647,9 @@ class PrimitiveTable:
             self.meshes[id(mesh)] = shared_triangle_mesh(mesh)
 
     def _fill_sizes_and_bounds(self) -> None:
-        """generic_size and the bounding spheres, a batch per kind (the kinds with a fixed generic box), per
-        chunk of tapered cylinders, and per mesh (or polyhedron vertex set) with its instances."""
-        for kind, corners in _BOX_CORNERS.items():
-            rows = self.rows([kind])
-            if rows.size:
-                self.generic_size[rows] = 1.0 + TORUS_TUBE_RADIUS if kind == "torus" else np.max(np.abs(corners))
-                self._bound(rows, corners)
+        """generic_size and the bounding spheres of the kinds without a fixed generic box (those are done a
+        chunk at a time with the inverses): per chunk of tapered cylinders, and per mesh (or polyhedron
+        vertex set) with its instances."""
         rows = self.rows(_TAPERED_KINDS)
         if rows.size:
             top = np.maximum(self.top[rows], 0.0)
@@ -636,6 +673,37 @@ class PrimitiveTable:
             for start in range(0, len(rows), per_chunk):
                 self._bound(rows[start:start + per_chunk], vertices)
 
+    def _bound_generic_boxes(self, rows: slice, matrix: np.ndarray) -> None:
+        """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
+        box (``matrix``: the chunk's matrices).  Each world bound is the sum of the extreme terms, in the
+        order of the product (matrix row . corner, then the translation): the extreme of that sum over the
+        box's corners, since rounding is monotonic, without carrying the 8 corners through."""
+        codes = self.kind[rows]
+        has_box = _HAS_BOX[codes]
+        every = bool(has_box.all())
+        local = None if every else np.flatnonzero(has_box)
+        if not every and not local.size:
+            return
+        linear = matrix[:, :3, :3] if every else matrix[local, :3, :3]
+        translation = matrix[:, :3, 3] if every else matrix[local, :3, 3]
+        codes = codes if every else codes[local]
+        at_lo = linear * _BOX_LO[codes][:, None, :]  # (k, 3, 3): [r, j] = matrix[r, j] * corner j
+        at_hi = linear * _BOX_HI[codes][:, None, :]
+        low, high = np.minimum(at_lo, at_hi), np.maximum(at_lo, at_hi)
+        lo = low[:, :, 0] + low[:, :, 1] + low[:, :, 2] + translation
+        hi = high[:, :, 0] + high[:, :, 1] + high[:, :, 2] + translation
+        where = np.arange(rows.start, rows.stop) if every else rows.start + local
+        self.generic_size[where] = _BOX_SIZE[codes]
+        self._keep_bounds(where, lo, hi)
+
+    def _keep_bounds(self, rows, lo: np.ndarray, hi: np.ndarray) -> None:
+        """World boxes (lo, hi) of these rows, and the bounding spheres round them (radius padded by 1e-9
+        relatively, as _sphere_around does)."""
+        self.boxes[rows, :3], self.boxes[rows, 3:] = lo, hi
+        self.centers[rows] = 0.5 * (lo + hi)
+        extent = hi - lo
+        self.radii[rows] = np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)
+
     def _bound(self, rows: np.ndarray, points: np.ndarray) -> None:
         """World boxes and bounding spheres of ``rows`` whose generic solids lie in the hull of ``points``
         ((K, 3) for all, or (len(rows), K, 3)), carried to the world by one stacked product: what
@@ -645,11 +713,7 @@ class PrimitiveTable:
             m = self.matrix_rows(rows[part])
             p = points if points.ndim == 2 else points[part]
             world = p @ m[:, :3, :3].transpose(0, 2, 1) + m[:, None, :3, 3]
-            lo, hi = world.min(axis=1), world.max(axis=1)
-            self.boxes[rows[part], :3], self.boxes[rows[part], 3:] = lo, hi
-            self.centers[rows[part]] = 0.5 * (lo + hi)
-            extent = hi - lo
-            self.radii[rows[part]] = np.sqrt(np.einsum("ij,ij->i", extent, extent)) * 0.5 * (1 + 1e-9)
+            self._keep_bounds(rows[part], world.min(axis=1), world.max(axis=1))
 
 
 #: Index of each kind in the shape registry (PrimitiveTable.kind).
@@ -657,6 +721,15 @@ _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
 _KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
 _MESH_CODES = frozenset(_KIND_INDEX[k] for k in MESH_KINDS)
 _TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
+#: Per kind code: whether the kind has a fixed generic box, the box's low and high corners, and the generic
+#: size (Primitive.generic_size) of such a kind.
+_HAS_BOX = np.array([e.keyword in _BOX_CORNERS for e in shapes.REGISTRY])
+_BOX_LO = np.array([_BOX_CORNERS[e.keyword].min(axis=0) if e.keyword in _BOX_CORNERS else np.zeros(3)
+                    for e in shapes.REGISTRY])
+_BOX_HI = np.array([_BOX_CORNERS[e.keyword].max(axis=0) if e.keyword in _BOX_CORNERS else np.zeros(3)
+                    for e in shapes.REGISTRY])
+_BOX_SIZE = np.array([(1.0 + TORUS_TUBE_RADIUS if e.keyword == "torus" else float(np.max(np.abs(_BOX_CORNERS[e.keyword]))))
+                      if e.keyword in _BOX_CORNERS else 1.0 for e in shapes.REGISTRY])
 #: The generic points of a tapered cylinder of top radius 1: the squares round its two discs (the frustum
 #: lies in their hull; the top's x and y are scaled by the top radius).
 _TAPERED_POINTS = np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX, np.ones(4)]])
@@ -877,11 +950,12 @@ class _Columns:
         """(kind codes, material ids, the materials by id, tapered radii) of the shapes."""
         table = self.table
         if table is not None:
-            ids, materials = table.material_ids, list(table.materials)
+            ids, materials = table.material_ids, table.materials
             used = np.bincount(ids, minlength=len(materials)) > 0
             if not used.all():  # (only the materials in use, as from a list: they decide the live effects)
                 ids = (np.cumsum(used) - 1)[ids].astype(np.int32)
-                materials = [m for m, kept in zip(materials, used.tolist()) if kept]
+                materials = (materials.used(used) if isinstance(materials, MaterialRows) else
+                             [m for m, kept in zip(materials, used.tolist()) if kept])
             return table.kinds, ids, materials, table.tapered_radii
         n = len(self.kinds)
         material_ids, materials = _material_ids(self.materials)
@@ -968,13 +1042,13 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
 
 
 def _table_content(scene: Scene, table: ShapeColumns) -> tuple[tuple, _Columns]:
-    """_content of a scene whose objects are a ShapeTable not yet made into Shapes: the table's identity,
-    a digest of its arrays (kept on its read-only columns) and its materials by value, without a Python
-    object per shape.  (Once the table is made into Shapes, _content reads those: another key, and a new
-    compile from them.)"""
+    """_content of a scene whose objects are a ShapeTable not yet made into Shapes: the identity of its
+    columns (arrays nobody can change: see ShapeTable) and its materials by value, without a Python object
+    per shape and without hashing its arrays.  (Once the table is made into Shapes, _content reads those:
+    another key, and a new compile from them.)"""
     shapes = _RowShapes(table)
     meshes = {id(mesh): mesh for mesh in map(shapes.mesh_of, _builtin_mesh_rows(table))}
-    key = ("table", id(table), table.digest(), table.materials,
+    key = ("table", id(table), table.materials,
            tuple((k, mesh_digest(m)) for k, m in meshes.items())) + _scene_wide_key(scene)
     return key, _Columns([table], shapes, False, table.affines, table=table)
 

@@ -37,7 +37,7 @@ from typing import Callable, Iterator, Optional, Sequence
 import numpy as np
 
 from .errors import TracerError
-from .model import Scene
+from .model import Scene, ShapeTable
 from .savings import RaySavings
 from .trace import RayCounts
 
@@ -83,7 +83,9 @@ def scene_files(path: str | os.PathLike, scene: Scene) -> list[Path]:
     path = Path(path)
     files = [path]
     files += [Path(name) for name in scene.pixmaps.values()]
-    files += [path.parent / shape.mesh_file for shape in scene.shapes() if shape.mesh_file]
+    if not (isinstance(scene.objects, ShapeTable) and scene.objects.columns is not None):
+        # (a table's rows read no mesh file: not made into a million Shapes to find that out)
+        files += [path.parent / shape.mesh_file for shape in scene.shapes() if shape.mesh_file]
     if path.suffix.lower() in (".usd", ".usda", ".usdc"):
         from .usd.common import pxr
         pxr()  # (a TracerError saying how to install usd-core, where it is missing)

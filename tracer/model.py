@@ -6,8 +6,7 @@ coordinates (column vectors: ``world = matrix @ generic``).
 """
 from __future__ import annotations
 
-import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from collections.abc import MutableSequence, Sequence
 from typing import Optional, Union
@@ -65,6 +64,90 @@ class Material:
     surface_roughness: float = 1.0
     texture: int = 0
     parameters: tuple[float, ...] = ()
+
+
+def _material_slots() -> dict[str, tuple[int, int]]:
+    """(first slot, width) in a MaterialRows row of each Material field but the texture and parameters."""
+    slots, at = {}, 0
+    for f in fields(Material):
+        if f.name not in ("texture", "parameters"):
+            width = 3 if isinstance(f.default, tuple) else 1
+            slots[f.name], at = (at, width), at + width
+    return slots
+
+
+class MaterialRows(Sequence):
+    """Materials kept as one row of numbers each (``rows``, (M, :attr:`WIDTH`) float64), as a fast reader hands
+    them over: a million spheres of their own colours are a million materials, and making each a Material
+    object took most of the time of reading them.  It reads as the sequence of those Materials (each made
+    when first asked for, then the same object); compiling reads the columns (:meth:`column`).
+
+    A row holds the fields in Material's order: a colour takes three slots, a number one, the texture one,
+    then the count of parameters and :attr:`MAX_PARAMETERS` slots for them (unused ones 0)."""
+
+    MAX_PARAMETERS = 10
+    #: (first slot, width) of each colour and number field
+    SLOTS: dict[str, tuple[int, int]] = _material_slots()
+    TEXTURE = sum(width for _, width in SLOTS.values())
+    PARAMETER_COUNT = TEXTURE + 1
+    WIDTH = PARAMETER_COUNT + 1 + MAX_PARAMETERS
+
+    def __init__(self, rows: np.ndarray):
+        rows = np.array(rows, dtype=np.float64, order="C").reshape(-1, self.WIDTH)
+        rows.setflags(write=False)
+        self.rows = rows
+        self._made: dict[int, Material] = {}
+
+    @classmethod
+    def row_of(cls, material: Material) -> np.ndarray:
+        """The row of one Material (parameters beyond MAX_PARAMETERS are not kept)."""
+        row = np.zeros(cls.WIDTH)
+        for name, (start, width) in cls.SLOTS.items():
+            row[start:start + width] = getattr(material, name)
+        row[cls.TEXTURE] = material.texture
+        parameters = material.parameters[:cls.MAX_PARAMETERS]
+        row[cls.PARAMETER_COUNT] = len(parameters)
+        row[cls.PARAMETER_COUNT + 1:cls.PARAMETER_COUNT + 1 + len(parameters)] = parameters
+        return row
+
+    def column(self, name: str) -> np.ndarray:
+        """Field ``name`` of every row: (M, 3) for a colour, (M,) for a number; the texture as int64."""
+        if name == "texture":
+            return self.rows[:, self.TEXTURE].astype(np.int64)
+        start, width = self.SLOTS[name]
+        return self.rows[:, start] if width == 1 else self.rows[:, start:start + width]
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        index = range(len(self))[index]  # (negative from the end; IndexError)
+        made = self._made.get(index)
+        if made is None:
+            values = self.rows[index].tolist()
+            kept = {name: (tuple(values[start:start + width]) if width == 3 else values[start])
+                    for name, (start, width) in self.SLOTS.items()}
+            count = int(values[self.PARAMETER_COUNT])
+            made = self._made[index] = Material(
+                **kept, texture=int(values[self.TEXTURE]),
+                parameters=tuple(values[self.PARAMETER_COUNT + 1:self.PARAMETER_COUNT + 1 + count]))
+        return made
+
+    def used(self, mask: np.ndarray) -> "MaterialRows":
+        """The rows where ``mask`` is true, as a table of their own."""
+        return MaterialRows(self.rows[mask])
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, MaterialRows):
+            return self.rows.shape == other.rows.shape and bool(np.array_equal(self.rows, other.rows))
+        return NotImplemented
+
+    __hash__ = None
+
+    def __reduce__(self):
+        return MaterialRows, (self.rows,)
 
 
 class FaceList(Sequence):
@@ -265,7 +348,7 @@ class ShapeColumns:
     kinds: np.ndarray  # (N,) int16
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
-    materials: tuple[Material, ...]
+    materials: Sequence[Material]  # a tuple, or a MaterialRows
     tapered_radii: np.ndarray  # (N,) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
@@ -311,19 +394,6 @@ class ShapeColumns:
                                      SourceLocation(self.file, line, column), names.get(i)))
         return out
 
-    def digest(self) -> bytes:
-        """A digest of what compiling reads from the rows: kinds, matrices, material ids and tapers (the
-        materials themselves are compared by value by whoever uses this).  Kept once computed: the arrays
-        are read-only."""
-        kept = self.__dict__.get("_digest")
-        if kept is None:
-            h = hashlib.blake2b(digest_size=20)
-            for array in (self.kinds, self.affines, self.material_ids, self.tapered_radii):
-                h.update(repr((array.dtype.str, array.shape)).encode())
-                h.update(np.ascontiguousarray(array))
-            kept = self.__dict__["_digest"] = h.digest()
-        return kept
-
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
 _ROWS_AT_ONCE = 1 << 15
@@ -342,15 +412,23 @@ _KIND_CODE = {keyword: code for code, keyword in enumerate(_KEYWORD_OF_CODE)}
 
 
 def _read_only(array, dtype, shape: tuple, what: str) -> np.ndarray:
-    """``array`` as a read-only C-contiguous array of this dtype and shape (a view where it already is one)."""
+    """``array`` as a read-only C-contiguous array of this dtype and shape.  The table takes the memory over:
+    the array and the array that owns its memory are made read-only; memory that no array owns (a writable
+    buffer) is copied."""
     out = np.ascontiguousarray(array, dtype=dtype)
     if out.shape != shape:
         try:
             out = out.reshape(shape)
         except ValueError:
             raise ValueError(f"ShapeTable: {what} has shape {out.shape}, not {shape}") from None
-    out = out.view()
-    out.setflags(write=False)
+    chain = [out]
+    while isinstance(chain[-1].base, np.ndarray):
+        chain.append(chain[-1].base)
+    if chain[-1].base is not None and not isinstance(chain[-1].base, bytes) and chain[-1].flags.writeable:
+        out = out.copy()
+        chain = [out]
+    for part in chain:
+        part.setflags(write=False)
     return out
 
 
@@ -361,11 +439,13 @@ class ShapeTable(MutableSequence):
 
     ``kinds`` (N,) int16, each shape's kind as its index in tracer.shapes.REGISTRY; ``affines`` (N, 12)
     float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1);
-    ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects); ``tapered_radii``
-    (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
+    ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects, or a MaterialRows);
+    ``tapered_radii`` (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
     shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
     polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
-    the arrays over: nobody may change them afterwards.
+    the arrays over: nobody may change them afterwards (compile_scene knows a table by its identity).  They,
+    and the arrays that own their memory, are made read-only; memory that no array owns (a writable buffer)
+    is copied.
 
     It reads as the list of those Shapes.  len() makes nothing; the first access to an element (indexing,
     iteration, any change, ==) makes every Shape once, and from then on the table is a plain list of them
@@ -378,7 +458,7 @@ class ShapeTable(MutableSequence):
         n = len(kinds)
         kinds = _read_only(kinds, np.int16, (n,), "kinds")
         material_ids = _read_only(material_ids, np.int32, (n,), "material_ids")
-        materials = tuple(materials)
+        materials = materials if isinstance(materials, MaterialRows) else tuple(materials)
         if n and not (0 <= kinds.min() and kinds.max() < len(_KEYWORD_OF_CODE)):
             raise ValueError("ShapeTable: a kind code is not in tracer.shapes.REGISTRY")
         if n and not (0 <= material_ids.min() and material_ids.max() < len(materials)):
@@ -523,7 +603,7 @@ class ShapeTable(MutableSequence):
         c = self._columns
         if c is None:
             return ShapeTable._of_list, (self._shapes,)
-        return ShapeTable, (c.kinds, c.affines, c.material_ids, list(c.materials), c.tapered_radii, c.lines,
+        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.tapered_radii, c.lines,
                             c.columns, c.file, c.names)
 
 

@@ -67,8 +67,9 @@ def inverse_rounding(inverses: np.ndarray, matrices: np.ndarray) -> np.ndarray:
     """The rounding (N,) of computed inverses (N, 4, 4) of ``matrices``, relative: the largest residual of
     inverse @ matrix - I against the products' magnitudes |inverse| @ |matrix|, elementwise.  It grows
     with the matrix's condition number (about 1e-8 at 1e8)."""
-    residual = np.abs(np.einsum("nij,njk->nik", inverses, matrices) - np.eye(4))
-    magnitude = np.einsum("nij,njk->nik", np.abs(inverses), np.abs(matrices))
+    # (matmul, not einsum: a tenth of the time for a million 4x4 products)
+    residual = np.abs(inverses @ matrices - np.eye(4))
+    magnitude = np.abs(inverses) @ np.abs(matrices)
     relative = np.divide(residual, magnitude, out=np.zeros_like(residual), where=magnitude > 0)
     return relative.reshape(len(relative), -1).max(axis=1) if len(relative) else np.zeros(0)
 

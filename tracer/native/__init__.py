@@ -67,6 +67,11 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_desc_size.argtypes = []
     lib.rt_create.restype = ctypes.c_void_p
     lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_char_p, ctypes.c_int64]
+    lib.rt_create_threaded.restype = ctypes.c_void_p
+    lib.rt_create_threaded.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_int64, ctypes.c_char_p,
+                                       ctypes.c_int64]
+    lib.rt_object_tree.restype = ctypes.c_int64
+    lib.rt_object_tree.argtypes = [ctypes.c_void_p, ctypes.c_void_p, _i64p, _i64p]
     lib.rt_destroy.restype = None
     lib.rt_destroy.argtypes = [ctypes.c_void_p]
     lib.rt_set_savings.restype = ctypes.c_int
@@ -314,7 +319,8 @@ class NativeTracer:
         self.threads = threads or default_threads()
         self._flat = _flat_scene(compiled)  # owns the arrays the C side points into
         message = ctypes.create_string_buffer(256)
-        self._handle = _lib.rt_create(ctypes.byref(self._flat.desc), message, len(message))
+        # (the object hierarchy is built on the tracer's threads; it is the same tree on any number)
+        self._handle = _lib.rt_create_threaded(ctypes.byref(self._flat.desc), self.threads, message, len(message))
         if not self._handle:
             reason = message.value.decode(errors="replace") or "no reason given"
             raise TracerError(f"the C core refused the scene description: {reason}")
@@ -328,6 +334,16 @@ class NativeTracer:
         if _lib.rt_set_savings(self._handle, float(self.savings.cutoff), self.savings.flags(),
                                _ptr(sealed, ctypes.c_uint8)) != 0:
             raise MemoryError("the C core ran out of memory")
+
+    def object_tree(self) -> tuple[bytes, np.ndarray, tuple[int, ...]]:
+        """The C core's object hierarchy as built (for tests): its PairNode records as bytes, the bounded
+        objects in leaf order, and (root leaf's first item, its count, depth, items)."""
+        root = np.zeros(5, dtype=np.int64)
+        count = _lib.rt_object_tree(self._handle, None, None, _ptr(root, ctypes.c_int64))
+        pairs = ctypes.create_string_buffer(max(1, int(count * root[4])))
+        items = np.zeros(max(1, int(root[3])), dtype=np.int64)
+        _lib.rt_object_tree(self._handle, pairs, _ptr(items, ctypes.c_int64), _ptr(root, ctypes.c_int64))
+        return pairs.raw[:int(count * root[4])], items[:int(root[3])], tuple(root[:4].tolist())
 
     def close(self) -> None:
         handle, self._handle = getattr(self, "_handle", None), None

@@ -58,14 +58,6 @@ const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 /* ------------------------------------------------------------------------------------------------------
  * The scene at run time */
 
-/* The object hierarchy while it is built (a binary tree of boxes). */
-typedef struct {
-    double lo[3], hi[3];
-    int64_t left;         /* inner: left child (right = left + 1) */
-    int64_t first, count; /* leaf: items[first : first + count]; count = 0 for inner nodes */
-    int64_t axis;
-} TopNode;
-
 /* ...and as it is traversed: one record per inner node holding both children's boxes, side by side so
  * that one pass of two-lane arithmetic tests both.  A child is a leaf (items[first : first + count]) when
  * its count is > 0, else the index of its own pair record. */
@@ -697,32 +689,6 @@ static ShadeFn pick_shade(int64_t effects)
 /* ------------------------------------------------------------------------------------------------------
  * Building the scene: checks, mesh views, the top-level BVH */
 
-static double half_area(const double *lo, const double *hi)
-{
-    double x = hi[0] - lo[0], y = hi[1] - lo[1], z = hi[2] - lo[2];
-    if (!(x >= 0.0 && y >= 0.0 && z >= 0.0))
-        return 0.0;
-    return x * y + y * z + z * x;
-}
-
-static void box_empty(double *lo, double *hi)
-{
-    for (int i = 0; i < 3; i++) {
-        lo[i] = INFINITY;
-        hi[i] = -INFINITY;
-    }
-}
-
-static void box_grow(double *lo, double *hi, const double *blo, const double *bhi)
-{
-    /* (stored whether changed or not: the compiler may then use minsd/maxsd, which give these same
-     * values, instead of a branch that mispredicts on every other object) */
-    for (int i = 0; i < 3; i++) {
-        lo[i] = blo[i] < lo[i] ? blo[i] : lo[i];
-        hi[i] = bhi[i] > hi[i] ? bhi[i] : hi[i];
-    }
-}
-
 /* The built tree as PairNodes (see scene_first); frees the TopNodes. */
 static int pair_tree(Scene *S)
 {
@@ -768,45 +734,26 @@ static int pair_tree(Scene *S)
     return 1;
 }
 
-/* Tree shape (measured on the 1k and 10k sphere benchmarks; other values within noise): 16 bins per axis,
- * single objects in the leaves where a split is possible at all, and nodes of up to LEAF_MAX objects kept
- * whole when no split has a lower surface-area cost (SAH_TRAVERSAL: the cost of a box test, in objects). */
-#define SAH_BINS 16
-#define LEAF_MIN 1
-#define LEAF_MAX 4
-#define SAH_TRAVERSAL 0.0
-
-static inline int64_t sah_bin(double c, double lo, double extent)
-{
-    int64_t k = (int64_t)((c - lo) * (SAH_BINS / extent));
-    return k >= SAH_BINS ? SAH_BINS - 1 : (k < 0 ? 0 : k);
-}
-
-typedef struct {
-    int64_t node, start, end, depth;
-} BuildTask;
-
-static int build_tree(Scene *S)
+/* The object hierarchy over the bounded objects (bvh_build.h) on up to `threads` threads, as PairNodes;
+ * the unbounded objects listed apart.  0 when memory runs out. */
+static int build_tree(Scene *S, int64_t threads)
 {
     const SceneDesc *D = &S->d;
     int64_t nb = 0;
     for (int64_t i = 0; i < D->n_objects; i++)
         nb += D->object_bounded[i] != 0;
+    if (nb >= INT32_MAX)
+        return 0;
     S->n_unbounded = D->n_objects - nb;
     S->unbounded = (int64_t *)malloc((size_t)(S->n_unbounded + 1) * sizeof(int64_t));
     S->items = (int64_t *)malloc((size_t)(nb + 1) * sizeof(int64_t));
-    if (nb >= INT32_MAX)
-        return 0;
-    S->nodes = (TopNode *)malloc((size_t)(2 * nb + 1) * sizeof(TopNode));
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
-    BuildTask *tasks = (BuildTask *)malloc((size_t)(2 * nb + 2) * sizeof(BuildTask));
     /* The boxes as the slab test sees them: an axis whose bounds are in the wrong order is the slab
      * between them, one with a NaN bound is no constraint at all.  Like centre[], by position in items[]
      * (the partition moves them with their items): the passes over a node then read memory in order. */
     double *boxes = (double *)malloc((size_t)(6 * nb + 1) * sizeof(double));
-    if (!S->unbounded || !S->items || !S->nodes || !centre || !tasks || !boxes) {
+    if (!S->unbounded || !S->items || !centre || !boxes) {
         free(centre);
-        free(tasks);
         free(boxes);
         return 0;
     }
@@ -833,135 +780,16 @@ static int build_tree(Scene *S)
             S->unbounded[u++] = i;
         }
     }
-    /* centre[] and boxes[] are indexed by position in items[]; the partition below permutes them together. */
     S->n_nodes = 0;
     S->tree_depth = 0;
-    if (nb == 0) {
-        free(centre);
-        free(tasks);
-        free(boxes);
-        return 1;
-    }
-    S->n_nodes = 1;
-    int64_t n_tasks = 0;
-    tasks[n_tasks++] = (BuildTask){0, 0, nb, 1};
-    while (n_tasks) {
-        BuildTask task = tasks[--n_tasks];
-        TopNode *node = &S->nodes[task.node];
-        if (task.depth > S->tree_depth)
-            S->tree_depth = task.depth;
-        double clo[3], chi[3];
-        box_empty(node->lo, node->hi);
-        box_empty(clo, chi);
-        for (int64_t i = task.start; i < task.end; i++) {
-            const double *box = boxes + 6 * i;
-            box_grow(node->lo, node->hi, box, box + 3);
-            box_grow(clo, chi, centre + 3 * i, centre + 3 * i);
-        }
-        int64_t n = task.end - task.start;
-        node->count = 0;
-        node->first = -1;
-        node->left = -1;
-        node->axis = 0;
-        if (n <= LEAF_MIN) {
-            node->first = task.start;
-            node->count = n;
-            continue;
-        }
-        /* the binned surface-area heuristic along every axis with some spread of centres */
-        int axis = -1;
-        int64_t best_split = -1;
-        double best_cost = INFINITY;
-        for (int k = 0; k < 3; k++) {
-            double extent = chi[k] - clo[k];
-            if (!(extent > 0.0))
-                continue;
-            int64_t count[SAH_BINS] = {0};
-            double blo[SAH_BINS][3], bhi[SAH_BINS][3];
-            for (int j = 0; j < SAH_BINS; j++)
-                box_empty(blo[j], bhi[j]);
-            for (int64_t i = task.start; i < task.end; i++) {
-                int64_t j = sah_bin(centre[3 * i + k], clo[k], extent);
-                count[j]++;
-                const double *box = boxes + 6 * i;
-                box_grow(blo[j], bhi[j], box, box + 3);
-            }
-            double right_area[SAH_BINS];
-            int64_t right_count[SAH_BINS];
-            double rlo[3], rhi[3];
-            box_empty(rlo, rhi);
-            int64_t rc = 0;
-            for (int j = SAH_BINS - 1; j > 0; j--) {
-                box_grow(rlo, rhi, blo[j], bhi[j]);
-                rc += count[j];
-                right_area[j] = half_area(rlo, rhi);
-                right_count[j] = rc;
-            }
-            double llo[3], lhi[3];
-            box_empty(llo, lhi);
-            int64_t lc = 0;
-            for (int j = 0; j < SAH_BINS - 1; j++) {
-                box_grow(llo, lhi, blo[j], bhi[j]);
-                lc += count[j];
-                if (lc == 0 || right_count[j + 1] == 0)
-                    continue;
-                double cost = half_area(llo, lhi) * (double)lc + right_area[j + 1] * (double)right_count[j + 1];
-                if (cost < best_cost) {
-                    best_cost = cost;
-                    best_split = j;
-                    axis = k;
-                }
-            }
-        }
-        int64_t mid = task.start + n / 2;
-        if (axis >= 0) {
-            /* small nodes become leaves when no split beats testing every object */
-            double area = half_area(node->lo, node->hi);
-            if (n <= LEAF_MAX && SAH_TRAVERSAL * area + best_cost >= area * (double)n) {
-                node->first = task.start;
-                node->count = n;
-                continue;
-            }
-            /* partition items (and their centres) so that bins <= best_split come first */
-            double lo_axis = clo[axis], extent = chi[axis] - clo[axis];
-            int64_t i = task.start, j = task.end - 1;
-            while (i <= j) {
-                if (sah_bin(centre[3 * i + axis], lo_axis, extent) <= best_split) {
-                    i++;
-                } else {
-                    int64_t x = S->items[i]; S->items[i] = S->items[j]; S->items[j] = x;
-                    for (int k = 0; k < 3; k++) {
-                        double c = centre[3 * i + k];
-                        centre[3 * i + k] = centre[3 * j + k];
-                        centre[3 * j + k] = c;
-                    }
-                    for (int k = 0; k < 6; k++) {
-                        double c = boxes[6 * i + k];
-                        boxes[6 * i + k] = boxes[6 * j + k];
-                        boxes[6 * j + k] = c;
-                    }
-                    j--;
-                }
-            }
-            if (i > task.start && i < task.end)
-                mid = i;
-        } else {
-            axis = 0;
-            if (n <= 8) {
-                node->first = task.start;
-                node->count = n;
-                continue;
-            }
-        }
-        node->axis = axis;
-        node->left = S->n_nodes;
-        S->n_nodes += 2;
-        tasks[n_tasks++] = (BuildTask){node->left + 1, mid, task.end, task.depth + 1};
-        tasks[n_tasks++] = (BuildTask){node->left, task.start, mid, task.depth + 1};
+    if (nb > 0) {
+        ObjectInput in = {S->items, centre, boxes};
+        S->nodes = object_bvh_build(&in, nb, threads, &S->n_nodes, &S->tree_depth);
     }
     free(centre);
-    free(tasks);
     free(boxes);
+    if (nb > 0 && !S->nodes)
+        return 0;
     return pair_tree(S);
 }
 
@@ -1049,7 +877,7 @@ void rt_destroy(void *handle)
         goto fail;                                               \
     } while (0)
 
-void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
+void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity)
 {
     if (error && capacity > 0)
         error[0] = '\0';
@@ -1140,7 +968,7 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
         if (m->depth > S->mesh_depth)
             S->mesh_depth = m->depth;
     }
-    if (!build_tree(S))
+    if (!build_tree(S, threads))
         REFUSE("out of memory (or more than 2^31 bounded objects) building the object hierarchy");
     return S;
 fail:
@@ -1148,6 +976,34 @@ fail:
     return NULL;
 }
 #undef REFUSE
+
+/* The object hierarchy as built (for tests): returns the number of PairNode records; with buffers, copies
+ * them (pairs, n records of sizeof(PairNode) bytes), the bounded objects in leaf order (items) and root[5]:
+ * the root's first item and count when the whole hierarchy is one leaf, its depth, the number of items,
+ * sizeof(PairNode). */
+int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *root)
+{
+    const Scene *S = (const Scene *)scene;
+    int64_t n_items = S->d.n_objects - S->n_unbounded;
+    if (pairs && S->n_pairs)
+        memcpy(pairs, S->pairs, (size_t)S->n_pairs * sizeof(PairNode));
+    if (items && n_items)
+        memcpy(items, S->items, (size_t)n_items * sizeof(int64_t));
+    if (root) {
+        root[0] = S->root_first;
+        root[1] = S->root_count;
+        root[2] = S->tree_depth;
+        root[3] = n_items;
+        root[4] = (int64_t)sizeof(PairNode);
+    }
+    return S->n_pairs;
+}
+
+/* rt_create_threaded on one thread. */
+void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
+{
+    return rt_create_threaded(desc, 1, error, capacity);
+}
 
 /* Which useless rays to skip (see tracer.savings); `sealed` has n_objects x n_lights entries, copied.
  * 0 on success, -1 out of memory. */

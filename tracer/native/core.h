@@ -40,6 +40,8 @@ int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity);
 const char *rt_contract_digest(void);
 /* NULL when the description is refused; then `error` (capacity bytes, may be NULL) says what was refused. */
 void *rt_create(const SceneDesc *desc, char *error, int64_t capacity);
+void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity);
+int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *root);
 void rt_destroy(void *scene);
 int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed);
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,

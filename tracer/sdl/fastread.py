@@ -22,13 +22,13 @@ import ctypes
 import functools
 import re
 import sys
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Optional, Union
 
 import numpy as np
 
 from .. import shapes as shape_registry
-from ..model import Camera, Light, Material, Scene, ShapeTable
+from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
 #: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
@@ -72,77 +72,10 @@ class _Result(ctypes.Structure):
 _SET_GLOBAL_AMBIENT, _SET_BACKGROUND, _SET_MIN_REFLECTIVITY, _SET_MIN_TRANSPARENCY, _SET_MAX_DEPTH = 1, 2, 4, 8, 16
 
 
-@dataclass(frozen=True)
-class _MaterialLayout:
-    """Where each Material field is in a material row of sdl_read.h: colours take three slots, numbers one,
-    then the texture, the count of parameters and the parameters."""
-
-    slots: dict[str, int]
-    colours: frozenset[str]
-    texture: int
-    parameters: int  # the count's slot; the values follow it
-    width: int
-
-    def row(self, material: Material) -> list[float]:
-        row = [0.0] * self.width
-        for f in fields(Material):
-            value = getattr(material, f.name)
-            if f.name == "texture":
-                row[self.texture] = float(value)
-            elif f.name == "parameters":
-                row[self.parameters] = float(len(value))
-                row[self.parameters + 1:self.parameters + 1 + len(value)] = value
-            elif f.name in self.colours:
-                row[self.slots[f.name]:self.slots[f.name] + 3] = value
-            else:
-                row[self.slots[f.name]] = value
-        return row
-
-    def materials(self, rows: np.ndarray) -> list[Material]:
-        """The Materials of material rows (M, width), made a field at a time: a million of them is most of
-        reading a million spheres of their own colours, so the per-row work is Material() alone (and a field
-        with the same bits in every row is one object for all)."""
-        count = len(rows)
-        values = []
-        for f in fields(Material):
-            if f.name == "texture":
-                values.append(rows[:, self.texture].astype(np.int64).tolist())  # (int(-0.0) is 0)
-            elif f.name == "parameters":
-                sizes = rows[:, self.parameters].astype(np.int64)
-                first = self.parameters + 1
-                values.append([()] * count if not sizes.any() else
-                              [tuple(row[first:first + size]) for row, size in zip(rows.tolist(), sizes.tolist())])
-            elif f.name in self.colours:
-                values.append(_same_or_each(rows[:, self.slots[f.name]:self.slots[f.name] + 3]))
-            else:
-                values.append(_same_or_each(rows[:, self.slots[f.name]]))
-        return list(map(Material, *values))
-
-
-def _same_or_each(block: np.ndarray) -> list:
-    """Each row of ``block`` (M, 3) as a tuple, or each value of ``block`` (M,) as a float; one object for
-    all when every row has the first one's bits."""
-    if len(block) and (block.view(np.int64) == block[:1].view(np.int64)).all():
-        first = block[0].tolist()
-        return [tuple(first) if block.ndim == 2 else first] * len(block)
-    return list(zip(*block.T.tolist())) if block.ndim == 2 else block.tolist()
-
-
-def _material_layout(width: int, max_parameters: int) -> _MaterialLayout:
-    slots, colours, at = {}, set(), 0
-    for f in fields(Material):
-        if f.name in ("texture", "parameters"):
-            continue
-        slots[f.name] = at
-        if isinstance(f.default, tuple):
-            colours.add(f.name)
-            at += 3
-        else:
-            at += 1
-    layout = _MaterialLayout(slots, frozenset(colours), at, at + 1, width)
-    if at + 2 + max_parameters != width:  # the C side's row does not fit the Material: read nothing with it
-        raise RuntimeError("sdl_read.h's material row does not match tracer.model.Material")
-    return layout
+def _check_material_rows(width: int, max_parameters: int) -> None:
+    """The C side's material row must be tracer.model.MaterialRows' (the material columns the scene keeps)."""
+    if width != MaterialRows.WIDTH or max_parameters != MaterialRows.MAX_PARAMETERS:
+        raise RuntimeError("sdl_read.h's material row does not match tracer.model.MaterialRows")
 
 
 @dataclass(frozen=True)
@@ -153,7 +86,6 @@ class _Setup:
     words: bytes
     codes: np.ndarray  # (action, argument) per word, int32
     defaults: np.ndarray  # the default material's row
-    layout: _MaterialLayout
     reasons: tuple[str, ...]
 
 
@@ -176,16 +108,16 @@ def _setup() -> Optional[_Setup]:
     lib.rt_sdl_material_width.restype = ctypes.c_int64
     lib.rt_sdl_material_width.argtypes = []
     from . import parser
-    layout = _material_layout(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
+    _check_material_rows(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
     actions = {name: code for code, name in enumerate(lib.rt_sdl_action_names().decode().split())}
-    vocabulary = _vocabulary(layout)
+    vocabulary = _vocabulary()
     words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
     codes = np.array([(actions[action], argument) for action, argument in vocabulary.values()], dtype=np.int32)
-    defaults = np.array(layout.row(Material()), dtype=np.float64)
-    return _Setup(lib, words, codes, defaults, layout, tuple(lib.rt_sdl_decline_names().decode().split()))
+    defaults = MaterialRows.row_of(Material())
+    return _Setup(lib, words, codes, defaults, tuple(lib.rt_sdl_decline_names().decode().split()))
 
 
-def _vocabulary(layout: _MaterialLayout) -> dict[str, tuple[str, int]]:
+def _vocabulary() -> dict[str, tuple[str, int]]:
     """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names) and argument."""
     from . import parser
     words = {keyword: (keyword, 0) for keyword in (
@@ -193,9 +125,9 @@ def _vocabulary(layout: _MaterialLayout) -> dict[str, tuple[str, int]]:
         "camera", "texture", "parameters", "defaultMaterials", "translate", "scale", "rotate", "push", "pop",
         "identityAffine")}
     for keyword, name in parser.COLOR_MATERIAL.items():
-        words[keyword] = ("colorMaterial", layout.slots[name])
+        words[keyword] = ("colorMaterial", MaterialRows.SLOTS[name][0])
     for keyword, name in parser.FLOAT_MATERIAL.items():
-        words[keyword] = ("floatMaterial", layout.slots[name])
+        words[keyword] = ("floatMaterial", MaterialRows.SLOTS[name][0])
     kind_codes = {entry.keyword: code for code, entry in enumerate(shape_registry.REGISTRY)}
     for kind in parser.ANALYTIC_KINDS + parser.POLYHEDRON_KINDS + ("teapot",):
         # (the parser's _read_shape reads a number after taperedCylinder alone)
@@ -215,7 +147,7 @@ class Columns:
     kinds: np.ndarray  # (N,) int16, index into tracer.shapes.REGISTRY
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
-    materials: list[Material]
+    materials: MaterialRows
     tapered_radii: np.ndarray  # (N,) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
@@ -243,7 +175,7 @@ def scan(text: str) -> Union[Columns, Declined, None]:
         res = pointer.contents
         if res.status != 0:
             return Declined(setup.reasons[res.status], int(res.decline_offset))
-        return _columns(res, text, setup.layout)
+        return _columns(res, text)
     finally:
         lib.rt_sdl_free(pointer)
 
@@ -283,12 +215,12 @@ def _view(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
     return np.ctypeslib.as_array(pointer, shape=shape)  # (of the pointer's type, which is dtype)
 
 
-def _columns(res: _Result, text: str, layout: _MaterialLayout) -> Columns:
+def _columns(res: _Result, text: str) -> Columns:
     n = res.shapes
     # (what becomes Python objects is read in place; what the scene keeps as arrays is copied)
     name_rows = _view(res.name_rows, (res.names, 3), np.int64).tolist()
     names = {row: text[start:start + length] for row, start, length in name_rows} or None
-    materials = layout.materials(_view(res.material_rows, (res.materials, layout.width), np.float64))
+    materials = MaterialRows(_view(res.material_rows, (res.materials, MaterialRows.WIDTH), np.float64))  # (a copy)
     lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _view(res.light_rows, (res.lights, 6),
                                                                        np.float64).tolist()]
     cameras = [tuple(row) for row in _view(res.camera_rows, (res.cameras, 10), np.float64).tolist()]

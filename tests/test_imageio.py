@@ -77,7 +77,12 @@ def test_banded_writing_gives_the_whole_frame_file_byte_for_byte(tmp_path, monke
     from_bytes = save_image(to_8bit(image), tmp_path / f"bytes{suffix}").read_bytes()
     upside_down = to_8bit(image)[::-1]  # a film counted from the bottom, seen through a flipped view
     from_view = save_image(upside_down[::-1], tmp_path / f"view{suffix}").read_bytes()
-    assert from_floats == from_bytes == from_view == whole.getvalue()
+    assert from_floats == from_bytes == from_view
+    if suffix == ".png":  # (written by tracer.png: Pillow's bytes where both deflate with one zlib)
+        from test_png import assert_pillows_file
+        assert_pillows_file(from_floats, whole.getvalue())
+    else:
+        assert from_floats == whole.getvalue()
 
 
 def test_images_of_another_shape_are_refused(tmp_path):

@@ -481,3 +481,14 @@ def test_mutated_texts(seed):
     if rng.random() < 0.3:
         chars = chars[:rng.randrange(len(chars) + 1)]
     assert_readers_agree("".join(chars))
+
+
+def test_the_text_is_handed_to_c_without_a_copy_in_cpython():
+    import ctypes
+    text = "sphere cube " * 1000
+    handed = fastread._ascii_bytes(text)
+    if sys.implementation.name == "cpython":
+        assert isinstance(handed, int)
+        assert ctypes.string_at(handed, len(text)) == text.encode("ascii")
+    else:
+        assert handed == text.encode("ascii")

@@ -5,8 +5,10 @@ it adds about 3 MB of libraries; for a 1280 x 960 render the two were a fifth of
 Here each band of rows is filtered and handed to zlib as it comes, so what writing adds is a band and
 zlib's state.
 
-The file is the one Pillow (7 to 11) writes for an RGB image with no metadata, byte for byte (tests compare
-them): the signature, an IHDR chunk (8 bits, colour type 2, no interlace), the compressed rows in IDAT
+The file is the one Pillow (7 to 11) writes for an RGB image with no metadata, byte for byte where Pillow
+deflates with the zlib library that Python's zlib module uses (Pillow's Linux wheels use the system's, as
+Python does; tests compare the files there, and the pixels elsewhere, where a Pillow built on another
+deflate, such as zlib-ng, gives other bytes for the same filtered rows): the signature, an IHDR chunk (8 bits, colour type 2, no interlace), the compressed rows in IDAT
 chunks of max(65536, 4 x width) bytes each (the last one shorter: Pillow's encoder fills a buffer of that
 size per chunk), and IEND.  Each row gets the filter whose output bytes, read as signed, have the smallest
 sum of magnitudes, trying none, up, sub and Paeth in that order and keeping the first on a tie (Pillow's

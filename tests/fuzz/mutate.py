@@ -225,6 +225,19 @@ def render_options(rng: random.Random) -> list[str]:
     return options
 
 
+#: Lines put before a text to make it as long as the command line's reader offers to the C reader first
+#: (tracer.sdl.parser.FAST_MIN_CHARS): comments, or shapes, which the C reader reads before it meets the
+#: mutations (and declines, or reads them too).
+PADDING = ("! a comment line, for length\n", "push translate 0.5 -0.25 1e-3 scale 0.01 0.01 0.01 sphere pop\n",
+           "diffuse 0.3 0.6 0.9 rotate 33 1 2 3 cube identityAffine\n")
+
+
+def padded_for_the_c_reader(rng: random.Random, text: str) -> str:
+    from tracer.sdl.parser import FAST_MIN_CHARS
+    line = rng.choice(PADDING)
+    return line * (FAST_MIN_CHARS // len(line) + 1) + text
+
+
 def make_case(seed: int, usd: bool = True) -> Case:
     """The case for one seed; ``usd`` False: nothing that needs usd-core (no USD input, no convert)."""
     rng = random.Random(seed)
@@ -239,7 +252,10 @@ def make_case(seed: int, usd: bool = True) -> Case:
     options = render_options(rng) if command == "render" else ["--json"] * rng.randint(0, 1) if command == "info" else []
     deep = 1500 if "numpy" not in options else 100
     if kind == "sdl":
-        case = Case(kind, {f"{name}.sdl": mutate_text(rng, original, kind, deep).encode()})
+        text = mutate_text(rng, original, kind, deep)
+        if rng.random() < 0.3:
+            text = padded_for_the_c_reader(rng, text)
+        case = Case(kind, {f"{name}.sdl": text.encode()})
     elif kind == "usd":
         text = original if rng.random() < 0.1 else mutate_text(rng, original, kind)
         case = Case(kind, {f"{name}.usda": text.encode()})

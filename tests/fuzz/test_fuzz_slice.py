@@ -43,6 +43,21 @@ def test_cases_are_reproduced_from_their_seed():
     assert {make_case(seed).kind for seed in range(200)} == set(KINDS)
 
 
+def test_some_scenes_are_long_enough_for_the_c_reader_and_some_of_those_it_reads():
+    """The command line offers a long text to the C reader first (tracer.sdl.parser.FAST_MIN_CHARS), so the
+    fuzz run pads part of its scenes to that length: the C reader then reads hostile input too, through the
+    real command, and has to read it exactly as the Python reader or leave it to that reader."""
+    from tracer.sdl import fastread
+    from tracer.sdl.parser import FAST_MIN_CHARS
+    long_texts = [text for seed in range(1500) if (case := make_case(seed, usd=False)).kind == "sdl"
+                  and len(text := case.files[case.main].decode("utf-8", "replace")) >= FAST_MIN_CHARS]
+    assert len(long_texts) >= 20
+    if fastread.available():
+        read = [text for text in long_texts
+                if text.isascii() and not isinstance(fastread.scan(text), fastread.Declined)]
+        assert read
+
+
 @settings(max_examples=150, deadline=None)
 @given(st.sampled_from(("png", "bmp", "jpeg", "ppm")), st.integers(0, 2**32))
 def test_a_mutated_picture_loads_as_8_bit_or_is_a_tracer_error(tmp_path_factory, kind, seed):

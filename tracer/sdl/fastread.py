@@ -97,7 +97,7 @@ def _setup() -> Optional[_Setup]:
         return None
     lib = native._lib
     lib.rt_sdl_read.restype = ctypes.POINTER(_Result)
-    lib.rt_sdl_read.argtypes = [ctypes.c_char_p, ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64,
+    lib.rt_sdl_read.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64,
                                 ctypes.POINTER(ctypes.c_int32), ctypes.c_int64, ctypes.POINTER(ctypes.c_double),
                                 ctypes.c_int64]
     lib.rt_sdl_free.restype = None
@@ -165,12 +165,10 @@ def scan(text: str) -> Union[Columns, Declined, None]:
         return None
     if not text.isascii():  # (columns are counted in characters; ASCII makes them bytes)
         return Declined("ascii", _NON_ASCII.search(text).start())
-    data = text.encode("ascii")
     lib = setup.lib
-    pointer = lib.rt_sdl_read(data, len(data), setup.words, len(setup.words),
+    pointer = lib.rt_sdl_read(_ascii_bytes(text), len(text), setup.words, len(setup.words),
                               setup.codes.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)), len(setup.codes),
                               setup.defaults.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), SHARED_LIBM)
-    del data  # (a copy of the text: 100 MB for a million spheres, not needed while the columns are made)
     if not pointer:
         return Declined("memory", 0)
     try:
@@ -180,6 +178,29 @@ def scan(text: str) -> Union[Columns, Declined, None]:
         return _columns(res, text)
     finally:
         lib.rt_sdl_free(pointer)
+
+
+def _ascii_bytes(text: str) -> Union[int, bytes]:
+    """An ASCII ``text``'s characters as bytes for C: in CPython, the address of the string's own (an ASCII
+    str keeps one byte per character, and its UTF-8 form is those bytes), valid while ``text`` lives; else a
+    copy (encoding 100 MB takes a few tenths of a second and as much memory again)."""
+    if _utf8_and_size is None:
+        return text.encode("ascii")
+    size = ctypes.c_ssize_t()
+    address = _utf8_and_size(text, ctypes.byref(size))
+    return address if address and size.value == len(text) else text.encode("ascii")
+
+
+def _cpython_utf8_and_size():
+    if sys.implementation.name != "cpython":
+        return None
+    function = ctypes.pythonapi.PyUnicode_AsUTF8AndSize
+    function.restype = ctypes.c_void_p
+    function.argtypes = [ctypes.py_object, ctypes.POINTER(ctypes.c_ssize_t)]
+    return function
+
+
+_utf8_and_size = _cpython_utf8_and_size()
 
 
 def _array(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:

@@ -30,12 +30,11 @@ def _decimal(values: np.ndarray, places: int) -> np.ndarray:
 
 
 def sphere_table_scene(count: int, seed: int = 1):
-    """sphere_scene(count, seed) read, made without the text (one Material per sphere, as the reader's
-    ``diffuse`` statements make them)."""
+    """sphere_scene(count, seed) read, made without the text (a material per sphere, as the reader's
+    ``diffuse`` statements make them, kept as rows as the C reader keeps them)."""
     from dataclasses import replace
 
-    from tracer.bulk import collector_paused
-    from tracer.model import ShapeTable
+    from tracer.model import MaterialRows, ShapeTable
     from tracer.sdl.parser import parse_sdl
 
     rng = np.random.default_rng(seed)
@@ -54,8 +53,12 @@ def sphere_table_scene(count: int, seed: int = 1):
     affines[0] = plane.matrix[:3]
     affines[1:, 0, 0] = affines[1:, 1, 1] = affines[1:, 2, 2] = r
     affines[1:, 0, 3], affines[1:, 1, 3], affines[1:, 2, 3] = x, y, z
-    with collector_paused():
-        materials = [plane.material] + [replace(probe.material, diffuse=tuple(c)) for c in colours.tolist()]
+    # (as rows, as the C reader hands them over: a row per material, the plane's then one per sphere)
+    rows = np.repeat(MaterialRows.row_of(probe.material)[None], count + 1, axis=0)
+    rows[0] = MaterialRows.row_of(plane.material)
+    start, width = MaterialRows.SLOTS["diffuse"]
+    rows[1:, start:start + width] = colours
+    materials = MaterialRows(rows)
     # the columns of each sphere's keyword: after "diffuse r g b push translate x y z scale r r r "
     widths = sum(np.char.str_len(np.char.mod("%.4f", v)) for v in (x, y, z)) + 3 * np.char.str_len(
         np.char.mod("%.4f", r)) + np.char.str_len(np.char.mod("%.3f", colours)).sum(axis=1)

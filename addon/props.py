@@ -8,6 +8,7 @@
 """
 from __future__ import annotations
 
+from array import array
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
@@ -170,8 +171,20 @@ def _set_input(node, names, value) -> None:
     for name in names:
         socket = node.inputs.get(name)
         if socket is not None:
-            socket.default_value = value
+            # Only a change is set: every set, even of the value already there, makes Blender look through
+            # all the node trees in the file, so that importing N materials took time in proportion to N².
+            if _as_stored(value) != _as_stored(socket.default_value):
+                socket.default_value = value
             return
+
+
+def _as_stored(value) -> tuple:
+    """A socket value (a number or a colour) as the single-precision numbers Blender keeps."""
+    try:
+        numbers = list(value)
+    except TypeError:
+        numbers = [value]
+    return tuple(array("f", numbers))
 
 
 def _get_input(node, names, default):

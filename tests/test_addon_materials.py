@@ -3,6 +3,8 @@ Material panel's Diffuse) is the colour traced and exported, whichever of the tw
 unticking SDL Material overwrites neither."""
 from __future__ import annotations
 
+import shutil
+
 import bpy
 import numpy as np
 from bpy_extras.object_utils import world_to_camera_view
@@ -70,3 +72,28 @@ def test_an_edit_in_the_sdl_panel_reaches_the_principled_bsdf_and_the_render():
     now = props.material_to_sdl(material)
     assert np.allclose(now.diffuse, (0.25, 0.5, 0.75), atol=1e-6)
     assert (now.ambient, now.specular) == (before.ambient, before.specular)  # the exact SDL values kept
+
+
+def test_materials_made_one_after_another_keep_nothing_of_the_one_before(tmp_path):
+    """The importer makes each new material as a copy of the one made before it (a node tree is then not
+    built anew): every material must still be exactly its own SDL material, its Principled inputs and viewport
+    colour its own, and only a picture-textured material keeps a picture."""
+    shutil.copy(SCENES / "images" / "bricks.png", tmp_path / "bricks.png")
+    text = ("makePixmap 1 bricks.png\n"
+            "texture 1 parameters 2 3 4 diffuse 0.9 0.1 0.1 specular 0.5 0.5 0.5 reflectivity 0.3 sphere\n"
+            "defaultMaterials diffuse 0.1 0.8 0.2 speedOfLight 0.6 transparency 0.4 translate 3 0 0 cube\n"
+            "defaultMaterials emissive 0.2 0.1 0 translate -3 0 0 cone\n"
+            "defaultMaterials translate 0 3 0 torus\n")
+    path = tmp_path / "three.sdl"
+    path.write_text(text)
+    fresh()
+    import_sdl(path)
+    wanted = [s.material for s in tracer.load(path).objects]
+    made = {o["sdl_kind"]: o.active_material for o in shape_objects()}
+    for shape, material in zip(tracer.load(path).objects, wanted):
+        blender = made[shape.kind]
+        assert props.material_to_sdl(blender) == material
+        assert blender.sdl.image == (str(tmp_path / "bricks.png") if material.texture > 0 else "")
+        assert np.allclose(tuple(_base(blender).default_value)[:3], material.diffuse, atol=1e-6)
+        assert np.allclose(tuple(blender.diffuse_color)[:3], material.diffuse, atol=1e-6)
+    assert len({m.name for m in made.values()}) == 4

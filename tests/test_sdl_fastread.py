@@ -540,15 +540,26 @@ def test_a_character_beyond_ascii_outside_a_comment_is_declined_where_it_stands(
         assert_declined(text, "ascii")
 
 
+@pytest.mark.parametrize("text, name", [
+    ("! name: caf\u00e9\nsphere", "caf\u00e9"),
+    ("! name: ball \u2603\U0001F600 \nsphere", "ball \u2603\U0001F600"),
+    ("! name: ball\u3000\nsphere", "ball"),  # (U+3000 and U+00A0 are white space to \s)
+    ("! name:\u00a0\u3000ball \u00e9\u00a0\r\nsphere", "ball \u00e9"),
+    ("! \u2603\n! name: ball ! \U0001F600\nsphere", "ball ! \U0001F600"),
+    ("! name: first\n! name: \u00e9 second\n! name: \t\nsphere", "\u00e9 second"),  # (the latest non-empty one)
+])
+def test_a_name_comment_beyond_ascii_is_read(text, name):
+    assert fastread.scan(text).names == {0: name}
+    assert assert_read_fast(text).objects[0].name == name
+
+
 @pytest.mark.parametrize("text", [
-    "! name: caf\u00e9\nsphere",
-    "! name: ball \u2603\nsphere",
-    "! name: ball\u3000\nsphere",  # (to \s, U+3000 is white space: the Python reader's name is 'ball')
     "!\u3000name: ball\nsphere",  # (a name comment to the Python reader)
     "!\u00e9 name: ball\nsphere",  # (not one: declined all the same)
-    "! \u2603\n! name: ball ! \U0001F600\nsphere",
+    "! name: \u00e9\nsphere",  # (no ASCII in the name: it could be all white space to \s, naming nothing)
+    "! name: ball\n! name: \u3000\nsphere",
 ])
-def test_a_name_comment_beyond_ascii_is_declined(text):
+def test_a_name_comment_whose_name_beyond_ascii_may_be_empty_is_declined(text):
     assert_declined(text, "ascii")
 
 

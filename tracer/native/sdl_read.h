@@ -12,11 +12,11 @@
  * Bit for bit the same scene as the Python reader:
  * - tokens: runs of bytes that are not white space (scan_is_space, str.split's ASCII set), cut by '!', which
  *   starts a comment up to the next '\n'; lines are counted at '\n' only; columns are 1-based bytes;
- * - text: UTF-8, whose bytes beyond ASCII it reads only inside comments other than name comments (they are
- *   the Python reader's comments whatever they are: no UTF-8 sequence holds a '\n' byte).  Anywhere else such
- *   a byte declines the text: Python's str.split takes some of those characters (U+00A0, U+3000, ...) for white
- *   space.  So every byte before a token on its line is ASCII, and its column in bytes is its column in
- *   characters;
+ * - text: UTF-8, whose bytes beyond ASCII it reads only inside comments (they are the Python reader's
+ *   comments whatever they are: no UTF-8 sequence holds a '\n' byte; see sdl_comment for name comments).
+ *   Anywhere else such a byte declines the text: Python's str.split takes some of those characters (U+00A0,
+ *   U+3000, ...) for white space.  So every byte before a token on its line is ASCII, and its column in bytes
+ *   is its column in characters;
  * - numbers: scan.h's scan_word, NUMBER_RE's grammar with Python float()'s correctly rounded value;
  * - transforms: the operations of transforms.affine_translate, affine_scale, affine_times and rotation(), in
  *   the same order (the core is built with -ffp-contract=off, so no product is fused into a sum), the
@@ -198,38 +198,47 @@ static int sdl_is_regex_space(unsigned char c)
 
 /* Skips the comment starting at '!' (text[i]); keeps its name if it is a ``! name: text`` comment with a
  * non-empty name (lexer._NAME_COMMENT_RE).  Returns where its line ends.
- * Bytes beyond ASCII are skipped with the comment unless it may be a name comment: Python's \s also takes
- * some characters beyond ASCII for white space (around the name and before "name:"), and the name is cut from
- * the Python str by characters; so a comment with such a byte, whose "name:" follows the '!' after nothing but
- * white space or such bytes, sets lx->non_ascii. */
+ * Bytes beyond ASCII are skipped with the comment, but Python's \s takes some characters beyond ASCII for
+ * white space (U+00A0, U+3000, ...): so the name kept is stripped of ASCII white space only (the caller strips
+ * the rest, str.strip being the pattern's \s*), and where such a character could decide whether the comment
+ * names anything at all (before "name:", or in a name without a byte of ASCII that is not white space, which
+ * may be empty to Python), the comment sets lx->non_ascii. */
 static int64_t sdl_comment(SdlLexer *lx, int64_t i)
 {
     const char *t = lx->text;
     const char *newline = memchr(t + i, '\n', (size_t)(lx->length - i));
     int64_t end = newline != NULL ? newline - t : lx->length;
-    int64_t beyond = -1;  /* the first byte beyond ASCII in the comment */
-    for (int64_t j = i; j < end && beyond < 0; j++)
-        if ((unsigned char)t[j] >= 0x80)
-            beyond = j;
     int64_t p = i + 1;
-    while (p < end && (sdl_is_regex_space((unsigned char)t[p]) || (beyond >= 0 && (unsigned char)t[p] >= 0x80)))
+    while (p < end && (sdl_is_regex_space((unsigned char)t[p]) || (unsigned char)t[p] >= 0x80))
         p++;
-    if (end - p >= 5 && memcmp(t + p, "name:", 5) == 0) {
-        if (beyond >= 0) {
+    if (end - p < 5 || memcmp(t + p, "name:", 5) != 0)
+        return end;
+    for (int64_t j = i + 1; j < p; j++)
+        if ((unsigned char)t[j] >= 0x80) {
             if (lx->non_ascii < 0)
-                lx->non_ascii = beyond;
+                lx->non_ascii = j;
             return end;
         }
-        p += 5;
-        while (p < end && sdl_is_regex_space((unsigned char)t[p]))
-            p++;
-        int64_t q = end;
-        while (q > p && sdl_is_regex_space((unsigned char)t[q - 1]))
-            q--;
-        if (q > p) {  /* an empty name names nothing (and leaves an earlier one waiting) */
-            lx->name_start = p;
-            lx->name_length = q - p;
-        }
+    p += 5;
+    while (p < end && sdl_is_regex_space((unsigned char)t[p]))
+        p++;
+    int64_t q = end;
+    while (q > p && sdl_is_regex_space((unsigned char)t[q - 1]))
+        q--;
+    int beyond = 0, visible = 0;  /* bytes beyond ASCII; ASCII bytes that are not white space */
+    for (int64_t j = p; j < q; j++) {
+        unsigned char c = (unsigned char)t[j];
+        beyond |= c >= 0x80;
+        visible |= c < 0x80 && !sdl_is_regex_space(c);
+    }
+    if (beyond && !visible) {
+        if (lx->non_ascii < 0)
+            lx->non_ascii = p;
+        return end;
+    }
+    if (q > p) {  /* an empty name names nothing (and leaves an earlier one waiting) */
+        lx->name_start = p;
+        lx->name_length = q - p;
     }
     return end;
 }

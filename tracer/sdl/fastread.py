@@ -255,7 +255,8 @@ def _columns(res: _Result, utf8: _Utf8) -> Columns:
     n = res.shapes
     # (what becomes Python objects is read in place; what the scene keeps as arrays is copied)
     name_rows = _view(res.name_rows, (res.names, 3), np.int64).tolist()
-    names = {row: utf8.cut(start, length) for row, start, length in name_rows} or None
+    # (C strips a name of white space in ASCII; str.strip is the name pattern's \s* beyond ASCII too)
+    names = {row: utf8.cut(start, length).strip() for row, start, length in name_rows} or None
     materials = MaterialRows(_view(res.material_rows, (res.materials, MaterialRows.WIDTH), np.float64))  # (a copy)
     lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _view(res.light_rows, (res.lights, 6),
                                                                        np.float64).tolist()]

@@ -210,10 +210,12 @@ class _Utf8:
         return _Utf8(text, data, len(data))
 
     def characters_before(self, offset: int) -> int:
-        """The character offset in the text of byte ``offset`` (one that starts a character)."""
+        """The character offset in the text of byte ``offset``: the bytes before it that start a character
+        (all but UTF-8's continuation bytes, 10xxxxxx)."""
         if self.size == len(self.text):  # ASCII: bytes are characters
             return offset
-        return len(self.bytes_at(0, offset).decode("utf-8"))
+        before = np.frombuffer(self.bytes_at(0, offset), dtype=np.uint8)
+        return offset - int(np.count_nonzero((before & 0xC0) == 0x80))
 
     def bytes_at(self, start: int, length: int) -> bytes:
         if isinstance(self.data, bytes):

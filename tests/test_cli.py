@@ -344,3 +344,17 @@ def test_a_render_that_fails_while_streaming_leaves_no_file(tmp_path):
                           timeout=300)
     assert proc.returncode == 130 and "cancelled" in proc.stderr, proc.stderr
     assert [p.name for p in tmp_path.iterdir()] == ["x.png"] and out.read_bytes() == b"before"
+
+
+@pytest.mark.skipif(os.name != "posix", reason="a closed pipe is told by polling it (POSIX)")
+def test_info_whose_reader_stops_early_ends_quietly(tmp_path):
+    """``info big.sdl | head``: the reader closing the pipe is not the scene's fault, so no error names the
+    scene; the command ends as a Unix tool ended by SIGPIPE does (status 141) and prints nothing more."""
+    scene = tmp_path / "many.sdl"
+    scene.write_text("".join(f"push translate {k} 0 0 sphere pop\n" for k in range(20000)))  # (~700 KB of info)
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", "info", str(scene)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=ROOT)
+    assert proc.stdout.readline().startswith(b"objects: 20000")
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 141 and err.decode() == ""

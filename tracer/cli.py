@@ -23,6 +23,9 @@ from .reporting import error_message
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+#: The status of a command whose output was closed by its reader (``info big.sdl | head``): what a Unix tool
+#: ended by SIGPIPE reports to its shell.
+EXIT_OUTPUT_CLOSED = 128 + 13
 
 
 def _add_scene_options(p: argparse.ArgumentParser) -> None:
@@ -465,6 +468,25 @@ def _terminate_like_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
+def _output_closed() -> bool:
+    """Whether standard output is a pipe whose reader has gone (then the broken pipe was the output's, not a
+    connection's or a file's): polling such a pipe reports an error.  If so, output is sent to the null
+    device from here on, so that Python's own flush at exit does not print a second complaint."""
+    import select
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()  # (POSIX; elsewhere AttributeError: then it is not known to be closed)
+        poller.register(fd, select.POLLOUT)
+        closed = any(events & select.POLLERR for _, events in poller.poll(0))
+    except (AttributeError, OSError, ValueError):
+        return False
+    if closed:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    return closed
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
@@ -475,6 +497,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except RenderCancelled:  # (a TracerError: caught first)
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError as err:  # (an OSError: caught before the input's errors)
+        if _output_closed():
+            return EXIT_OUTPUT_CLOSED  # the reader wanted no more: nothing is wrong with the input
+        message = error_message(err, subject)
+        print(f"error: {message}", file=sys.stderr)
+        return EXIT_USAGE
     except Exception as err:  # noqa: BLE001 — translated if it is the input's fault, else raised again
         message = error_message(err, subject)
         if message is None:

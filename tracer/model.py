@@ -513,7 +513,8 @@ class ShapeTable(MutableSequence):
         return self._columns
 
     def shape_at(self, i: int) -> Shape:
-        """Shape i (negative from the end), without making the others (the list's element once made)."""
+        """Shape i (negative from the end), without making the others: while the table is columns, a new Shape
+        at each call, whose changes stay its own (once made, the list's element)."""
         if self._shapes is not None:
             return self._shapes[i]
         return self._columns.shape(i)

@@ -53,11 +53,12 @@ class _Writer:
     def __init__(self, scene: Scene, folder: Path):
         pxr = C.pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = pxr.Gf, pxr.Sdf, pxr.Usd, pxr.UsdGeom
-        self.UsdLux, self.UsdShade, self.Vt = pxr.UsdLux, pxr.UsdShade, pxr.Vt
+        self.UsdLux, self.UsdShade, self.Vt, self.Tf = pxr.UsdLux, pxr.UsdShade, pxr.Vt, pxr.Tf
         self.scene = scene
         self.folder = folder
         self.stage = self.Usd.Stage.CreateInMemory()
-        self.materials: dict[Material, object] = {}
+        self.materials: dict[Material, object] = {}  # each distinct material's UsdShade.Material
+        self.material_paths: dict[Material, str] = {}  # and its prim's path
         self.names: dict[str, int] = {}
         self.reach = self._scene_reach()
 
@@ -173,45 +174,85 @@ class _Writer:
     # -- objects ----------------------------------------------------------------------------------------
 
     def _objects(self) -> None:
-        # An explicit stack, so that deeply nested booleans cannot overflow Python's.
-        todo: list[tuple[SceneObject, str, Optional[str]]] = [
-            (o, C.OBJECTS, None) for o in reversed(self.scene.objects)]
-        while todo:
-            obj, parent, operand = todo.pop()
+        """Every object's prim, and its material's.  All those prims are first made together, in one
+        Sdf.ChangeBlock, so that the stage recomposes once: Define() one at a time recomposes the growing list
+        of siblings each time, which made big scenes quadratic (20,000 spheres took more than 12 minutes).
+        Define() on a prim already defined with that type only returns it, so the authoring is unchanged."""
+        placed = self._place_objects()
+        bound = self.Sdf.TokenListOp.Create(prependedItems=["MaterialBindingAPI"])  # what its Apply() authors
+        self._define_all([(path, self._schema(obj), None if isinstance(obj, CSG) else bound) for obj, path, _ in placed]
+                         + [prim for path in self.material_paths.values()
+                            for prim in ((path, self.UsdShade.Material, None),
+                                         (path + "/PreviewSurface", self.UsdShade.Shader, None))])
+        for obj, path, operand in placed:
             if isinstance(obj, CSG):
-                path = f"{parent}/{self._name(obj.op)}"
                 prim = self.UsdGeom.Xform.Define(self.stage, path).GetPrim()
                 self._attr(prim, C.A_CSG, self.Sdf.ValueTypeNames.Token, obj.op)
-                todo += [(obj.right, path, "right"), (obj.left, path, "left")]
             else:
-                prim = self._shape(obj, parent)
+                prim = self._shape(obj, path)
             if operand is not None:
                 self._attr(prim, C.A_OPERAND, self.Sdf.ValueTypeNames.Token, operand)
             if obj.groups:
                 self._attr(prim, C.A_GROUPS, self.Sdf.ValueTypeNames.StringArray, self.Vt.StringArray(list(obj.groups)))
 
-    def _shape(self, shape: Shape, parent: str):
+    def _place_objects(self) -> list[tuple[SceneObject, str, Optional[str]]]:
+        """Every object (a boolean before its left and right operands) with its prim path and its operand
+        side; also names each distinct material's prim in ``material_paths``, in the order of first use."""
+        placed = []
+        # An explicit stack, so that deeply nested booleans cannot overflow Python's.
+        todo: list[tuple[SceneObject, str, Optional[str]]] = [
+            (o, C.OBJECTS, None) for o in reversed(self.scene.objects)]
+        while todo:
+            obj, parent, operand = todo.pop()
+            path = f"{parent}/{self._name(obj.op if isinstance(obj, CSG) else obj.kind)}"
+            placed.append((obj, path, operand))
+            if isinstance(obj, CSG):
+                todo += [(obj.right, path, "right"), (obj.left, path, "left")]
+            elif obj.material not in self.material_paths:
+                self.material_paths[obj.material] = f"{C.MATERIALS}/{self._name('material')}"
+        return placed
+
+    def _schema(self, obj: SceneObject):
+        """The UsdGeom schema of an object's prim: an implicit prim where USD has one, else a Mesh."""
+        UsdGeom = self.UsdGeom
+        if isinstance(obj, CSG):
+            return UsdGeom.Xform
+        return {"sphere": UsdGeom.Sphere, "cube": UsdGeom.Cube, "cylinder": UsdGeom.Cylinder,
+                "cone": UsdGeom.Cone, "plane": UsdGeom.Plane}.get(obj.kind, UsdGeom.Mesh)
+
+    def _define_all(self, prims: list) -> None:
+        """Define each (path, schema, API schemas or None) prim, parents first, in one change block (one
+        recomposition; applying an API schema later would recompose again)."""
+        Sdf, layer = self.Sdf, self.stage.GetEditTarget().GetLayer()
+        type_names = {}
+        with Sdf.ChangeBlock():
+            for path, schema, api_schemas in prims:
+                if schema not in type_names:
+                    type_names[schema] = self.Usd.SchemaRegistry.GetSchemaTypeName(self.Tf.Type.Find(schema))
+                spec = Sdf.CreatePrimInLayer(layer, path)
+                spec.specifier = Sdf.SpecifierDef
+                spec.typeName = type_names[schema]
+                if api_schemas is not None:
+                    spec.SetInfo("apiSchemas", api_schemas)
+
+    def _shape(self, shape: Shape, path: str):
         UsdGeom, stage = self.UsdGeom, self.stage
-        path = f"{parent}/{self._name(shape.kind)}"
         kind = shape.kind
         exact_matrix = None
+        gprim = self._schema(shape).Define(stage, path)
         if kind == "sphere":
-            gprim = UsdGeom.Sphere.Define(stage, path)
             gprim.CreateRadiusAttr(1.0)
             matrix = shape.matrix
         elif kind == "cube":
-            gprim = UsdGeom.Cube.Define(stage, path)
             gprim.CreateSizeAttr(2.0)
             matrix = shape.matrix
         elif kind in ("cylinder", "cone"):
-            gprim = (UsdGeom.Cylinder if kind == "cylinder" else UsdGeom.Cone).Define(stage, path)
             gprim.CreateRadiusAttr(1.0)
             gprim.CreateHeightAttr(1.0)
             gprim.CreateAxisAttr(UsdGeom.Tokens.z)
             matrix = shape.matrix @ CENTRED
             exact_matrix = shape.matrix  # M @ CENTRED @ CENTRED⁻¹ may be off by an ulp
         elif kind == "plane":
-            gprim = UsdGeom.Plane.Define(stage, path)
             half = self._plane_half_size(shape.matrix)
             gprim.CreateWidthAttr(2.0 * half)
             gprim.CreateLengthAttr(2.0 * half)
@@ -219,7 +260,6 @@ class _Writer:
             gprim.CreateDoubleSidedAttr(True)
             matrix = shape.matrix
         else:
-            gprim = UsdGeom.Mesh.Define(stage, path)
             self._mesh(gprim, self._generic_mesh(shape))
             matrix = shape.matrix
         self._set_transform(gprim, matrix)
@@ -316,14 +356,13 @@ class _Writer:
                    self.Vt.DoubleArray([float(p) for p in material.parameters]))
         usd_material = self.materials.get(material)
         if usd_material is None:
-            usd_material = self._preview_surface(material)
+            usd_material = self._preview_surface(material, self.material_paths[material])
             self.materials[material] = usd_material
         binding = self.UsdShade.MaterialBindingAPI.Apply(prim)
         binding.Bind(usd_material)
 
-    def _preview_surface(self, material: Material):
+    def _preview_surface(self, material: Material, path: str):
         UsdShade, Sdf, Gf = self.UsdShade, self.Sdf, self.Gf
-        path = f"{C.MATERIALS}/{self._name('material')}"
         usd_material = UsdShade.Material.Define(self.stage, path)
         shader = UsdShade.Shader.Define(self.stage, path + "/PreviewSurface")
         shader.CreateIdAttr("UsdPreviewSurface")

@@ -181,6 +181,45 @@ def test_info_shows_shape_names(tmp_path):
     assert [o.get("name") for o in data["objects"]] == ["Lamp post", None]
 
 
+def _info_output(capsys, monkeypatch, scene, *options):
+    """What ``info`` prints for this Scene object (read from no file)."""
+    from tracer import cli
+
+    monkeypatch.setattr(cli, "_read_scene", lambda *args: scene)
+    assert cli.main(["info", "scene.sdl", *options]) == 0
+    return capsys.readouterr().out
+
+
+def test_info_of_a_shape_table_prints_what_its_shapes_would(capsys, monkeypatch):
+    """A big file's shapes stay columns (tracer.model.ShapeTable) and info reads those; the text and the JSON
+    are the same, byte for byte, as for the Python reader's list of Shapes.  Positions include decimal ties
+    at the sixth place (x.yyyyyy5), where rounding x * 10^6 in floating point can go the other way."""
+    import numpy as np
+
+    from tracer.model import ShapeTable
+    from tracer.sdl.parser import parse_sdl
+
+    rng = np.random.default_rng(7)
+    kinds = ["sphere", "cube", "cylinder", "cone", "taperedCylinder 0.4", "tetrahedron", "teapot", "torus"]
+    lines = ["light 3 4 5  1 1 1", "camera 0 2 9  0 0 0  0 1 0  40",
+             "push rotate -90 1 0 0 translate 0 0 -1.0000005 plane pop"]
+    for i in range(300):
+        x, y, z = (rng.integers(-10**7, 10**7, 3) + rng.choice([0.5, 0.25, 0.0], 3)) / 10**6
+        if i % 7 == 0:
+            lines.append(f"! name: thing {i}")
+        lines.append(f"diffuse {rng.uniform():.3f} 0.5 0.5 push translate {x!r} {y!r} {z!r} "
+                     f"scale 2 0.5 1 {kinds[i % len(kinds)]} pop")
+    text = "\n".join(lines) + "\n"
+    columns, objects = parse_sdl(text, fast=True), parse_sdl(text, fast=False)
+    assert isinstance(columns.objects, ShapeTable) and columns.objects.columns is not None
+    assert not isinstance(objects.objects, ShapeTable)
+    for options in (("--json",), ()):
+        from_columns = _info_output(capsys, monkeypatch, columns, *options)
+        assert columns.objects.columns is not None  # (no Shape was made)
+        assert from_columns == _info_output(capsys, monkeypatch, objects, *options)
+    assert "torus 'thing 7' at" in from_columns and "  tetrahedron at" in from_columns
+
+
 # --- convert (SDL <-> USD; docs/usd.md) -------------------------------------------------------------------
 
 def test_convert_sdl_to_usd_and_back_keeps_what_info_shows(tmp_path):

@@ -308,7 +308,7 @@ def random_statement(rng: random.Random) -> str:
         return rng.choice(["push", "push pop", "push", "identityAffine", "defaultMaterials",
                            "pop" * (rng.random() < 0.1)])
     if choice == 11:
-        return f"! name: shape {rng.randrange(100)}\n"
+        return rng.choice([f"! name: shape {rng.randrange(100)}\n", "! caf\u00e9 \u2603 \U0001F600 \u00a0\n"])
     if choice == 12:
         return f"camera {numbers(9)} {rng.uniform(1, 179):.3f}"
     if choice == 13:
@@ -400,7 +400,6 @@ def test_bundled_and_regression_files(path):
     ("scale 1e-90 1e-90 1e-90 sphere", "transform"),
     ("scale 1 1 1e-12 sphere", "transform"),
     ("translate 1e301 0 0 sphere", "transform"),
-    ("sphere ! caf\u00e9\ncube", "ascii"),
     ("sph\u00e8re", "ascii"),
 ])
 def test_declines(text, reason):
@@ -454,8 +453,9 @@ def test_without_a_shared_libm_only_right_angles_are_read(monkeypatch):
     assert_declined("rotate 9e20 0 1 0 cube", "angle")
 
 
-#: Bytes a mutation puts into a text: the ones the lexer treats specially, digits and letters.
-MUTATION_BYTES = " \t\n\r\x0b\x0c\x1c\x1f!{}+-.eE0123456789aZ\x00~:#"
+#: Characters a mutation puts into a text: the ones the lexer treats specially, digits, letters, and
+#: characters beyond ASCII (white space to str.split, or not).
+MUTATION_BYTES = " \t\n\r\x0b\x0c\x1c\x1f!{}+-.eE0123456789aZ\x00~:#\u00e9\u00a0\u2028\u3000\U0001F600\ufffd"
 
 
 @pytest.mark.parametrize("seed", range(25))
@@ -485,10 +485,100 @@ def test_mutated_texts(seed):
 
 def test_the_text_is_handed_to_c_without_a_copy_in_cpython():
     import ctypes
-    text = "sphere cube " * 1000
-    handed = fastread._ascii_bytes(text)
-    if sys.implementation.name == "cpython":
-        assert isinstance(handed, int)
-        assert ctypes.string_at(handed, len(text)) == text.encode("ascii")
-    else:
-        assert handed == text.encode("ascii")
+    for text in ("sphere cube " * 1000, "sphere ! \u2603\ncube " * 1000):
+        utf8 = fastread._Utf8.of(text)
+        assert utf8.size == len(text.encode("utf-8"))
+        if sys.implementation.name == "cpython":
+            assert isinstance(utf8.data, int)
+            assert ctypes.string_at(utf8.data, utf8.size) == text.encode("utf-8")
+        else:
+            assert utf8.data == text.encode("utf-8")
+
+
+# --- text beyond ASCII: read inside plain comments, declined anywhere else ------------------------------------
+
+@pytest.mark.parametrize("comment", [
+    "caf\u00e9",  # 2 bytes in UTF-8
+    "\u2603 snow",  # 3
+    "\U0001F600",  # 4
+    "\ufffd\ufffd",  # what read_text makes of bytes that are not UTF-8
+    "\u00a0\u0085\u2028\u3000",  # white space to str.split, line breaks to str.splitlines: inside a comment still
+    "! name: \u00e9 ! \u2603",  # not a name comment: the first '!' starts it
+])
+@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+def test_comments_beyond_ascii_are_read_by_the_c_reader(comment, newline):
+    lines = [f"! {comment}", "! name: first", f"sphere ! {comment}", f"  diffuse 1 0 0 cube !{comment}",
+             f"\t! {comment}", "! name: second", f"translate 1 2 3 taperedCylinder 0.5 ! {comment}", f"!{comment}"]
+    text = newline.join(lines)
+    assert_read_fast(text)
+    columns = fastread.scan(text)
+    # the places of the Python reader's tokens (compared in assert_read_fast), spelled out
+    assert (columns.lines.tolist(), columns.columns.tolist()) == ([3, 4, 7], [1, 17, 17])
+    assert columns.names == {0: "first", 2: "second"}
+    assert_readers_agree(text)
+
+
+def test_a_utf8_file_with_and_without_a_byte_order_mark_is_read_by_the_c_reader(tmp_path):
+    body = sphere_scene(3000, 5).replace("\n", " ! caf\u00e9 \u2603 \U0001F600\r\n", 40)
+    assert len(body) >= parser.FAST_MIN_CHARS
+    for name, data in (("plain.sdl", body.encode("utf-8")), ("marked.sdl", b"\xef\xbb\xbf" + body.encode("utf-8")),
+                       ("latin.sdl", body.encode("utf-8") + "! caf\u00e9\n".encode("latin-1"))):
+        path = tmp_path / name
+        path.write_bytes(data)
+        fast = load(path)
+        assert isinstance(fast.objects, ShapeTable), name  # (the Python reader's is a list)
+        assert_same_scene(fast, load(path, fast=False))
+
+
+@pytest.mark.parametrize("space", ["\u00a0", "\u0085", "\u1680", "\u2000", "\u2028", "\u3000", "\ufeff", "\u00e9"])
+def test_a_character_beyond_ascii_outside_a_comment_is_declined_where_it_stands(space):
+    """str.split takes some of them for white space (so 'sphere\u00a0cube' is two shapes to the Python reader);
+    the C reader leaves them all to it."""
+    for text in (f"sphere ! \u2603\ncube{space}sphere", f"sphere ! \u2603\ntranslate 1 2{space}3 cube",
+                 f"sphere\n{space}cube ! \u2603"):
+        assert fastread.scan(text) == fastread.Declined("ascii", text.index(space, text.index("\n")))
+        assert_declined(text, "ascii")
+
+
+@pytest.mark.parametrize("text, name", [
+    ("! name: caf\u00e9\nsphere", "caf\u00e9"),
+    ("! name: ball \u2603\U0001F600 \nsphere", "ball \u2603\U0001F600"),
+    ("! name: ball\u3000\nsphere", "ball"),  # (U+3000 and U+00A0 are white space to \s)
+    ("! name:\u00a0\u3000ball \u00e9\u00a0\r\nsphere", "ball \u00e9"),
+    ("! \u2603\n! name: ball ! \U0001F600\nsphere", "ball ! \U0001F600"),
+    ("! name: first\n! name: \u00e9 second\n! name: \t\nsphere", "\u00e9 second"),  # (the latest non-empty one)
+])
+def test_a_name_comment_beyond_ascii_is_read(text, name):
+    assert fastread.scan(text).names == {0: name}
+    assert assert_read_fast(text).objects[0].name == name
+
+
+@pytest.mark.parametrize("text", [
+    "!\u3000name: ball\nsphere",  # (a name comment to the Python reader)
+    "!\u00e9 name: ball\nsphere",  # (not one: declined all the same)
+    "! name: \u00e9\nsphere",  # (no ASCII in the name: it could be all white space to \s, naming nothing)
+    "! name: ball\n! name: \u3000\nsphere",
+])
+def test_a_name_comment_whose_name_beyond_ascii_may_be_empty_is_declined(text):
+    assert_declined(text, "ascii")
+
+
+def test_an_error_after_a_comment_beyond_ascii_has_the_python_readers_place():
+    text = "sphere ! caf\u00e9 \U0001F600\r\ncube ! \u2603\n  translate 1 two 3 sphere"
+    assert fastread.scan(text).reason == "number"
+    assert_readers_agree(text)
+    with pytest.raises(SDLError, match="^scene.sdl:3:15: expected a number after 'translate'"):
+        parse_sdl(text, file="scene.sdl", fast=True)
+
+
+def test_a_lone_surrogate_is_declined_without_an_exception():
+    """(A str made in Python: read_text replaces bytes that are not UTF-8 with U+FFFD.)"""
+    text = "sphere ! \ud800\ncube"
+    assert fastread.scan(text) == fastread.Declined("ascii", 9)
+    assert_declined(text, "ascii")
+    assert len(parse_sdl(text).objects) == 2
+
+
+def test_the_decline_offset_counts_characters_after_a_comment_beyond_ascii():
+    text = "sphere ! \U0001F600\u2603\u00e9\ncube def a { sphere }"
+    assert fastread.scan(text) == fastread.Declined("word", text.index("def"))

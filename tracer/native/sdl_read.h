@@ -11,8 +11,12 @@
  *
  * Bit for bit the same scene as the Python reader:
  * - tokens: runs of bytes that are not white space (scan_is_space, str.split's ASCII set), cut by '!', which
- *   starts a comment up to the next '\n'; lines are counted at '\n' only; columns are 1-based bytes (the
- *   caller hands over ASCII text only, so bytes are characters);
+ *   starts a comment up to the next '\n'; lines are counted at '\n' only; columns are 1-based bytes;
+ * - text: UTF-8, whose bytes beyond ASCII it reads only inside comments (they are the Python reader's
+ *   comments whatever they are: no UTF-8 sequence holds a '\n' byte; see sdl_comment for name comments).
+ *   Anywhere else such a byte declines the text: Python's str.split takes some of those characters (U+00A0,
+ *   U+3000, ...) for white space.  So every byte before a token on its line is ASCII, and its column in bytes
+ *   is its column in characters;
  * - numbers: scan.h's scan_word, NUMBER_RE's grammar with Python float()'s correctly rounded value;
  * - transforms: the operations of transforms.affine_translate, affine_scale, affine_times and rotation(), in
  *   the same order (the core is built with -ffp-contract=off, so no product is fused into a sum), the
@@ -49,11 +53,11 @@ static const char sdl_action_names[] =
 enum {
     SDL_READ = 0, SDL_DECLINE_WORD, SDL_DECLINE_BRACE, SDL_DECLINE_NUMBER, SDL_DECLINE_END, SDL_DECLINE_VALUE,
     SDL_DECLINE_POP, SDL_DECLINE_AXIS, SDL_DECLINE_TRANSFORM, SDL_DECLINE_SIZE, SDL_DECLINE_MEMORY,
-    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE
+    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII
 };
 
 static const char sdl_decline_names[] =
-    "read word brace number end value pop axis transform size memory vocabulary angle";
+    "read word brace number end value pop axis transform size memory vocabulary angle ascii";
 
 /* A material row: the Material's fields in its order (four colours, six numbers), then the texture, the
  * count of parameters and the parameters (unused ones 0). */
@@ -71,7 +75,7 @@ enum { SDL_SET_GLOBAL_AMBIENT = 1, SDL_SET_BACKGROUND = 2, SDL_SET_MIN_REFLECTIV
 /* What one read gives; fastread.py mirrors it with ctypes (every field 8 bytes, in this order). */
 typedef struct {
     int64_t status;          /* SDL_READ or a decline reason */
-    int64_t decline_offset;  /* the byte where it declined */
+    int64_t decline_offset;  /* the byte where it declined (the caller turns it into a character offset) */
     int64_t shapes, materials, lights, cameras, names;
     int16_t *kinds;          /* shapes */
     double *affines;         /* shapes x 12 */
@@ -183,7 +187,7 @@ typedef struct {
     int64_t length, pos;
     int64_t line, line_start;    /* the current line (1-based) and where it starts */
     int64_t name_start, name_length;  /* the name comment waiting for a shape; length 0: none */
-    int non_ascii;               /* a byte outside ASCII was met (the caller should have checked) */
+    int64_t non_ascii;           /* where the first byte beyond ASCII outside a plain comment is; -1: none */
 } SdlLexer;
 
 static int sdl_is_regex_space(unsigned char c)
@@ -193,29 +197,48 @@ static int sdl_is_regex_space(unsigned char c)
 }
 
 /* Skips the comment starting at '!' (text[i]); keeps its name if it is a ``! name: text`` comment with a
- * non-empty name (lexer._NAME_COMMENT_RE).  Returns where its line ends. */
+ * non-empty name (lexer._NAME_COMMENT_RE).  Returns where its line ends.
+ * Bytes beyond ASCII are skipped with the comment, but Python's \s takes some characters beyond ASCII for
+ * white space (U+00A0, U+3000, ...): so the name kept is stripped of ASCII white space only (the caller strips
+ * the rest, str.strip being the pattern's \s*), and where such a character could decide whether the comment
+ * names anything at all (before "name:", or in a name without a byte of ASCII that is not white space, which
+ * may be empty to Python), the comment sets lx->non_ascii. */
 static int64_t sdl_comment(SdlLexer *lx, int64_t i)
 {
     const char *t = lx->text;
     const char *newline = memchr(t + i, '\n', (size_t)(lx->length - i));
     int64_t end = newline != NULL ? newline - t : lx->length;
-    for (int64_t j = i; j < end; j++)
-        if ((unsigned char)t[j] >= 0x80)
-            lx->non_ascii = 1;
     int64_t p = i + 1;
+    while (p < end && (sdl_is_regex_space((unsigned char)t[p]) || (unsigned char)t[p] >= 0x80))
+        p++;
+    if (end - p < 5 || memcmp(t + p, "name:", 5) != 0)
+        return end;
+    for (int64_t j = i + 1; j < p; j++)
+        if ((unsigned char)t[j] >= 0x80) {
+            if (lx->non_ascii < 0)
+                lx->non_ascii = j;
+            return end;
+        }
+    p += 5;
     while (p < end && sdl_is_regex_space((unsigned char)t[p]))
         p++;
-    if (end - p >= 5 && memcmp(t + p, "name:", 5) == 0) {
-        p += 5;
-        while (p < end && sdl_is_regex_space((unsigned char)t[p]))
-            p++;
-        int64_t q = end;
-        while (q > p && sdl_is_regex_space((unsigned char)t[q - 1]))
-            q--;
-        if (q > p) {  /* an empty name names nothing (and leaves an earlier one waiting) */
-            lx->name_start = p;
-            lx->name_length = q - p;
-        }
+    int64_t q = end;
+    while (q > p && sdl_is_regex_space((unsigned char)t[q - 1]))
+        q--;
+    int beyond = 0, visible = 0;  /* bytes beyond ASCII; ASCII bytes that are not white space */
+    for (int64_t j = p; j < q; j++) {
+        unsigned char c = (unsigned char)t[j];
+        beyond |= c >= 0x80;
+        visible |= c < 0x80 && !sdl_is_regex_space(c);
+    }
+    if (beyond && !visible) {
+        if (lx->non_ascii < 0)
+            lx->non_ascii = p;
+        return end;
+    }
+    if (q > p) {  /* an empty name names nothing (and leaves an earlier one waiting) */
+        lx->name_start = p;
+        lx->name_length = q - p;
     }
     return end;
 }
@@ -246,8 +269,8 @@ static int sdl_next(SdlLexer *lx, int64_t *start, int64_t *end)
         return -1;
     *start = i;
     while (i < n && !scan_is_space((unsigned char)t[i]) && t[i] != '!' && t[i] != '{' && t[i] != '}') {
-        if ((unsigned char)t[i] >= 0x80)
-            lx->non_ascii = 1;
+        if ((unsigned char)t[i] >= 0x80 && lx->non_ascii < 0)
+            lx->non_ascii = i;
         i++;
     }
     *end = i;
@@ -265,6 +288,8 @@ static int sdl_numbers(SdlLexer *lx, int count, double *out)
             return SDL_DECLINE_END;
         if (got < 0)
             return SDL_DECLINE_BRACE;
+        if (lx->non_ascii >= 0)
+            return SDL_DECLINE_ASCII;
         int ok;
         out[k] = scan_word(lx->text + start, lx->text + end, &ok);
         if (!ok)
@@ -505,14 +530,18 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
     for (;;) {
         int64_t start, end;
         int got = sdl_next(lx, &start, &end);
+        if (lx->non_ascii >= 0) {
+            res->decline_offset = lx->non_ascii;
+            return SDL_DECLINE_ASCII;
+        }
         if (got == 0)
-            return lx->non_ascii ? SDL_DECLINE_WORD : SDL_READ;
+            return SDL_READ;
         res->decline_offset = lx->pos;
         if (got < 0)
             return SDL_DECLINE_BRACE;
         res->decline_offset = start;
         int slot = sdl_lookup(vocabulary, lx->text + start, end - start);
-        if (slot < 0 || lx->non_ascii)
+        if (slot < 0)
             return SDL_DECLINE_WORD;
         int argument = vocabulary->argument[slot];
         double *top = res->stack + 12 * (res->depth - 1);
@@ -668,7 +697,9 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
             return SDL_DECLINE_VOCABULARY;
         }
         if (status != SDL_READ) {
-            if (status != SDL_DECLINE_END)
+            if (status == SDL_DECLINE_ASCII)
+                res->decline_offset = lx->non_ascii;
+            else if (status != SDL_DECLINE_END)
                 res->decline_offset = lx->pos;
             return status;
         }
@@ -713,7 +744,7 @@ SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int6
     if (!sdl_vocabulary(vocabulary, words, words_length, codes, count) || length < 0) {
         res->status = SDL_DECLINE_VOCABULARY;
     } else {
-        SdlLexer lx = {text, length, 0, 1, 0, 0, 0, 0};
+        SdlLexer lx = {text, length, 0, 1, 0, 0, 0, -1};
         res->status = sdl_read(res, &lx, vocabulary, defaults, shared_libm != 0);
     }
     free(vocabulary);

@@ -35,7 +35,7 @@ from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
 #: whose sine and cosine are not plain 0 or +-1.
 SHARED_LIBM = sys.platform != "win32"
 
-_NON_ASCII = re.compile(r"[^\x00-\x7f]")
+_SURROGATE = re.compile(r"[\ud800-\udfff]")
 
 #: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
 DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference"))
@@ -163,10 +163,11 @@ def scan(text: str) -> Union[Columns, Declined, None]:
     setup = _setup()
     if setup is None:
         return None
-    if not text.isascii():  # (columns are counted in characters; ASCII makes them bytes)
-        return Declined("ascii", _NON_ASCII.search(text).start())
+    utf8 = _Utf8.of(text)
+    if utf8 is None:  # a lone surrogate (in a str made in Python: read_text replaces bad bytes with U+FFFD)
+        return Declined("ascii", _SURROGATE.search(text).start())
     lib = setup.lib
-    pointer = lib.rt_sdl_read(_ascii_bytes(text), len(text), setup.words, len(setup.words),
+    pointer = lib.rt_sdl_read(utf8.data, utf8.size, setup.words, len(setup.words),
                               setup.codes.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)), len(setup.codes),
                               setup.defaults.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), SHARED_LIBM)
     if not pointer:
@@ -174,21 +175,58 @@ def scan(text: str) -> Union[Columns, Declined, None]:
     try:
         res = pointer.contents
         if res.status != 0:
-            return Declined(setup.reasons[res.status], int(res.decline_offset))
-        return _columns(res, text)
+            return Declined(setup.reasons[res.status], utf8.characters_before(int(res.decline_offset)))
+        return _columns(res, utf8)
     finally:
         lib.rt_sdl_free(pointer)
 
 
-def _ascii_bytes(text: str) -> Union[int, bytes]:
-    """An ASCII ``text``'s characters as bytes for C: in CPython, the address of the string's own (an ASCII
-    str keeps one byte per character, and its UTF-8 form is those bytes), valid while ``text`` lives; else a
-    copy (encoding 100 MB takes a few tenths of a second and as much memory again)."""
-    if _utf8_and_size is None:
-        return text.encode("ascii")
-    size = ctypes.c_ssize_t()
-    address = _utf8_and_size(text, ctypes.byref(size))
-    return address if address and size.value == len(text) else text.encode("ascii")
+@dataclass(frozen=True)
+class _Utf8:
+    """A text's UTF-8 as the C reader gets it, and the way back from its byte offsets to the text's."""
+
+    text: str
+    #: In CPython, the address of the str's own UTF-8 (an ASCII str's own bytes; for any other str, a copy
+    #: CPython makes once and keeps with the str), valid while ``text`` lives; else an encoded copy (encoding
+    #: 100 MB takes a few tenths of a second and as much memory again).
+    data: Union[int, bytes]
+    size: int  # in bytes
+
+    @staticmethod
+    def of(text: str) -> Optional["_Utf8"]:
+        """None when ``text`` has no UTF-8 form (it holds a lone surrogate)."""
+        if _utf8_and_size is not None:
+            size = ctypes.c_ssize_t()
+            try:
+                address = _utf8_and_size(text, ctypes.byref(size))
+            except UnicodeEncodeError:
+                return None
+            if address:
+                return _Utf8(text, address, size.value)
+        try:
+            data = text.encode("utf-8")
+        except UnicodeEncodeError:
+            return None
+        return _Utf8(text, data, len(data))
+
+    def characters_before(self, offset: int) -> int:
+        """The character offset in the text of byte ``offset``: the bytes before it that start a character
+        (all but UTF-8's continuation bytes, 10xxxxxx)."""
+        if self.size == len(self.text):  # ASCII: bytes are characters
+            return offset
+        before = np.frombuffer(self.bytes_at(0, offset), dtype=np.uint8)
+        return offset - int(np.count_nonzero((before & 0xC0) == 0x80))
+
+    def bytes_at(self, start: int, length: int) -> bytes:
+        if isinstance(self.data, bytes):
+            return self.data[start:start + length]
+        return ctypes.string_at(self.data + start, length)
+
+    def cut(self, start: int, length: int) -> str:
+        """The characters of bytes [start, start + length), which start and end characters."""
+        if self.size == len(self.text):
+            return self.text[start:start + length]
+        return self.bytes_at(start, length).decode("utf-8")
 
 
 def _cpython_utf8_and_size():
@@ -215,11 +253,12 @@ def _view(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
     return np.ctypeslib.as_array(pointer, shape=shape)  # (of the pointer's type, which is dtype)
 
 
-def _columns(res: _Result, text: str) -> Columns:
+def _columns(res: _Result, utf8: _Utf8) -> Columns:
     n = res.shapes
     # (what becomes Python objects is read in place; what the scene keeps as arrays is copied)
     name_rows = _view(res.name_rows, (res.names, 3), np.int64).tolist()
-    names = {row: text[start:start + length] for row, start, length in name_rows} or None
+    # (C strips a name of white space in ASCII; str.strip is the name pattern's \s* beyond ASCII too)
+    names = {row: utf8.cut(start, length).strip() for row, start, length in name_rows} or None
     materials = MaterialRows(_view(res.material_rows, (res.materials, MaterialRows.WIDTH), np.float64))  # (a copy)
     lights = [Light(tuple(row[:3]), tuple(row[3:])) for row in _view(res.light_rows, (res.lights, 6),
                                                                        np.float64).tolist()]

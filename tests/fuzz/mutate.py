@@ -253,7 +253,8 @@ def make_case(seed: int, usd: bool = True) -> Case:
     deep = 1500 if "numpy" not in options else 100
     if kind == "sdl":
         text = mutate_text(rng, original, kind, deep)
-        if rng.random() < 0.3:
+        # (not for the NumPy path, the slow reference: a thousand padding shapes take it past the hang limit)
+        if rng.random() < 0.3 and "numpy" not in options:
             text = padded_for_the_c_reader(rng, text)
         case = Case(kind, {f"{name}.sdl": text.encode()})
     elif kind == "usd":

@@ -124,6 +124,12 @@ def render_settings(scene) -> dict:
                 sampling=s.sampling.lower(), threshold=s.threshold)
 
 
+def blocky_warning(block_size: int) -> str:
+    """What a final render without Progressive Refinement says when it traces blocks, not pixels."""
+    return (f"Progressive Refinement is off with Block Size {block_size}: the image is one ray per "
+            f"{block_size} x {block_size} block (set Block Size 1, or tick Progressive Refinement)")
+
+
 def preview_lighting(tracer_scene) -> None:
     """Blender's preview scene has lights of 10 and 70 W, which as SDL lights (1000 W is colour 1) leave a
     material preview nearly black: scale them together so that the brightest is white, as SDL scenes are lit."""
@@ -276,6 +282,9 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             settings = render_settings(scene)
             if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
                 settings.update(block_size=1, progressive=False, samples=1)
+            elif not settings["progressive"] and settings["block_size"] > 1:
+                warnings.append(blocky_warning(settings["block_size"]))
+                self.report({"WARNING"}, warnings[-1])
             if settings["progressive"] and not displayed():
                 # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
                 # the same rays either way, so the image is the same without them.
@@ -331,7 +340,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         except Exception as exc:  # noqa: BLE001 - a render must end with a message, not a traceback
             LAST_RENDER["error"] = str(exc)
             self.report({"ERROR"}, f"SDL Ray Tracer: {exc}")
-            traceback.print_exc()
+            if not isinstance(exc, (deps.module("errors").TracerError, ValueError)):
+                traceback.print_exc()  # (the scene's own problems are said in one line; a bug shows where)
         finally:
             self.end_result(result)
 

@@ -141,6 +141,30 @@ def far_light(distance: float) -> Scene:
                  settings=Settings(global_ambient=(0.1, 0.1, 0.1), background=(0.1, 0.1, 0.15)))
 
 
+def cone_apex(span: float) -> Scene:
+    """A cone standing on its base, its apex seen from 3 units away through a window ``span`` wide, lit from
+    the eye (every point seen faces the light, and a convex solid cannot shadow itself: any shadow on it is
+    a feeler finding again the surface it left)."""
+    from .transforms import rotation
+
+    cone = Shape("cone", rotation(-90, 1, 0, 0), Material(diffuse=(0.85, 0.6, 0.2), **_MATT))
+    apex = np.asarray(_point(cone.matrix, (0.0, 0.0, 1.0)))
+    view = np.array([0.3, 0.5, 1.0]) / np.linalg.norm([0.3, 0.5, 1.0])
+    eye = tuple((apex + 3.0 * view).tolist())
+    angle = 2.0 * math.degrees(math.atan(span / 2.0 / 3.0))
+    return Scene(objects=[cone], lights=[Light(eye, (0.9, 0.9, 0.9))],
+                 camera=Camera(eye, tuple(apex.tolist()), (0, 1, 0), angle),
+                 settings=Settings(global_ambient=(0.1, 0.1, 0.1), background=(0.1, 0.1, 0.15)))
+
+
+def without_shadows(scene: Scene):
+    """The scene compiled with its shadow feelers turned off (a twin for scenes that should have no shadow)."""
+    from .compile import compile_scene
+
+    compiled = compile_scene(scene)
+    return replace(compiled, effects=compiled.effects - {"shadows"})
+
+
 def bundled(name: str) -> Scene:
     from . import load
 
@@ -171,6 +195,9 @@ CASES: dict[str, Callable[[], tuple[Scene, Scene]]] = {
     "light in the floor plane: moved by +1e5": lambda: (light_on_surface("floor", LIGHT_OFF),
                                                         moved(light_on_surface("floor"), (1e5, 1e5, 1e5))),
     "light at 1e300": lambda: (far_light(1e12), far_light(1e300)),
+    "cone apex: span 1e-4": lambda: (without_shadows(cone_apex(1e-4)), cone_apex(1e-4)),
+    "cone apex: span 1e-6": lambda: (without_shadows(cone_apex(1e-6)), cone_apex(1e-6)),
+    "cone apex: span 1e-8": lambda: (without_shadows(cone_apex(1e-8)), cone_apex(1e-8)),
 }
 
 

@@ -57,6 +57,7 @@ class SurfaceHits:
     part: np.ndarray
     uv: np.ndarray
     error: np.ndarray  # bound on the rounding error of t (tracer.numerics)
+    offset: np.ndarray  # how far a secondary ray starts from the hit, before the world rounding
 
 
 def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
@@ -65,7 +66,7 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
     t_min = np.broadcast_to(np.asarray(t_min, dtype=float), (n,))
     best = SurfaceHits(hit=np.zeros(n, bool), t=np.full(n, np.inf), normal=np.zeros((n, 3)),
                        entering=np.zeros(n, bool), shape=np.full(n, -1), obj=np.full(n, -1),
-                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n))
+                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n), offset=np.zeros(n))
     for index, obj in enumerate(scene.objects):
         h = obj.first_hit(origins, directions, t_min, best.t)
         closer = h.t[:, 0] < best.t
@@ -79,6 +80,7 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
         best.part[closer] = h.part[closer, 0]
         best.uv[closer] = h.uv[closer, 0]
         best.error[closer] = h.error[closer, 0]
+        best.offset[closer] = h.offset[closer, 0]
     best.hit = np.isfinite(best.t)
     length = np.linalg.norm(best.normal, axis=1, keepdims=True)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
@@ -236,7 +238,7 @@ class Tracer:
         mats = self.scene.materials
         mat = self.material_of[hits.shape[idx]]
         # Secondary rays start off the surface by the bound on the hit point's rounding error.
-        offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
+        offset = numerics.offset_distance(hits.offset[idx], t, o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
             texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx])
@@ -273,7 +275,8 @@ class Tracer:
         feeler_start = point + offset * normal
         for light, (light_pos, light_color) in enumerate(zip(self.scene.light_positions, self.scene.light_colors)):
             to_light = light_pos - point
-            s = to_light / numerics.norm3(to_light)[:, None]  # (a light at 1e300: |s|^2 overflows)
+            distance = numerics.norm3(to_light)  # (a light at 1e300: |s|^2 overflows)
+            s = to_light / distance[:, None]
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
@@ -283,7 +286,7 @@ class Tracer:
                 lit[rows[skip]] = False
                 rows = rows[~skip]
                 self.counts.shadow += rows.size
-                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos)
+                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos, distance[rows])
                 lit[rows] &= ~occluded(self.scene, feeler_start[rows], to_light, reach)
             rows = np.nonzero(lit)[0]
             if rows.size == 0:

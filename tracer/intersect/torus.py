@@ -129,6 +129,13 @@ def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> n
     return s
 
 
+def torus_value(points: np.ndarray, tube: float = TORUS_TUBE_RADIUS) -> np.ndarray:
+    """The torus function (|p|^2 + R^2 - r^2)^2 - 4 R^2 (x^2 + y^2) at (..., 3) points (shapes.h's sums)."""
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    k = x * x + y * y + z * z + RING_RADIUS * RING_RADIUS - tube * tube
+    return k * k - 4.0 * RING_RADIUS * RING_RADIUS * (x * x + y * y)
+
+
 def torus_normal(points: np.ndarray, tube: float = TORUS_TUBE_RADIUS) -> np.ndarray:
     """Outward gradient of the torus function at (..., 3) points."""
     r2 = np.sum(points * points, axis=-1, keepdims=True)
@@ -174,6 +181,11 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances =
     hits.entering[idx] = np.isfinite(t) & (np.arange(4) % 2 == 0)
     hits.part[idx] = np.where(np.isfinite(t), 0, -1)
     hits.error[idx] = np.where(np.isfinite(t), root_error(s, coeffs, magnitudes, tol) / speed[idx, None], 0.0)
+    # G is the quartic itself (the normal its gradient): it bends by speed^2 times its curvature in s
+    x = np.where(np.isfinite(s), s, 0.0)
+    curvature = np.abs((12.0 * x + 6.0 * coeffs[0][:, None]) * x + 2.0 * coeffs[1][:, None])
+    hits.bend[idx] = np.where(np.isfinite(t), curvature * speed[idx, None] * speed[idx, None], 0.0)
+    hits.offset[idx] = np.where(np.isfinite(t), np.abs(torus_value(points)), 0.0)
     return hits
 
 

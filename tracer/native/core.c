@@ -220,7 +220,7 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
     case K_PLANE:
         *inside = plane_inside_at_start(o, d);
         return hits_z_plane(o, d, out, 0, D->tol_square_edge);
-    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
+    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], D->tol_hit_ulps, out);
     case K_TORUS:
         return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
     case K_POLYHEDRON: {
@@ -249,6 +249,22 @@ static inline double prim_generic_ray(const double *inv, const double *o, const 
     for (int i = 0; i < 3; i++)
         og[i] = raw[i] + shift * dg[i];
     return shift;
+}
+
+/* A hit's bounds (Primitive.bound_hits): its t's error (plus the shape's own root error, where it has one)
+ * and how far its generic point may be from the surface: the shape's residual over |n| (its first-order
+ * distance) plus the line's error; the shading turns it into a world distance (world_unit_normal).  A
+ * mesh's triangles report no bend or residual: they keep the unit-curvature floor of the bound and their
+ * point is off by the t error along the line. */
+static inline void hit_bounds(const ErrorFrame *frame, const double *dg, int mesh, Hit *h)
+{
+    double error = point_error(frame, h->t);
+    double nn = dot3(h->n, h->n), length = sqrt(nn);
+    if (mesh)
+        h->bend = 2.0 * length * frame->dd / frame->size;
+    h->err += time_error_of(frame, error, dg, h, nn, length);
+    double gap = nn > 0.0 ? h->offset / length : h->offset;
+    h->offset = mesh ? h->err * sqrt(frame->dd) : gap + frame->size * error;
 }
 
 /* All hits of primitive p along the whole world line (Primitive.intersect), into out. */
@@ -280,12 +296,12 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     }
     ErrorFrame frame;
     error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
+    int mesh = D->prim_kind[p] == K_MESH;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
         h->t += shift;
         h->shape = (int32_t)p;
-        /* (plus the shape's own root error, where it has one: the torus) */
-        h->err += time_error(&frame, point_error(&frame, h->t), dg, h->n);
+        hit_bounds(&frame, dg, mesh, h);
     }
     out->n = n;
     return 1;
@@ -311,7 +327,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
             error_frame(o, og, dg, rounding, &frame);
-            out->err = time_error(&frame, point_error(&frame, out->t), dg, out->n);
+            hit_bounds(&frame, dg, 1, out);
         }
         return 1;
     }
@@ -329,16 +345,15 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!(t > t_min && t < t_max))
             continue;
         /* after t_min with its whole error interval (compiled.first_after), compared without square roots */
-        if (solid_analytic(D->prim_kind[p]))
-            agree_with_crossing(&buf[i], dg);
+        double along = solid_analytic(D->prim_kind[p]) ? agree_with_crossing(&buf[i], dg) : dot3(buf[i].n, dg);
         double error = point_error(&frame, t);
-        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n) &&
-            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, buf[i].n))) {
+        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, &buf[i], along) &&
+            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, &buf[i], along))) {
             *out = buf[i];
             out->t = t;
             out->shape = (int32_t)p;
-            if (!feeler)  /* (plus the shape's own root error, where it has one: the torus) */
-                out->err = buf[i].err + time_error(&frame, error, dg, buf[i].n);
+            if (!feeler)
+                hit_bounds(&frame, dg, 0, out);
             return 1;
         }
     }
@@ -617,11 +632,14 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
     return 0;
 }
 
-/* The hit's unit world normal (zero if degenerate), as first_hits normalises it. */
-static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
+/* The hit's unit world normal (zero if degenerate), as first_hits normalises it; returns how far along it
+ * the world hit point may be from the surface (SurfaceHits.offset): the hit's generic distance maps to the
+ * world along the gradient n by |n| / |n M^-1|, exactly for a plane (tracer.numerics.world_offsets). */
+static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
 {
     normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, n);
-    double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    double squared = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    double length = sqrt(squared);
     if (length > 0.0) {
         n[0] /= length;
         n[1] /= length;
@@ -629,6 +647,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     } else {
         n[0] = n[1] = n[2] = 0.0;
     }
+    return h->offset * sqrt(dot3(h->n, h->n) / squared);
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -1192,11 +1211,12 @@ int rt_occluded(void *scene, int64_t n, const double *origins, const double *dir
     return run_job(&job, threads, NULL);
 }
 
-/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, as
- * the reference's obj.intersect(); returns the number of hits (only `capacity` are written) or -1. */
+/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, with
+ * their error bounds and offsets, as the reference's obj.intersect(); returns the number of hits (only
+ * `capacity` are written) or -1. */
 int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction,
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
-                       int32_t *part, double *uv, int8_t *inside_at_start)
+                       int32_t *part, double *uv, int8_t *inside_at_start, double *error, double *offset)
 {
     const Scene *S = (const Scene *)scene;
     if (object < 0 || object >= S->d.n_objects)
@@ -1211,11 +1231,14 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
         const Hit *h = &top->h[i];
         t[i] = h->t;
         entering[i] = (int8_t)h->entering;
+        double unit[3];
+        offset[i] = world_unit_normal(S, h, unit);
         normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, normal + 3 * i);
         shape[i] = h->shape;
         part[i] = h->part;
         uv[2 * i] = h->uv[0];
         uv[2 * i + 1] = h->uv[1];
+        error[i] = h->err;
     }
     if (n >= 0)
         *inside_at_start = (int8_t)top->inside;

@@ -32,7 +32,15 @@ typedef struct {
     int32_t shape;
     int32_t entering;
     int32_t pad;
-    double err;         /* bound on the rounding error of t (tracer.numerics) */
+    double err;         /* bound on the rounding error of t (tracer.numerics); shapes: their own root's */
+    /* From a shape routine to its primitive's error bound (tracer.intersect.hits.HitArrays): with n the
+     * gradient of the shape's function G on the surface, G's second derivative along the generic direction
+     * (0 for a flat face). */
+    double bend;
+    /* Shapes: the residual of the computed hit point, |G| to first order (|G| / |n| is its distance from
+     * the surface); after the primitive: how far the point may be from the surface in generic units (the
+     * shading's world_unit_normal maps it to the world). */
+    double offset;
 } Hit;
 
 int64_t rt_desc_size(void);
@@ -52,7 +60,7 @@ int rt_occluded(void *scene, int64_t n, const double *origins, const double *dir
                 int8_t *blocked, int64_t threads);
 int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction,
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
-                       int32_t *part, double *uv, int8_t *inside_at_start);
+                       int32_t *part, double *uv, int8_t *inside_at_start, double *error, double *offset);
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
                       double *out);
 

@@ -87,7 +87,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     double point[3], facing[3];
     for (int i = 0; i < 3; i++)
         point[i] = o[i] + h.t * d[i];
-    world_unit_normal(S, &h, facing);
+    double gap = world_unit_normal(S, &h, facing);
     if (dot3(facing, d) > 0.0) {  /* shade the side the ray arrives on */
         facing[0] = -facing[0];
         facing[1] = -facing[1];
@@ -95,7 +95,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     }
     int64_t mat = D->prim_material[h.shape];
     /* secondary rays start off the surface by the bound on the hit point's rounding error */
-    double offset = offset_distance(h.t, h.err, o, d, D->tol_offset_ulps);
+    double offset = offset_distance(gap, h.t, o, d, D->tol_offset_ulps);
     const double *ambient = D->mat_ambient + 3 * mat, *emissive = D->mat_emissive + 3 * mat;
     const double *diffuse = D->mat_diffuse + 3 * mat;
     double textured_ambient[3], textured_diffuse[3];
@@ -136,7 +136,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                     continue;
                 w->counts[RAY_SHADOW]++;
                 double to_light[3];
-                double reach = feeler_to(feeler, lp, to_light);
+                double reach = feeler_to(feeler, lp, sl, to_light);
                 if (scene_occluded(S, w, feeler, to_light, reach, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
                     continue;
             }

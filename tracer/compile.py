@@ -282,7 +282,8 @@ class Primitive:
         the rounding of t (plus the shape's own root error, where it has one), and ``offset``, how far the
         generic point may be from the surface (the shape's residual over |n|, its first-order distance, plus
         the line's error; the C core's hit_bounds).  A mesh's triangles report no bend or residual: they keep
-        the unit-curvature floor of the bound and their point is off by the t error along the line."""
+        the unit-curvature floor of the bound and their point is off by the t error along the line.  (The
+        caller ignores floating-point warnings.)"""
         linear, translation = self.inverse_norms
         raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
         size = self.generic_size
@@ -297,9 +298,7 @@ class Primitive:
         if mesh:
             hits.offset = hits.error * np.sqrt(dd)
         else:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                gap = np.where(nn > 0.0, hits.offset / length, hits.offset)
-            hits.offset = gap + size * error
+            hits.offset = np.where(nn > 0.0, hits.offset / length, hits.offset) + size * error
         hits.bend = None  # (read; take and the others need not carry it)
 
     def to_world(self, hits: HitArrays) -> None:
@@ -342,16 +341,16 @@ class Primitive:
         o, d = self.to_generic(origins[idx], directions[idx])
         # Move each generic origin to the line's point nearest the generic centre: every shape's
         # equation then has O(1) coefficients, however far away the ray started.
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             shift = -numerics.dot3(o, d) / numerics.dot3(d, d)
-        shift = np.where(np.isfinite(shift), shift, 0.0)
-        centred = o + shift[:, None] * d
-        local = self.generic_hits(centred, d)
-        if self._normals_agree:
-            analytic.agree_with_crossing(local, d)
-        local.t = local.t + shift[:, None]
-        self.bound_hits(origins[idx], centred, d, local)
-        self.to_world(local)
+            shift = np.where(np.isfinite(shift), shift, 0.0)
+            centred = o + shift[:, None] * d
+            local = self.generic_hits(centred, d)
+            if self._normals_agree:
+                analytic.agree_with_crossing(local, d)
+            local.t = local.t + shift[:, None]
+            self.bound_hits(origins[idx], centred, d, local)
+            self.to_world(local)
         local.shape[np.isfinite(local.t)] = self.index
         if self.thin:
             local = sheet_to_pairs(local)
@@ -372,8 +371,9 @@ class Primitive:
         if idx.size:
             o, d = self.to_generic(origins[idx], directions[idx])
             local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
-            self.bound_hits(origins[idx], o, d, local)
-            self.to_world(local)
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                self.bound_hits(origins[idx], o, d, local)
+                self.to_world(local)
             local.shape[np.isfinite(local.t)] = self.index
             for name in ("t", "entering", "normal", "part", "uv", "shape", "error", "offset"):
                 getattr(out, name)[idx] = getattr(local, name)

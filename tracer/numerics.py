@@ -124,11 +124,10 @@ def crossing_shift(delta: np.ndarray, slope: np.ndarray, bend: np.ndarray) -> np
     most sqrt(2 delta / bend).
 
     No curvature is assumed (the first bound took unit curvature near tangency: a flat face at grazing
-    incidence exceeded it by 10^6, a cone near its apex by 10^5)."""
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        squared = slope * slope
-        shift = np.where(squared > 2.0 * bend * delta, delta * slope / (squared - bend * delta),
-                         np.sqrt(2.0 * delta / bend))
+    incidence exceeded it by 10^6, a cone near its apex by 10^5).  (Its callers ignore floating-point
+    warnings: a zero slope or bend divides by zero where the other form is taken.)"""
+    squared = slope * slope
+    shift = np.where(squared > 2.0 * bend * delta, delta * slope / (squared - bend * delta), np.sqrt(2.0 * delta / bend))
     return np.where(delta > 0.0, shift, 0.0)
 
 
@@ -154,12 +153,12 @@ def time_errors(error: np.ndarray, hits, direction: np.ndarray, size: float, nn:
     and their bend, tracer.intersect.hits).
 
     G along the line is off by |n| size E (the line's error across the surface), and its crossing moves by
-    crossing_shift of that; a zero normal counts as grazing.  (numeric.h's time_error_of.)"""
+    crossing_shift of that; a zero normal counts as grazing.  (numeric.h's time_error_of; the caller ignores
+    floating-point warnings.)"""
     along = np.abs(dot3(hits.normal, direction[:, None, :]))
     dd = dot3(direction, direction)[:, None]
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        bound = crossing_shift(length * (size * error), along, np.abs(hits.bend))
-        return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
+    bound = crossing_shift(length * (size * error), along, np.abs(hits.bend))
+    return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
 
 
 def normal_to_world(normal: np.ndarray, normal_matrix: np.ndarray) -> np.ndarray:
@@ -172,9 +171,8 @@ def world_offsets(gap: np.ndarray, normal: np.ndarray, world: np.ndarray) -> np.
     """How far (N, K) along the unit world normal the world hit point can be from the surface: a generic
     distance ``gap`` (the point's own distance from the surface plus the line's error) along the gradient
     ``normal`` (N, K, 3) maps to the world along its world normal ``world`` by |n| / |world| (exactly for a
-    plane; the C core's world_unit_normal)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return gap * np.sqrt(dot3(normal, normal) / dot3(world, world))
+    plane; the C core's world_unit_normal; the caller ignores floating-point warnings)."""
+    return gap * np.sqrt(dot3(normal, normal) / dot3(world, world))
 
 
 def offset_distance(offset: np.ndarray, t: np.ndarray, origins: np.ndarray, directions: np.ndarray,

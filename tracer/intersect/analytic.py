@@ -106,10 +106,9 @@ def intersect_cube(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     part_in = 2 * axis_in + (sign[rows, axis_in] < 0)
     part_out = 2 * axis_out + (sign[rows, axis_out] > 0)
     out = _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit)
-    with np.errstate(invalid="ignore"):  # the point's distance from its face's plane
-        for slot, (t, axis) in enumerate(((t_in, axis_in), (t_out, axis_out))):
-            gap = np.abs(np.abs(origin[rows, axis] + t * direction[rows, axis]) - 1.0)
-            out.offset[:, slot] = np.where(hit, gap, 0.0)
+    for slot, (t, axis) in enumerate(((t_in, axis_in), (t_out, axis_out))):  # its distance from its face's plane
+        gap = np.abs(np.abs(origin[rows, axis] + np.where(hit, t, 0.0) * direction[rows, axis]) - 1.0)
+        out.offset[:, slot] = np.where(hit, gap, 0.0)
     return out
 
 
@@ -207,13 +206,14 @@ def wall_error_terms(origin: np.ndarray, direction: np.ndarray, k: float, a: np.
     point error no longer covers).  The residual is the point's distance from the wall times |n| =
     rho sqrt(1 + k^2): that of (rho, z) from the line rho = 1 + k z in the plane through the axis, or, where
     its foot (rho, z) - (rho - w) (1, -k) / (1 + k^2) is past a cone's apex, its distance from the apex."""
-    own = crossing_shift(rounding * wall_terms_at(sizes, t), np.abs(a * t + b), np.abs(a))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        own = crossing_shift(rounding * wall_terms_at(sizes, t), np.abs(a * t + b), np.abs(a))
     p = origin + t[:, None] * direction
     rho = np.sqrt(p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1])
     w = 1.0 + k * p[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        residual = np.where(rho * k * k + w >= 0.0, np.abs(rho - w) * rho,
-                            np.sqrt(rho * rho + (w / k) * (w / k)) * rho * np.sqrt(1.0 + k * k))
+    apex = k if k != 0.0 else 1.0  # (a cylinder has no apex: its foot is never past it)
+    residual = np.where(rho * k * k + w >= 0.0, np.abs(rho - w) * rho,
+                        np.sqrt(rho * rho + (w / apex) * (w / apex)) * rho * np.sqrt(1.0 + k * k))
     return a, own, residual
 
 
@@ -297,9 +297,8 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
     # line's touching pair, a line through a cone's apex).
     rounding = gamma(tol.hit_ulps)
     sizes = wall_term_sizes(origin, direction, k)
-    with np.errstate(invalid="ignore"):
-        mid = 0.5 * (t_in + t_out)
-        proven = 0.5 * ((a * mid + 2.0 * b) * mid + c) < -rounding * wall_terms_at(sizes, mid)
+    mid = np.where(hit, 0.5 * (t_in + t_out), 0.0)
+    proven = 0.5 * ((a * mid + 2.0 * b) * mid + c) < -rounding * wall_terms_at(sizes, mid)
     hit &= ~((part_in == 0) & (part_out == 0) & (a >= 0.0)) | proven
     cap_normal = {1: np.array([0.0, 0.0, -1.0]), 2: np.array([0.0, 0.0, 1.0])}
 
@@ -341,9 +340,6 @@ def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
     hit = ~outside_parallel & np.isfinite(t_in) & np.isfinite(t_out) & (t_in <= t_out)
     out = _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)
     for slot, (t, face) in enumerate(((t_in, i_in), (t_out, i_out))):  # the point's distance from its face's plane
-        with np.errstate(invalid="ignore"):
-            p = origin + np.where(hit, t, 0.0)[:, None] * direction
-            normal = plane_normals[face]
-            gap = np.abs(dot3(p, normal) - plane_offsets[face])
-        out.offset[:, slot] = np.where(hit, gap, 0.0)
+        p = origin + np.where(hit, t, 0.0)[:, None] * direction
+        out.offset[:, slot] = np.where(hit, np.abs(dot3(p, plane_normals[face]) - plane_offsets[face]), 0.0)
     return out

@@ -293,13 +293,13 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
     cap_out = t_out >= slab_hi
     part_in = np.where(cap_in, np.where(rising, 1, 2), 0)
     part_out = np.where(cap_out, np.where(rising, 2, 1), 0)
-    # A pair of wall crossings counts only where the line is provably inside between them (the tangent
-    # line's touching pair, a line through a cone's apex).
+    # A pair with a wall crossing, between the wall's roots, counts only where the line is provably inside
+    # between its ends (the tangent line's touching pair, a line through a cone's apex).
     rounding = gamma(tol.hit_ulps)
     sizes = wall_term_sizes(origin, direction, k)
     mid = np.where(hit, 0.5 * (t_in + t_out), 0.0)
     proven = 0.5 * ((a * mid + 2.0 * b) * mid + c) < -rounding * wall_terms_at(sizes, mid)
-    hit &= ~((part_in == 0) & (part_out == 0) & (a >= 0.0)) | proven
+    hit &= ~(((part_in == 0) | (part_out == 0)) & (a >= 0.0)) | proven
     cap_normal = {1: np.array([0.0, 0.0, -1.0]), 2: np.array([0.0, 0.0, 1.0])}
 
     def normal_at(t, part):

@@ -430,8 +430,8 @@ static int object_occludes(const Scene *S, Work *w, int64_t ref, const double *o
 }
 
 /* ------------------------------------------------------------------------------------------------------
- * The scene: nearest hit over all objects (ties go to the lower object index, as the reference's loop
- * over objects does) and shadow feelers. */
+ * The scene: the first hit over all objects (trace.first_hits: where hits tie, the object that comes first in
+ * the scene) and shadow feelers. */
 
 /* nextafter(x, INFINITY) for x > 0 finite (a hit's t), without the call. */
 static inline double next_up_positive(double x)
@@ -443,16 +443,30 @@ static inline double next_up_positive(double x)
     return x;
 }
 
-static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d,
-                                   Hit *best, int64_t *best_obj)
+/* The first hits of the objects seen so far (trace.first_hits): the nearest (`best`, ties of t to the lower
+ * index), the second nearest time, and `reach`, the least t + error: every hit up to it lies within the
+ * error interval of every hit found, so none of them is certainly nearer than another. */
+typedef struct {
+    Hit best;
+    int64_t obj;
+    double second, reach;
+} Nearest;
+
+static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d, Nearest *n)
 {
     Hit h;
-    double limit = isfinite(best->t) ? next_up_positive(best->t) : INFINITY;
-    if (object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h) &&
-        (h.t < best->t || (h.t == best->t && obj < *best_obj))) {
-        *best = h;
-        *best_obj = obj;
+    double limit = isfinite(n->reach) ? next_up_positive(n->reach) : INFINITY;  /* hits up to the reach */
+    if (!object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h))
+        return;
+    if (h.t < n->best.t || (h.t == n->best.t && obj < n->obj)) {
+        n->second = n->best.t;
+        n->best = h;
+        n->obj = obj;
+    } else if (h.t < n->second) {
+        n->second = h.t;
     }
+    if (h.t + h.err < n->reach)
+        n->reach = h.t + h.err;
 }
 
 /* The ray against the boxes of the object hierarchy (whose boxes are padded, so the test is conservative).
@@ -494,13 +508,13 @@ static inline int box_hit(const double *lo, const double *hi, const double *o, c
     return near <= far;
 }
 
-/* Which children of p the ray meets with 0 <= t <= far (bit 0: child 0, bit 1: child 1), and where it
+/* Which children of p the ray meets with lo <= t <= far (bit 0: child 0, bit 1: child 1), and where it
  * enters their boxes. */
-static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, double *near_out)
+static inline int pair_hit(const PairNode *p, const RayBoxes *r, double lo, double far, double *near_out)
 {
     if (r->fast) {
 #if defined(__SSE2__)
-        __m128d near = _mm_setzero_pd(), fr = _mm_set1_pd(far);
+        __m128d near = _mm_set1_pd(lo), fr = _mm_set1_pd(far);
         for (int i = 0; i < 3; i++) {
             __m128d o = _mm_set1_pd(r->o[i]), inv = _mm_set1_pd(r->inv[i]);
             int s = r->near_side[i];
@@ -514,7 +528,7 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, dou
 #else
         int mask = 0;
         for (int c = 0; c < 2; c++) {
-            double near = 0.0, fr = far;
+            double near = lo, fr = far;
             for (int i = 0; i < 3; i++) {
                 int s = r->near_side[i];
                 double tn = (p->b[i][s][c] - r->o[i]) * r->inv[i], tf = (p->b[i][1 - s][c] - r->o[i]) * r->inv[i];
@@ -529,20 +543,20 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, dou
     }
     int mask = 0;
     for (int c = 0; c < 2; c++) {
-        double lo[3] = {p->b[0][0][c], p->b[1][0][c], p->b[2][0][c]};
-        double hi[3] = {p->b[0][1][c], p->b[1][1][c], p->b[2][1][c]};
-        near_out[c] = 0.0;  /* (only orders the visit) */
-        mask |= box_hit(lo, hi, r->o, r->inv, 0.0, far) << c;
+        double box_lo[3] = {p->b[0][0][c], p->b[1][0][c], p->b[2][0][c]};
+        double box_hi[3] = {p->b[0][1][c], p->b[1][1][c], p->b[2][1][c]};
+        near_out[c] = lo;  /* (only orders the visit) */
+        mask |= box_hit(box_lo, box_hi, r->o, r->inv, lo, far) << c;
     }
     return mask;
 }
 
 /* The children of p that the ray meets, nearer first: the first into *next, the other onto the stack. */
-static inline int pair_children(const PairNode *p, const RayBoxes *r, double far, TreeEntry *next, TreeEntry *stack,
-                                int64_t *top)
+static inline int pair_children(const PairNode *p, const RayBoxes *r, double lo, double far, TreeEntry *next,
+                                TreeEntry *stack, int64_t *top)
 {
     double near[2];
-    int mask = pair_hit(p, r, far, near);
+    int mask = pair_hit(p, r, lo, far, near);
     if (!mask)
         return 0;
     int first = mask == 2 || (mask == 3 && near[1] < near[0]);
@@ -558,12 +572,15 @@ static inline int pair_children(const PairNode *p, const RayBoxes *r, double far
     return 1;
 }
 
-static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+/* Every object whose box the ray meets for some t in [lo, hi] (the hierarchy's boxes, then the unbounded
+ * objects), each offered to `visit` with the Nearest so far (whose reach may shrink as it goes). */
+typedef void (*ObjectVisit)(const Scene *, Work *, int64_t, const double *, const double *, Nearest *);
+
+static void scene_objects(const Scene *S, Work *w, const double *o, const double *d, double lo, Nearest *n,
+                          ObjectVisit visit)
 {
-    best->t = INFINITY;
-    *best_obj = -1;
     for (int64_t i = 0; i < S->n_unbounded; i++)
-        consider_object(S, w, S->unbounded[i], o, d, best, best_obj);
+        visit(S, w, S->unbounded[i], o, d, n);
     if (S->n_pairs) {
         RayBoxes r;
         ray_boxes(o, d, &r);
@@ -572,21 +589,48 @@ static int scene_first(const Scene *S, Work *w, const double *o, const double *d
         for (;;) {
             if (e.count) {
                 for (int64_t i = e.child; i < (int64_t)e.child + e.count; i++)
-                    consider_object(S, w, S->items[i], o, d, best, best_obj);
-            } else if (pair_children(&S->pairs[e.child], &r, best->t, &e, stack, &top)) {
+                    visit(S, w, S->items[i], o, d, n);
+            } else if (pair_children(&S->pairs[e.child], &r, lo, n->reach, &e, stack, &top)) {
                 continue;
             }
-            /* the next child still in reach (entered no later than the nearest hit so far: ties count) */
+            /* the next child still in reach (entered no later than the reach: ties count) */
             do {
                 if (!top)
-                    return *best_obj >= 0;
+                    return;
                 e = stack[--top];
-            } while (e.near > best->t);
+            } while (e.near > n->reach);
         }
     }
     for (int64_t i = S->root_first; i < (int64_t)S->root_first + S->root_count; i++)
-        consider_object(S, w, S->items[i], o, d, best, best_obj);
-    return *best_obj >= 0;
+        visit(S, w, S->items[i], o, d, n);
+}
+
+/* An object that comes before the tie's winner so far and has a hit within the reach wins it. */
+static void earlier_in_reach(const Scene *S, Work *w, int64_t obj, const double *o, const double *d, Nearest *n)
+{
+    Hit h;
+    if (obj < n->obj && object_first(S, w, S->d.object_ref[obj], o, d, 0.0, next_up_positive(n->reach), &h)) {
+        n->best = h;
+        n->obj = obj;
+    }
+}
+
+/* The first hit: the nearest, unless another hit lies within the error interval of every hit found (t at most
+ * the least t + error, the reach); then, of those, the hit of the object that comes first in the scene
+ * (trace.first_hits), however the two round.  Coplanar faces look the same from any position, on both
+ * backends.  The second pass, over the boxes that hold [nearest t, reach], is taken only on such a tie. */
+static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+{
+    Nearest n;
+    n.best.t = INFINITY;
+    n.obj = -1;
+    n.second = n.reach = INFINITY;
+    scene_objects(S, w, o, d, 0.0, &n, consider_object);
+    if (n.obj >= 0 && n.second <= n.reach)
+        scene_objects(S, w, o, d, n.best.t, &n, earlier_in_reach);
+    *best = n.best;
+    *best_obj = n.obj;
+    return n.obj >= 0;
 }
 
 /* Is any object on o + t d, 0 < t < t_max?  `cache` (may be NULL) remembers the last object that blocked a
@@ -616,7 +660,7 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
                         if (cache) *cache = S->items[i];
                         return 1;
                     }
-            } else if (pair_children(&S->pairs[e.child], &r, t_max, &e, stack, &top)) {
+            } else if (pair_children(&S->pairs[e.child], &r, 0.0, t_max, &e, stack, &top)) {
                 continue;
             }
             if (!top)

@@ -244,10 +244,10 @@ static int hits_tapered(const double *centred, const double *d, double s, double
     /* An end on the slab's boundary is a cap (ties too: a cone's apex is its cap's point). */
     int part_in = t_in <= slab_lo ? (rising ? 1 : 2) : 0;
     int part_out = t_out >= slab_hi ? (rising ? 2 : 1) : 0;
-    /* A pair of wall crossings counts only where the line is provably inside between them (the tangent
-     * line's touching pair, a line through a cone's apex). */
+    /* A pair with a wall crossing, between the wall's roots, counts only where the line is provably inside
+     * between its ends (the tangent line's touching pair, a line through a cone's apex). */
     WallTerms m = wall_term_sizes(o, d, k);
-    if (part_in == 0 && part_out == 0 && a >= 0.0) {
+    if ((part_in == 0 || part_out == 0) && a >= 0.0) {
         double mid = 0.5 * (t_in + t_out);
         if (!(0.5 * ((a * mid + 2.0 * b) * mid + c) < -gamma * wall_terms_at(&m, mid)))
             return 0;
@@ -371,8 +371,8 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
     double wr[4], wi[4];
     if (hessenberg_eigenvalues(h, 4, wr, wi) != 0)
         return 0;
-    /* Real eigenvalues count; a complex pair only where the quartic's minimum next to it is below the
-     * rounding bound (then as its two nearby roots, or a touching pair). See tracer/intersect/torus.py. */
+    /* Real eigenvalues count; a complex pair only where the quartic's minimum next to it is provably below
+     * zero (then as its two nearby roots). See tracer/intersect/torus.py. */
     double s[4];
     int m_count = 0;
     for (int i = 0; i < 4; i++) {
@@ -385,7 +385,9 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
             double centre = torus_minimum_near(wr[i], c, newton_steps);
             double depth = quartic_at(centre, c);
             double curvature = (12.0 * centre + 6.0 * c[0]) * centre + 2.0 * c[1];
-            if (!(fabs(depth) <= torus_residual_bound(centre, m, residual_ulps)) || !(curvature > 0.0))
+            /* a proven pair of real roots split by no more than twice the imaginary part (torus.py) */
+            if (!(depth < -torus_residual_bound(centre, m, residual_ulps)) ||
+                !(-depth <= 2.0 * curvature * wi[i] * wi[i]) || !(curvature > 0.0))
                 continue;
             double half = sqrt((depth < 0.0 ? -depth : 0.0) / (0.5 * curvature));
             start = wi[i] > 0.0 ? centre - half : centre + half;
@@ -399,7 +401,7 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
     for (int i = m_count; i < 4; i++)
         s[i] = INFINITY;
     /* Inside the tube between an entry and its exit, outside between an exit and the next entry: a pair
-     * the quartic's sign (beyond rounding) disagrees with is no crossing. */
+     * whose sign the quartic does not prove beyond rounding is no crossing. */
     static const int pairs[3][3] = {{0, 1, 1}, {2, 3, 1}, {1, 2, 0}};
     for (int k = 0; k < 3; k++) {
         int first = pairs[k][0], second = pairs[k][1];
@@ -407,7 +409,7 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
             continue;
         double mid = 0.5 * (s[first] + s[second]);
         double value = quartic_at(mid, c), limit = torus_residual_bound(mid, m, residual_ulps);
-        if (pairs[k][2] ? value > limit : value < -limit)
+        if (pairs[k][2] ? !(value < -limit) : !(value > limit))
             s[first] = s[second] = INFINITY;
     }
     for (int i = 1; i < 4; i++)

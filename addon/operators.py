@@ -135,17 +135,21 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     kind: EnumProperty(name="Shape", items=SHAPE_ITEMS, default="sphere")
-    small_radius: FloatProperty(name="Top Radius", default=0.5, description="Top radius of a tapered cylinder")
+    # (and a FloatProperty per registered shape parameter: see _PARAMETERS below)
+
+    def draw(self, context):
+        self.layout.prop(self, "kind")
+        for parameter in deps.module("shapes").KINDS[self.kind].parameters:
+            self.layout.prop(self, parameter.name)
 
     def execute(self, context):
         from . import importer
 
         model = deps.module("model")
-        shape = model.Shape(self.kind)
-        if self.kind == "taperedCylinder":
-            shape.tapered_radius = self.small_radius
-        if self.kind in model.POLYHEDRON_KINDS or self.kind == "teapot":
-            shape.mesh = deps.module("sdl.parser").builtin_mesh(self.kind)
+        entry = deps.module("shapes").KINDS[self.kind]
+        shape = model.Shape(self.kind, parameters=tuple(getattr(self, p.name) for p in entry.parameters))
+        if entry.builtin_mesh:
+            shape.mesh = deps.module("geometry").builtin_mesh(self.kind)
         matrix = np.eye(4)
         matrix[:3, 3] = tuple(context.scene.cursor.location)
         shape.matrix = matrix
@@ -165,6 +169,13 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
         obj.select_set(True)
         context.view_layer.objects.active = obj
         return {"FINISHED"}
+
+
+#: The Add operator's property for each registered shape parameter (by its name, shared by the kinds that
+#: have it), labelled as the registry says.
+_PARAMETERS = {p.name: FloatProperty(name=p.label, default=p.add_value, description=p.description)
+               for e in deps.module("shapes").REGISTRY for p in e.parameters}
+OBJECT_OT_sdl_add_shape.__annotations__.update(_PARAMETERS)
 
 
 class VIEW3D_MT_sdl_add(bpy.types.Menu):

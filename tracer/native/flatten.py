@@ -128,7 +128,7 @@ class FlatScene:
         a["prim_kind"] = codes
         a["prim_inverse"] = table.inverses.reshape(n, 16)  # (a view: the C core reads the table's own inverses)
         a["prim_sphere"] = table.spheres
-        a["prim_param"] = table.top  # (0 but for tapered cylinders)
+        a["prim_param"] = table.parameters  # (PRIM_PARAMS per primitive: what its kind's intersection takes)
         a["prim_material"] = table.material_ids
         rounding = numerics.gamma(table.tolerances.hit_ulps) + table.inverse_error  # (Primitive.rounding)
         a["prim_rounding"] = np.concatenate([(rounding / table.generic_size)[:, None], table.generic_size[:, None],

@@ -15,7 +15,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import deps
+from .tracer import errors
+from .tracer.textures import images as limits
 
 
 def _existing(path: Path):
@@ -30,7 +31,6 @@ def _existing(path: Path):
 
 def decode(path: Path) -> np.ndarray:
     """(height, width, 3) float32 in [0, 1], row 0 at the bottom (Blender's order too)."""
-    errors, limits = deps.module("errors"), deps.module("textures.images")
     path = Path(path)
     if not path.is_file():
         raise errors.TracerError(f"{path}: texture image not found")
@@ -64,8 +64,8 @@ def decode(path: Path) -> np.ndarray:
 
 
 def register() -> None:
-    deps.module("textures.images").set_fallback_decoder(decode)
+    limits.set_fallback_decoder(decode)
 
 
 def unregister() -> None:
-    deps.module("textures.images").set_fallback_decoder(None)
+    limits.set_fallback_decoder(None)

@@ -95,7 +95,7 @@ def test_manifest():
 def test_extension_zip_contents(tmp_path):
     zip_path = build_extension.build(tmp_path / "ext.zip")
     names = set(zipfile.ZipFile(zip_path).namelist())
-    assert {"blender_manifest.toml", "__init__.py", "engine.py", "deps.py"} <= names
+    assert {"blender_manifest.toml", "__init__.py", "engine.py", "pure/convert.py"} <= names
     assert {"tracer/__init__.py", "tracer/native/core.c", "tracer/native/build.py",
             "tracer/geometry/teapot.py"} <= names
     assert not [n for n in names if n.endswith((".so", ".pyc")) or "__pycache__" in n or n.startswith("tracer/usd")]

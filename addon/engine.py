@@ -33,6 +33,7 @@ from .pure import blocks, convert, passes, raycam
 from .scene_build import SceneBuilder, flat, matrix_np
 from .tracer.camera import CameraFrame
 from .tracer.compile import compile_scene
+from .tracer.errors import TracerError
 from .tracer.model import Camera
 
 ENGINE_ID = "SDL_RAYTRACER"
@@ -125,6 +126,12 @@ def render_settings(scene) -> dict:
     s = scene.sdl_render
     return dict(block_size=s.block_size, progressive=s.progressive, threads=s.threads, samples=s.samples,
                 sampling=s.sampling.lower(), threshold=s.threshold)
+
+
+def blocky_warning(block_size: int) -> str:
+    """What a final render without Progressive Refinement says when it traces blocks, not pixels."""
+    return (f"Progressive Refinement is off with Block Size {block_size}: the image is one ray per "
+            f"{block_size} x {block_size} block (set Block Size 1, or tick Progressive Refinement)")
 
 
 def preview_lighting(tracer_scene) -> None:
@@ -279,6 +286,9 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             settings = render_settings(scene)
             if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
                 settings.update(block_size=1, progressive=False, samples=1)
+            elif not settings["progressive"] and settings["block_size"] > 1:
+                warnings.append(blocky_warning(settings["block_size"]))
+                self.report({"WARNING"}, warnings[-1])
             if settings["progressive"] and not displayed():
                 # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
                 # the same rays either way, so the image is the same without them.
@@ -334,7 +344,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         except Exception as exc:  # noqa: BLE001 - a render must end with a message, not a traceback
             LAST_RENDER["error"] = str(exc)
             self.report({"ERROR"}, f"SDL Ray Tracer: {exc}")
-            traceback.print_exc()
+            if not isinstance(exc, (TracerError, ValueError)):
+                traceback.print_exc()  # (the scene's own problems are said in one line; a bug shows where)
         finally:
             self.end_result(result)
 

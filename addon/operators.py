@@ -10,6 +10,7 @@ from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatPrope
 from bpy_extras.io_utils import ExportHelper, ImportHelper, orientation_helper
 
 from . import exporter, importer
+from .importer import COLOUR_MANAGEMENT
 from .pure import convert
 from .tracer import errors, model
 from .tracer.sdl.parser import builtin_mesh
@@ -43,10 +44,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                                      "and report the problems)")
     set_camera: BoolProperty(name="Set Scene Camera", default=True,
                              description="Make the file's camera (or a camera framing the scene) the scene camera")
-    sdl_colours: BoolProperty(name="SDL Colours", default=True,
-                              description="Show colours as SDL and the tracer do: the scene's View Transform "
-                                          "becomes Raw (values shown unchanged; Standard, Filmic and AgX "
-                                          "change them)")
+    colour_management: EnumProperty(name="Colour Management", default="AUTO", items=COLOUR_MANAGEMENT)
 
     def invoke(self, context, event):
         if self.properties.is_property_set("filepath") and hasattr(ImportHelper, "invoke_popup"):
@@ -72,7 +70,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         for path, scene in parsed:
             imp = importer.Importer(context, conversion)
             try:
-                result = imp.run(scene, path, set_camera=self.set_camera, sdl_colours=self.sdl_colours)
+                result = imp.run(scene, path, set_camera=self.set_camera, colour_management=self.colour_management)
             except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
                 for earlier in reversed(done):  # and the files before it: all of them or nothing
                     earlier.undo()
@@ -83,7 +81,11 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
             done.append(imp)
             _report_warnings(self, result.warnings)
             total += len(result.objects)
+            kept_view = not result.sdl_view and self.colour_management == "AUTO"
         self.report({"INFO"}, f"Imported {total} shapes from {len(parsed)} SDL file(s)")
+        if parsed and kept_view:
+            self.report({"INFO"}, f"The scene keeps its View Transform ({context.scene.view_settings.view_transform}): "
+                                  "choose Colour Management SDL's to see the tracer's colours unchanged")
         return {"FINISHED"}
 
     def draw(self, context):
@@ -91,7 +93,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         layout.use_property_split = True
         layout.prop(self, "strict")
         layout.prop(self, "set_camera")
-        layout.prop(self, "sdl_colours")
+        layout.prop(self, "colour_management")
         layout.prop(self, "axis_forward")
         layout.prop(self, "axis_up")
 

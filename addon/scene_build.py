@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 from typing import Optional
 
 import bpy
@@ -85,9 +86,14 @@ class SceneBuilder:
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
             sdl_material = props.material_to_sdl(material)
-            if sdl_material.texture > 0 and material.sdl.image:
-                image = bpy.path.abspath(material.sdl.image, library=material.library)
-                number = self._pixmap_number(sdl_material.texture, image)
+            if sdl_material.texture > 0:
+                image = bpy.path.abspath(material.sdl.image, library=material.library) if material.sdl.image else ""
+                if os.path.isfile(image):
+                    number = self._pixmap_number(sdl_material.texture, image)
+                else:  # drawn with its own colours, as a lenient read draws it, and said
+                    number = 0
+                    self.warnings.append(f"{material.name}: texture image {image or '(none)'} not found: "
+                                         "drawn without it")
                 sdl_material = dataclasses.replace(sdl_material, texture=number)
             self._materials[key] = sdl_material
         return self._materials[key]

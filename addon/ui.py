@@ -30,6 +30,9 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         col = layout.column()
         col.prop(settings, "block_size")
         col.prop(settings, "progressive")
+        if not settings.progressive and settings.block_size > 1:
+            col.label(text=f"F12 traces one ray per {settings.block_size} x {settings.block_size} block",
+                      icon="ERROR")
         col.prop(settings, "max_recursion_depth")
         col.prop(settings, "threads")
         col = layout.column()

@@ -900,6 +900,10 @@ def _hash_mesh(mesh: MeshData) -> bytes:
     else:
         h.update(b"list")
         h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
+    if mesh.corner_uvs is not None:  # (the texture coordinates are part of the built mesh)
+        uvs = np.ascontiguousarray(mesh.corner_uvs, dtype=np.float64)
+        h.update(b"uvs" + repr(uvs.shape).encode())
+        h.update(uvs.reshape(-1))
     return h.digest()
 
 
@@ -1132,6 +1136,19 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
     return number[which], list(map(materials.__getitem__, first[order].tolist()))
 
 
+def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
+    """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
+    docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
+    pending = [f"a {light.kind} light" for light in scene.lights if light.kind != "point"]
+    if scene.settings.smooth_terminator:
+        pending.append("smooth_terminator")
+    if not isinstance(materials, MaterialRows):
+        pending += [f"fresnel {m.fresnel!r}" for m in materials if m.fresnel != "constant"]
+    pending += ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
+    if pending:
+        raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")
+
+
 def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     """Compile ``scene`` (``columns``: what compile_scene's content key gathered, when the caller has it).
 
@@ -1143,6 +1160,7 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     shapes = columns.shapes
     kind, material_ids, materials, tapered_radii = columns.arrays()
     table = PrimitiveTable(shapes, kind, tapered_radii, columns.matrices, material_ids)
+    _refuse_untraced(scene, materials, table)
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
     material_table = MaterialTable(materials or [Material()])

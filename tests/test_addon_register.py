@@ -63,8 +63,9 @@ def test_register_unregister_twice_leaves_nothing_behind():
     assert len(registered["properties"]) == 3 and registered["engine"]
     assert registered["menus"] == {menu: 1 for menu in MENUS}
     assert "RENDER_PT_format" in registered["compat"]  # Blender's own panels show for the engine
-    # the SDL Shape panel's cache (meshes.HANDLERS), the engine's (object_cache.HANDLERS), Base Color edits
-    assert registered["handlers"] == 8
+    # the SDL Shape panel's cache (meshes.HANDLERS), the engine's (object_cache.HANDLERS), Base Color edits,
+    # the decoded pictures' (images.forget)
+    assert registered["handlers"] == 9
     for _ in range(2):
         addon.unregister()
         gone = _state()

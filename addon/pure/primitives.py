@@ -17,7 +17,8 @@ from typing import Optional
 
 import numpy as np
 
-from . import deps
+from ..tracer.geometry.tessellate import tapered_cylinder_mesh, torus_mesh
+from ..tracer.shapes import KINDS
 
 #: Segments around the sphere, the cylinders and the torus ring; rings of the sphere; segments of the tube.
 SEGMENTS = 64
@@ -146,7 +147,7 @@ def plane() -> GenericMesh:
 def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMesh:
     """Wall from z = 0 (radius 1) to z = 1 (radius ``small_radius``), with the base and cap discs: the
     tracer's tessellation, the wall smooth and the discs flat, the rims sharp."""
-    data = deps.module("geometry.tessellate").tapered_cylinder_mesh(small_radius, segments)
+    data = tapered_cylinder_mesh(small_radius, segments)
     faces = [vertices for vertices, _ in data.faces]
     n = segments
     smooth = np.arange(len(faces)) < n  # the wall's faces come first
@@ -158,7 +159,7 @@ def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMe
 
 def torus(segments: int = SEGMENTS, tube_segments: int = TORUS_TUBE_SEGMENTS) -> GenericMesh:
     """The tracer's tessellation of the generic torus, smooth."""
-    data = deps.module("geometry.tessellate").torus_mesh(segments, tube_segments)
+    data = torus_mesh(segments, tube_segments)
     faces = [vertices for vertices, _ in data.faces]
     return GenericMesh(np.asarray(data.vertices, dtype=np.float64), faces, np.ones(len(faces), bool))
 
@@ -181,7 +182,7 @@ def generic_mesh(kind: str, parameters: tuple[float, ...] = (), mesh_data=None) 
     """The Blender mesh of a generic shape with these parameters (Shape.parameters): the builder of this
     module its registry entry names (ShapeKind.blender_mesh), else the tracer's tessellation, else
     ``mesh_data``, the tracer's MeshData of a polyhedron, the teapot or a ``mesh`` shape."""
-    entry = deps.module("shapes").KINDS[kind]
+    entry = KINDS[kind]
     values = entry.traced(parameters or entry.defaults)
     if entry.blender_mesh is not None:
         return globals()[entry.blender_mesh](*values)
@@ -195,7 +196,7 @@ def generic_mesh(kind: str, parameters: tuple[float, ...] = (), mesh_data=None) 
 def mesh_name(kind: str, parameters: tuple[float, ...] = (), mesh_file: Optional[str] = None) -> str:
     """Name of the shared Blender mesh of one kind and parameters ("SDL sphere", "SDL taperedCylinder 0.5",
     "SDL mesh pawn.3vn")."""
-    if deps.module("shapes").KINDS[kind].file_argument:
+    if KINDS[kind].file_argument:
         import os
         return f"SDL {kind} {os.path.basename(mesh_file or kind)}"
     return " ".join(["SDL", kind, *(f"{float(v):g}" for v in parameters)])
@@ -211,7 +212,7 @@ def stored_parameters(parameters: tuple[float, ...]):
 
 def parameters_of(kind: str, stored) -> tuple[float, ...]:
     """The parameters of a ``kind`` whose ``sdl_param`` property holds ``stored`` (None: its defaults)."""
-    entry = deps.module("shapes").KINDS[kind]
+    entry = KINDS[kind]
     if not entry.parameters or stored is None:
         return entry.defaults
     values = [float(v) for v in stored] if hasattr(stored, "__len__") else [float(stored)]

@@ -17,12 +17,16 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 from typing import Optional
 
 import bpy
 import numpy as np
 
-from . import convert, deps, meshes, object_cache, props
+from . import meshes, object_cache, props
+from .pure import convert
+from .tracer import model
+from .tracer.model import FaceList, MeshData
 
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
@@ -68,7 +72,7 @@ class SceneBuilder:
         self.mode = mode
         self.cache = object_cache.ObjectCache() if cache is None else cache
         self.to_target = np.eye(4) if to_target is None else np.asarray(to_target, dtype=np.float64)
-        self.model = deps.module("model")
+        self.model = model
         self.warnings: list[str] = []
         self._generic_cache: dict = {}
         #: id(shape) -> the Blender object's name, for each mesh shape (the exporter names mesh files by it)
@@ -82,9 +86,14 @@ class SceneBuilder:
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
             sdl_material = props.material_to_sdl(material)
-            if sdl_material.texture > 0 and material.sdl.image:
-                image = bpy.path.abspath(material.sdl.image, library=material.library)
-                number = self._pixmap_number(sdl_material.texture, image)
+            if sdl_material.texture > 0:
+                image = bpy.path.abspath(material.sdl.image, library=material.library) if material.sdl.image else ""
+                if os.path.isfile(image):
+                    number = self._pixmap_number(sdl_material.texture, image)
+                else:  # drawn with its own colours, as a lenient read draws it, and said
+                    number = 0
+                    self.warnings.append(f"{material.name}: texture image {image or '(none)'} not found: "
+                                         "drawn without it")
                 sdl_material = dataclasses.replace(sdl_material, texture=number)
             self._materials[key] = sdl_material
         return self._materials[key]
@@ -289,7 +298,6 @@ class SceneBuilder:
 
 def polygon_meshes(mesh) -> dict:
     """The mesh's polygons with corner normals, one tracer MeshData per material index (for export)."""
-    MeshData = deps.module("model").MeshData
     count = len(mesh.polygons)
     if count == 0:
         return {}
@@ -321,7 +329,6 @@ def polygon_meshes(mesh) -> dict:
 def merge_mesh_data(parts, MeshData):
     """One MeshData from parts that share their vertex array (the pieces of one mesh)."""
     vertices = parts[0].vertices
-    FaceList = deps.module("model").FaceList
     if all(isinstance(p.faces, FaceList) and p.normals is parts[0].normals for p in parts):
         # triangle_meshes' parts: one normal array too, so their faces are simply put together
         faces = FaceList(*(np.concatenate([getattr(p.faces, name) for p in parts])

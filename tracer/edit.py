@@ -44,7 +44,7 @@ from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, eff
 from .errors import TracerError
 from .model import CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
 from .native import flatten
-from .native import default_threads
+from .threads import default_threads
 from .savings import sealed_lights
 from .textures import TextureSet
 from .textures.images import load_image

@@ -64,13 +64,31 @@ class Material:
     surface_roughness: float = 1.0
     texture: int = 0
     parameters: tuple[float, ...] = ()
+    #: How the mirror and transmitted rays are weighted (an extension; see docs/tracer.md, "Materials for
+    #: Blender scenes"): ``"constant"`` (SDL: reflectivity and transparency as given), ``"metal"`` (the mirror
+    #: ray weighted by reflectivity times Schlick's Fresnel from ``fresnel_tint``, coloured) or
+    #: ``"dielectric"`` (reflectivity and transparency split by the exact Fresnel reflectance of the interface,
+    #: from the speeds of light on its two sides).
+    fresnel: str = "constant"
+    #: ``"metal"``: the reflectance at normal incidence, per channel (Schlick's F0).
+    fresnel_tint: Color = (1.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        if self.fresnel not in FRESNEL_MODES:
+            raise SceneError(f"unknown fresnel mode {self.fresnel!r} (expected one of {', '.join(FRESNEL_MODES)})")
+
+
+#: Material.fresnel's values, in the order of their codes in the material tables.
+FRESNEL_MODES = ("constant", "metal", "dielectric")
+#: Material fields that are not kept in MaterialRows (the C reader declines the statements that set them).
+_NOT_IN_ROWS = ("texture", "parameters", "fresnel", "fresnel_tint")
 
 
 def _material_slots() -> dict[str, tuple[int, int]]:
     """(first slot, width) in a MaterialRows row of each Material field but the texture and parameters."""
     slots, at = {}, 0
     for f in fields(Material):
-        if f.name not in ("texture", "parameters"):
+        if f.name not in _NOT_IN_ROWS:
             width = 3 if isinstance(f.default, tuple) else 1
             slots[f.name], at = (at, width), at + width
     return slots
@@ -83,7 +101,8 @@ class MaterialRows(Sequence):
     when first asked for, then the same object); compiling reads the columns (:meth:`column`).
 
     A row holds the fields in Material's order: a colour takes three slots, a number one, the texture one,
-    then the count of parameters and :attr:`MAX_PARAMETERS` slots for them (unused ones 0)."""
+    then the count of parameters and :attr:`MAX_PARAMETERS` slots for them (unused ones 0).  The extensions
+    ``fresnel`` and ``fresnel_tint`` are not kept: a row's Material has their defaults."""
 
     MAX_PARAMETERS = 10
     #: (first slot, width) of each colour and number field
@@ -261,6 +280,10 @@ class MeshData:
     faces: Union[list[tuple[tuple[int, ...], tuple[int, ...]]], FaceList]
     #: Where the data came from (a file path, or e.g. "built-in:icosahedron").
     origin: str = ""
+    #: Texture coordinates per face corner, (C, 2) float64, or None: the corners of face 0, then of face 1,
+    #: ... (C = the sum of the faces' sizes; Blender's loop UVs).  An image texture on a mesh that has them is
+    #: looked up at the (u, v) interpolated at the hit, instead of the shape's own mapping.
+    corner_uvs: Optional[np.ndarray] = None
 
     def triangles(self) -> tuple[np.ndarray, np.ndarray]:
         """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""
@@ -334,7 +357,9 @@ def _same_mesh(a: Optional[MeshData], b: Optional[MeshData]) -> bool:
     if a is None or b is None:
         return False
     return (np.array_equal(a.vertices, b.vertices) and np.array_equal(a.normals, b.normals)
-            and (a.faces == b.faces if isinstance(a.faces, FaceList) else b.faces == a.faces))
+            and (a.faces == b.faces if isinstance(a.faces, FaceList) else b.faces == a.faces)
+            and (a.corner_uvs is None) == (b.corner_uvs is None)
+            and (a.corner_uvs is None or np.array_equal(a.corner_uvs, b.corner_uvs)))
 
 
 #: The SDL keyword of each shape kind code (tracer.shapes.REGISTRY's order; ShapeTable.kinds).
@@ -643,12 +668,60 @@ def iter_shapes(obj: SceneObject):
             yield node
 
 
+#: Light.kind's values: SDL's point light (no falloff, as in the book) and the physical lights (see
+#: docs/tracer.md, "Lights").
+LIGHT_KINDS = ("point", "sphere", "spot", "sun", "area")
+#: Light.shape's values, for area lights.
+AREA_SHAPES = ("rectangle", "ellipse")
+
+
 @dataclass(frozen=True)
 class Light:
-    """A point light (no attenuation with distance, as in the book)."""
+    """A light.  ``kind`` ``"point"`` is SDL's (no attenuation with distance, as in the book); the others are
+    physical lights for Blender scenes, which fall off with distance and may cast soft shadows.  Units and
+    meaning of every field: docs/tracer.md, "Lights".  Angles are in degrees, as everywhere in SDL."""
 
-    position: Vec3
+    position: Vec3  # point, sphere, spot: where it is; area: its centre; sun: unused
     color: Color
+    kind: str = "point"
+    #: Kept through SDL (a ``! name:`` comment before the statement), USD and Blender.
+    name: Optional[str] = None
+    #: spot, area: the way it shines (an area light emits on this side only); sun: the way its light travels.
+    direction: Vec3 = (0.0, 0.0, -1.0)
+    #: sphere, spot: the radius of the emitting sphere (0: a point, hard shadows).
+    radius: float = 0.0
+    #: sun: its angular diameter in degrees (0: hard shadows).
+    angle: float = 0.0
+    #: spot: the full angle of its cone in degrees (Blender's spot_size), and the share of it that is a
+    #: smooth edge, 0..1 (Blender's spot_blend).
+    spot_size: float = 45.0
+    spot_blend: float = 0.0
+    #: area: "rectangle" (a square is one) or "ellipse" (a disk is one), of side lengths (diameters) ``size``,
+    #: the first along ``axis`` (made perpendicular to ``direction``), the second along direction x axis.
+    shape: str = "rectangle"
+    size: tuple[float, float] = (1.0, 1.0)
+    axis: Vec3 = (1.0, 0.0, 0.0)
+    #: Shadow rays per shading point, stratified over the light (soft shadows): for a sphere or spot of some
+    #: radius, a sun of some angle, and every area light.
+    samples: int = 1
+
+    def __post_init__(self) -> None:
+        if self.kind not in LIGHT_KINDS:
+            raise SceneError(f"unknown light kind {self.kind!r} (expected one of {', '.join(LIGHT_KINDS)})")
+        if self.shape not in AREA_SHAPES:
+            raise SceneError(f"unknown area light shape {self.shape!r} (expected one of {', '.join(AREA_SHAPES)})")
+        if not (isinstance(self.samples, int) and 1 <= self.samples <= MAX_LIGHT_SAMPLES):
+            raise SceneError(f"light samples must be a whole number 1..{MAX_LIGHT_SAMPLES}, not {self.samples!r}")
+
+    @property
+    def soft(self) -> bool:
+        """Whether its shadows are soft (it has an extent: shadow rays go to several points of it)."""
+        return (self.kind == "area" or (self.kind in ("sphere", "spot") and self.radius > 0.0)
+                or (self.kind == "sun" and self.angle > 0.0))
+
+
+#: The most shadow rays per shading point one light may ask for.
+MAX_LIGHT_SAMPLES = 1024
 
 
 @dataclass(frozen=True)
@@ -681,6 +754,9 @@ class Settings:
     min_reflectivity: float = 0.5
     min_transparency: float = 0.5
     max_recursion_depth: int = 3
+    #: Shadow rays of smooth-shaded meshes start from the smooth surface their normals describe, not the
+    #: flat triangle (no stair-stepped shadow terminator on low-poly meshes; an extension, off for SDL files).
+    smooth_terminator: bool = False
 
 
 @dataclass

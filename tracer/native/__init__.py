@@ -24,6 +24,7 @@ from ..compile import CompiledScene
 from ..errors import TracerError
 from ..intersect.hits import HitArrays
 from ..savings import RaySavings, sealed_table
+from ..threads import default_threads
 from ..trace import RayCounts
 from . import contract, flatten
 from . import build as _builder
@@ -148,20 +149,6 @@ def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
     if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
         return "the C core's SceneDesc size differs from flatten.py's"
     return None
-
-
-def default_threads() -> int:
-    """$SDL_TRACER_THREADS if set, else every core this process may run on."""
-    env = os.environ.get("SDL_TRACER_THREADS")
-    if env:
-        try:
-            return max(1, int(env))
-        except ValueError:
-            pass
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
@@ -292,12 +279,6 @@ def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
     flat = flatten.FlatScene(compiled)
     compiled._flat_cache = (key, flat)
     return flat
-
-
-def flat_scene_if_made(compiled: CompiledScene) -> Optional[flatten.FlatScene]:
-    """The compiled scene's FlatScene if the C core has traced it (for tracer.edit, which then edits it too)."""
-    cached = getattr(compiled, "_flat_cache", None)
-    return None if cached is None else cached[1]
 
 
 class CoreScene:

@@ -20,7 +20,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import deps
+from .tracer import errors
+from .tracer.textures import images as limits
 
 
 def _existing(path: Path):
@@ -61,7 +62,6 @@ def forget(*_args) -> None:
 def decode(path: Path) -> np.ndarray:
     """(height, width, 3) float32 in [0, 1], row 0 at the bottom (Blender's order too); read-only, and the
     same array for every file of the same content."""
-    errors = deps.module("errors")
     path = Path(path)
     if not path.is_file():
         raise errors.TracerError(f"{path}: texture image not found")
@@ -77,7 +77,6 @@ def decode(path: Path) -> np.ndarray:
 
 
 def _decode_with_blender(path: Path) -> np.ndarray:
-    errors, limits = deps.module("errors"), deps.module("textures.images")
     image = _existing(path)
     if image is not None and image.is_float and image.colorspace_settings.name != "Non-Color":
         image = None  # its pixels are linearised: read the file again rather than change the user's image
@@ -108,12 +107,12 @@ def _decode_with_blender(path: Path) -> np.ndarray:
 
 
 def register() -> None:
-    deps.module("textures.images").set_fallback_decoder(decode)
+    limits.set_fallback_decoder(decode)
     bpy.app.handlers.load_post.append(forget)
 
 
 def unregister() -> None:
-    deps.module("textures.images").set_fallback_decoder(None)
+    limits.set_fallback_decoder(None)
     while forget in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(forget)
     forget()

@@ -9,8 +9,12 @@ import numpy as np
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper, orientation_helper
 
-from . import convert, deps
+from . import exporter, importer
 from .importer import COLOUR_MANAGEMENT
+from .pure import convert
+from .tracer import errors, model
+from .tracer.sdl.parser import builtin_mesh
+from .tracer.shapes import REGISTRY
 
 #: How many of a file's warnings are shown one by one (the rest are counted).
 SHOWN_WARNINGS = 8
@@ -53,9 +57,6 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         return [self.filepath]
 
     def execute(self, context):
-        from . import importer
-
-        errors = deps.module("errors")
         conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
         parsed = []
         for path in self._paths():  # read every file before creating anything
@@ -110,8 +111,6 @@ class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
     use_selection: BoolProperty(name="Selected Only", default=False)
 
     def execute(self, context):
-        from . import exporter
-
         conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
         try:
             warnings = exporter.export_sdl(context, self.filepath, conversion, use_selection=self.use_selection)
@@ -126,7 +125,7 @@ class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
 
 
 #: The Add menu's shapes: every registered kind that needs no file (tracer/shapes.py).
-SHAPE_ITEMS = [(e.keyword, e.keyword, f"The generic {e.keyword}") for e in deps.module("shapes").REGISTRY if e.addable]
+SHAPE_ITEMS = [(e.keyword, e.keyword, f"The generic {e.keyword}") for e in REGISTRY if e.addable]
 
 
 class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
@@ -140,14 +139,11 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
     small_radius: FloatProperty(name="Top Radius", default=0.5, description="Top radius of a tapered cylinder")
 
     def execute(self, context):
-        from . import importer
-
-        model = deps.module("model")
         shape = model.Shape(self.kind)
         if self.kind == "taperedCylinder":
             shape.tapered_radius = self.small_radius
         if self.kind in model.POLYHEDRON_KINDS or self.kind == "teapot":
-            shape.mesh = deps.module("sdl.parser").builtin_mesh(self.kind)
+            shape.mesh = builtin_mesh(self.kind)
         matrix = np.eye(4)
         matrix[:3, 3] = tuple(context.scene.cursor.location)
         shape.matrix = matrix

@@ -23,7 +23,10 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import convert, deps, meshes, object_cache, props
+from . import meshes, object_cache, props
+from .pure import convert
+from .tracer import model
+from .tracer.model import FaceList, MeshData
 
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
@@ -69,7 +72,7 @@ class SceneBuilder:
         self.mode = mode
         self.cache = object_cache.ObjectCache() if cache is None else cache
         self.to_target = np.eye(4) if to_target is None else np.asarray(to_target, dtype=np.float64)
-        self.model = deps.module("model")
+        self.model = model
         self.warnings: list[str] = []
         self._generic_cache: dict = {}
         #: id(shape) -> the Blender object's name, for each mesh shape (the exporter names mesh files by it)
@@ -307,7 +310,6 @@ class SceneBuilder:
 
 def polygon_meshes(mesh) -> dict:
     """The mesh's polygons with corner normals, one tracer MeshData per material index (for export)."""
-    MeshData = deps.module("model").MeshData
     count = len(mesh.polygons)
     if count == 0:
         return {}
@@ -339,7 +341,6 @@ def polygon_meshes(mesh) -> dict:
 def merge_mesh_data(parts, MeshData):
     """One MeshData from parts that share their vertex array (the pieces of one mesh)."""
     vertices = parts[0].vertices
-    FaceList = deps.module("model").FaceList
     if all(isinstance(p.faces, FaceList) and p.normals is parts[0].normals for p in parts):
         # triangle_meshes' parts: one normal array too, so their faces are simply put together
         faces = FaceList(*(np.concatenate([getattr(p.faces, name) for p in parts])

@@ -13,7 +13,8 @@ from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
 import tracer
-from addon import blocks, engine, object_cache, raycam
+from addon import engine, object_cache
+from addon.pure import blocks, raycam
 from addon.scene_build import matrix_np
 from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
 

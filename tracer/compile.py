@@ -48,6 +48,18 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
 SOLID_ANALYTIC_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.family == "analytic" and e.normals_agree)
 
 
+def blocks_between(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+    """(N,) bool: a hit lies between t_min and t_max with its whole error interval (a shadow feeler's blocker).
+
+    The same rule at both ends: a feeler leaving a surface never finds that surface at its start, and one
+    ending on a light that sits on a surface (a lamp on a wall, a light in the floor's plane) is not blocked
+    by that surface at its end, however the hit's time rounds."""
+    if hits.slots == 0:
+        return np.zeros(hits.count, dtype=bool)
+    inside = (hits.t - hits.error > t_min[:, None]) & (hits.t + hits.error < t_max[:, None])
+    return inside.any(axis=1)
+
+
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
     """The first hit per ray with t_min < t < t_max (K = 1; t = inf where there is none).
 
@@ -345,9 +357,10 @@ class Primitive:
         return out
 
     def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
-        """Whether anything of this shape lies on each ray between t_min and t_max (shadow feelers)."""
+        """Whether anything of this shape lies on each ray between t_min and t_max, with its whole error
+        interval (shadow feelers, see blocks_between; a mesh's hits are taken as exact there)."""
         if self._mesh is None:
-            return np.isfinite(self.first_hit(origins, directions, t_min, t_max).t[:, 0])
+            return blocks_between(self.intersect(origins, directions), t_min, t_max)
         blocked = np.zeros(origins.shape[0], dtype=bool)
         idx = np.nonzero(self.may_hit(origins, directions))[0]
         if idx.size:
@@ -404,7 +417,7 @@ class CSGNode:
         return first_after(self.intersect(origins, directions), t_min, t_max)
 
     def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
-        return np.isfinite(self.first_hit(origins, directions, t_min, t_max).t[:, 0])
+        return blocks_between(self.intersect(origins, directions), t_min, t_max)
 
 
 Node = Union[Primitive, CSGNode]

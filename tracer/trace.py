@@ -86,17 +86,18 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
 
 
 def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
-             t_max: float = 1.0) -> np.ndarray:
-    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max?"""
+             t_max: np.ndarray | float = 1.0) -> np.ndarray:
+    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max, with its whole
+    error interval (compile.blocks_between)?"""
     n = origins.shape[0]
+    t_max = np.broadcast_to(np.asarray(t_max, dtype=float), (n,))
     blocked = np.zeros(n, dtype=bool)
     for obj in scene.objects:
         open_rays = np.nonzero(~blocked)[0]
         if open_rays.size == 0:
             break
         m = open_rays.size
-        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays],
-                                          np.zeros(m), np.full(m, t_max))
+        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays], np.zeros(m), t_max[open_rays])
     return blocked
 
 
@@ -146,7 +147,9 @@ class Media:
 
 
 def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
+    # (summed left to right, as the C core sums: where a sign decides, a light in the surface's plane or a
+    # grazing ray, einsum's order could decide it otherwise)
+    return numerics.dot3(a, b)
 
 
 def reflect(direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -270,7 +273,7 @@ class Tracer:
         feeler_start = point + offset * normal
         for light, (light_pos, light_color) in enumerate(zip(self.scene.light_positions, self.scene.light_colors)):
             to_light = light_pos - point
-            s = to_light / np.linalg.norm(to_light, axis=1, keepdims=True)
+            s = to_light / numerics.norm3(to_light)[:, None]  # (a light at 1e300: |s|^2 overflows)
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
@@ -280,7 +283,8 @@ class Tracer:
                 lit[rows[skip]] = False
                 rows = rows[~skip]
                 self.counts.shadow += rows.size
-                lit[rows] &= ~occluded(self.scene, feeler_start[rows], light_pos - feeler_start[rows])
+                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos)
+                lit[rows] &= ~occluded(self.scene, feeler_start[rows], to_light, reach)
             rows = np.nonzero(lit)[0]
             if rows.size == 0:
                 continue

@@ -23,6 +23,7 @@ from ..compile import CompiledScene
 from ..errors import TracerError
 from ..intersect.hits import HitArrays
 from ..savings import RaySavings, sealed_lights
+from ..threads import default_threads
 from ..trace import RayCounts
 from . import contract, flatten
 from . import build as _builder
@@ -143,20 +144,6 @@ def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
     if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
         return "the C core's SceneDesc size differs from flatten.py's"
     return None
-
-
-def default_threads() -> int:
-    """$SDL_TRACER_THREADS if set, else every core this process may run on."""
-    env = os.environ.get("SDL_TRACER_THREADS")
-    if env:
-        try:
-            return max(1, int(env))
-        except ValueError:
-            pass
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:

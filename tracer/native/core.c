@@ -291,10 +291,11 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     return 1;
 }
 
-/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit); with `want_error` its bound on
- * t's rounding too (a shadow feeler needs only the yes or no). */
+/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit) and its bound on t's rounding;
+ * for a `feeler` (Primitive.occludes) only whether there is one whose whole error interval lies between
+ * t_min and t_max (compile.blocks_between: the feeler's end is protected as its start is). */
 static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
-                      double t_max, Hit *out, int want_error)
+                      double t_max, Hit *out, int feeler)
 {
     const SceneDesc *D = &S->d;
     if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
@@ -307,7 +308,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, out))
             return 0;
         out->shape = (int32_t)p;
-        if (want_error) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
+        if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
             error_frame(o, og, dg, rounding, &frame);
             out->err = time_error(&frame, point_error(&frame, out->t), dg, out->n);
@@ -331,11 +332,12 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (solid_analytic(D->prim_kind[p]))
             agree_with_crossing(&buf[i], dg);
         double error = point_error(&frame, t);
-        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n)) {
+        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n) &&
+            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, buf[i].n))) {
             *out = buf[i];
             out->t = t;
             out->shape = (int32_t)p;
-            if (want_error)  /* (plus the shape's own root error, where it has one: the torus) */
+            if (!feeler)  /* (plus the shape's own root error, where it has one: the torus) */
                 out->err = buf[i].err + time_error(&frame, error, dg, buf[i].n);
             return 1;
         }
@@ -358,7 +360,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
         return mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack);
     }
     Hit h;
-    return prim_first(S, w, p, o, d, t_min, t_max, &h, 0);
+    return prim_first(S, w, p, o, d, t_min, t_max, &h, 1);
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -385,7 +387,7 @@ static int object_first(const Scene *S, Work *w, int64_t ref, const double *o, c
                         double t_max, Hit *out)
 {
     if (ref >= 0)
-        return prim_first(S, w, ref, o, d, t_min, t_max, out, 1);
+        return prim_first(S, w, ref, o, d, t_min, t_max, out, 0);
     HitList *top = &w->lists[w->n_lists - 1];
     if (!object_hits(S, w, ref, o, d, 0, top))
         return 0;
@@ -403,8 +405,13 @@ static int object_occludes(const Scene *S, Work *w, int64_t ref, const double *o
 {
     if (ref >= 0)
         return prim_occludes(S, w, ref, o, d, t_min, t_max);
-    Hit h;
-    return object_first(S, w, ref, o, d, t_min, t_max, &h);
+    HitList *top = &w->lists[w->n_lists - 1];
+    if (!object_hits(S, w, ref, o, d, 0, top))
+        return 0;
+    for (int64_t i = 0; i < top->n; i++)  /* compile.blocks_between */
+        if (top->h[i].t - top->h[i].err > t_min && top->h[i].t + top->h[i].err < t_max)
+            return 1;
+    return 0;
 }
 
 /* ------------------------------------------------------------------------------------------------------

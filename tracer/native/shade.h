@@ -124,7 +124,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
         for (int64_t l = 0; l < D->n_lights; l++) {
             const double *lp = D->light_pos + 3 * l, *lc = D->light_color + 3 * l;
             double s[3] = {lp[0] - point[0], lp[1] - point[1], lp[2] - point[2]};
-            double sl = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+            double sl = norm3(s);  /* (a light at 1e300: |s|^2 overflows) */
             s[0] /= sl;
             s[1] /= sl;
             s[2] /= sl;
@@ -135,8 +135,9 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                 if (skip_feeler(S, w, mat, h.entering ? -1 : obj, l, use_cook_torrance))
                     continue;
                 w->counts[RAY_SHADOW]++;
-                double to_light[3] = {lp[0] - feeler[0], lp[1] - feeler[1], lp[2] - feeler[2]};
-                if (scene_occluded(S, w, feeler, to_light, 1.0, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
+                double to_light[3];
+                double reach = feeler_to(feeler, lp, to_light);
+                if (scene_occluded(S, w, feeler, to_light, reach, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
                     continue;
             }
             double half[3] = {s[0] + to_eye[0], s[1] + to_eye[1], s[2] + to_eye[2]};

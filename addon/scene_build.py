@@ -119,6 +119,8 @@ class SceneBuilder:
         return self.to_target @ world_matrix
 
     def _evaluated(self, obj):
+        if getattr(obj, "is_evaluated", False):  # (an instance's own object: its original may be its instancer)
+            return obj
         try:
             return obj.evaluated_get(self.depsgraph)
         except (RuntimeError, ReferenceError):
@@ -165,7 +167,7 @@ class SceneBuilder:
         if original.name in visiting:
             self.warnings.append(f"{original.name}: Boolean operands form a loop; traced as a mesh")
             return self.mesh_nodes(obj_eval, matrix_world, top_level)
-        info = self.generic(obj_eval, own)
+        info = self.generic(obj_eval, own) if own else None  # (an instance is not its instancer's shape)
         enabled = enabled_modifiers(original, self.mode) if info is not None else []
         if info is None or any(m.type != "BOOLEAN" for m in enabled):
             return self.mesh_nodes(obj_eval, matrix_world, top_level, own)
@@ -261,31 +263,41 @@ class SceneBuilder:
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
         """The tracer Scene of everything the depsgraph shows (its object instances)."""
         model = self.model
-        objects, lights = [], []
-        entries = []
+        # (sort key, what it made): import order first (so that files round-trip in their own order), then by
+        # name, then as the depsgraph listed them
+        made: list[tuple[tuple, list]] = []
+        lights: list[tuple[tuple, object, np.ndarray]] = []
+        later: list[tuple[tuple, object, np.ndarray]] = []
         self.cache.begin_build(self.depsgraph)
-        for inst in (instances if instances is not None else self.depsgraph.object_instances):
-            obj = inst.instance_object if inst.is_instance else inst.object
+        for count, inst in enumerate(instances if instances is not None else self.depsgraph.object_instances):
+            obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
             original = obj.original
             if skip_hidden_render and original.hide_render:
                 continue
+            if not inst.is_instance and not getattr(inst, "show_self", True):
+                continue  # an instancer that does not show itself (Show Instancer off; particles, vertices...)
             if selected_only and not (inst.is_instance and inst.parent and inst.parent.original.select_get()) \
                     and not original.select_get():
                 continue
-            # An instance whose original is its instancer was made by geometry nodes: not that object's mesh.
-            own = not inst.is_instance or inst.parent is None or \
-                original.as_pointer() != inst.parent.original.as_pointer()
-            entries.append((obj, matrix_np(inst.matrix_world), own))
-        # Import order first (so that files round-trip in their own order), then by name.
-        entries.sort(key=lambda e: (e[0].original.get(OBJ_ORDER, math.inf), e[0].original.name))
-        shape_entries = []
-        for obj, matrix, own in entries:
+            key = (original.get(OBJ_ORDER, math.inf), original.name, count)
+            matrix = matrix_np(inst.matrix_world)
+            # An instance whose original is its instancer was made by geometry nodes: its geometry is not that
+            # object's, and only ``inst.object`` carries it, until the iteration moves on: made now.
+            if inst.is_instance and inst.parent is not None and \
+                    original.as_pointer() == inst.parent.original.as_pointer():
+                if obj.type in GEOMETRY_TYPES:
+                    made.append((key, self.object_node(obj, matrix, own=False)))
+                continue
+            stable = inst.instance_object if inst.is_instance else obj  # (the instanced object itself)
             if obj.type == "LIGHT":
-                lights.append(self.light(obj, matrix))
+                lights.append((key, stable, matrix))
             elif obj.type in GEOMETRY_TYPES:
-                shape_entries.append((obj, matrix, own))
-        for obj, matrix, own in shape_entries:
-            objects.extend(self.object_node(obj, matrix, own=own))
+                later.append((key, stable, matrix))
+        for key, obj, matrix in later:
+            made.append((key, self.object_node(obj, matrix)))
+        made.sort(key=lambda entry: entry[0])
+        objects = [node for _, nodes in made for node in nodes]
+        lights = [self.light(obj, matrix) for _, obj, matrix in sorted(lights, key=lambda entry: entry[0])]
         self.cache.end_build()
         world = scene.world
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth

@@ -13,6 +13,7 @@ enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
+enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define K_COUNT 9
 /* Every kind's generic hits, as a call in analytic_hits' names (tracer/shapes.py: c_intersect with its
  * parameters, face planes and error budget; meshes are traced by the BVH instead). */
@@ -196,6 +197,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 61
-#define RT_CONTRACT_DIGEST "0e96587246ed9b37"
+#define RT_CONTRACT_DIGEST "25cdae0c0ad9ee91"
 
 #endif

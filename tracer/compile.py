@@ -29,6 +29,7 @@ from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
 from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
                     Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
+from .lights import LightTable
 from .transforms import transform_points
 
 
@@ -512,6 +513,8 @@ class CompiledScene:
     light_positions: np.ndarray  # (L, 3)
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
+    #: Every light's numbers (tracer.lights.LightTable; its position and color are the two above).
+    lights: Optional["LightTable"] = None
     textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
     tolerances: numerics.Tolerances = field(default_factory=lambda: numerics.TOLERANCES)
     #: All primitives' numbers as arrays (what ``primitives`` are views of)
@@ -834,6 +837,10 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
     if scene.lights and lit:
         effects.add("lighting")
         effects.add("shadows")
+        if any(light.kind != "point" for light in scene.lights):
+            effects.add("physical-lights")
+        if any(light.soft for light in scene.lights):
+            effects.add("soft-shadows")
     deep = settings.max_recursion_depth > 0
     r, t = table.reflectivity, table.transparency
     if deep and ((r >= settings.min_reflectivity) & (r > 0)).any():
@@ -1139,7 +1146,7 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
 def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
     """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
     docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
-    pending = [f"a {light.kind} light" for light in scene.lights if light.kind != "point"]
+    pending = []
     if scene.settings.smooth_terminator:
         pending.append("smooth_terminator")
     if not isinstance(materials, MaterialRows):
@@ -1170,9 +1177,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     if "textures" in effects:
         from .textures import TextureSet
         textures = TextureSet(scene, primitives)
-    lights = scene.lights
+    lights = LightTable.of(scene.lights)
     return CompiledScene(
         scene=scene, objects=objects, primitives=primitives, materials=material_table,
-        light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
-        light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
+        light_positions=lights.position, light_colors=lights.color, lights=lights,
         effects=effects, textures=textures, tolerances=table.tolerances, table=table)

@@ -194,7 +194,9 @@ class FlatScene:
                  mat_speed=mats.speed_of_light,
                  mat_specular_fraction=getattr(mats, "specular_fraction", np.zeros(len(mats.materials))),
                  mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))))
-        a.update(light_pos=compiled.light_positions, light_color=compiled.light_colors)
+        lights = compiled.lights
+        a.update(light_pos=lights.position, light_color=lights.color, light_kind=lights.kind,
+                 light_samples=lights.samples, light_frame=lights.frame, light_param=lights.param)
         n_images = self._flatten_textures(compiled)
 
         settings = compiled.settings

@@ -27,7 +27,7 @@ from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
+from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
                     Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
 from .lights import LightTable
 from .transforms import transform_points
@@ -470,6 +470,9 @@ class MaterialTable:
     speed_of_light: np.ndarray = field(init=False)
     #: The texture number (0: none).
     texture: np.ndarray = field(init=False)
+    #: The Material.fresnel mode's index in FRESNEL_MODES, and the tint (a metal's F0).
+    fresnel: np.ndarray = field(init=False)
+    fresnel_tint: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         # A few thousand materials at a time (they stay in the cache while each of their fields is read:
@@ -479,6 +482,8 @@ class MaterialTable:
         if isinstance(self.materials, MaterialRows):  # (columns already: a million materials read as rows)
             for name in _COLOR_FIELDS + _NUMBER_FIELDS + ("texture",):
                 setattr(self, name, self.materials.column(name))
+            self.fresnel = np.zeros(len(self.materials), dtype=np.int32)  # (rows keep SDL's materials only)
+            self.fresnel_tint = np.ones((len(self.materials), 3))
             return
         n = len(self.materials)
         for name in _COLOR_FIELDS:
@@ -498,6 +503,22 @@ class MaterialTable:
                     column[rows] = np.fromiter(chain.from_iterable(values), float, 3 * len(values)).reshape(-1, 3)
                 else:
                     column[rows] = np.fromiter(values, column.dtype, len(values))
+        self._fresnel_columns()
+
+    def _fresnel_columns(self) -> None:
+        """Material.fresnel and fresnel_tint, which only materials made for Blender scenes change from their
+        defaults (looked at one by one only where some material does)."""
+        n = len(self.materials)
+        self.fresnel = np.zeros(n, dtype=np.int32)
+        self.fresnel_tint = np.ones((n, 3))
+        modes = list(map(attrgetter("fresnel"), self.materials))
+        tints = list(map(attrgetter("fresnel_tint"), self.materials))
+        default = Material()  # (its values are the very objects every material has that keeps them)
+        if all(map(operator.is_, modes, repeat(default.fresnel))) and all(
+                map(operator.is_, tints, repeat(default.fresnel_tint))):
+            return
+        self.fresnel[:] = [FRESNEL_MODES.index(mode) for mode in modes]
+        self.fresnel_tint[:] = tints
 
 
 #: Materials read at a time by MaterialTable (their objects stay in the cache while each field is read).
@@ -853,6 +874,10 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
         effects.add("textures")
     if "lighting" in effects and (table.specular_fraction > 0).any():
         effects.add("cook-torrance")
+    fresnel = table.fresnel != 0
+    if (("reflection" in effects and (fresnel & (r >= settings.min_reflectivity) & (r > 0)).any())
+            or ("refraction" in effects and (fresnel & (t >= settings.min_transparency) & (t > 0)).any())):
+        effects.add("fresnel")
     return frozenset(effects)
 
 
@@ -1149,8 +1174,6 @@ def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
     pending = []
     if scene.settings.smooth_terminator:
         pending.append("smooth_terminator")
-    if not isinstance(materials, MaterialRows):
-        pending += [f"fresnel {m.fresnel!r}" for m in materials if m.fresnel != "constant"]
     pending += ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
     if pending:
         raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")

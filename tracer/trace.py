@@ -11,7 +11,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from .compile import CompiledScene
-from . import lights, numerics
+from . import fresnel, lights, numerics
 from .model import traced_depth
 from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_lights
 
@@ -438,6 +438,13 @@ class Tracer:
         kr, kt = mats.reflectivity[mat], mats.transparency[mat]
         reflects = ("reflection" in self.effects) & (kr >= settings.min_reflectivity) & (kr > 0.0)
         transmits = ("refraction" in self.effects) & (kt >= settings.min_transparency) & (kt > 0.0)
+        # The weights of the mirror ray (per channel) and of the transmitted ray: the coefficients, or, for
+        # the Fresnel modes of Blender scenes, the coefficients times the reflectance at this angle.
+        kr_color, kr_max = kr[:, None], kr
+        if "fresnel" in self.effects:
+            kr_color, kt = self._fresnel_weights(direction, normal, mat, media, entering, obj, kr, kt,
+                                                 reflects | transmits)
+            kr_max = kr_color.max(axis=1)
         reflected, transmitted = np.zeros_like(point), np.zeros_like(point)
         # Snell's law first: under total internal reflection the transmitted ray is the mirror ray.
         rows = np.nonzero(transmits)[0]
@@ -455,7 +462,7 @@ class Tracer:
         shared = tir & reflects if self.savings.shared_tir else np.zeros(n, dtype=bool)
         self.counts.skipped_shared_tir += int(shared.sum())
         # The mirror ray, weighted by both coefficients where it also stands for the internal reflection.
-        mirror_weight = weight * np.where(shared, kr + kt, kr)
+        mirror_weight = weight * np.where(shared, kr_max + kt, kr_max)
         mirror = self._worth_tracing(reflects, mirror_weight)
         if mirror.size:
             reflected[mirror] = self._reflected(point[mirror], normal[mirror], direction[mirror], offset[mirror],
@@ -473,7 +480,33 @@ class Tracer:
         if bounce.size:  # total internal reflection: the light stays in the medium it came from
             transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
                                                   level, media.subset(bounce), weight[bounce] * kt[bounce])
-        return kr[:, None] * reflected, kt[:, None] * transmitted
+        return kr_color * reflected, kt[:, None] * transmitted
+
+    def _fresnel_weights(self, direction, normal, mat, media, entering, obj, kr, kt, rows_wanted):
+        """The mirror ray's weight per channel (N, 3) and the transmitted ray's (N,) where Material.fresnel
+        asks for them (tracer.fresnel): a metal's Schlick reflectance from its tint, a dielectric's exact
+        reflectance F splitting reflectivity (times F) and transparency (times 1 - F)."""
+        mats = self.scene.materials
+        kr_color = np.repeat(kr[:, None], 3, axis=1)
+        kt = kt.copy()
+        mode = mats.fresnel[mat]
+        rows = np.nonzero(rows_wanted & (mode != fresnel.CONSTANT))[0]
+        if rows.size == 0:
+            return kr_color, kt
+        d = direction[rows]
+        unit = d / np.sqrt(numerics.dot3(d, d))[:, None]
+        cos1 = -numerics.dot3(unit, normal[rows])
+        metal = mode[rows] == fresnel.METAL
+        metal_rows = rows[metal]
+        kr_color[metal_rows] = kr[metal_rows, None] * fresnel.schlick(cos1[metal], mats.fresnel_tint[mat[metal_rows]])
+        glass = rows[~metal]
+        if glass.size:
+            around = media.subset(glass)
+            c2 = np.where(entering[glass], mats.speed_of_light[mat[glass]], around.left(obj[glass]).current_speed())
+            reflectance = fresnel.dielectric(cos1[~metal], c2 / around.current_speed())
+            kr_color[glass] = (kr[glass] * reflectance)[:, None]
+            kt[glass] = kt[glass] * (1.0 - reflectance)
+        return kr_color, kt
 
     def _reflected(self, point, normal, direction, offset, level, media, weight) -> np.ndarray:
         r = reflect(direction, normal)

@@ -38,9 +38,11 @@ CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
            # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
-           "physical-lights", "soft-shadows")
+           "physical-lights", "soft-shadows", "fresnel")
 #: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
 LIGHT_KINDS = _model.LIGHT_KINDS
+#: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).
+FRESNEL_MODES = _model.FRESNEL_MODES
 #: Ray kinds in the order of the C core's counters (tracer.trace.RAY_KINDS is the NumPy side).
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: After the ray kinds, the counters of rays not cast, per reason (SKIP_*); and the bits of
@@ -202,6 +204,8 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mat_speed", "*f64"),
     F("mat_specular_fraction", "*f64"),
     F("mat_roughness", "*f64"),
+    F("mat_fresnel", "*i32", "FRESNEL_* each"),
+    F("mat_fresnel_tint", "*f64", "3 each: a metal's reflectance at normal incidence"),
     F("n_lights", "i64", section="lights (tracer.lights.LightTable)"),
     F("light_pos", "*f64", "3 each"),
     F("light_color", "*f64"),
@@ -302,6 +306,7 @@ def header_text() -> str:
     out.append(_enum("FX", EFFECTS, [EFFECT_BITS[e] for e in EFFECTS]))
     out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
     out.append(_enum("LIGHT", LIGHT_KINDS, range(len(LIGHT_KINDS))))
+    out.append(_enum("FRESNEL", FRESNEL_MODES, range(len(FRESNEL_MODES))))
     out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
     out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")

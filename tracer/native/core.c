@@ -638,7 +638,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, NAME);                 \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, NAME);              \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -666,7 +666,7 @@ SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
 /* The effects of Blender scenes, traced by shade_general alone. */
-#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS)
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL)
 
 /* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
  * FX_GENERAL pay for that choice per ray, the others never come here. */
@@ -677,7 +677,7 @@ static void shade_general(const Scene *S, Work *w, const double *o, const double
     int l = (fx & FX_LIGHTING) != 0;
     shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
                l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
-               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, shade_general);
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0, shade_general);
 }
 
 static ShadeFn pick_shade(int64_t effects)
@@ -938,6 +938,9 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
                 REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
                        (long long)D->image_info[2 * i + 1]);
     }
+    for (int64_t m = 0; m < D->n_materials; m++)
+        if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
+            REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
     for (int64_t l = 0; l < D->n_lights; l++)
         if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
             (D->light_kind[l] != LIGHT_POINT && !(D->effects & FX_PHYSICAL_LIGHTS)))

@@ -193,7 +193,8 @@ class FlatScene:
                  mat_reflectivity=mats.reflectivity, mat_transparency=mats.transparency,
                  mat_speed=mats.speed_of_light,
                  mat_specular_fraction=getattr(mats, "specular_fraction", np.zeros(len(mats.materials))),
-                 mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))))
+                 mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))),
+                 mat_fresnel=mats.fresnel, mat_fresnel_tint=mats.fresnel_tint)
         lights = compiled.lights
         a.update(light_pos=lights.position, light_color=lights.color, light_kind=lights.kind,
                  light_samples=lights.samples, light_frame=lights.frame, light_param=lights.param)

@@ -161,16 +161,54 @@ static inline void mirror_ray(const double *d, const double *facing, const doubl
     }
 }
 
+/* Tracer._fresnel_weights for one hit (tracer.fresnel): the mirror ray's weight per channel and the
+ * transmitted ray's, for a material whose fresnel mode is metal or dielectric. */
+static void fresnel_weights(const SceneDesc *D, const double *d, const Hit *h, int64_t obj, const double *facing,
+                            const Media *media, int64_t mat, double kr, double *kr_color, double *kt)
+{
+    double length = sqrt(dot3(d, d)), unit[3] = {d[0] / length, d[1] / length, d[2] / length};
+    double cos1 = -dot3(unit, facing);
+    if (D->mat_fresnel[mat] == FRESNEL_METAL) {
+        const double *tint = D->mat_fresnel_tint + 3 * mat;
+        double m = 1.0 - cos1, m2 = m * m, m5 = m2 * m2 * m;
+        for (int c = 0; c < 3; c++)
+            kr_color[c] = kr * (tint[c] + (1.0 - tint[c]) * m5);
+        return;
+    }
+    double c2 = D->mat_speed[mat];
+    if (!h->entering) {
+        Media around = *media;
+        media_leave(&around, obj);
+        c2 = media_speed(&around);
+    }
+    double ratio = c2 / media_speed(media), reflectance = 1.0;
+    double cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1);
+    if (!(cos2_squared < 0.0)) {  /* (past the critical angle everything is reflected) */
+        double cos2 = sqrt(nan_max2(cos2_squared, 0.0)), a = ratio * cos1, b = ratio * cos2;
+        double rs = (a - cos2) / (a + cos2), rp = (cos1 - b) / (cos1 + b);
+        reflectance = 0.5 * (rs * rs + rp * rp);
+    }
+    for (int c = 0; c < 3; c++)
+        kr_color[c] = kr * reflectance;
+    *kt = *kt * (1.0 - reflectance);
+}
+
 /* Tracer._secondary: the reflected and transmitted colours, each times its coefficient, added to `color`. */
 static inline __attribute__((always_inline)) void
 secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, const double *point,
           const double *facing, double offset, int64_t level, const Media *media, double weight, int64_t mat,
-          const int use_reflection, const int use_refraction, ShadeFn self, double *color)
+          const int use_reflection, const int use_refraction, const int use_fresnel, ShadeFn self, double *color)
 {
     const SceneDesc *D = &S->d;
     double kr = D->mat_reflectivity[mat], kt = D->mat_transparency[mat];
     int reflects = use_reflection && kr >= D->min_reflectivity && kr > 0.0;
     int transmits = use_refraction && kt >= D->min_transparency && kt > 0.0;
+    /* the mirror ray's weight per channel and its largest (the Fresnel modes'), and the transmitted ray's */
+    double kr_color[3] = {kr, kr, kr}, kr_max = kr;
+    if (use_fresnel && (reflects || transmits) && D->mat_fresnel[mat] != FRESNEL_CONSTANT) {
+        fresnel_weights(D, d, h, obj, facing, media, mat, kr, kr_color, &kt);
+        kr_max = nan_max2(nan_max2(kr_color[0], kr_color[1]), kr_color[2]);
+    }
     /* Snell's law first: under total internal reflection the transmitted ray is the mirror ray. */
     Media after;
     double ratio = 1.0, cos1 = 0.0, cos2_squared = 0.0, unit[3] = {0.0, 0.0, 0.0};
@@ -195,14 +233,14 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
     double mirrored[3] = {0.0, 0.0, 0.0}, mirror[3], start[3];
     if (shared)
         w->counts[SKIP_SHARED_TIR]++;
-    if (reflects && worth_tracing(S, w, weight * (shared ? kr + kt : kr))) {
+    if (reflects && worth_tracing(S, w, weight * (shared ? kr_max + kt : kr_max))) {
         mirror_ray(d, facing, point, offset, mirror, start);
         w->counts[RAY_REFLECTION]++;
-        self(S, w, start, mirror, level + 1, media, weight * (shared ? kr + kt : kr), mirrored);
+        self(S, w, start, mirror, level + 1, media, weight * (shared ? kr_max + kt : kr_max), mirrored);
     }
     if (reflects)
         for (int i = 0; i < 3; i++)
-            color[i] += kr * mirrored[i];
+            color[i] += kr_color[i] * mirrored[i];
     if (!transmits)
         return;
     double c[3] = {0.0, 0.0, 0.0};
@@ -233,7 +271,8 @@ static inline __attribute__((always_inline)) void
 shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t level, const Media *media,
            double weight, double *out,
            const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
-           const int use_refraction, const int use_textures, const int use_physical, ShadeFn self)
+           const int use_refraction, const int use_textures, const int use_physical, const int use_fresnel,
+           ShadeFn self)
 {
     const SceneDesc *D = &S->d;
     out[0] = D->background[0];
@@ -282,7 +321,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     }
     if ((use_reflection || use_refraction) && level < D->max_depth)
         secondary(S, w, d, &h, obj, p.point, p.facing, offset, level, media, weight, p.mat, use_reflection,
-                  use_refraction, self, color);
+                  use_refraction, use_fresnel, self, color);
     out[0] = color[0];
     out[1] = color[1];
     out[2] = color[2];

@@ -304,3 +304,20 @@ def test_the_c_reader_leaves_named_lights_to_the_python_reader():
     declined = fastread.scan(text)
     assert isinstance(declined, fastread.Declined) and declined.reason == "namedLight"
     assert parse_sdl(text * 1000).lights[0].name == "Key"
+
+
+def test_editing_lights_in_place_renders_as_from_scratch(backend):
+    from tracer.edit import EditableScene
+    scene = showcase()
+    lights = list(scene.lights)
+    scene.lights = lights[-1:]  # SDL's point light alone: no physical lights yet
+    editable = EditableScene(scene)
+    w, h = scaled(backend, 48, 36)
+    tracer.render(editable.compiled, w, h, backend=backend)
+    editable.set_lights(lights[:3])
+    edited = tracer.render(editable.compiled, w, h, backend=backend)
+    fresh = showcase()
+    fresh.lights = lights[:3]
+    expected = tracer.render(fresh, w, h, backend=backend)
+    assert np.array_equal(edited.image, expected.image)
+    assert edited.rays.as_dict() == expected.rays.as_dict()

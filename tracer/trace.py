@@ -13,7 +13,7 @@ import numpy as np
 from .compile import CompiledScene
 from . import fresnel, lights, numerics
 from .model import traced_depth
-from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_lights
+from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_table
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: How many nested transparent objects a ray remembers being inside.
@@ -86,17 +86,18 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
 
 
 def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
-             t_max: float = 1.0) -> np.ndarray:
-    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max?"""
+             t_max: np.ndarray | float = 1.0) -> np.ndarray:
+    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max, with its whole
+    error interval (compile.blocks_between)?"""
     n = origins.shape[0]
+    t_max = np.broadcast_to(np.asarray(t_max, dtype=float), (n,))
     blocked = np.zeros(n, dtype=bool)
     for obj in scene.objects:
         open_rays = np.nonzero(~blocked)[0]
         if open_rays.size == 0:
             break
         m = open_rays.size
-        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays],
-                                          np.zeros(m), np.full(m, t_max))
+        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays], np.zeros(m), t_max[open_rays])
     return blocked
 
 
@@ -161,7 +162,9 @@ class Media:
 
 
 def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
+    # (summed left to right, as the C core sums: where a sign decides, a light in the surface's plane or a
+    # grazing ray, einsum's order could decide it otherwise)
+    return numerics.dot3(a, b)
 
 
 def reflect(direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -219,7 +222,7 @@ class Tracer:
         self.background = np.asarray(scene.settings.background, dtype=float)
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
         self.dark = dark_materials(scene)
-        self.sealed = sealed_lights(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
+        self.sealed = sealed_table(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         n = origins.shape[0]
@@ -289,7 +292,7 @@ class Tracer:
                 self._physical_light(light, shading, total)
                 continue
             to_light = light_pos - point
-            s = to_light / np.linalg.norm(to_light, axis=1, keepdims=True)
+            s = to_light / numerics.norm3(to_light)[:, None]  # (a light at 1e300: |s|^2 overflows)
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
@@ -299,7 +302,8 @@ class Tracer:
                 lit[rows[skip]] = False
                 rows = rows[~skip]
                 self.counts.shadow += rows.size
-                lit[rows] &= ~occluded(self.scene, feeler_start[rows], light_pos - feeler_start[rows])
+                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos)
+                lit[rows] &= ~occluded(self.scene, feeler_start[rows], to_light, reach)
             rows = np.nonzero(lit)[0]
             if rows.size == 0:
                 continue
@@ -369,10 +373,12 @@ class Tracer:
         kind, n = table.kind[light], int(table.samples[light])
         sun = kind == lights.SUN
         extent = table.param[light, 0]  # the radius; the sun's 1 - cos(angle / 2)
-        reach = np.inf if sun else 1.0
+        reach = np.inf  # (the sun's feelers never end)
         if extent == 0.0:  # a point, or a sun of no angle: one feeler
             self.counts.shadow += len(point)
-            towards = s if sun else table.position[light] - feeler_start
+            towards = s
+            if not sun:
+                towards, reach = numerics.feeler_to(feeler_start, table.position[light])
             return np.where(occluded(self.scene, feeler_start, towards, reach), 0.0, 1.0)
         xi1, xi2 = lights.sample_shifts(point, light)
         t1, t2 = lights.basis(s)
@@ -382,7 +388,8 @@ class Tracer:
             if sun:
                 towards = lights.cone_direction(u, v, s, t1, t2, extent)
             else:
-                towards = table.position[light] + lights.disk_point(u, v, t1 * extent, t2 * extent) - feeler_start
+                target = table.position[light] + lights.disk_point(u, v, t1 * extent, t2 * extent)
+                towards, reach = numerics.feeler_to(feeler_start, target)
             self.counts.shadow += len(point)
             unblocked += ~occluded(self.scene, feeler_start, towards, reach)
         return unblocked / n
@@ -417,7 +424,8 @@ class Tracer:
             if "shadows" in self.effects and lit.size:
                 self.counts.shadow += lit.size
                 start = at.feeler_start[rows[lit]]
-                lit = lit[~occluded(self.scene, start, sample[lit] - start)]
+                towards, reach = numerics.feeler_to(start, sample[lit])
+                lit = lit[~occluded(self.scene, start, towards, reach)]
             if lit.size == 0:
                 continue
             r = rows[lit]

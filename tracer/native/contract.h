@@ -15,6 +15,7 @@ enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_A
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
+enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define K_COUNT 9
 /* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
 #define RT_SHAPE_HITS(X) X(K_SPHERE, hits_sphere) X(K_CUBE, hits_cube) X(K_PARABOLOID, hits_paraboloid)
@@ -191,6 +192,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 67
-#define RT_CONTRACT_DIGEST "0680663e57445c4d"
+#define RT_CONTRACT_DIGEST "5ece5f750b429139"
 
 #endif

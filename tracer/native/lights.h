@@ -89,13 +89,15 @@ static double visible_share(const Scene *S, Work *w, const ShadePoint *p, int64_
     const SceneDesc *D = &S->d;
     int sun = D->light_kind[l] == LIGHT_SUN;
     int64_t n = D->light_samples[l];
-    double extent = D->light_param[4 * l], reach = sun ? INFINITY : 1.0;
+    double extent = D->light_param[4 * l], reach = INFINITY;  /* (the sun's feelers never end) */
     const double *pos = D->light_pos + 3 * l;
     int64_t *cache = l < SHADOW_CACHE ? &w->last_blocker[l] : NULL;
     double towards[3];
     if (extent == 0.0) {  /* a point, or a sun of no angle: one feeler */
-        for (int i = 0; i < 3; i++)
-            towards[i] = sun ? s[i] : pos[i] - p->feeler[i];
+        if (sun)
+            memcpy(towards, s, sizeof towards);
+        else
+            reach = feeler_to(p->feeler, pos, towards);
         w->counts[RAY_SHADOW]++;
         return scene_occluded(S, w, p->feeler, towards, reach, cache) ? 0.0 : 1.0;
     }
@@ -107,14 +109,15 @@ static double visible_share(const Scene *S, Work *w, const ShadePoint *p, int64_
         e2[i] = t2[i] * extent;
     }
     for (int64_t k = 0; k < n; k++) {
-        double u, v, offset[3];
+        double u, v, offset[3], target[3];
         light_lattice(k, n, xi1, xi2, &u, &v);
         if (sun) {
             light_cone(u, v, s, t1, t2, extent, towards);
         } else {
             light_disk(u, v, e1, e2, offset);
             for (int i = 0; i < 3; i++)
-                towards[i] = pos[i] + offset[i] - p->feeler[i];
+                target[i] = pos[i] + offset[i];
+            reach = feeler_to(p->feeler, target, towards);
         }
         w->counts[RAY_SHADOW]++;
         if (!scene_occluded(S, w, p->feeler, towards, reach, cache))
@@ -157,9 +160,9 @@ static void area_light(const Scene *S, Work *w, const ShadePoint *p, int64_t l, 
         if (!(lambert > 0.0 && cos_light > 0.0))
             continue;
         if (use_shadows) {
-            double towards[3] = {sample[0] - p->feeler[0], sample[1] - p->feeler[1], sample[2] - p->feeler[2]};
+            double towards[3], reach = feeler_to(p->feeler, sample, towards);
             w->counts[RAY_SHADOW]++;
-            if (scene_occluded(S, w, p->feeler, towards, 1.0, cache))
+            if (scene_occluded(S, w, p->feeler, towards, reach, cache))
                 continue;
         }
         double response[3], weight = cos_light * share / distance2;

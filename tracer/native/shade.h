@@ -18,7 +18,7 @@ static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t insi
                               const int use_cook_torrance)
 {
     const SceneDesc *D = &S->d;
-    if (S->savings & SAVE_DARK_MATERIALS) {
+    if (w->savings & SAVE_DARK_MATERIALS) {
         const double *diffuse = D->mat_diffuse + 3 * mat, *specular = D->mat_specular + 3 * mat;
         int dark = diffuse[0] == 0.0 && diffuse[1] == 0.0 && diffuse[2] == 0.0 && specular[0] == 0.0 &&
                    specular[1] == 0.0 && specular[2] == 0.0 &&
@@ -28,7 +28,8 @@ static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t insi
             return 1;
         }
     }
-    if ((S->savings & SAVE_INSIDE_SHADOWS) && inside_of >= 0 && S->sealed[inside_of * D->n_lights + l]) {
+    if ((w->savings & SAVE_INSIDE_SHADOWS) && inside_of >= 0 && S->sealed &&
+        S->sealed[inside_of * D->n_lights + l]) {
         w->counts[SKIP_INSIDE_SHADOW]++;
         return 1;
     }
@@ -36,9 +37,9 @@ static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t insi
 }
 
 /* tracer.savings, the contribution cutoff: whether a secondary ray of this cumulative weight is traced. */
-static inline int worth_tracing(const Scene *S, Work *w, double weight)
+static inline int worth_tracing(Work *w, double weight)
 {
-    if (weight >= S->cutoff)
+    if (weight >= w->cutoff)
         return 1;
     w->counts[SKIP_CUTOFF]++;
     return 0;
@@ -126,7 +127,7 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
         }
         const double *lp = D->light_pos + 3 * l, *lc = D->light_color + 3 * l;
         double s[3] = {lp[0] - p->point[0], lp[1] - p->point[1], lp[2] - p->point[2]};
-        double sl = sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+        double sl = norm3(s);  /* (a light at 1e300: |s|^2 overflows) */
         s[0] /= sl;
         s[1] /= sl;
         s[2] /= sl;
@@ -137,8 +138,9 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
             if (skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance))
                 continue;
             w->counts[RAY_SHADOW]++;
-            double to_light[3] = {lp[0] - p->feeler[0], lp[1] - p->feeler[1], lp[2] - p->feeler[2]};
-            if (scene_occluded(S, w, p->feeler, to_light, 1.0, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
+            double to_light[3];
+            double reach = feeler_to(p->feeler, lp, to_light);
+            if (scene_occluded(S, w, p->feeler, to_light, reach, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
                 continue;
         }
         double response[3];
@@ -229,11 +231,11 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
         cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1);
     }
     int total_internal = transmits && cos2_squared < 0.0;
-    int shared = total_internal && reflects && (S->savings & SAVE_SHARED_TIR);
+    int shared = total_internal && reflects && (w->savings & SAVE_SHARED_TIR);
     double mirrored[3] = {0.0, 0.0, 0.0}, mirror[3], start[3];
     if (shared)
         w->counts[SKIP_SHARED_TIR]++;
-    if (reflects && worth_tracing(S, w, weight * (shared ? kr_max + kt : kr_max))) {
+    if (reflects && worth_tracing(w, weight * (shared ? kr_max + kt : kr_max))) {
         mirror_ray(d, facing, point, offset, mirror, start);
         w->counts[RAY_REFLECTION]++;
         self(S, w, start, mirror, level + 1, media, weight * (shared ? kr_max + kt : kr_max), mirrored);
@@ -248,7 +250,7 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
         c[0] = mirrored[0];
         c[1] = mirrored[1];
         c[2] = mirrored[2];
-    } else if (worth_tracing(S, w, weight * kt)) {
+    } else if (worth_tracing(w, weight * kt)) {
         if (total_internal) {  /* total internal reflection: stays in the medium it came from */
             mirror_ray(d, facing, point, offset, mirror, start);
             w->counts[RAY_REFLECTION]++;

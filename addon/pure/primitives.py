@@ -17,7 +17,8 @@ from typing import Optional
 
 import numpy as np
 
-from . import deps
+from ..tracer.geometry.tessellate import tapered_cylinder_mesh, torus_mesh
+from ..tracer.shapes import KINDS
 
 #: Segments around the sphere, the cylinders and the torus ring; rings of the sphere; segments of the tube.
 SEGMENTS = 64
@@ -146,7 +147,7 @@ def plane() -> GenericMesh:
 def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMesh:
     """Wall from z = 0 (radius 1) to z = 1 (radius ``small_radius``), with the base and cap discs: the
     tracer's tessellation, the wall smooth and the discs flat, the rims sharp."""
-    data = deps.module("geometry.tessellate").tapered_cylinder_mesh(small_radius, segments)
+    data = tapered_cylinder_mesh(small_radius, segments)
     faces = [vertices for vertices, _ in data.faces]
     n = segments
     smooth = np.arange(len(faces)) < n  # the wall's faces come first
@@ -158,7 +159,7 @@ def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMe
 
 def torus(segments: int = SEGMENTS, tube_segments: int = TORUS_TUBE_SEGMENTS) -> GenericMesh:
     """The tracer's tessellation of the generic torus, smooth."""
-    data = deps.module("geometry.tessellate").torus_mesh(segments, tube_segments)
+    data = torus_mesh(segments, tube_segments)
     faces = [vertices for vertices, _ in data.faces]
     return GenericMesh(np.asarray(data.vertices, dtype=np.float64), faces, np.ones(len(faces), bool))
 
@@ -187,7 +188,7 @@ def generic_mesh(kind: str, param: float = 1.0, mesh_data=None) -> GenericMesh:
     the tracer's MeshData for the polyhedra, the teapot and ``mesh`` shapes."""
     if kind in _BUILDERS:
         return _BUILDERS[kind]()
-    entry = deps.module("shapes").KINDS.get(kind)
+    entry = KINDS.get(kind)
     if entry is not None and entry.tessellate is not None:  # any other parameterless registered shape
         return from_mesh_data(entry.function("tessellate")(), smooth=True)
     if kind == "taperedCylinder":

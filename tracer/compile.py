@@ -675,7 +675,8 @@ class PrimitiveTable:
         """Keep the rows where ``keep`` is true (in order) and append rows for the ``added`` shapes (matrices
         checked) with these material ids, computed as refill computes them.  Every array is a new one."""
         kept = np.flatnonzero(keep)
-        self.shapes = [self.shapes[i] for i in kept.tolist()] + list(added)
+        delete_positions(self.shapes, np.flatnonzero(~keep).tolist())
+        self.shapes.extend(added)
         extra = len(added)
 
         def grown(array: np.ndarray, fill=0) -> np.ndarray:
@@ -739,6 +740,10 @@ class PrimitiveTable:
         if not self.kind_counts[codes].any():  # (no pass over a million rows for a kind that has none)
             return np.zeros(0, dtype=np.int64)
         return np.flatnonzero(np.isin(self.kind, codes))
+
+    def kinds_present(self) -> set[str]:
+        """The SDL kinds of the rows."""
+        return {_KEYWORDS[code] for code in np.flatnonzero(self.kind_counts).tolist()}
 
     @cached_property
     def kind_counts(self) -> np.ndarray:
@@ -897,6 +902,17 @@ def row_chunks(n: int):
     return (slice(start, min(n, start + _CHUNK)) for start in range(0, n, _CHUNK))
 
 
+def delete_positions(items: list, positions: Sequence[int]) -> None:
+    """Delete these positions (ascending) from a list in place: a few deletions move the tail a few times, with
+    no Python loop over the whole list; many make the list anew."""
+    if len(positions) > 64:
+        gone = set(positions)
+        items[:] = [item for i, item in enumerate(items) if i not in gone]
+        return
+    for p in reversed(positions):
+        del items[p]
+
+
 def _position(index, length: int) -> int:
     """A sequence index (negative from the end) as a position in range(length), or IndexError."""
     position = operator.index(index)
@@ -979,18 +995,37 @@ def live_effects(scene: Scene) -> frozenset[str]:
                     any(isinstance(o, CSG) for o in scene.objects))
 
 
+#: What a material can call for (material_traits' columns).
+TRAITS = ("lit", "reflects", "transmits", "textured", "cook-torrance", "fresnel-reflects", "fresnel-transmits")
+
+
+def material_traits(table: MaterialTable, settings, rows=slice(None)) -> np.ndarray:
+    """Per material (of every row, or of ``rows``), which TRAITS it has, (M, 7) bool: lit (a diffuse or specular
+    colour), reflects and transmits (above the settings' thresholds), textured, a Cook–Torrance share, and
+    reflects or transmits with a Fresnel mode."""
+    r, t = table.reflectivity[rows], table.transparency[rows]
+    reflects, transmits = (r >= settings.min_reflectivity) & (r > 0), (t >= settings.min_transparency) & (t > 0)
+    fresnel = table.fresnel[rows] != 0
+    return np.stack([(table.diffuse[rows] > 0).any(axis=1) | (table.specular[rows] > 0).any(axis=1),
+                     reflects, transmits, table.texture[rows] != 0, table.specular_fraction[rows] > 0,
+                     fresnel & reflects, fresnel & transmits], axis=1)
+
+
 def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool,
              used: Optional[np.ndarray] = None) -> frozenset[str]:
     """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes;
     ``used``: which of its rows count, default all)."""
+    traits = np.zeros((0, len(TRAITS)), dtype=bool) if table is None else material_traits(table, scene.settings)
+    return effects_of_traits(scene, kinds, (traits if used is None else traits[used]).any(axis=0), any_boolean)
+
+
+def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_boolean: bool) -> frozenset[str]:
+    """The live effects of a scene whose shapes are of ``kinds`` and whose materials have, together, the
+    TRAITS where ``present`` (a bool per trait) is true."""
     settings = scene.settings
+    has = dict(zip(TRAITS, np.asarray(present, dtype=bool).tolist()))
     effects = {f"shape:{kind}" for kind in kinds}
-    if table is None:
-        table = MaterialTable([])
-    elif used is not None:
-        table = _UsedRows(table, used)
-    lit = bool((table.diffuse > 0).any() or (table.specular > 0).any())
-    if scene.lights and lit:
+    if scene.lights and has["lit"]:
         effects.add("lighting")
         effects.add("shadows")
         if any(light.kind != "point" for light in scene.lights):
@@ -998,40 +1033,19 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
         if any(light.soft for light in scene.lights):
             effects.add("soft-shadows")
     deep = settings.max_recursion_depth > 0
-    r, t = table.reflectivity, table.transparency
-    if deep and ((r >= settings.min_reflectivity) & (r > 0)).any():
+    if deep and has["reflects"]:
         effects.add("reflection")
-    if deep and ((t >= settings.min_transparency) & (t > 0)).any():
+    if deep and has["transmits"]:
         effects.add("refraction")
     if any_boolean:
         effects.add("csg")
-    if (table.texture != 0).any():
+    if has["textured"]:
         effects.add("textures")
-    if "lighting" in effects and (table.specular_fraction > 0).any():
+    if "lighting" in effects and has["cook-torrance"]:
         effects.add("cook-torrance")
-    fresnel = table.fresnel != 0
-    if (("reflection" in effects and (fresnel & (r >= settings.min_reflectivity) & (r > 0)).any())
-            or ("refraction" in effects and (fresnel & (t >= settings.min_transparency) & (t > 0)).any())):
+    if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
         effects.add("fresnel")
     return frozenset(effects)
-
-
-class _UsedRows:
-    """The columns _effects reads of some rows of a MaterialTable."""
-
-    def __init__(self, table: MaterialTable, used: np.ndarray):
-        for name in ("diffuse", "specular", "reflectivity", "transparency", "texture", "specular_fraction", "fresnel"):
-            setattr(self, name, getattr(table, name)[used])
-
-
-def effects_of(compiled: CompiledScene) -> frozenset[str]:
-    """The live effects of a compiled scene as it is now (tracer.edit, after an edit): from the kinds present,
-    the materials in use, the lights and settings; what compile_scene gives the same scene."""
-    table = compiled.table
-    kinds = {_KEYWORDS[code] for code in np.flatnonzero(table.kind_counts).tolist()}
-    used = np.bincount(table.material_ids, minlength=len(compiled.materials.materials)) > 0
-    return _effects(compiled.scene, kinds, compiled.materials if len(table) else None,
-                    bool(compiled.objects.booleans), used)
 
 
 #: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same

@@ -997,6 +997,8 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
         effects.add("textures")
     if "lighting" in effects and (table.specular_fraction > 0).any():
         effects.add("cook-torrance")
+    if "shadows" in effects and scene.settings.smooth_terminator and kinds & set(MESH_KINDS):
+        effects.add("smooth-terminator")
     fresnel = table.fresnel != 0
     if (("reflection" in effects and (fresnel & (r >= settings.min_reflectivity) & (r > 0)).any())
             or ("refraction" in effects and (fresnel & (t >= settings.min_transparency) & (t > 0)).any())):
@@ -1312,10 +1314,7 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
 def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
     """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
     docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
-    pending = []
-    if scene.settings.smooth_terminator:
-        pending.append("smooth_terminator")
-    pending += ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
+    pending = ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
     if pending:
         raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")
 

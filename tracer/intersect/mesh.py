@@ -425,6 +425,21 @@ class TriangleMesh:
             smooth = smooth / length[:, None]
         return np.where(usable[:, None], smooth, geometric)
 
+    def smooth_lift(self, tri: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far (generic, (n, 3)) the points at barycentrics (b1, b2) of triangles ``tri`` move onto the
+        smooth surface the vertex normals describe, and which triangles have normals (a zero move for the
+        others).  The point g goes to each corner's tangent plane where it lies below it, q_i = g - min(0,
+        (g - p_i) . n_i) n_i, and the moves are mixed with the barycentrics (docs/tracer.md, "Smooth shadow
+        terminator"; mesh.h's mesh_smooth_lift)."""
+        corners, has = self._unit_corner_normals(tri)
+        p0, p1, p2 = self._corners(tri)
+        w0 = (1.0 - b1 - b2)[:, None]
+        w1, w2 = b1[:, None], b2[:, None]
+        g = (w0 * p0 + w1 * p1) + w2 * p2
+        q = [g - np.minimum(dot3(g - p, n), 0.0)[:, None] * n for p, n in zip((p0, p1, p2), corners)]
+        lift = ((w0 * q[0] + w1 * q[1]) + w2 * q[2]) - g
+        return np.where(has[:, None], lift, 0.0), has
+
     def _touching(self, slot_a: np.ndarray, slot_b: np.ndarray) -> np.ndarray:
         """Do the triangles in leaf slots ``slot_a`` and ``slot_b`` share a vertex (by index or position)?"""
         a, b = self.tri_vertex[self.tri_order[slot_a]], self.tri_vertex[self.tri_order[slot_b]]

@@ -963,14 +963,23 @@ def live_effects(scene: Scene) -> frozenset[str]:
     """Which effects this scene can show at all; the tracer computes nothing for the others."""
     shapes = scene.shapes()
     materials = list({id(s.material): s.material for s in shapes}.values())
+    uv_textured = any(s.material.texture > 0 and s.mesh is not None and s.mesh.corner_uvs is not None
+                      for s in shapes)
     return _effects(scene, {s.kind for s in shapes}, MaterialTable(materials) if materials else None,
-                    any(isinstance(o, CSG) for o in scene.objects))
+                    any(isinstance(o, CSG) for o in scene.objects), uv_textured=uv_textured)
+
+
+def _uv_textured(table: "PrimitiveTable", texture: np.ndarray) -> bool:
+    """Whether an image texture lies on a mesh with texture coordinates (``texture``: per material id)."""
+    return any(mesh.corner_uvs is not None and (texture[table.material_ids[rows]] > 0).any()
+               for mesh, rows in table.mesh_groups())
 
 
 def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool,
-             used: Optional[np.ndarray] = None) -> frozenset[str]:
+             used: Optional[np.ndarray] = None, uv_textured: bool = False) -> frozenset[str]:
     """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes;
-    ``used``: which of its rows count, default all)."""
+    ``used``: which of its rows count, default all); ``uv_textured``: an image texture lies on a mesh with
+    texture coordinates."""
     settings = scene.settings
     effects = {f"shape:{kind}" for kind in kinds}
     if table is None:
@@ -995,6 +1004,8 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
         effects.add("csg")
     if (table.texture != 0).any():
         effects.add("textures")
+        if uv_textured:
+            effects.add("mesh-uv")
     if "lighting" in effects and (table.specular_fraction > 0).any():
         effects.add("cook-torrance")
     if "shadows" in effects and scene.settings.smooth_terminator and kinds & set(MESH_KINDS):
@@ -1021,7 +1032,7 @@ def effects_of(compiled: CompiledScene) -> frozenset[str]:
     kinds = {_KEYWORDS[code] for code in np.flatnonzero(table.kind_counts).tolist()}
     used = np.bincount(table.material_ids, minlength=len(compiled.materials.materials)) > 0
     return _effects(compiled.scene, kinds, compiled.materials if len(table) else None,
-                    bool(compiled.objects.booleans), used)
+                    bool(compiled.objects.booleans), used, _uv_textured(table, compiled.materials.texture))
 
 
 #: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same
@@ -1311,14 +1322,6 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
     return number[which], list(map(materials.__getitem__, first[order].tolist()))
 
 
-def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
-    """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
-    docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
-    pending = ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
-    if pending:
-        raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")
-
-
 def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     """Compile ``scene`` (``columns``: what compile_scene's content key gathered, when the caller has it).
 
@@ -1330,12 +1333,12 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     shapes = columns.shapes
     kind, material_ids, materials, tapered_radii = columns.arrays()
     table = PrimitiveTable(shapes, kind, tapered_radii, columns.matrices, material_ids)
-    _refuse_untraced(scene, materials, table)
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
     material_table = MaterialTable(materials or [Material()])
     kinds = {_KEYWORDS[code] for code in np.unique(kind).tolist()}
-    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean)
+    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean,
+                       uv_textured=_uv_textured(table, material_table.texture))
     textures = None
     if "textures" in effects:
         from .textures import TextureSet

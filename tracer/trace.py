@@ -254,7 +254,7 @@ class Tracer:
         offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
-            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx])
+            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx], hits.uv[idx])
             ambient, diffuse = ambient * texture, diffuse * texture
         local = mats.emissive[mat] + self.ambient_light * ambient
         if "lighting" in self.effects:

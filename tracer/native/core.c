@@ -1106,6 +1106,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
         m->tri_normal = D->mesh_tri_normal[k];
         m->vertices = D->mesh_vertices[k];
         m->normals = D->mesh_normals[k];
+        m->tri_uv = D->mesh_tri_uv[k];
         m->rounding_factor = D->mesh_constants[0];
         m->barycentric_max = D->mesh_constants[1];
         m->parallel_eps = D->mesh_constants[2];
@@ -1472,7 +1473,7 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
  * untextured); for the tests, which compare it with the NumPy reference point by point.  -1 on a bad
  * primitive index. */
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out)
+                      const double *bary, double *out)
 {
     const Scene *S = (const Scene *)scene;
     for (int64_t i = 0; i < n; i++)
@@ -1480,7 +1481,7 @@ int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double
             return -1;
     for (int64_t i = 0; i < n; i++) {
         if (S->d.effects & FX_TEXTURES)
-            texture_color(S, shape[i], points + 3 * i, part[i], out + 3 * i);
+            texture_color(S, shape[i], points + 3 * i, part[i], bary ? bary + 2 * i : NULL, out + 3 * i);
         else
             out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = 1.0;
     }

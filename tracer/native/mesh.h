@@ -37,6 +37,7 @@ typedef struct {
     const int32_t *tri_vertex;  /* 3 per triangle */
     const int32_t *tri_normal;  /* 3 per triangle (below 0: the triangle has no normals), or NULL */
     const double *vertices, *normals;
+    const double *tri_uv;       /* 6 per triangle: its corners' texture coordinates, or NULL */
     int64_t n_tris, n_vertices, n_normals;
     double extent;
     int64_t depth;  /* longest root-to-leaf path, in nodes */

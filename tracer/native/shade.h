@@ -317,7 +317,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     double textured_ambient[3], textured_diffuse[3];
     if (use_textures) {  /* the texture colour multiplies ambient and diffuse (1 where untextured) */
         double texture[3];
-        texture_color(S, h.shape, p.point, h.part, texture);
+        texture_color(S, h.shape, p.point, h.part, h.uv, texture);
         for (int c = 0; c < 3; c++) {
             textured_ambient[c] = ambient[c] * texture[c];
             textured_diffuse[c] = p.diffuse[c] * texture[c];

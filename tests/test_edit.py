@@ -88,7 +88,7 @@ def _grid_rays(n: int = 9):
 def assert_same_rows(edited, fresh) -> None:
     """The edited compiled scene's primitive rows are the fresh compile's, number for number."""
     a, b = edited.table, fresh.table
-    for name in ("kind", "top", "inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes"):
+    for name in ("kind", "parameters", "inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     ma, mb = edited.materials, fresh.materials
     for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency", "texture"):

@@ -203,35 +203,20 @@ static inline int prim_may_hit(const double *sphere, const double *o, const doub
     return dot3(perp, perp) <= sphere[3] * sphere[3];
 }
 
-/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out). */
+/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out): each kind's
+ * registered C function, called as contract.h's RT_SHAPE_HITS spells it in these names. */
 static int analytic_hits(const Scene *S, int64_t p, const double *o, const double *d, Hit *out, int *inside)
 {
     const SceneDesc *D = &S->d;
+    const double *param = D->prim_param + PRIM_PARAMS * p;
+    const int64_t *aux = D->prim_aux + 2 * p;
+    (void)param;
+    (void)aux;
     *inside = 0;
     switch (D->prim_kind[p]) {
-#define REGISTERED_HITS(kind, hits) case kind: return hits(o, d, out);
-    RT_SHAPE_HITS(REGISTERED_HITS)  /* the kinds tracer/shapes.py names a C function for */
+#define REGISTERED_HITS(kind, call) case kind: return call;
+    RT_SHAPE_HITS(REGISTERED_HITS)
 #undef REGISTERED_HITS
-    case K_SQUARE: {
-        /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
-        int n = hits_z_plane(o, d, out, 1, D->tol_square_edge);
-        if (n) {
-            out[1] = out[0];
-            out[0].entering = 1;
-            out[1].entering = 0;
-        }
-        return 2 * n;
-    }
-    case K_PLANE:
-        *inside = plane_inside_at_start(o, d);
-        return hits_z_plane(o, d, out, 0, D->tol_square_edge);
-    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS:
-        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
-    case K_POLYHEDRON: {
-        const int64_t *aux = D->prim_aux + 2 * p;
-        return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
-    }
     }
     return 0;
 }
@@ -268,7 +253,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     double og[3], dg[3];
     double shift = prim_generic_ray(inv, o, d, og, dg);
     int64_t n;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         const MeshView *m = &S->meshes[D->prim_aux[2 * p]];
         n = mesh_all(m, og, dg, w->mesh_stack, &w->raw, &out->h, &out->cap);
         if (n < 0) {
@@ -306,7 +291,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
         return 0;
     const double *inv = D->prim_inverse + 16 * p, *rounding = D->prim_rounding + 4 * p;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         double og[3], dg[3];
         affine_point(inv, o, og);
         affine_vector(inv, d, dg);
@@ -355,7 +340,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
                          double t_max)
 {
     const SceneDesc *D = &S->d;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
             return 0;
         const double *inv = D->prim_inverse + 16 * p;
@@ -1027,7 +1012,7 @@ static int prim_ok(const SceneDesc *D, int64_t p, char *error, int64_t capacity)
     if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
         REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
                (long long)D->n_materials);
-    if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
+    if (RT_IS_MESH(kind) && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
         REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
                (long long)D->n_meshes);
     return 1;

@@ -41,6 +41,7 @@ MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tr
                "vertices": np.float64, "normals": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
+PRIM_PARAMS = _SHARED["PRIM_PARAMS"]
 
 
 class SceneDesc(ctypes.Structure):
@@ -137,7 +138,7 @@ class FlatScene:
         a["prim_kind"] = _CODE_OF_ENTRY[table.kind]
         a["prim_inverse"] = table.inverses.reshape(n, 16)  # (a view: the C core reads the table's own inverses)
         a["prim_sphere"] = table.spheres
-        a["prim_param"] = table.top  # (0 but for tapered cylinders)
+        a["prim_param"] = table.parameters  # (PRIM_PARAMS per primitive: what its kind's intersection takes)
         a["prim_material"] = table.material_ids
         a["prim_rounding"] = _rounding(table)
 
@@ -289,7 +290,8 @@ class FlatScene:
         a["prim_kind"][prims] = _CODE_OF_ENTRY[table.kind[prims]]
         a["prim_rounding"].reshape(-1, 4)[prims] = _rounding(table, prims)
         for name, column, width in (("prim_inverse", table.inverses, 16), ("prim_sphere", table.spheres, 4),
-                                    ("prim_param", table.top, 1), ("prim_material", table.material_ids, 1)):
+                                    ("prim_param", table.parameters, PRIM_PARAMS),
+                                    ("prim_material", table.material_ids, 1)):
             a[name].reshape(-1, width)[prims] = column[prims].reshape(-1, width)  # (no-ops where a is a view)
         aux = a["prim_aux"].reshape(-1, 2)
         meshes_before, plane_kinds = len(self._meshes), len(self._planes_of)

@@ -32,7 +32,7 @@ from typing import Callable, Iterator, Optional, Sequence, Union
 
 import numpy as np
 
-from .. import transforms
+from .. import shapes, transforms
 from ..bulk import collector_paused
 from ..errors import SDLError
 from ..geometry import builtin_mesh  # (its home; imported under this name by the add-on and tests)
@@ -69,7 +69,7 @@ USAGE: dict[str, str] = {
     "texture": "t", "parameters": "n p1 ... pn", "defaultMaterials": "",
     "translate": "dx dy dz", "scale": "sx sy sz", "rotate": "angle ux uy uz",
     "push": "", "pop": "", "identityAffine": "",
-    **{k: "" for k in ANALYTIC_KINDS + POLYHEDRON_KINDS}, "taperedCylinder": "s", "teapot": "", "mesh": "file",
+    **{e.keyword: e.usage for e in shapes.REGISTRY},
     **{k: "object object" for k in CSG_OPS},
     "def": "name { tokens }", "use": "name",
     # extensions for Blender scenes (docs/sdl.md)
@@ -337,7 +337,7 @@ class _Reader:
             self.handlers[keyword] = self._color_material
         for keyword in FLOAT_MATERIAL:
             self.handlers[keyword] = self._float_material
-        for keyword in ANALYTIC_KINDS + POLYHEDRON_KINDS + ("teapot", "mesh"):
+        for keyword in SHAPE_KINDS:
             self.handlers[keyword] = self._shape
         for keyword in CSG_OPS:
             self.handlers[keyword] = self._boolean
@@ -647,10 +647,9 @@ class _Reader:
         self._place(shape)
 
     def _read_shape(self, kind: str, at: int, groups) -> Optional[Shape]:
-        tapered_radius, mesh_file = 1.0, None
-        if kind == "taperedCylinder":
-            tapered_radius = self._number_token(kind, at)[0]
-        elif kind == "mesh":
+        entry = shapes.KINDS[kind]
+        parameters, mesh_file = tuple(self._number_token(kind, at)[0] for _ in entry.parameters), None
+        if entry.file_argument:
             mesh_file, mesh_at = self._name(kind, at, "a mesh file name")
         transform = self.stack[-1]
         if transform is not self.invertible:  # (shapes in a row often share their transform)
@@ -662,15 +661,15 @@ class _Reader:
                 return None
             self.invertible = transform
         mesh = None
-        if kind == "mesh":
+        if entry.file_argument:
             mesh = self._mesh_file(mesh_file, mesh_at)
             if mesh is None:
                 return None
-        elif kind in POLYHEDRON_KINDS or kind == "teapot":
+        elif entry.builtin_mesh:
             mesh = builtin_mesh(kind)
         # (The 16 entries, not a matrix: Shape makes its own matrix of what it is given anyway.)
         return Shape(_SHAPE_KIND[kind], transforms.affine_entries(transform), self._current_material(),
-                     tapered_radius, mesh, mesh_file, groups, self._shape_location(at),
+                     parameters, mesh, mesh_file, groups, self._shape_location(at),
                      self.shape_names.names.get(at))
 
     def _shape_location(self, at: int) -> SourceLocation:

@@ -1086,9 +1086,10 @@ static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, in
     for (int64_t m = 0; m < D->n_materials; m++)
         if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
             REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
+    /* (lights are read only where something is lit: then a physical one needs its shading variant) */
     for (int64_t l = 0; l < D->n_lights; l++)
         if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
-            (D->light_kind[l] != LIGHT_POINT && !(D->effects & FX_PHYSICAL_LIGHTS)))
+            (D->light_kind[l] != LIGHT_POINT && (D->effects & FX_LIGHTING) && !(D->effects & FX_PHYSICAL_LIGHTS)))
             REFUSE("light %lld has kind %d and %d samples", (long long)l, (int)D->light_kind[l],
                    (int)D->light_samples[l]);
     if (objects && n >= 0) {

@@ -370,7 +370,9 @@ class FlatScene:
         pictures = [np.ascontiguousarray(images[k], dtype=np.uint8) for k in numbers]  # 8-bit, as loaded
         a.update(mat_texture=np.zeros(len(materials), dtype=np.int32), mat_tex_param=np.zeros((len(materials), TEX_PARAMS)),
                  mat_tex_image=np.full(len(materials), -1, dtype=np.int64))
-        self._texture_rows(materials, range(len(materials)), numbers)
+        # (only the textured materials' rows differ from those defaults: 10^5 materials of their own colours
+        # are not each looked at in Python)
+        self._texture_rows(materials, np.flatnonzero(compiled.materials.texture != 0).tolist(), numbers)
         self._pictures = pictures  # the C side points into these
         a.update(image_info=[(p.shape[1], p.shape[0]) for p in pictures],
                  image_data=np.array([p.ctypes.data for p in pictures], dtype=np.uintp),

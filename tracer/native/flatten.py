@@ -36,9 +36,10 @@ MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILO
                   "DEDUPE_RELATIVE_ADJACENT")
 #: SceneDesc's per-mesh address fields and the MeshArrays field each points into, with its element type.
 MESH_ADDRESSES = {"mesh_nodes": "nodes", "mesh_order": "tri_order", "mesh_tri_vertex": "tri_vertex",
-                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals"}
+                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals",
+                  "mesh_tri_uv": "tri_uv"}
 MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tri_normal": np.int32,
-               "vertices": np.float64, "normals": np.float64}
+               "vertices": np.float64, "normals": np.float64, "tri_uv": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
 PRIM_PARAMS = _SHARED["PRIM_PARAMS"]
@@ -369,7 +370,9 @@ class FlatScene:
         pictures = [np.ascontiguousarray(images[k], dtype=np.uint8) for k in numbers]  # 8-bit, as loaded
         a.update(mat_texture=np.zeros(len(materials), dtype=np.int32), mat_tex_param=np.zeros((len(materials), TEX_PARAMS)),
                  mat_tex_image=np.full(len(materials), -1, dtype=np.int64))
-        self._texture_rows(materials, range(len(materials)), numbers)
+        # (only the textured materials' rows differ from those defaults: 10^5 materials of their own colours
+        # are not each looked at in Python)
+        self._texture_rows(materials, np.flatnonzero(compiled.materials.texture != 0).tolist(), numbers)
         self._pictures = pictures  # the C side points into these
         a.update(image_info=[(p.shape[1], p.shape[0]) for p in pictures],
                  image_data=np.array([p.ctypes.data for p in pictures], dtype=np.uintp),

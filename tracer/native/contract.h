@@ -9,7 +9,8 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
        K_MESH = 7, K_PARABOLOID = 8 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
-       FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256 };
+       FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
+       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
@@ -88,6 +89,7 @@ typedef struct {
     const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
     const double *const *mesh_vertices;      /* per mesh: 3 per vertex */
     const double *const *mesh_normals;       /* per mesh: 3 per normal (made unit where used) */
+    const double *const *mesh_tri_uv;        /* per mesh: 6 per triangle, its corners' (u, v) (MeshData.corner_uvs), or NULL */
     /* CSG */
     int64_t n_csg;
     const int32_t *csg_op;                   /* OP_* per node */
@@ -166,6 +168,7 @@ typedef struct {
     X(mesh_tri_normal) \
     X(mesh_vertices) \
     X(mesh_normals) \
+    X(mesh_tri_uv) \
     X(n_csg) \
     X(csg_op) \
     X(csg_left) \
@@ -214,7 +217,7 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 67
-#define RT_CONTRACT_DIGEST "940330a1857964d4"
+#define RT_SCENE_DESC_FIELD_COUNT 68
+#define RT_CONTRACT_DIGEST "7d32511aed2fa2c2"
 
 #endif

@@ -38,7 +38,7 @@ CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
            # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
-           "physical-lights", "soft-shadows", "fresnel")
+           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv")
 #: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
 LIGHT_KINDS = _model.LIGHT_KINDS
 #: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).
@@ -190,6 +190,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mesh_tri_normal", "**i32", "per mesh: 3 normal indices per triangle (< 0: none), or NULL"),
     F("mesh_vertices", "**f64", "per mesh: 3 per vertex"),
     F("mesh_normals", "**f64", "per mesh: 3 per normal (made unit where used)"),
+    F("mesh_tri_uv", "**f64", "per mesh: 6 per triangle, its corners' (u, v) (MeshData.corner_uvs), or NULL"),
     F("n_csg", "i64", section="CSG"),
     F("csg_op", "*i32", "OP_* per node"),
     F("csg_left", "*i64"),

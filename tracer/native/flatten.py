@@ -36,9 +36,10 @@ MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILO
                   "DEDUPE_RELATIVE_ADJACENT")
 #: SceneDesc's per-mesh address fields and the MeshArrays field each points into, with its element type.
 MESH_ADDRESSES = {"mesh_nodes": "nodes", "mesh_order": "tri_order", "mesh_tri_vertex": "tri_vertex",
-                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals"}
+                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals",
+                  "mesh_tri_uv": "tri_uv"}
 MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tri_normal": np.int32,
-               "vertices": np.float64, "normals": np.float64}
+               "vertices": np.float64, "normals": np.float64, "tri_uv": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
 PRIM_PARAMS = _SHARED["PRIM_PARAMS"]

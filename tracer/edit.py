@@ -12,16 +12,15 @@ then, 0, 1, ...).  Several objects may share one key — the parts of one Blende
 and are then edited together, in their order in the scene.  Keys stay valid across every edit;
 positions do not (a removal shifts the objects after it).
 
-What each edit costs (see docs/tracer.md, "Editing a compiled scene"):
+What each edit recomputes (docs/tracer.md, "Editing a compiled scene", has the table and the costs):
 
-* ``set_transform`` / ``set_matrices``: the key's primitive rows (matrix, inverse, rounding, bounds) and
-  its objects' boxes, then a *refit* of the C core's object hierarchy (each changed leaf's boxes up to the
-  root); nothing else.
-* ``set_material`` / ``replace_material``: one material row (a new row for a new material).
-* ``replace_mesh``: that mesh's BVH, built once per content (meshes stay shared by content), and the rows
-  of the shapes that use it.
-* ``add_objects`` / ``remove_objects`` / ``replace_objects`` with another structure: their own rows, then a
-  rebuild of the object hierarchy (on the tracer's threads).
+* a move (``set_transform``, ``set_transforms``, ``set_matrices``): the key's primitive rows (inverse,
+  rounding, bounds) and its objects' boxes, then a *refit* of the C core's object hierarchy;
+* a material (``set_material``, ``replace_material``): one material row (a new row for a new material);
+* a mesh (``replace_mesh``): that mesh's BVH, built once per content (meshes stay shared by content), and
+  the rows of the shapes that use it;
+* ``add_objects`` / ``remove_objects`` / ``replace_objects`` with another structure: their own rows, the
+  FlatScene made anew, a rebuild of the object hierarchy (on the tracer's threads);
 * ``set_lights``: the light rows.
 
 An edit that changes which *live effects* the scene has (the first reflective material, the first texture,

@@ -52,6 +52,7 @@ A_PARAMETERS = "sdl:parameters"
 SETTING_COLORS = {"global_ambient": "sdl:globalAmbient", "background": "sdl:background"}
 SETTING_FLOATS = {"min_reflectivity": "sdl:minReflectivity", "min_transparency": "sdl:minTransparency"}
 A_MAX_DEPTH = "sdl:maxRecursionDepth"
+A_SMOOTH_TERMINATOR = "sdl:smoothTerminator"  # bool, written where true
 A_PIXMAP_NUMBERS = "sdl:pixmapNumbers"  # int[]
 A_PIXMAP_FILES = "sdl:pixmapFiles"  # asset[], same order
 

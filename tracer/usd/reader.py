@@ -192,6 +192,7 @@ class _Reader:
             for field_name, name in C.SETTING_FLOATS.items():
                 setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
             s.max_recursion_depth = int(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth))
+            s.smooth_terminator = bool(self.get(root, C.A_SMOOTH_TERMINATOR, False))
             numbers = list(self.get(root, C.A_PIXMAP_NUMBERS, []))
             files = list(self.get(root, C.A_PIXMAP_FILES, []))
         except _BAD_VALUE as exc:

@@ -120,6 +120,8 @@ class _Writer:
         for field, name in C.SETTING_FLOATS.items():
             self._double(root, name, getattr(s, field))
         self._attr(root, C.A_MAX_DEPTH, self.Sdf.ValueTypeNames.Int, int(s.max_recursion_depth))
+        if s.smooth_terminator:
+            self._attr(root, C.A_SMOOTH_TERMINATOR, self.Sdf.ValueTypeNames.Bool, True)
         numbers = sorted(self.scene.pixmaps)
         self._attr(root, C.A_PIXMAP_NUMBERS, self.Sdf.ValueTypeNames.IntArray, self.Vt.IntArray(numbers))
         files = [self._relative(self.scene.pixmaps[i]) for i in numbers]

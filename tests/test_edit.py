@@ -419,3 +419,21 @@ def test_a_physical_light_over_unlit_shapes_renders_on_the_c_core():
     scene.lights = [Light((3, 4, 5), (1, 1, 1), kind="sphere", radius=0.5, samples=4)]
     c, numpy = render(scene, 16, 12, backend="c"), render(scene, 16, 12, backend="numpy")
     assert c.backend == "c" and np.abs(c.image - numpy.image).max() <= 1 / 255
+
+
+def test_an_animation_frame_moves_every_object_at_once(backend):
+    scene, keys = mixed_scene()
+    editable = EditableScene(scene, keys)
+    render(editable.compiled, 8, 6, backend="c")
+    frame = {key: translation(0.1 * k, 0.05, -0.1) @ _first_matrix(editable, key) for k, key in enumerate(keys)}
+    frame["csg"] = translation(0.2, 0, 0)  # (a boolean's leaves all get it)
+    editable.set_transforms(frame.items())
+    for key, matrix in frame.items():
+        for obj in editable.objects_of(key):
+            for leaf in ([obj.left, obj.right] if isinstance(obj, CSG) else [obj]):
+                assert np.array_equal(leaf.matrix, matrix)
+    assert editable.done["rebuild"] == 1  # (every object moved: built anew, not refitted)
+    assert_renders_alike(editable, backend)
+    with pytest.raises(TracerError, match="'torus'.*singular"):
+        editable.set_transforms([("red", np.eye(4)), ("torus", np.diag([1.0, 1.0, 0.0, 1.0]))])
+    assert np.array_equal(editable.objects_of("red")[0].matrix, frame["red"])  # (nothing changed)

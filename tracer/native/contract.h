@@ -44,6 +44,10 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
 /* Kinds made of triangles, traced by their BVH (the mesh family). */
 #define RT_IS_MESH(kind) ((kind) == K_MESH)
+/* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index
+ * (tracer/sdl/statements.py names each statement's). */
+#define RT_SDL_ACTIONS(X) X(0, sdl_light) X(1, sdl_global_ambient) X(2, sdl_background) X(3, sdl_min_reflectivity) X(4, sdl_min_transparency) X(5, sdl_max_recursion_depth) X(6, sdl_camera) X(7, sdl_color_material) X(8, sdl_float_material) X(9, sdl_texture) X(10, sdl_parameters) X(11, sdl_default_materials) X(12, sdl_translate) X(13, sdl_scale) X(14, sdl_rotate) X(15, sdl_push) X(16, sdl_pop) X(17, sdl_identity) X(18, sdl_shape)
+#define RT_SDL_ACTION_COUNT 19
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
@@ -218,6 +222,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 68
-#define RT_CONTRACT_DIGEST "7d32511aed2fa2c2"
+#define RT_CONTRACT_DIGEST "318ae2c19e6bcc55"
 
 #endif

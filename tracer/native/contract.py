@@ -27,6 +27,7 @@ import numpy as np
 from .. import model as _model
 from .. import savings as _savings
 from .. import shapes as _shapes
+from ..sdl import statements as _statements
 
 HEADER = Path(__file__).resolve().parent / "contract.h"
 
@@ -349,6 +350,10 @@ def header_text() -> str:
     out.append(_enum("EDIT", EDIT_FLAGS, [1 << k for k in range(len(EDIT_FLAGS))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
     out += _shape_dispatch()
+    out += ["/* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index",
+            " * (tracer/sdl/statements.py names each statement's). */",
+            "#define RT_SDL_ACTIONS(X) " + " ".join(f"X({k}, {a})" for k, a in enumerate(_statements.ACTIONS)),
+            f"#define RT_SDL_ACTION_COUNT {len(_statements.ACTIONS)}"]
     out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")
     out.append(f"#define N_COUNTS {len(RAY_KINDS) + len(SKIP_REASONS)}  /* rays cast per kind, then skipped per reason */")
     out.append("")

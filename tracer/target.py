@@ -67,8 +67,14 @@ KAPPA_START = 1.0
 #: Image target: plans aim at this fraction of the target's squared error, so that the estimate's scatter
 #: and the plan's rounding seldom leave a round short of the target.
 PLAN_AIM = 0.9
-#: Image target: every this-many-th pixel that may need rays is in the pilot that measures kappa.
-PILOT_EVERY = 10
+#: Image target: the pilot's share of the pixels (chosen at random, whatever their centre rays show), and
+#: the fewest rays per half it gives each.
+PILOT_FRACTION = 1.0 / 16
+PILOT_HALF = 2
+PILOT_SALT = 0x5EED_C0DE
+#: Image target: a floor the pilot measures under the centre rays' errors counts from this many standard
+#: errors up.
+FLOOR_SIGNIFICANCE = 2.0
 MAX_ROUNDS = 16
 
 #: Pixel target: every pixel's first batch of rays (enough for a variance, one 4 x 4 grid of strata).
@@ -134,23 +140,73 @@ def _second_difference(image: np.ndarray, axis: int) -> np.ndarray:
     return np.concatenate([first, inner, last], axis=axis)
 
 
-def plan_halves(centre_errors: np.ndarray, kappa: float, squared_budget: float) -> np.ndarray:
+@dataclass
+class ErrorModel:
+    """What a pixel's squared error is expected to be, from its centre rays' ``e0`` (:func:`centre_error`):
+    ``centre_scale * e0 + centre_floor`` with the centre ray alone, ``(kappa * e0 + floor) / rays^ALPHA``
+    with that many jittered rays.  The floors are what ``e0`` does not see (a texture finer than a pixel
+    looks smooth to centre rays); they, kappa and floor are fitted to rays (:func:`_fitted_model`,
+    :meth:`refit`)."""
+
+    kappa: float = KAPPA_START
+    floor: float = 0.0
+    centre_scale: float = 1.0
+    centre_floor: float = 0.0
+
+    def centre(self, e0: np.ndarray) -> np.ndarray:
+        return self.centre_scale * e0 + self.centre_floor
+
+    def difficulty(self, e0: np.ndarray) -> np.ndarray:
+        return self.kappa * e0 + self.floor
+
+    def refit(self, e0: np.ndarray, squared_errors: np.ndarray, rays: np.ndarray) -> "ErrorModel":
+        """kappa and floor fitted to refined pixels' halves (their squared errors at so many rays)."""
+        kappa, floor = _fit_line(e0, squared_errors * rays ** ALPHA, (self.kappa, self.floor))
+        return ErrorModel(kappa, floor, self.centre_scale, self.centre_floor)
+
+
+def _fit_line(x: np.ndarray, y: np.ndarray, fallback: tuple[float, float]) -> tuple[float, float]:
+    """(slope, floor), both 0 or more, of y = slope x + floor through the sums of the lower and upper halves
+    of the points by x (two equations, as noisy points fit no better with more).  With too few points, or
+    points at a single x, ``fallback``."""
+    if x.size < 2:
+        return fallback
+    order = np.argsort(x, kind="stable")
+    lower, upper = order[:x.size // 2], order[x.size // 2:]
+    sx = np.array([x[lower].sum(), x[upper].sum()])
+    sy = np.array([y[lower].sum(), y[upper].sum()])
+    n = np.array([lower.size, upper.size], dtype=float)
+    det = sx[0] * n[1] - sx[1] * n[0]
+    if det != 0.0:
+        slope = (sy[0] * n[1] - sy[1] * n[0]) / det
+        floor = (sx[0] * sy[1] - sx[1] * sy[0]) / det
+        if slope >= 0.0 and floor >= 0.0:
+            return float(slope), float(floor)
+    total_x, total_y = float(sx.sum()), max(float(sy.sum()), 0.0)
+    if total_x > 0.0 and (det == 0.0 or (sy[0] * n[1] - sy[1] * n[0]) / det >= 0.0):
+        return total_y / total_x, 0.0  # the floor came out below 0: a slope alone
+    return 0.0, total_y / x.size  # no slope (or no x): a floor alone
+
+
+def plan_halves(e0: np.ndarray, model: ErrorModel, squared_budget: float) -> np.ndarray:
     """Rays per half for each pixel (0: its centre ray alone) such that the predicted sum of squared errors
-    is at most ``squared_budget`` for the fewest rays, as far as HALF_LADDER's steps allow."""
-    weight = np.power(kappa * centre_errors, 1.0 / (1.0 + ALPHA))
+    is at most ``squared_budget`` for the fewest rays, as far as HALF_LADDER's steps allow.  A pixel is
+    refined only where its rays are predicted to do better than its centre ray."""
+    difficulty, centre = model.difficulty(e0), model.centre(e0)
+    weight = np.power(difficulty, 1.0 / (1.0 + ALPHA))
 
     def halves_at(scale: float) -> np.ndarray:
         rays = scale * weight
         step = np.searchsorted(HALF_LADDER, rays / 2.0, side="right") - 1
-        return np.where(rays >= 2 * HALF_LADDER[0], HALF_LADDER[np.maximum(step, 0)], 0)
+        halves = HALF_LADDER[np.maximum(step, 0)]
+        better = difficulty / (2.0 * halves) ** ALPHA < centre
+        return np.where((rays >= 2 * HALF_LADDER[0]) & better, halves, 0)
 
     def predicted(halves: np.ndarray) -> float:
-        refined = halves > 0
-        return float(np.sum(np.where(refined, kappa * centre_errors / np.maximum(2.0 * halves, 1.0) ** ALPHA,
-                                     centre_errors)))
+        return float(np.sum(np.where(halves > 0, difficulty / np.maximum(2.0 * halves, 1.0) ** ALPHA, centre)))
 
-    if predicted(np.zeros_like(centre_errors, dtype=np.int64)) <= squared_budget:
-        return np.zeros(centre_errors.shape, dtype=np.int64)
+    if predicted(np.zeros(e0.shape, dtype=np.int64)) <= squared_budget:
+        return np.zeros(e0.shape, dtype=np.int64)
     low, high = -30.0, 30.0  # log10 of the scale
     for _ in range(48):
         middle = 0.5 * (low + high)
@@ -217,38 +273,38 @@ def sample_image(camera_rays: CameraRays, rays_for, width: int, height: int, tar
     check(target)
     pixels = width * height
     film = _trace_centres(camera_rays, rays_for, width, height, cancel)
-    errors = centre_error(np.clip(film, 0.0, 1.0).reshape(height, width, 3)).ravel()
-    candidates = np.flatnonzero(errors > 0.0)  # a pixel like all its neighbours never needs more rays
+    e0 = centre_error(np.clip(film, 0.0, 1.0).reshape(height, width, 3)).ravel()
     halves = _Halves(pixels)
     budget = pixels * target * target
-    estimate = _Estimate(errors, halves)
-    if estimate.total > budget:
-        # The pilot: every PILOT_EVERY-th candidate gets the rays a plan with KAPPA_START gives it, and kappa
-        # is fitted to them; then every pixel gets its rays at once (one jittered set per half samples a
-        # pixel better than several rounds' sets of the same total).
-        pilot = candidates[::PILOT_EVERY]
-        planned = plan_halves(errors[candidates], KAPPA_START, PLAN_AIM * budget)[::PILOT_EVERY]
-        _trace_halves(camera_rays, rays_for, width, halves, pilot[planned > 0], planned[planned > 0], seed, 0,
-                      cancel)
-        kappa = estimate.kappa(pilot[planned > 0]) or KAPPA_START
-        aim = PLAN_AIM * budget
-        for round_index in range(1, MAX_ROUNDS):
-            wanted = np.maximum(plan_halves(errors[candidates], kappa, aim), halves.count[candidates])
-            more = wanted - halves.count[candidates]
-            if more.any():
-                _trace_halves(camera_rays, rays_for, width, halves, candidates[more > 0], more[more > 0], seed,
-                              round_index, cancel)
-                refined = candidates[halves.count[candidates] > 0]
-                estimate.update(refined)
-                if estimate.total <= budget:
-                    break
-                kappa = estimate.kappa(refined) or kappa
-                aim = min(aim, aim * budget / estimate.total)
-            elif np.all(halves.count[candidates] == HALF_LADDER[-1]):
-                break  # every pixel that could use rays has all it may have
-            else:
-                aim *= 0.8  # the plan's rounding left the estimate short: ask for a little more
-    refined = candidates[halves.count[candidates] > 0]
+    # The pilot: a random PILOT_FRACTION of all pixels, whatever their e0, get the rays a plan with the
+    # starting model gives them, at least PILOT_HALF per half.  Their halves measure both the centre rays'
+    # true errors (the model for pixels left with their centre ray) and the jittered rays' (the plan's).
+    rows, cols = np.divmod(np.arange(pixels), width)
+    pilot = np.flatnonzero(sampling.pixel_uniforms(rows, cols, 1, seed ^ PILOT_SALT)[0][:, 0] < PILOT_FRACTION)
+    planned = np.maximum(plan_halves(e0, ErrorModel(), PLAN_AIM * budget)[pilot], PILOT_HALF)
+    _trace_halves(camera_rays, rays_for, width, halves, pilot, planned, seed, 0, cancel)
+    model = _fitted_model(film, e0, halves, pilot)
+    estimate = _Estimate(e0, halves, model)
+    aim = PLAN_AIM * budget
+    for round_index in range(1, MAX_ROUNDS):
+        if estimate.total <= budget:
+            break
+        wanted = np.maximum(plan_halves(e0, model, aim), halves.count)
+        more = wanted - halves.count
+        if more.any():
+            grow = np.flatnonzero(more)
+            _trace_halves(camera_rays, rays_for, width, halves, grow, more[grow], seed, round_index, cancel)
+            refined = np.flatnonzero(halves.count)
+            estimate.update()
+            model = model.refit(e0[refined], estimate.per_pixel[refined], 2.0 * halves.count[refined])
+            estimate.model = model
+            aim = min(aim, aim * budget / max(estimate.total, 1e-300))
+        elif np.all(halves.count[model.difficulty(e0) > 0] == HALF_LADDER[-1]):
+            break  # every pixel that could use rays has all it may have
+        else:
+            aim *= 0.8  # the plan's rounding left the estimate short: ask for a little more
+        estimate.update()
+    refined = np.flatnonzero(halves.count)
     film[refined] = halves.sums[:, refined].sum(axis=0) / (2.0 * halves.count[refined])[:, None]
     rays = 1 + 2 * halves.count
     result = ErrorEstimate(target=float(target), rms=math.sqrt(max(estimate.total, 0.0) / pixels),
@@ -260,26 +316,42 @@ def sample_image(camera_rays: CameraRays, rays_for, width: int, height: int, tar
     return film.reshape(height, width, 3), result
 
 
+def _fitted_model(film: np.ndarray, e0: np.ndarray, halves: _Halves, pilot: np.ndarray) -> ErrorModel:
+    """The error model fitted to the pilot: per pilot pixel, its halves' squared error at its rays, and its
+    centre ray's squared error, (centre - halves' mean)² less the halves' own (an unbiased estimate)."""
+    squared = halves.squared_error(pilot)
+    rays = 2.0 * halves.count[pilot]
+    kappa, floor = _fit_line(e0[pilot], squared * rays ** ALPHA, (KAPPA_START, 0.0))
+    mean = np.clip(halves.sums[:, pilot].sum(axis=0) / rays[:, None], 0.0, 1.0)
+    centre_squared = ((np.clip(film[pilot], 0.0, 1.0) - mean) ** 2).mean(axis=1) - squared
+    # e0 stays the centre ray's error where an edge is seen (its h²/12 is what an edge crossing the pixel at
+    # random gives; a pilot of a few hundred pixels holds too few edges to scale it down safely).  What
+    # centre rays do not see is a floor: the mean excess over e0 of the pilot's lower half by e0 (the upper
+    # half, edges where e0 overstates, would hide it), counted only when it stands FLOOR_SIGNIFICANCE
+    # standard errors above 0 (one stray edge among flat pixels would otherwise set a floor for all).
+    lower = np.argsort(e0[pilot], kind="stable")[:pilot.size // 2]
+    excess = centre_squared[lower] - e0[pilot][lower]
+    centre_floor = 0.0
+    if excess.size >= 2:
+        mean, spread = float(excess.mean()), float(excess.std(ddof=1)) / math.sqrt(excess.size)
+        if mean > FLOOR_SIGNIFICANCE * spread:
+            centre_floor = mean
+    return ErrorModel(kappa, floor, 1.0, centre_floor)
+
+
 class _Estimate:
-    """The image's estimated squared errors: the centre rays' (``errors``) where a pixel is not refined,
-    its halves' where it is."""
+    """The image's estimated squared errors: the halves' where a pixel is refined, the model's for a centre
+    ray alone where it is not."""
 
-    def __init__(self, errors: np.ndarray, halves: _Halves):
-        self.errors, self.halves = errors, halves
-        self.per_pixel = errors.copy()
-        self.total = float(errors.sum())
+    def __init__(self, e0: np.ndarray, halves: _Halves, model: ErrorModel):
+        self.e0, self.halves, self.model = e0, halves, model
+        self.update()
 
-    def update(self, refined: np.ndarray) -> None:
+    def update(self) -> None:
+        refined = np.flatnonzero(self.halves.count)
+        self.per_pixel = self.model.centre(self.e0)
         self.per_pixel[refined] = self.halves.squared_error(refined)
         self.total = float(self.per_pixel.sum())
-
-    def kappa(self, refined: np.ndarray) -> Optional[float]:
-        """kappa fitted to these refined pixels: their halves' squared errors against e0 / rays^ALPHA."""
-        if refined.size == 0:
-            return None
-        self.update(refined)
-        rays = 2.0 * self.halves.count[refined]
-        return max(1e-6, float(np.sum(self.per_pixel[refined] * rays ** ALPHA) / np.sum(self.errors[refined])))
 
 
 def _shown(values: np.ndarray, width: int, height: int) -> np.ndarray:

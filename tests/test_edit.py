@@ -253,3 +253,86 @@ def test_random_edit_sequences_render_as_from_scratch(steps):
             EDITS[edit](editable, key)
     assert_renders_alike(editable, "c")
     assert_renders_alike(editable, "numpy")
+
+
+# ------------------------------------------------------------------------------------------------ in place
+
+
+def many_spheres(n: int = 400, seed: int = 1) -> Scene:
+    rng = np.random.default_rng(seed)
+    objects = [Shape("sphere", translation(*rng.uniform(-4, 4, 3)) @ scaling(*rng.uniform(0.05, 0.3, 3)),
+                     Material(diffuse=tuple(rng.uniform(0, 1, 3)), reflectivity=0.6 if k % 7 == 0 else 0.0))
+               for k in range(n)]
+    objects.append(Shape("plane", translation(0, -4.5, 0) @ rotation(-90, 1, 0, 0), CHECKER))
+    return Scene(objects=objects, lights=[Light((4, 5, 6), (1, 1, 1))],
+                 camera=Camera(eye=(0, 2, 12), look=(0, 0, 0), view_angle=45))
+
+
+def _pair_boxes(tracer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The C core's object hierarchy: per pair, its children's boxes (lo, hi: (P, 2, 3)), children and counts."""
+    raw, items, root = tracer.object_tree()
+    record = np.dtype([("b", "<f8", (3, 2, 2)), ("child", "<i4", 2), ("count", "<i4", 2)])
+    pairs = np.frombuffer(raw, dtype=record)
+    boxes = pairs["b"].transpose(0, 3, 2, 1)  # [pair, child, lo/hi, axis]
+    return boxes, pairs["child"], pairs["count"], items
+
+
+def assert_hierarchy_holds_every_object(editable: EditableScene) -> None:
+    """Every pair's child box holds the boxes of the objects below it (what a refit must keep true)."""
+    from tracer.native import NativeTracer
+    tracer = NativeTracer(editable.compiled, threads=1)
+    boxes, child, count, items = _pair_boxes(tracer)
+    flat = editable.compiled._flat_cache[1]
+    object_box = flat.arrays["object_box"].reshape(-1, 6)
+
+    def objects_below(p: int, c: int) -> list[int]:
+        if count[p, c]:
+            return items[child[p, c]:child[p, c] + count[p, c]].tolist()
+        return objects_below(child[p, c], 0) + objects_below(child[p, c], 1)
+
+    for p in range(len(boxes)):
+        for c in range(2):
+            below = object_box[objects_below(p, c)]
+            assert (boxes[p, c, 0] <= below[:, :3]).all() and (boxes[p, c, 1] >= below[:, 3:]).all()
+
+
+def test_moving_a_few_of_many_objects_refits_the_hierarchy_in_place(backend):
+    editable = EditableScene(many_spheres())
+    compiled = editable.compiled
+    render(compiled, 8, 6, backend="c")  # (the C core's scene made: edits now reach it)
+    core = compiled._flat_cache[1].core
+    for k in (3, 50, 51, 399):
+        editable.set_transform(k, translation(3 - k / 100, 1.5, 2) @ scaling(0.4, 0.4, 0.4))
+    with editable.batch():  # (one refit for all of them)
+        for k in range(100, 110):
+            editable.set_transform(k, translation(-3, -1 + k / 50, 1) @ scaling(0.2, 0.3, 0.2))
+    assert editable.compiled is compiled and compiled._flat_cache[1].core is core
+    assert editable.done["refit"] == 5 and editable.done["rebuild"] == editable.done["flat"] == 0
+    assert_hierarchy_holds_every_object(editable)
+    assert_renders_alike(editable, backend)
+
+
+def test_moving_most_objects_rebuilds_the_hierarchy():
+    editable = EditableScene(many_spheres(60))
+    render(editable.compiled, 8, 6, backend="c")
+    with editable.batch():
+        for k in range(45):
+            editable.set_transform(k, translation(k / 10 - 2, 0, 0) @ scaling(0.1, 0.1, 0.1))
+    assert editable.done["rebuild"] == 1 and editable.done["refit"] == 0
+    assert_hierarchy_holds_every_object(editable)
+    assert_renders_alike(editable, "c")
+
+
+def test_edits_change_the_rows_they_concern_and_no_other():
+    editable = EditableScene(many_spheres(50))
+    render(editable.compiled, 8, 6, backend="c")
+    flat = editable.compiled._flat_cache[1]
+    before = {name: array.copy() for name, array in flat.arrays.items()}
+    editable.set_transform(7, translation(1, 1, 1))
+    changed = {name for name, array in flat.arrays.items()
+               if array.shape != before[name].shape or not np.array_equal(array, before[name])}
+    assert changed == {"prim_inverse", "prim_sphere", "prim_rounding", "object_box"}
+    for name in changed:
+        width = {"prim_inverse": 16, "prim_sphere": 4, "prim_rounding": 4, "object_box": 6}[name]
+        rows = np.flatnonzero((flat.arrays[name].reshape(-1, width) != before[name].reshape(-1, width)).any(axis=1))
+        assert rows.tolist() == [7], name

@@ -512,6 +512,24 @@ class MaterialTable:
                     column[rows] = np.fromiter(values, column.dtype, len(values))
 
 
+    def put(self, material: Material, row: Optional[int] = None) -> int:
+        """Write ``material`` into ``row`` (None: a new row at the end, every array then a new one, longer by
+        one); returns the row (tracer.edit)."""
+        if not isinstance(self.materials, list):
+            self.materials = list(self.materials)
+        if row is None:
+            row = len(self.materials)
+            self.materials.append(material)
+            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+                column = getattr(self, name)
+                setattr(self, name, np.concatenate([column, np.zeros((1,) + column.shape[1:], column.dtype)]))
+        else:
+            self.materials[row] = material
+        for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+            getattr(self, name)[row] = getattr(material, name)
+        return row
+
+
 #: Materials read at a time by MaterialTable (their objects stay in the cache while each field is read).
 _MATERIALS_AT_ONCE = 8192
 
@@ -561,6 +579,7 @@ class PrimitiveTable:
         self.material_ids = material_ids
         self.kind = np.asarray(kind, dtype=np.int16)
         self.meshes: dict[int, object] = {}
+        self._mesh_owners: dict[int, MeshData] = {}
         if matrices is None:  # (a matrix that is not a float64 4x4: _checked_inverse says which, or copes)
             matrices = _stack_checked(shapes)
         self._matrices = matrices
@@ -572,20 +591,7 @@ class PrimitiveTable:
         self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
         self.boxes = np.zeros((n, 6))
         for rows in row_chunks(n):  # (each chunk's matrices made once, for all that is computed from them)
-            matrix = self.matrix_rows(rows)
-            inverse = _batched_inverses(matrix)
-            if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
-                inverse = self._checked_inverses(rows)
-            self.inverses[rows] = inverse
-            self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
-            # (the sums in Primitive's order: rows of three, left to right; spelt out, as NumPy's
-            # reductions over axes of three take several times longer)
-            linear, translation = np.abs(inverse[:, :3, :3]), np.abs(inverse[:, :3, 3])
-            sums = linear[:, :, 0] + linear[:, :, 1] + linear[:, :, 2]
-            self.inverse_norms[rows, 0] = np.maximum(np.maximum(sums[:, 0], sums[:, 1]), sums[:, 2])
-            self.inverse_norms[rows, 1] = np.maximum(np.maximum(translation[:, 0], translation[:, 1]),
-                                                     translation[:, 2])
-            self._bound_generic_boxes(rows, matrix)
+            self._fill_rows(rows, self.matrix_rows(rows))
         for mesh, _ in self.mesh_groups():
             self._build_mesh(mesh)
         # a tapered cylinder's small radius (Shape.small_radius), 0 for the other kinds
@@ -594,12 +600,98 @@ class PrimitiveTable:
         self._fill_sizes_and_bounds()
         self._matrices = None  # (the shapes' or the table's own: not kept twice)
 
+    def _fill_rows(self, rows, matrix: np.ndarray) -> None:
+        """Inverses, their rounding and norms, and the bounds of the kinds with a fixed generic box, of
+        ``rows`` (a slice or an index array) whose matrices are ``matrix``: each row's numbers depend on
+        its own matrix alone, computed the same whichever rows come with it."""
+        inverse = _batched_inverses(matrix)
+        if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
+            inverse = self._checked_inverses(rows)
+        self.inverses[rows] = inverse
+        self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
+        # (the sums in Primitive's order: rows of three, left to right; spelt out, as NumPy's
+        # reductions over axes of three take several times longer)
+        linear, translation = np.abs(inverse[:, :3, :3]), np.abs(inverse[:, :3, 3])
+        sums = linear[:, :, 0] + linear[:, :, 1] + linear[:, :, 2]
+        self.inverse_norms[rows, 0] = np.maximum(np.maximum(sums[:, 0], sums[:, 1]), sums[:, 2])
+        self.inverse_norms[rows, 1] = np.maximum(np.maximum(translation[:, 0], translation[:, 1]),
+                                                 translation[:, 2])
+        self._bound_generic_boxes(rows, matrix)
+
+    def refill(self, rows: np.ndarray, shapes: Sequence[Shape]) -> None:
+        """Put these Shapes (matrices checked) in ``rows`` (sorted indices) and compute every number of those
+        rows from them: kind, taper, mesh, inverse, bounds; the numbers a compile of the shapes from scratch
+        gives, bit for bit.  (Material ids are the caller's.)"""
+        index = rows.tolist()
+        old_meshes = [self.shapes[i].mesh for i in index]
+        for i, shape in zip(index, shapes):
+            self.shapes[i] = shape
+        old_kinds = self.kind[rows].copy()
+        self.kind[rows] = [_KIND_INDEX[s.kind] for s in shapes]
+        if "kind_counts" in self.__dict__:
+            np.subtract.at(self.kind_counts, old_kinds, 1)
+            np.add.at(self.kind_counts, self.kind[rows], 1)
+        self.top[rows] = [s.tapered_radius if s.kind == "taperedCylinder" else 1.0 if s.kind == "cylinder" else 0.0
+                          for s in shapes]
+        mesh_codes = list(_MESH_CODES)
+        if np.isin(old_kinds, mesh_codes).any() or np.isin(self.kind[rows], mesh_codes).any():
+            self.__dict__.pop("_mesh_groups", None)
+            if any(a is not b.mesh for a, b in zip(old_meshes, shapes)):
+                self._prune_meshes()
+            for shape in shapes:
+                if shape.kind in MESH_KINDS:
+                    self._build_mesh(shape.mesh)
+        # (the defaults a compile starts every row from: what an unbounded kind keeps)
+        self.generic_size[rows], self.spheres[rows], self.boxes[rows] = 1.0, (0.0, 0.0, 0.0, np.inf), 0.0
+        for part in row_chunks(len(rows)):
+            self._fill_rows(rows[part], self.matrix_rows(rows[part]))
+        self._fill_sizes_and_bounds(rows)
+
+    def resize(self, keep: np.ndarray, added: list[Shape], added_material_ids: np.ndarray) -> None:
+        """Keep the rows where ``keep`` is true (in order) and append rows for the ``added`` shapes (matrices
+        checked) with these material ids, computed as refill computes them.  Every array is a new one."""
+        kept = np.flatnonzero(keep)
+        self.shapes = [self.shapes[i] for i in kept.tolist()] + list(added)
+        extra = len(added)
+
+        def grown(array: np.ndarray, fill=0) -> np.ndarray:
+            out = np.empty((len(kept) + extra,) + array.shape[1:], dtype=array.dtype)
+            out[:len(kept)] = array[kept]
+            out[len(kept):] = fill
+            return out
+
+        self.material_ids = np.concatenate([self.material_ids[kept], np.asarray(added_material_ids, np.int32)])
+        self.kind = grown(self.kind)
+        self.top = grown(self.top, 0.0)
+        self.inverses, self.inverse_error, self.inverse_norms = (grown(self.inverses), grown(self.inverse_error),
+                                                                 grown(self.inverse_norms))
+        self.generic_size = grown(self.generic_size, 1.0)
+        self.spheres = grown(self.spheres)
+        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
+        self.boxes = grown(self.boxes)
+        self.__dict__.pop("kind_counts", None)
+        self.__dict__.pop("_mesh_groups", None)
+        self._prune_meshes()
+        if extra:
+            self.refill(np.arange(len(kept), len(kept) + extra), self.shapes[len(kept):])
+
+    def _prune_meshes(self) -> None:
+        """Forget the built meshes no row holds any longer (kept, an id freed could name another mesh later)."""
+        used = {id(mesh) for mesh, _ in self.mesh_groups()}
+        for gone in [k for k in self.meshes if k not in used]:
+            del self.meshes[gone]
+            self._mesh_owners.pop(gone, None)
+
     def __len__(self) -> int:
         return len(self.shapes)
 
     def matrix_rows(self, rows) -> np.ndarray:
         """The (k, 4, 4) matrices of these rows (a slice or an index array)."""
         m = self._matrices
+        if m is None:  # (compiled: the shapes' own, as tracer.edit refills rows from them)
+            shapes = self.shapes
+            return np.stack([np.asarray(shapes[i].matrix, dtype=np.float64)
+                             for i in np.arange(len(self))[rows].tolist()]).reshape(-1, 4, 4)
         return m[rows] if m.ndim == 3 else _matrices_of_affines(m[rows])
 
     def _checked_inverses(self, rows: slice) -> np.ndarray:
@@ -658,12 +750,15 @@ class PrimitiveTable:
     def _build_mesh(self, mesh: MeshData) -> None:
         if id(mesh) not in self.meshes:
             self.meshes[id(mesh)] = shared_triangle_mesh(mesh)
+            self._mesh_owners[id(mesh)] = mesh  # (its id names it for as long as the entry is kept)
 
-    def _fill_sizes_and_bounds(self) -> None:
+    def _fill_sizes_and_bounds(self, subset: Optional[np.ndarray] = None) -> None:
         """generic_size and the bounding spheres of the kinds without a fixed generic box (those are done a
         chunk at a time with the inverses): per chunk of tapered cylinders, and per mesh (or polyhedron
-        vertex set) with its instances."""
+        vertex set) with its instances.  Of every row, or of the rows in ``subset`` (sorted indices)."""
         rows = self.rows(_TAPERED_KINDS)
+        if subset is not None:
+            rows = np.intersect1d(rows, subset)
         if rows.size:
             top = np.maximum(self.top[rows], 0.0)
             self.generic_size[rows] = np.maximum(top, 1.0)
@@ -672,21 +767,27 @@ class PrimitiveTable:
                 points[:, 4:, :2] *= top[part, None, None]
                 self._bound(rows[part], points)
         groups: dict = {}
-        for mesh, rows in self._groups(POLYHEDRON_KINDS) + self.mesh_groups():
+        if subset is None:
+            vertex_rows = self._groups(POLYHEDRON_KINDS) + self.mesh_groups()
+        else:  # (the subset's rows that hold vertices, a group per mesh object)
+            vertex_rows = {}
+            for i in subset[_HAS_VERTICES[self.kind[subset]]].tolist():
+                mesh = self.mesh_of(i)
+                vertex_rows.setdefault(id(mesh), (mesh, []))[1].append(i)
+            vertex_rows = [(mesh, np.array(members, dtype=np.int64)) for mesh, members in vertex_rows.values()]
+        for mesh, rows in vertex_rows:
             vertices = np.asarray(mesh.vertices, dtype=np.float64)
             # (polyhedra read elsewhere may each have a MeshData of their own: the same vertices, grouped by
             # their bytes)
             key = id(mesh) if len(rows) and self.kind[rows[0]] in _MESH_CODES else vertices.tobytes()
             groups.setdefault(key, (vertices, []))[1].append(rows)
-        #: (vertices, rows) of each mesh and each polyhedron vertex set, with the rows of its instances
-        self.vertex_groups = [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]
-        for vertices, rows in self.vertex_groups:
+        for vertices, rows in [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
             per_chunk = max(1, _CHUNK // max(1, len(vertices)))
             for start in range(0, len(rows), per_chunk):
                 self._bound(rows[start:start + per_chunk], vertices)
 
-    def _bound_generic_boxes(self, rows: slice, matrix: np.ndarray) -> None:
+    def _bound_generic_boxes(self, rows, matrix: np.ndarray) -> None:
         """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
         box (``matrix``: the chunk's matrices).  Each world bound is the sum of the extreme terms, in the
         order of the product (matrix row . corner, then the translation): the extreme of that sum over the
@@ -705,7 +806,10 @@ class PrimitiveTable:
         low, high = np.minimum(at_lo, at_hi), np.maximum(at_lo, at_hi)
         lo = low[:, :, 0] + low[:, :, 1] + low[:, :, 2] + translation
         hi = high[:, :, 0] + high[:, :, 1] + high[:, :, 2] + translation
-        where = np.arange(rows.start, rows.stop) if every else rows.start + local
+        if isinstance(rows, slice):
+            where = np.arange(rows.start, rows.stop) if every else rows.start + local
+        else:
+            where = rows if every else rows[local]
         self.generic_size[where] = _BOX_SIZE[codes]
         self._keep_bounds(where, lo, hi)
 
@@ -733,6 +837,8 @@ class PrimitiveTable:
 _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
 _KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
 _MESH_CODES = frozenset(_KIND_INDEX[k] for k in MESH_KINDS)
+#: Per kind code: whether its bounds come from vertices (a mesh's, a polyhedron's).
+_HAS_VERTICES = np.array([e.keyword in MESH_KINDS or e.keyword in POLYHEDRON_KINDS for e in shapes.REGISTRY])
 _TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
 #: Per kind code: whether the kind has a fixed generic box, the box's low and high corners, and the generic
 #: size (Primitive.generic_size) of such a kind.
@@ -837,12 +943,16 @@ def live_effects(scene: Scene) -> frozenset[str]:
                     any(isinstance(o, CSG) for o in scene.objects))
 
 
-def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool) -> frozenset[str]:
-    """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes)."""
+def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool,
+             used: Optional[np.ndarray] = None) -> frozenset[str]:
+    """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes;
+    ``used``: which of its rows count, default all)."""
     settings = scene.settings
     effects = {f"shape:{kind}" for kind in kinds}
     if table is None:
         table = MaterialTable([])
+    elif used is not None:
+        table = _UsedRows(table, used)
     lit = bool((table.diffuse > 0).any() or (table.specular > 0).any())
     if scene.lights and lit:
         effects.add("lighting")
@@ -860,6 +970,24 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
     if "lighting" in effects and (table.specular_fraction > 0).any():
         effects.add("cook-torrance")
     return frozenset(effects)
+
+
+class _UsedRows:
+    """The columns _effects reads of some rows of a MaterialTable."""
+
+    def __init__(self, table: MaterialTable, used: np.ndarray):
+        for name in ("diffuse", "specular", "reflectivity", "transparency", "texture", "specular_fraction"):
+            setattr(self, name, getattr(table, name)[used])
+
+
+def effects_of(compiled: CompiledScene) -> frozenset[str]:
+    """The live effects of a compiled scene as it is now (tracer.edit, after an edit): from the kinds present,
+    the materials in use, the lights and settings; what compile_scene gives the same scene."""
+    table = compiled.table
+    kinds = {_KEYWORDS[code] for code in np.flatnonzero(table.kind_counts).tolist()}
+    used = np.bincount(table.material_ids, minlength=len(compiled.materials.materials)) > 0
+    return _effects(compiled.scene, kinds, compiled.materials if len(table) else None,
+                    bool(compiled.objects.booleans), used)
 
 
 #: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same

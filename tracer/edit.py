@@ -38,9 +38,17 @@ from typing import Optional
 
 import numpy as np
 
-from .compile import CompiledScene, compile_scene, fold_tree
+from collections import Counter
+
+from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, effects_of, fold_tree
 from .errors import TracerError
-from .model import CSG, MESH_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
+from .model import CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
+from .native import flatten
+from .threads import default_threads
+from .savings import sealed_lights
+from .textures import TextureSet
+from .textures.images import load_image
+from .textures.solid import SOLID_TEXTURES
 
 
 class EditableScene:
@@ -48,8 +56,8 @@ class EditableScene:
 
     def __init__(self, scene: Scene, keys: Optional[Sequence[Hashable]] = None):
         """``scene`` is taken over: its ``objects`` list is edited along with the compiled scene (a
-        ShapeTable is made into its list of Shapes).  ``keys``: one per top-level object (default: the
-        objects' positions)."""
+        ShapeTable is made into its list of Shapes, and compiled from that).  ``keys``: one per top-level
+        object (default: the objects' positions)."""
         if isinstance(scene.objects, ShapeTable):
             scene.objects = list(scene.objects)
         n = len(scene.objects)
@@ -60,9 +68,24 @@ class EditableScene:
         self._keys: list[Hashable] = keys
         self._positions: dict[Hashable, list[int]] = {}
         self._index_keys()
-        self._batch_depth = 0
-        self._dirty = False
         self.compiled: CompiledScene = compile_scene(scene)
+        compiled = self.compiled
+        # (a compiled list's materials are its distinct Material objects, by identity: kept alive by the table)
+        self._material_rows = {id(m): k for k, m in enumerate(compiled.materials.materials)}
+        self._leaf_counts = np.ones(n, dtype=np.int64)
+        for k, obj in compiled.objects.booleans.items():
+            self._leaf_counts[k] = sum(1 for _ in obj.leaves())
+        self._starts = np.concatenate([[0], np.cumsum(self._leaf_counts)])
+        self._images = dict(getattr(compiled.textures, "images", None) or {})
+        # what the C core has not been told yet (see _sync): objects whose boxes changed, and how
+        self._batch_depth = 0
+        self._pending_objects: set[int] = set()
+        self._pending_meshes = self._pending_rebuild = self._pending_flat = False
+        self._refitted = 0  # objects refitted since the hierarchy was last built
+        self._materials_dirty = False  # a material row written since the FlatScene last read them
+        #: what the last edits did, for the tests and the bench: "rows", "materials", "effects", "textures",
+        #: "refit", "rebuild", "flat" (the FlatScene made anew), counted since the scene was made editable
+        self.done: Counter = Counter()
 
     # -- keys ---------------------------------------------------------------------------------------------
 
@@ -91,20 +114,19 @@ class EditableScene:
         """Every shape of the key gets ``matrix`` (4 x 4, affine, invertible) as its own: for plain shapes
         (and the parts of one mesh) the new world matrix.  A boolean's leaves all get it too; to place a
         boolean's leaves one by one, use set_matrices."""
-        count = sum(_leaf_count(obj) for obj in self.objects_of(key))
-        self.set_matrices(key, [matrix] * count)
+        positions = self._where(key)
+        self.set_matrices(key, [matrix] * int(self._leaf_counts[positions].sum()))
 
     def set_matrices(self, key: Hashable, matrices: Sequence) -> None:
         """The key's shapes get these matrices, one per shape in scene order (a boolean's leaves left to
         right)."""
-        checked = [_checked_matrix(m, key) for m in matrices]
         objects = self.objects_of(key)
-        if len(checked) != sum(map(_leaf_count, objects)):
-            raise TracerError(f"object {key!r} has {sum(map(_leaf_count, objects))} shapes, "
-                              f"not {len(checked)} matrices")
-        it = iter(checked)
-        self._replace_in_place(key, [_with_leaves(obj, lambda shape: dataclasses.replace(shape, matrix=next(it)))
-                                     for obj in objects])
+        count = int(self._leaf_counts[self._where(key)].sum())
+        if len(matrices) != count:
+            raise TracerError(f"object {key!r} has {count} shapes, not {len(matrices)} matrices")
+        checked = iter([_checked_matrix(m, key) for m in matrices])
+        self._replace_in_place(key, [_with_leaves(obj, lambda shape: _moved(shape, next(checked)))
+                                     for obj in objects], checked=True)
 
     def set_material(self, key: Hashable, material: Material) -> None:
         """Every shape of the key gets ``material``."""
@@ -113,15 +135,24 @@ class EditableScene:
 
     def replace_material(self, old: Material, new: Material) -> None:
         """Every shape whose material is the object ``old`` gets ``new`` instead (a material edited where
-        many shapes share it: its one row changes)."""
-        changed = False
-        for i, obj in enumerate(self.scene.objects):
-            if any(shape.material is old for shape in _leaves(obj)):
-                self.scene.objects[i] = _with_leaves(
-                    obj, lambda s: dataclasses.replace(s, material=new) if s.material is old else s)
-                changed = True
-        if changed:
-            self._recompile()
+        many shapes share it: its one row changes, if ``new`` has none yet)."""
+        row = self._material_rows.get(id(old))
+        if row is None or old is new:
+            return
+        self._check_material(new, "a material")
+        rows = np.flatnonzero(self.compiled.table.material_ids == row)
+        positions = np.unique(np.searchsorted(self._starts, rows, side="right") - 1).tolist()
+        if id(new) not in self._material_rows:  # (the row is the new material's from now on)
+            self.compiled.materials.put(new, row)
+            del self._material_rows[id(old)]
+            self._material_rows[id(new)] = row
+            self._materials_dirty = True
+            self.done["materials"] += 1
+        with self.batch():
+            for p in positions:
+                obj = self.scene.objects[p]
+                self._replace_at([p], [_with_leaves(
+                    obj, lambda s: dataclasses.replace(s, material=new) if s.material is old else s)], True)
 
     def replace_mesh(self, key: Hashable, mesh: MeshData) -> None:
         """Every mesh (and teapot) shape of the key gets ``mesh`` as its triangles."""
@@ -136,53 +167,239 @@ class EditableScene:
         objects = list(objects)
         if not objects:
             self.remove_objects(key)
-            return
-        self._replace_in_place(key, objects) if _same_structure(self.objects_of(key), objects) else \
-            self._remove_and_add(key, objects)
+        elif _same_structure(self.objects_of(key), objects):
+            self._replace_in_place(key, objects)
+        else:
+            for obj in objects:
+                self._check_object(obj, key)
+            self._restructure(self._where(key), key, objects)
 
     def add_objects(self, key: Hashable, objects: Iterable[SceneObject]) -> None:
         """Add ``objects`` at the end of the scene under ``key`` (a new key, or more objects for one)."""
         objects = list(objects)
-        if not objects:
-            return
         for obj in objects:
-            _check_object(obj, key)
-        self.scene.objects.extend(objects)
-        self._keys.extend([key] * len(objects))
-        self._index_keys()
-        self._recompile()
+            self._check_object(obj, key)
+        if objects:
+            self._restructure([], key, objects)
 
     def remove_objects(self, key: Hashable) -> None:
         """Remove every object of ``key`` (the key is then unknown)."""
-        gone = set(self._where(key))
-        self.scene.objects[:] = [o for i, o in enumerate(self.scene.objects) if i not in gone]
-        self._keys = [k for i, k in enumerate(self._keys) if i not in gone]
-        self._index_keys()
-        self._recompile()
+        self._restructure(self._where(key), key, [])
 
     def set_lights(self, lights: Sequence[Light]) -> None:
         """The scene's lights become ``lights``."""
+        compiled = self.compiled
         self.scene.lights = list(lights)
-        self._recompile()
+        compiled.light_positions = np.array([l.position for l in lights], dtype=float).reshape(-1, 3)
+        compiled.light_colors = np.array([l.color for l in lights], dtype=float).reshape(-1, 3)
+        effects_before = compiled.effects
+        self._refresh_effects()
+        self._forget_sealed()
+        flat = _flat_of(compiled)
+        if flat is not None:
+            flat.edit(compiled, _NONE, _NONE, materials=compiled.effects != effects_before, lights=True)
+            self._pending_flat = True
+        self._sync()
 
     def rebuild_hierarchy(self) -> None:
         """Build the C core's object hierarchy anew (refits keep it valid, but many large moves can make it
         slower to traverse than a fresh build)."""
-        self._recompile()
+        self._pending_rebuild = True
+        self._sync()
 
     @contextmanager
     def batch(self):
-        """Edits inside ``with editable.batch():`` update their rows at once but the object hierarchy only
-        at the end (one refit or rebuild for all of them): for the many updates of one depsgraph change."""
+        """Edits inside ``with editable.batch():`` update their rows at once but the C core's object hierarchy
+        only at the end (one refit or rebuild for all of them): for the many updates of one depsgraph change."""
         self._batch_depth += 1
         try:
             yield self
         finally:
             self._batch_depth -= 1
-            if self._batch_depth == 0 and self._dirty:
-                self._recompile()
+            self._sync()
 
-    # -- internals ----------------------------------------------------------------------------------------
+    # -- in place -----------------------------------------------------------------------------------------
+
+    def _replace_in_place(self, key: Hashable, objects: list[SceneObject], checked: bool = False) -> None:
+        if not checked:
+            for obj in objects:
+                self._check_object(obj, key)
+        self._replace_at(self._where(key), objects, checked)
+
+    def _replace_at(self, positions: list[int], objects: list[SceneObject], checked: bool) -> None:
+        """Objects of the same structure as those at ``positions`` take their places: their rows recomputed."""
+        compiled, table = self.compiled, self.compiled.table
+        leaves = [leaf for obj in objects for leaf in _leaves(obj)]
+        rows = np.concatenate([np.arange(self._starts[p], self._starts[p + 1]) for p in positions])
+        material_ids = np.array([self._material_row(leaf.material) for leaf in leaves], dtype=np.int32)
+        kinds_before = table.kind[rows].copy()
+        same_materials = bool(np.array_equal(table.material_ids[rows], material_ids))
+        for p, obj in zip(positions, objects):
+            self.scene.objects[p] = obj
+        table.refill(rows, leaves)
+        table.material_ids[rows] = material_ids
+        self._renew_nodes(rows, positions)
+        effects_before = compiled.effects
+        materials_changed, self._materials_dirty = self._materials_dirty, False
+        if materials_changed or not (same_materials and np.array_equal(kinds_before, table.kind[rows])):
+            self._refresh_effects()
+        self._update_sealed(positions)
+        self.done["rows"] += 1
+        flat = _flat_of(compiled)
+        if flat is not None:
+            meshes = flat.edit(compiled, rows, np.asarray(positions, dtype=np.int64),
+                               materials=materials_changed or compiled.effects != effects_before, lights=False)
+            self._pending_meshes |= meshes
+            self._pending_objects.update(positions)
+        self._sync()
+
+    def _material_row(self, material: Material) -> int:
+        row = self._material_rows.get(id(material))
+        if row is None:
+            row = self._material_rows[id(material)] = self.compiled.materials.put(material)
+            self._materials_dirty = True
+            self.done["materials"] += 1
+        return row
+
+    def _renew_nodes(self, rows: np.ndarray, positions: list[int]) -> None:
+        """The NumPy path's primitives of these rows made again when next asked for, and the booleans at these
+        positions compiled again from them."""
+        compiled = self.compiled
+        made = compiled.primitives._made
+        for i in rows.tolist():
+            made.pop(i, None)
+        for p in positions:
+            if p in compiled.objects.booleans:
+                compiled.objects.booleans[p] = self._boolean_node(p)
+
+    def _boolean_node(self, position: int) -> CSGNode:
+        counter = iter(range(int(self._starts[position]), int(self._starts[position + 1])))
+        primitives = self.compiled.primitives
+        return fold_tree(self.scene.objects[position], lambda _: primitives[next(counter)],
+                         lambda node, left, right: CSGNode(node.op, left, right))
+
+    # -- added, removed -----------------------------------------------------------------------------------
+
+    def _restructure(self, removed: list[int], key: Hashable, added: list[SceneObject]) -> None:
+        """Remove the objects at ``removed`` and append ``added`` under ``key``: their own rows, then the
+        FlatScene made anew and the object hierarchy rebuilt."""
+        compiled, table = self.compiled, self.compiled.table
+        n = len(self._keys)
+        keep = np.ones(n, dtype=bool)
+        keep[removed] = False
+        keep_rows = np.repeat(keep, self._leaf_counts)
+        leaves = [leaf for obj in added for leaf in _leaves(obj)]
+        material_ids = np.array([self._material_row(leaf.material) for leaf in leaves], dtype=np.int32)
+        kept = np.flatnonzero(keep)
+        self.scene.objects[:] = [self.scene.objects[i] for i in kept.tolist()] + added
+        self._keys = [self._keys[i] for i in kept.tolist()] + [key] * len(added)
+        self._index_keys()
+        self._leaf_counts = np.concatenate([self._leaf_counts[kept], [_leaf_count(obj) for obj in added]]).astype(np.int64)
+        self._starts = np.concatenate([[0], np.cumsum(self._leaf_counts)])
+        table.resize(keep_rows, leaves, material_ids)
+        compiled.primitives._made.clear()
+        # (a boolean has two leaves or more; the booleans' positions shift, so each is compiled again)
+        index = np.where(self._leaf_counts == 1, self._starts[:-1], -1)
+        compiled.objects = CompiledObjects(compiled.primitives, index, {})
+        for p in np.flatnonzero(index < 0).tolist():
+            compiled.objects.booleans[p] = self._boolean_node(p)
+        self._refresh_effects()
+        self._materials_dirty = False  # (the new FlatScene reads them all)
+        sealed = compiled.__dict__.get(_SEALED)
+        if sealed is not None:
+            fresh = sealed_lights(compiled, np.arange(len(kept), len(self._keys)))
+            compiled.__dict__[_SEALED] = np.concatenate([sealed[kept], fresh])
+        self.done["rows"] += 1
+        old = _flat_of(compiled)
+        if old is not None:  # (a new flat scene; the C core's scene moves over to it)
+            flat = flatten.FlatScene(compiled)
+            flat.core = getattr(old, "core", None)
+            compiled._flat_cache = (compiled._flat_cache[0], flat)
+            self._pending_flat = self._pending_meshes = self._pending_rebuild = True
+            self.done["flat"] += 1
+        self._sync()
+
+    # -- what depends on many rows ------------------------------------------------------------------------
+
+    def _refresh_effects(self) -> None:
+        """The live effects again, and the textures where they changed (each picture loaded once)."""
+        compiled = self.compiled
+        effects = effects_of(compiled)
+        if effects != compiled.effects:
+            compiled.effects = effects
+            self.done["effects"] += 1
+        if "textures" not in effects:
+            compiled.textures = None
+            return
+        table = compiled.table
+        used = np.bincount(table.material_ids, minlength=len(compiled.materials.materials)) > 0
+        numbers = {int(t) for t in np.unique(compiled.materials.texture[used]).tolist() if t > 0}
+        for number in numbers - set(self._images):
+            self._images[number] = load_image(self.scene.pixmaps[number])  # (checked with the material)
+        images = {k: self._images[k] for k in sorted(numbers)}
+        if compiled.textures is None or compiled.textures.images != images:
+            compiled.textures = TextureSet.of_images(compiled.primitives, images)
+            self.done["textures"] += 1
+
+    def _update_sealed(self, positions: list[int]) -> None:
+        """The sealed-lights rows of these objects again, where the table has been made (as a new array)."""
+        sealed = self.compiled.__dict__.get(_SEALED)
+        if sealed is not None:
+            sealed = sealed.copy()
+            sealed[positions] = sealed_lights(self.compiled, np.asarray(positions, dtype=np.int64))
+            self.compiled.__dict__[_SEALED] = sealed
+
+    def _forget_sealed(self) -> None:
+        self.compiled.__dict__.pop(_SEALED, None)
+
+    # -- the C core ---------------------------------------------------------------------------------------
+
+    def _sync(self) -> None:
+        """Tell the C core's scene (when there is one) what the edits since the last time changed: a refit of
+        the hierarchy to the objects that moved, or a rebuild (objects added or removed, or more than
+        REBUILD_SHARE of the objects refitted since the last build)."""
+        if self._batch_depth:
+            return
+        flat = _flat_of(self.compiled)
+        core = getattr(flat, "core", None) if flat is not None else None
+        objects = np.array(sorted(self._pending_objects), dtype=np.int64)
+        anything = self._pending_flat or self._pending_rebuild or objects.size
+        self._pending_objects = set()
+        if core is None or not anything:
+            self._pending_meshes = self._pending_rebuild = self._pending_flat = False
+            return
+        self._refitted += objects.size
+        rebuild = self._pending_rebuild or self._refitted > REBUILD_SHARE * max(1, len(self._keys))
+        core.edit(flat, objects, meshes=self._pending_meshes, rebuild=rebuild, threads=default_threads())
+        if rebuild:
+            self._refitted = 0
+            self.done["rebuild"] += 1
+        elif objects.size:
+            self.done["refit"] += 1
+        self._pending_meshes = self._pending_rebuild = self._pending_flat = False
+
+    # -- checks -------------------------------------------------------------------------------------------
+
+    def _check_object(self, obj: SceneObject, key: Hashable) -> None:
+        for shape in _leaves(obj):
+            if not isinstance(shape, Shape):
+                raise TracerError(f"object {key!r}: {type(shape).__name__} is not a shape or a boolean")
+            if shape.kind not in SHAPE_KINDS:
+                raise TracerError(f"object {key!r}: unknown shape kind {shape.kind!r}")
+            if shape.kind in MESH_KINDS and not isinstance(shape.mesh, MeshData):
+                raise TracerError(f"object {key!r}: a {shape.kind} without a mesh")
+            _checked_matrix(shape.matrix, key)
+            self._check_material(shape.material, f"object {key!r}")
+
+    def _check_material(self, material: Material, where: str) -> None:
+        """A material's texture must be usable: a known solid texture, or a makePixmap picture (loaded now)."""
+        number = int(material.texture)
+        if number < 0 and number not in SOLID_TEXTURES:
+            raise TracerError(f"{where}: texture {number} is not a known solid texture (use -1, -2 or -3)")
+        if number > 0 and number not in self._images:
+            if number not in self.scene.pixmaps:
+                raise TracerError(f"{where}: texture {number} is used but the scene has no 'makePixmap {number} file'")
+            self._images[number] = load_image(self.scene.pixmaps[number])
 
     def _where(self, key: Hashable) -> list[int]:
         try:
@@ -196,25 +413,22 @@ class EditableScene:
             positions.setdefault(key, []).append(i)
         self._positions = positions
 
-    def _replace_in_place(self, key: Hashable, objects: list[SceneObject]) -> None:
-        for obj in objects:
-            _check_object(obj, key)
-        for i, obj in zip(self._where(key), objects):
-            self.scene.objects[i] = obj
-        self._recompile()
 
-    def _remove_and_add(self, key: Hashable, objects: list[SceneObject]) -> None:
-        with self.batch():
-            self.remove_objects(key)
-            self.add_objects(key, objects)
+#: A rebuild instead of a refit once more objects than this share of all have been refitted since the last
+#: build: refitted boxes of objects moved far apart overlap more and more.
+REBUILD_SHARE = 0.5
+_NONE = np.zeros(0, dtype=np.int64)
+_SEALED = "_sealed_lights"  # (where tracer.savings.sealed_table keeps its table)
 
-    def _recompile(self) -> None:
-        """(The first implementation: compile again; the in-place edits replace this step by step.)"""
-        if self._batch_depth:
-            self._dirty = True
-            return
-        self._dirty = False
-        self.compiled = compile_scene(self.scene)
+
+def _flat_of(compiled: CompiledScene):
+    """The compiled scene's FlatScene, if the C core has flattened it."""
+    cached = getattr(compiled, "_flat_cache", None)
+    return None if cached is None else cached[1]
+
+
+def _moved(shape: Shape, matrix: np.ndarray) -> Shape:
+    return dataclasses.replace(shape, matrix=matrix)
 
 
 def _leaves(obj: SceneObject) -> list[Shape]:
@@ -254,10 +468,3 @@ def _checked_matrix(matrix, key: Hashable) -> np.ndarray:
     if inverse is None or not np.isfinite(inverse).all():
         raise TracerError(f"object {key!r}: the transform is singular (a scale of 0?)")
     return m
-
-
-def _check_object(obj: SceneObject, key: Hashable) -> None:
-    for shape in _leaves(obj):
-        if not isinstance(shape, Shape):
-            raise TracerError(f"object {key!r}: {type(shape).__name__} is not a shape or a boolean")
-        _checked_matrix(shape.matrix, key)

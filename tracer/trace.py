@@ -13,7 +13,7 @@ import numpy as np
 from .compile import CompiledScene
 from . import numerics
 from .model import traced_depth
-from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_lights
+from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_table
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: How many nested transparent objects a ray remembers being inside.
@@ -207,7 +207,7 @@ class Tracer:
         self.background = np.asarray(scene.settings.background, dtype=float)
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
         self.dark = dark_materials(scene)
-        self.sealed = sealed_lights(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
+        self.sealed = sealed_table(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         n = origins.shape[0]

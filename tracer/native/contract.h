@@ -13,6 +13,7 @@ enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
+enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define K_COUNT 9
 /* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
 #define RT_SHAPE_HITS(X) X(K_SPHERE, hits_sphere) X(K_CUBE, hits_cube) X(K_PARABOLOID, hits_paraboloid)
@@ -173,6 +174,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 61
-#define RT_CONTRACT_DIGEST "63c73e847c36681b"
+#define RT_CONTRACT_DIGEST "7d416842de0c6c02"
 
 #endif

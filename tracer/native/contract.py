@@ -42,6 +42,8 @@ RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
 SKIP_REASONS = _savings.SKIP_REASONS
 SAVINGS_SWITCHES = _savings.SWITCHES
+#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew.
+EDIT_FLAGS = ("meshes", "rebuild")
 
 
 def c_name(name: str) -> str:
@@ -54,6 +56,7 @@ KIND = {c_name(kind): code for code, (kind, _) in enumerate(SHAPE_KINDS)}
 KIND_CODES = {sdl: code for code, (_, sdl_kinds) in enumerate(SHAPE_KINDS) for sdl in sdl_kinds}
 OP_CODES = {op: code for code, op in enumerate(CSG_OPS)}
 EFFECT_BITS = {name: 1 << bit for bit, name in enumerate(EFFECTS)}
+EDIT_BITS = {name: 1 << bit for bit, name in enumerate(EDIT_FLAGS)}
 
 # ------------------------------------------------------------------------------------------------ constants
 
@@ -292,6 +295,7 @@ def header_text() -> str:
     out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
     out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
     out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
+    out.append(_enum("EDIT", EDIT_FLAGS, [1 << k for k in range(len(EDIT_FLAGS))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
     out += _shape_dispatch()
     out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")

@@ -16,7 +16,7 @@ static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t insi
                               const int use_cook_torrance)
 {
     const SceneDesc *D = &S->d;
-    if (S->savings & SAVE_DARK_MATERIALS) {
+    if (w->savings & SAVE_DARK_MATERIALS) {
         const double *diffuse = D->mat_diffuse + 3 * mat, *specular = D->mat_specular + 3 * mat;
         int dark = diffuse[0] == 0.0 && diffuse[1] == 0.0 && diffuse[2] == 0.0 && specular[0] == 0.0 &&
                    specular[1] == 0.0 && specular[2] == 0.0 &&
@@ -26,7 +26,8 @@ static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t insi
             return 1;
         }
     }
-    if ((S->savings & SAVE_INSIDE_SHADOWS) && inside_of >= 0 && S->sealed[inside_of * D->n_lights + l]) {
+    if ((w->savings & SAVE_INSIDE_SHADOWS) && inside_of >= 0 && S->sealed &&
+        S->sealed[inside_of * D->n_lights + l]) {
         w->counts[SKIP_INSIDE_SHADOW]++;
         return 1;
     }
@@ -34,9 +35,9 @@ static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t insi
 }
 
 /* tracer.savings, the contribution cutoff: whether a secondary ray of this cumulative weight is traced. */
-static inline int worth_tracing(const Scene *S, Work *w, double weight)
+static inline int worth_tracing(Work *w, double weight)
 {
-    if (weight >= S->cutoff)
+    if (weight >= w->cutoff)
         return 1;
     w->counts[SKIP_CUTOFF]++;
     return 0;
@@ -188,11 +189,11 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
             cos2_squared = 1.0 - ratio * ratio * (1.0 - cos1 * cos1);
         }
         int total_internal = transmits && cos2_squared < 0.0;
-        int shared = total_internal && reflects && (S->savings & SAVE_SHARED_TIR);
+        int shared = total_internal && reflects && (w->savings & SAVE_SHARED_TIR);
         double mirrored[3] = {0.0, 0.0, 0.0};
         if (shared)
             w->counts[SKIP_SHARED_TIR]++;
-        if (reflects && worth_tracing(S, w, weight * (shared ? kr + kt : kr))) {
+        if (reflects && worth_tracing(w, weight * (shared ? kr + kt : kr))) {
             double r[3], start[3];
             double dn = 2.0 * dot3(d, facing);
             for (int i = 0; i < 3; i++) {
@@ -211,7 +212,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                 c[0] = mirrored[0];
                 c[1] = mirrored[1];
                 c[2] = mirrored[2];
-            } else if (worth_tracing(S, w, weight * kt)) {
+            } else if (worth_tracing(w, weight * kt)) {
                 double next[3], start[3];
                 if (total_internal) {  /* total internal reflection: stays in the medium it came from */
                     double dn = 2.0 * dot3(d, facing);

@@ -100,6 +100,14 @@ class TextureSet:
                     loaded[path] = _load_for(scene, shapes, number)
                 self.images[number] = loaded[path]
 
+    @classmethod
+    def of_images(cls, primitives, images: dict[int, np.ndarray]) -> "TextureSet":
+        """A TextureSet of these primitives with the pictures already loaded (by texture number): tracer.edit's,
+        which loads only a picture it has not loaded before."""
+        self = cls.__new__(cls)
+        self.primitives, self.images = primitives, dict(images)
+        return self
+
     def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:
         """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` (1 where untextured)."""
         out = np.ones_like(points)

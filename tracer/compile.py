@@ -27,8 +27,9 @@ from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .intersect.torus import intersect_torus
-from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
+from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
                     Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
+from .lights import LightTable
 from .transforms import transform_points
 
 
@@ -482,6 +483,9 @@ class MaterialTable:
     speed_of_light: np.ndarray = field(init=False)
     #: The texture number (0: none).
     texture: np.ndarray = field(init=False)
+    #: The Material.fresnel mode's index in FRESNEL_MODES, and the tint (a metal's F0).
+    fresnel: np.ndarray = field(init=False)
+    fresnel_tint: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         # A few thousand materials at a time (they stay in the cache while each of their fields is read:
@@ -491,6 +495,8 @@ class MaterialTable:
         if isinstance(self.materials, MaterialRows):  # (columns already: a million materials read as rows)
             for name in _COLOR_FIELDS + _NUMBER_FIELDS + ("texture",):
                 setattr(self, name, self.materials.column(name))
+            self.fresnel = np.zeros(len(self.materials), dtype=np.int32)  # (rows keep SDL's materials only)
+            self.fresnel_tint = np.ones((len(self.materials), 3))
             return
         n = len(self.materials)
         for name in _COLOR_FIELDS:
@@ -510,7 +516,22 @@ class MaterialTable:
                     column[rows] = np.fromiter(chain.from_iterable(values), float, 3 * len(values)).reshape(-1, 3)
                 else:
                     column[rows] = np.fromiter(values, column.dtype, len(values))
+        self._fresnel_columns()
 
+    def _fresnel_columns(self) -> None:
+        """Material.fresnel and fresnel_tint, which only materials made for Blender scenes change from their
+        defaults (looked at one by one only where some material does)."""
+        n = len(self.materials)
+        self.fresnel = np.zeros(n, dtype=np.int32)
+        self.fresnel_tint = np.ones((n, 3))
+        modes = list(map(attrgetter("fresnel"), self.materials))
+        tints = list(map(attrgetter("fresnel_tint"), self.materials))
+        default = Material()  # (its values are the very objects every material has that keeps them)
+        if all(map(operator.is_, modes, repeat(default.fresnel))) and all(
+                map(operator.is_, tints, repeat(default.fresnel_tint))):
+            return
+        self.fresnel[:] = [FRESNEL_MODES.index(mode) for mode in modes]
+        self.fresnel_tint[:] = tints
 
     def put(self, material: Material, row: Optional[int] = None) -> int:
         """Write ``material`` into ``row`` (None: a new row at the end, every array then a new one, longer by
@@ -520,13 +541,14 @@ class MaterialTable:
         if row is None:
             row = len(self.materials)
             self.materials.append(material)
-            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture", "fresnel", "fresnel_tint"):
                 column = getattr(self, name)
                 setattr(self, name, np.concatenate([column, np.zeros((1,) + column.shape[1:], column.dtype)]))
         else:
             self.materials[row] = material
-        for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+        for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture", "fresnel_tint"):
             getattr(self, name)[row] = getattr(material, name)
+        self.fresnel[row] = FRESNEL_MODES.index(material.fresnel)
         return row
 
 
@@ -543,6 +565,8 @@ class CompiledScene:
     light_positions: np.ndarray  # (L, 3)
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
+    #: Every light's numbers (tracer.lights.LightTable; its position and color are the two above).
+    lights: Optional["LightTable"] = None
     textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
     tolerances: numerics.Tolerances = field(default_factory=lambda: numerics.TOLERANCES)
     #: All primitives' numbers as arrays (what ``primitives`` are views of)
@@ -957,6 +981,10 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
     if scene.lights and lit:
         effects.add("lighting")
         effects.add("shadows")
+        if any(light.kind != "point" for light in scene.lights):
+            effects.add("physical-lights")
+        if any(light.soft for light in scene.lights):
+            effects.add("soft-shadows")
     deep = settings.max_recursion_depth > 0
     r, t = table.reflectivity, table.transparency
     if deep and ((r >= settings.min_reflectivity) & (r > 0)).any():
@@ -969,6 +997,10 @@ def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_
         effects.add("textures")
     if "lighting" in effects and (table.specular_fraction > 0).any():
         effects.add("cook-torrance")
+    fresnel = table.fresnel != 0
+    if (("reflection" in effects and (fresnel & (r >= settings.min_reflectivity) & (r > 0)).any())
+            or ("refraction" in effects and (fresnel & (t >= settings.min_transparency) & (t > 0)).any())):
+        effects.add("fresnel")
     return frozenset(effects)
 
 
@@ -976,7 +1008,7 @@ class _UsedRows:
     """The columns _effects reads of some rows of a MaterialTable."""
 
     def __init__(self, table: MaterialTable, used: np.ndarray):
-        for name in ("diffuse", "specular", "reflectivity", "transparency", "texture", "specular_fraction"):
+        for name in ("diffuse", "specular", "reflectivity", "transparency", "texture", "specular_fraction", "fresnel"):
             setattr(self, name, getattr(table, name)[used])
 
 
@@ -1280,11 +1312,9 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
 def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
     """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
     docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
-    pending = [f"a {light.kind} light" for light in scene.lights if light.kind != "point"]
+    pending = []
     if scene.settings.smooth_terminator:
         pending.append("smooth_terminator")
-    if not isinstance(materials, MaterialRows):
-        pending += [f"fresnel {m.fresnel!r}" for m in materials if m.fresnel != "constant"]
     pending += ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
     if pending:
         raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")
@@ -1311,9 +1341,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     if "textures" in effects:
         from .textures import TextureSet
         textures = TextureSet(scene, primitives)
-    lights = scene.lights
+    lights = LightTable.of(scene.lights)
     return CompiledScene(
         scene=scene, objects=objects, primitives=primitives, materials=material_table,
-        light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
-        light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
+        light_positions=lights.position, light_colors=lights.color, lights=lights,
         effects=effects, textures=textures, tolerances=table.tolerances, table=table)

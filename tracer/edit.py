@@ -45,6 +45,7 @@ from .errors import TracerError
 from .model import CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
 from .native import flatten
 from .threads import default_threads
+from .lights import LightTable
 from .savings import sealed_lights
 from .textures import TextureSet
 from .textures.images import load_image
@@ -190,8 +191,8 @@ class EditableScene:
         """The scene's lights become ``lights``."""
         compiled = self.compiled
         self.scene.lights = list(lights)
-        compiled.light_positions = np.array([l.position for l in lights], dtype=float).reshape(-1, 3)
-        compiled.light_colors = np.array([l.color for l in lights], dtype=float).reshape(-1, 3)
+        compiled.lights = LightTable.of(self.scene.lights)
+        compiled.light_positions, compiled.light_colors = compiled.lights.position, compiled.lights.color
         effects_before = compiled.effects
         self._refresh_effects()
         self._forget_sealed()

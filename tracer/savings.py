@@ -22,6 +22,7 @@ import numpy as np
 
 from . import shapes
 from .compile import CompiledScene, fold_tree
+from .lights import POINT, SPHERE, SPOT
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
 SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material")
@@ -102,9 +103,13 @@ def sealed_lights(compiled: CompiledScene, objects: Optional[np.ndarray] = None)
         obj = booleans[int(chosen[j])]
         if any(transparent[p.material_id] for p in obj.leaves()) and _closed(obj):
             candidates.append(j)
+    # Only lights that are one point can be said to be outside (a sun, an area light or a sphere of some
+    # radius sends feelers to points that may lie inside).
+    points = [light for light in range(n_lights) if compiled.lights.kind[light] in (POINT, SPHERE, SPOT)
+              and (compiled.lights.kind[light] == POINT or compiled.lights.param[light, 0] == 0.0)]
     for j in sorted(candidates):
         obj = compiled_objects[int(chosen[j])]
-        for light in range(n_lights):
+        for light in points:
             sealed[j, light] = _contains(obj, compiled.light_positions[light]) is False
     return sealed
 

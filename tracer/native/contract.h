@@ -9,8 +9,10 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
        K_MESH = 7, K_PARABOLOID = 8 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
-       FX_TEXTURES = 32 };
+       FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
+enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
+enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
@@ -35,6 +37,10 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define MAX_RECURSION_DEPTH 64
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
 #define TEX_PARAMS 9
+/* the shadow-sample lattice's step along v (tracer.lights:GOLDEN) */
+#define LIGHT_GOLDEN 0.6180339887498949
+/* 2 pi, as tracer.lights writes it (tracer.lights:TWO_PI) */
+#define LIGHT_TWO_PI 6.283185307179586
 
 typedef struct {
     /* primitives */
@@ -81,10 +87,16 @@ typedef struct {
     const double *mat_speed;
     const double *mat_specular_fraction;
     const double *mat_roughness;
-    /* lights */
+    const int32_t *mat_fresnel;              /* FRESNEL_* each */
+    const double *mat_fresnel_tint;          /* 3 each: a metal's reflectance at normal incidence */
+    /* lights (tracer.lights.LightTable) */
     int64_t n_lights;
     const double *light_pos;                 /* 3 each */
     const double *light_color;
+    const int32_t *light_kind;               /* LIGHT_* each */
+    const int32_t *light_samples;            /* shadow rays per shaded point */
+    const double *light_frame;               /* 9 each: unit direction, an area light's half sides U and V */
+    const double *light_param;               /* 4 each: LightTable.param */
     /* settings */
     double background[3];
     double global_ambient[3];
@@ -150,9 +162,15 @@ typedef struct {
     X(mat_speed) \
     X(mat_specular_fraction) \
     X(mat_roughness) \
+    X(mat_fresnel) \
+    X(mat_fresnel_tint) \
     X(n_lights) \
     X(light_pos) \
     X(light_color) \
+    X(light_kind) \
+    X(light_samples) \
+    X(light_frame) \
+    X(light_param) \
     X(background) \
     X(global_ambient) \
     X(min_reflectivity) \
@@ -173,7 +191,7 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 61
-#define RT_CONTRACT_DIGEST "7d416842de0c6c02"
+#define RT_SCENE_DESC_FIELD_COUNT 67
+#define RT_CONTRACT_DIGEST "5ece5f750b429139"
 
 #endif

@@ -24,6 +24,7 @@ from typing import Optional
 
 import numpy as np
 
+from .. import model as _model
 from .. import savings as _savings
 from .. import shapes as _shapes
 
@@ -35,7 +36,13 @@ HEADER = Path(__file__).resolve().parent / "contract.h"
 SHAPE_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = _shapes.c_kinds()
 CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
-EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures")
+EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
+           # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
+           "physical-lights", "soft-shadows", "fresnel")
+#: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
+LIGHT_KINDS = _model.LIGHT_KINDS
+#: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).
+FRESNEL_MODES = _model.FRESNEL_MODES
 #: Ray kinds in the order of the C core's counters (tracer.trace.RAY_KINDS is the NumPy side).
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: After the ray kinds, the counters of rays not cast, per reason (SKIP_*); and the bits of
@@ -89,6 +96,8 @@ CONSTANTS = (
              "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
              "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
+    Constant("LIGHT_GOLDEN", "tracer.lights:GOLDEN", "double", "the shadow-sample lattice's step along v"),
+    Constant("LIGHT_TWO_PI", "tracer.lights:TWO_PI", "double", "2 pi, as tracer.lights writes it"),
 )
 
 
@@ -198,9 +207,15 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mat_speed", "*f64"),
     F("mat_specular_fraction", "*f64"),
     F("mat_roughness", "*f64"),
-    F("n_lights", "i64", section="lights"),
+    F("mat_fresnel", "*i32", "FRESNEL_* each"),
+    F("mat_fresnel_tint", "*f64", "3 each: a metal's reflectance at normal incidence"),
+    F("n_lights", "i64", section="lights (tracer.lights.LightTable)"),
     F("light_pos", "*f64", "3 each"),
     F("light_color", "*f64"),
+    F("light_kind", "*i32", "LIGHT_* each"),
+    F("light_samples", "*i32", "shadow rays per shaded point"),
+    F("light_frame", "*f64", "9 each: unit direction, an area light's half sides U and V"),
+    F("light_param", "*f64", "4 each: LightTable.param"),
     F("background", "f64", length=3, section="settings"),
     F("global_ambient", "f64", length=3),
     F("min_reflectivity", "f64"),
@@ -293,6 +308,8 @@ def header_text() -> str:
     out.append(_enum("OP", CSG_OPS, range(len(CSG_OPS))))
     out.append(_enum("FX", EFFECTS, [EFFECT_BITS[e] for e in EFFECTS]))
     out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
+    out.append(_enum("LIGHT", LIGHT_KINDS, range(len(LIGHT_KINDS))))
+    out.append(_enum("FRESNEL", FRESNEL_MODES, range(len(FRESNEL_MODES))))
     out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
     out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
     out.append(_enum("EDIT", EDIT_FLAGS, [1 << k for k in range(len(EDIT_FLAGS))]))

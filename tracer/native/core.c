@@ -650,7 +650,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, NAME);                    \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, NAME);              \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -677,8 +677,25 @@ SHADE_PAIR(11101, 1, 1, 1, 0, 1)
 SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
+/* The effects of Blender scenes, traced by shade_general alone. */
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL)
+
+/* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
+ * FX_GENERAL pay for that choice per ray, the others never come here. */
+static void shade_general(const Scene *S, Work *w, const double *o, const double *d, int64_t level,
+                          const Media *media, double weight, double *out)
+{
+    int64_t fx = S->d.effects;
+    int l = (fx & FX_LIGHTING) != 0;
+    shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
+               l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0, shade_general);
+}
+
 static ShadeFn pick_shade(int64_t effects)
 {
+    if (effects & FX_GENERAL)
+        return shade_general;
     int l = (effects & FX_LIGHTING) != 0;
     int s = l && (effects & FX_SHADOWS) != 0, ct = l && (effects & FX_COOK_TORRANCE) != 0;
     int rl = (effects & FX_REFLECTION) != 0, rr = (effects & FX_REFRACTION) != 0;
@@ -1035,6 +1052,14 @@ static int take_desc(Scene *S, const SceneDesc *desc, char *error, int64_t capac
                 REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
                        (long long)D->image_info[2 * i + 1]);
     }
+    for (int64_t m = 0; m < D->n_materials; m++)
+        if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
+            REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
+    for (int64_t l = 0; l < D->n_lights; l++)
+        if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
+            (D->light_kind[l] != LIGHT_POINT && !(D->effects & FX_PHYSICAL_LIGHTS)))
+            REFUSE("light %lld has kind %d and %d samples", (long long)l, (int)D->light_kind[l],
+                   (int)D->light_samples[l]);
     for (int64_t c = 0; c < D->n_csg; c++)
         if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
             !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)

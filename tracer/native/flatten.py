@@ -221,12 +221,15 @@ class FlatScene:
                            mat_reflectivity=mats.reflectivity, mat_transparency=mats.transparency,
                            mat_speed=mats.speed_of_light,
                            mat_specular_fraction=getattr(mats, "specular_fraction", np.zeros(len(mats.materials))),
-                           mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))))
+                           mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))),
+                           mat_fresnel=mats.fresnel, mat_fresnel_tint=mats.fresnel_tint)
         self._counts.update(n_materials=len(mats.materials), n_images=self._flatten_textures(compiled))
 
     def _take_lights(self, compiled: CompiledScene) -> None:
-        self.arrays.update(light_pos=compiled.light_positions, light_color=compiled.light_colors)
-        self._counts["n_lights"] = len(compiled.light_positions)
+        lights = compiled.lights
+        self.arrays.update(light_pos=lights.position, light_color=lights.color, light_kind=lights.kind,
+                           light_samples=lights.samples, light_frame=lights.frame, light_param=lights.param)
+        self._counts["n_lights"] = len(lights.position)
 
     def _describe(self, compiled: CompiledScene) -> None:
         """Every field of the SceneDesc: the pointers into the arrays as they are now, the counts, the

@@ -23,7 +23,8 @@
  *   "+ 0.0" terms included;
  * - materials: one row per distinct value of the fields (compared with ==, so -0.0 equals 0.0 and the first
  *   value seen is kept), as the Python reader's dict of Materials;
- * - ``! name: text`` comments name the next shape keyword (a later one before it wins).
+ * - ``! name: text`` comments name the next shape keyword (a later one before it wins); one before a
+ *   ``light`` names the light, which is left to the Python reader.
  *
  * The keywords come from the caller (its vocabulary: word, action, argument), so the tables of material
  * keywords and shape kinds are the Python reader's own; the actions are named in sdl_action_names.
@@ -53,11 +54,11 @@ static const char sdl_action_names[] =
 enum {
     SDL_READ = 0, SDL_DECLINE_WORD, SDL_DECLINE_BRACE, SDL_DECLINE_NUMBER, SDL_DECLINE_END, SDL_DECLINE_VALUE,
     SDL_DECLINE_POP, SDL_DECLINE_AXIS, SDL_DECLINE_TRANSFORM, SDL_DECLINE_SIZE, SDL_DECLINE_MEMORY,
-    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII
+    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII, SDL_DECLINE_NAMED_LIGHT
 };
 
 static const char sdl_decline_names[] =
-    "read word brace number end value pop axis transform size memory vocabulary angle ascii";
+    "read word brace number end value pop axis transform size memory vocabulary angle ascii namedLight";
 
 /* A material row: the Material's fields in its order (four colours, six numbers), then the texture, the
  * count of parameters and the parameters (unused ones 0). */
@@ -548,6 +549,8 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
         int status = SDL_READ;
         switch (vocabulary->action[slot]) {
         case SDL_LIGHT:
+            if (lx->name_length > 0)  /* a name comment names the light: Light.name, left to the Python reader */
+                return SDL_DECLINE_NAMED_LIGHT;
             if ((status = sdl_numbers(lx, 6, v)) == SDL_READ &&
                 !sdl_add_row(&res->light_rows, &res->lights, &res->light_capacity, v, 6))
                 status = SDL_DECLINE_MEMORY;

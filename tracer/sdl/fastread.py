@@ -38,7 +38,10 @@ SHARED_LIBM = sys.platform != "win32"
 _SURROGATE = re.compile(r"[\ud800-\udfff]")
 
 #: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
-DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference"))
+DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference",
+                      # the extensions for Blender scenes
+                      "sphereLight", "spotLight", "sunLight", "areaLight", "ellipseLight", "fresnel", "fresnelTint",
+                      "smoothTerminator"))
 
 
 @dataclass(frozen=True)

@@ -37,10 +37,11 @@ from ..bulk import collector_paused
 from ..errors import SDLError
 from ..geometry import builtin_mesh  # (its home; imported under this name by the add-on and tests)
 from ..meshio import read_3vn
-from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
+from ..model import (ANALYTIC_KINDS, CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
                      Material, MeshData, Scene, SceneObject, Shape, SourceLocation, TEXTURE_NUMBERS)
 from ..userfiles import read_text
 from .lexer import Tokens, to_float, to_floats
+from .lights import LIGHT_USAGE, argument_count, light_of
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -71,8 +72,14 @@ USAGE: dict[str, str] = {
     **{k: "" for k in ANALYTIC_KINDS + POLYHEDRON_KINDS}, "taperedCylinder": "s", "teapot": "", "mesh": "file",
     **{k: "object object" for k in CSG_OPS},
     "def": "name { tokens }", "use": "name",
+    # extensions for Blender scenes (docs/sdl.md)
+    **LIGHT_USAGE, "fresnel": "constant|metal|dielectric", "fresnelTint": "r g b", "smoothTerminator": "0|1",
 }
 KEYWORDS = frozenset(USAGE)
+#: The keywords of the extensions for Blender scenes (not the book's; their own tests use them).
+EXTENSION_KEYWORDS = frozenset((*LIGHT_USAGE, "fresnel", "fresnelTint", "smoothTerminator"))
+#: The statements that add a light (a name comment names them as it names shapes).
+LIGHT_KEYWORDS = ("light", *LIGHT_USAGE)
 
 #: A guard against macros that do not recurse but still multiply (each using the previous one twice, thirty
 #: deep, is a billion tokens): no real scene splices anywhere near this many tokens.
@@ -247,7 +254,8 @@ class _Macro:
 
 #: Statements a name comment does not reach past: it names a shape read directly after it, not one in a macro.
 _NAME_STOPS = frozenset(("def", "use", "{", "}"))
-_SHAPE_KEYWORDS = frozenset(SHAPE_KINDS)  # a set: looked up for every token between a name and its shape
+#: What a name comment names (a set: looked up for every token between a name and its shape or light).
+_NAMED_KEYWORDS = frozenset(SHAPE_KINDS + LIGHT_KEYWORDS)
 
 
 class _ShapeNames:
@@ -273,7 +281,7 @@ class _ShapeNames:
             # Looked for only up to the next comment: past it, that comment's name wins anyway.
             for index in range(number - first, end - first):
                 token = tokens[index]
-                if token in _SHAPE_KEYWORDS:
+                if token in _NAMED_KEYWORDS:
                     self.names[first + index] = name
                     break
                 if token in _NAME_STOPS:
@@ -321,7 +329,10 @@ class _Reader:
             "translate": self._translate, "scale": self._scale, "rotate": self._rotate,
             "push": self._push, "pop": self._pop, "identityAffine": self._identity,
             "def": self._def, "use": self._use,
+            "fresnel": self._fresnel, "fresnelTint": self._fresnel_tint, "smoothTerminator": self._smooth_terminator,
         }
+        for keyword in LIGHT_USAGE:
+            self.handlers[keyword] = self._physical_light
         for keyword in COLOR_MATERIAL:
             self.handlers[keyword] = self._color_material
         for keyword in FLOAT_MATERIAL:
@@ -445,7 +456,20 @@ class _Reader:
 
     def _light(self, keyword: str, at: int, groups) -> None:
         x, y, z, r, g, b = self._numbers(keyword, at, 6)
-        self.scene.lights.append(Light((x, y, z), (r, g, b)))
+        self.scene.lights.append(Light((x, y, z), (r, g, b), name=self.shape_names.names.get(at)))
+
+    def _physical_light(self, keyword: str, at: int, groups) -> None:
+        light = light_of(keyword, self._numbers(keyword, at, argument_count(keyword)),
+                         self.shape_names.names.get(at))
+        if isinstance(light, str):
+            return self._report(self._error(at, f"{keyword}: {light}", expected=self._usage(keyword)))
+        self.scene.lights.append(light)
+
+    def _smooth_terminator(self, keyword: str, at: int, groups) -> None:
+        value, number = self._number_token(keyword, at)
+        if value not in (0.0, 1.0):
+            return self._report(self._error(number, "smoothTerminator must be 0 or 1"))
+        self.scene.settings.smooth_terminator = value == 1.0
 
     def _global_ambient(self, keyword: str, at: int, groups) -> None:
         self.scene.settings.global_ambient = self._numbers(keyword, at, 3)
@@ -508,6 +532,15 @@ class _Reader:
 
     def _float_material(self, keyword: str, at: int, groups) -> None:
         self._set_material(FLOAT_MATERIAL[keyword], self._numbers(keyword, at, 1)[0])
+
+    def _fresnel(self, keyword: str, at: int, groups) -> None:
+        mode, number = self._name(keyword, at, "a fresnel mode")
+        if mode not in FRESNEL_MODES:
+            return self._report(self._error(number, "unknown fresnel mode", expected=" or ".join(FRESNEL_MODES)))
+        self._set_material("fresnel", mode)
+
+    def _fresnel_tint(self, keyword: str, at: int, groups) -> None:
+        self._set_material("fresnel_tint", self._numbers(keyword, at, 3))
 
     def _texture(self, keyword: str, at: int, groups) -> None:
         value, number = self._number_token(keyword, at)

@@ -24,6 +24,7 @@ from .. import transforms
 from ..errors import WriteError
 from ..meshio import write_3vn, write_text_atomic
 from ..model import CSG, Material, MeshData, Scene, SceneObject, Shape
+from .lights import statement_of
 from .parser import COLOR_MATERIAL, FLOAT_MATERIAL, KEYWORDS, is_singular
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -237,10 +238,14 @@ def _material_statement(material: Material, name: str) -> str:
         return f"texture {_whole(value, 'texture')}"
     if name == "parameters":
         return " ".join(["parameters", str(len(value))] + [fmt(p) for p in value])
+    if name == "fresnel":
+        return f"fresnel {value}"
+    if name == "fresnel_tint":
+        return f"fresnelTint {_fmt_all(value)}"
     raise AssertionError(f"material field {name} has no SDL keyword")
 
 
-_MATERIAL_FIELDS = list(_COLOR_FIELDS) + list(_FLOAT_FIELDS) + ["texture", "parameters"]
+_MATERIAL_FIELDS = list(_COLOR_FIELDS) + list(_FLOAT_FIELDS) + ["texture", "parameters", "fresnel", "fresnel_tint"]
 
 
 def material_statements(current: Material, wanted: Material) -> list[str]:
@@ -278,7 +283,12 @@ def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str
              f"minReflectivity {fmt(s.min_reflectivity)}",
              f"minTransparency {fmt(s.min_transparency)}",
              f"maxRecursionDepth {_whole(s.max_recursion_depth, 'maxRecursionDepth')}"]
-    lines += [f"light {_fmt_all(light.position)} {_fmt_all(light.color)}" for light in scene.lights]
+    if s.smooth_terminator:
+        lines.append("smoothTerminator 1")
+    for light in scene.lights:
+        if light.name and _one_line(light.name):
+            lines.append(f"! name: {_one_line(light.name)}")
+        lines.append(statement_of(light, _fmt_all))
     if scene.camera is not None:
         c = scene.camera
         lines.append(f"camera {_fmt_all(c.eye)}  {_fmt_all(c.look)}  {_fmt_all(c.up)}  {fmt(c.view_angle)}")

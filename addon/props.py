@@ -374,7 +374,7 @@ def world_settings(world, max_recursion_depth: int, warnings: Optional[list] = N
         color = shader_nodes.world_color(world, warnings) if world is not None else (0.0, 0.0, 0.0)
         return Settings(global_ambient=color, background=color, min_reflectivity=BLENDER_MIN_WEIGHT,
                         min_transparency=BLENDER_MIN_WEIGHT, max_recursion_depth=int(max_recursion_depth),
-                        smooth_terminator=True)
+                        smooth_terminator=False)
     s = world.sdl
     return Settings(global_ambient=tuple(exact_field(world, s, "global_ambient")),
                     background=tuple(exact_field(world, s, "background")),

@@ -29,6 +29,9 @@ from .pure import convert
 from .tracer import model
 from .tracer.model import FaceList, MeshData
 
+#: Whether a mesh whose material has a picture is read with its UV map (False until the tracer traces
+#: MeshData.corner_uvs: the picture is then mapped as on any mesh).
+READ_UVS = False
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
@@ -239,7 +242,7 @@ class SceneBuilder:
         if not self._usable(matrix_world, obj_eval.name):
             return []
         # (the UV map is read only for a material with a picture on it)
-        uvs = any(self._material(slot.material) is not None and
+        uvs = READ_UVS and any(self._material(slot.material) is not None and
                   (slot.material.as_pointer() if slot.material is not None else 0) in self._uv_materials
                   for slot in obj_eval.material_slots)
         kind = f"evaluated mesh {self.mode}" + (" with UVs" if uvs else "")

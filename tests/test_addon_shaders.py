@@ -25,18 +25,18 @@ EXPECTED = {
               "diffuse": BLACK, "specular": BLACK},
     "mirror": {"fresnel": "metal", "reflectivity": 1.0, "fresnel_tint": [0.9, 0.6, 0.2], "diffuse": BLACK,
                "specular": BLACK},
-    "rough red": {"diffuse": [0.8, 0.05, 0.05], "ambient": [0.8, 0.05, 0.05], "specular_exponent": 30.0,
-                  "specular": [0.16] * 3, "reflectivity": 0.0, "fresnel": "constant"},
-    "low specular": {"specular": [0.08] * 3},  # a dielectric reflectance of 0.02 either way
+    "rough red": {"diffuse": [0.768, 0.048, 0.048], "ambient": [0.768, 0.048, 0.048], "specular_exponent": 30.0,
+                  "specular": [0.16] * 3, "reflectivity": 0.5, "fresnel": "metal", "fresnel_tint": [0.04] * 3},
+    "low specular": {"specular": [0.08] * 3, "diffuse": [0.8 * 0.98] * 3},  # a reflectance of 0.02 either way
     "emitting": {"emissive": [4.0, 2.0, 1.0], "diffuse": BLACK},
-    "half alpha": {"transparency": 0.5, "diffuse": [0.4] * 3, "speed_of_light": 1.0, "fresnel": "constant"},
+    "half alpha": {"transparency": 0.5, "speed_of_light": 1.0, "fresnel": "constant"},
     "diffuse node": {"diffuse": [0.2, 0.4, 0.6], "specular": BLACK, "reflectivity": 0.0},
     "glossy node": {"fresnel": "metal", "fresnel_tint": [0.9] * 3, "reflectivity": 1.0, "diffuse": BLACK},
     "glass node": {"fresnel": "dielectric", "transparency": 1.0, "diffuse": BLACK},
     "emission node": {"emissive": [3.0] * 3, "diffuse": BLACK, "specular": BLACK},
     "mix": {"diffuse": [0.75, 0.0, 0.0], "transparency": 0.25, "reflectivity": 0.25, "fresnel": "dielectric"},
-    "textured": {"image": str(PICTURE), "diffuse": [1.0] * 3},
-    "no nodes": {"diffuse": [0.3, 0.6, 0.9], "reflectivity": 0.0},
+    "textured": {"image": str(PICTURE), "diffuse": [0.96] * 3},
+    "no nodes": {"diffuse": [0.288, 0.576, 0.864], "reflectivity": 0.3},
 }
 
 

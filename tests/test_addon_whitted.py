@@ -21,10 +21,12 @@ def fields(shader) -> dict:
 
 def test_a_default_principled_is_lambert_with_a_ggx_sized_highlight():
     out = fields(Surface(base_color=(0.8, 0.1, 0.1), roughness=0.5, specular_f0=0.04))
-    assert out["diffuse"] == out["ambient"] == pytest.approx((0.8, 0.1, 0.1))
+    assert out["diffuse"] == out["ambient"] == pytest.approx((0.8 * 0.96, 0.1 * 0.96, 0.1 * 0.96))  # b (1 - F0)
     assert out["specular_exponent"] == pytest.approx(30.0)  # 2 / 0.5^4 - 2
     assert out["specular"] == pytest.approx((0.04 * 32 / 8,) * 3)  # F0 (f + 2) / 8
-    assert (out["reflectivity"], out["transparency"], out["fresnel"]) == (0.0, 0.0, "constant")
+    # its own reflection, Schlick from F0, half-faded at Roughness 0.5
+    assert (out["fresnel"], out["reflectivity"], out["transparency"]) == ("metal", 0.5, 0.0)
+    assert out["fresnel_tint"] == pytest.approx((0.04,) * 3)
 
 
 def test_rougher_is_wider_and_dimmer():
@@ -49,15 +51,18 @@ def test_a_metal_is_a_mirror_tinted_by_its_base_colour():
     assert out["fresnel"] == "metal" and out["reflectivity"] == 1.0
     assert out["fresnel_tint"] == pytest.approx(gold) and out["diffuse"] == (0.0, 0.0, 0.0)
     half = fields(Surface(base_color=gold, metallic=0.5, roughness=0.6, specular_f0=0.04))
-    assert half["reflectivity"] == pytest.approx(0.5) and half["fresnel_tint"] == pytest.approx(gold)
-    assert half["diffuse"] == pytest.approx(tuple(0.5 * c for c in gold))
+    coat = 0.5 * (1 - 0.6)  # the dielectric half's own reflection, faded by roughness
+    assert half["reflectivity"] == pytest.approx(0.5 + coat)
+    assert half["fresnel_tint"] == pytest.approx(tuple((0.5 * c + coat * 0.04) / (0.5 + coat) for c in gold))
+    assert half["diffuse"] == pytest.approx(tuple(0.5 * 0.96 * c for c in gold))
 
 
-def test_a_dielectric_reflects_only_while_smooth():
+def test_a_dielectric_reflects_less_the_rougher_it_is():
     smooth = fields(Surface(roughness=0.1, specular_f0=0.04))
-    assert smooth["fresnel"] == "metal" and smooth["reflectivity"] == 1.0
+    assert smooth["fresnel"] == "metal" and smooth["reflectivity"] == pytest.approx(0.9)
     assert smooth["fresnel_tint"] == pytest.approx((0.04,) * 3)
-    assert fields(Surface(roughness=0.5))["reflectivity"] == 0.0
+    assert fields(Surface(roughness=0.0))["reflectivity"] == 1.0
+    assert fields(Surface(roughness=1.0))["reflectivity"] == 0.0
     assert fields(Surface(roughness=0.0, specular_f0=0.0))["reflectivity"] == 0.0  # (a Diffuse BSDF)
 
 

@@ -152,13 +152,31 @@ def shown(linear: np.ndarray) -> np.ndarray:
     return 255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1.0 / 2.4) - 0.055)
 
 
-def compare(objects: dict, width: int, height: int, samples: int, depth: int = 8) -> dict:
-    """Mean shown colour per object (and background) by Cycles and by SDL_RAYTRACER, and their difference."""
+def cycles_without_lights_in_mirrors(samples: int) -> np.ndarray:
+    """Cycles' picture with the lights hidden from glossy rays: what a mirror shows without the images of the
+    lights themselves (Whitted's rays do not see lights; a Cycles mirror shows an area light, a sphere light
+    or the sun's disk)."""
+    lights = [obj for obj in bpy.data.objects if obj.type == "LIGHT"]
+    for light in lights:
+        light.visible_glossy = False
+    try:
+        set_up_cycles(samples)
+        return shown(render_rgba("CYCLES")[..., :3])
+    finally:
+        for light in lights:
+            light.visible_glossy = True
+
+
+def compare(objects: dict, width: int, height: int, samples: int, depth: int = 8,
+            lights_unseen: tuple = ()) -> dict:
+    """Mean shown colour per object (and background) by Cycles and by SDL_RAYTRACER, and their difference.
+    The objects named in ``lights_unseen`` (mirrors) are compared with cycles_without_lights_in_mirrors."""
     from addon import engine
 
     set_resolution(width, height)
     regions = masks(objects)
     scene = bpy.context.scene
+    unseen = cycles_without_lights_in_mirrors(samples) if lights_unseen else None
     set_up_cycles(samples)
     cycles = shown(render_rgba("CYCLES")[..., :3])
     s = scene.sdl_render
@@ -169,7 +187,11 @@ def compare(objects: dict, width: int, height: int, samples: int, depth: int = 8
               "warnings": stats.get("warnings")}
     for name, mask in regions.items():
         a, b = cycles[mask].mean(axis=0), traced[mask].mean(axis=0)
-        result["regions"][name] = {"pixels": int(mask.sum()), "cycles": [round(float(v), 1) for v in a],
-                                   "traced": [round(float(v), 1) for v in b],
-                                   "difference": round(float(np.abs(a - b).max()), 2)}
+        entry = result["regions"][name] = {"pixels": int(mask.sum()), "cycles": [round(float(v), 1) for v in a],
+                                           "traced": [round(float(v), 1) for v in b],
+                                           "difference": round(float(np.abs(a - b).max()), 2)}
+        if name in lights_unseen:
+            c = unseen[mask].mean(axis=0)
+            entry.update(cycles_lights_unseen=[round(float(v), 1) for v in c],
+                         difference_lights_unseen=round(float(np.abs(c - b).max()), 2))
     return result

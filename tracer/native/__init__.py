@@ -93,7 +93,7 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_object_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_int64, _dp, _i8p, _dp,
                                    _i32p, _i32p, _dp, _i8p]
     lib.rt_texture_colors.restype = ctypes.c_int
-    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
+    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp, _dp]
     lib.rt_scan_numbers.restype = ctypes.c_int64
     lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
     lib.rt_scan3_state_size.restype = ctypes.c_int64
@@ -420,17 +420,19 @@ class NativeTracer:
             raise MemoryError("the C core ran out of memory")
         return blocked.astype(bool)
 
-    def texture_colors(self, shape, points, parts) -> np.ndarray:
-        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts``, as
-        ``compiled.textures.colors`` (1 where untextured)."""
+    def texture_colors(self, shape, points, parts, uv=None) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts`` (at barycentrics
+        ``uv`` (N, 2) on meshes, or None), as ``compiled.textures.colors`` (1 where untextured)."""
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         s = np.ascontiguousarray(np.asarray(shape, dtype=np.int32).reshape(-1))
         q = np.ascontiguousarray(np.asarray(parts, dtype=np.int32).reshape(-1))
-        if not len(p) == len(s) == len(q):
-            raise ValueError("shape, points and parts must have the same length")
+        b = None if uv is None else np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+        if not len(p) == len(s) == len(q) or (b is not None and len(b) != len(p)):
+            raise ValueError("shape, points, parts and uv must have the same length")
         out = np.empty_like(p)
+        bary = None if b is None else _ptr(b, ctypes.c_double)
         if _lib.rt_texture_colors(self._handle, len(p), _ptr(s, ctypes.c_int32), _ptr(p, ctypes.c_double),
-                                  _ptr(q, ctypes.c_int32), _ptr(out, ctypes.c_double)) != 0:
+                                  _ptr(q, ctypes.c_int32), bary, _ptr(out, ctypes.c_double)) != 0:
             raise IndexError("primitive index out of range")
         return out
 

@@ -317,9 +317,9 @@ def material_to_sdl(material, warnings: Optional[list] = None):
 
 
 def blender_material(material, warnings: Optional[list] = None):
-    """(tracer Material, picture or None) of a material traced by its shader nodes, by the rules of
-    addon/pure/whitted.py; the picture is an Image Texture's on its Base Color, which the caller numbers (the
-    Material's texture is 0 here)."""
+    """(tracer Material, shader_nodes.Picture or None) of a material traced by its shader nodes, by the rules
+    of addon/pure/whitted.py; the picture is an Image Texture's on its Base Color, which the caller numbers
+    (the Material's texture is 0 here)."""
     fields = shader_nodes.material_fields(material, warnings)
     image = fields.pop("image")
     fields = {name: tuple(convert.shortest32(c) for c in value) if isinstance(value, tuple) else
@@ -374,7 +374,7 @@ def world_settings(world, max_recursion_depth: int, warnings: Optional[list] = N
         color = shader_nodes.world_color(world, warnings) if world is not None else (0.0, 0.0, 0.0)
         return Settings(global_ambient=color, background=color, min_reflectivity=BLENDER_MIN_WEIGHT,
                         min_transparency=BLENDER_MIN_WEIGHT, max_recursion_depth=int(max_recursion_depth),
-                        smooth_terminator=False)
+                        smooth_terminator=True)
     s = world.sdl
     return Settings(global_ambient=tuple(exact_field(world, s, "global_ambient")),
                     background=tuple(exact_field(world, s, "background")),

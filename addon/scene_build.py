@@ -24,15 +24,12 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import blender_lights, meshes, object_cache, props
+from . import blender_lights, images, meshes, object_cache, props
 from .pure import convert
 from .tracer import model
 from .tracer.shapes import KINDS
 from .tracer.model import FaceList, MeshData
 
-#: Whether a mesh whose material has a picture is read with its UV map (False until the tracer traces
-#: MeshData.corner_uvs: the picture is then mapped as on any mesh).
-READ_UVS = False
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
@@ -90,10 +87,14 @@ class SceneBuilder:
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
             if material is not None and not material.sdl.use_sdl:  # Blender's own: its shader nodes
-                sdl_material, image = props.blender_material(material, self.warnings)
-                if image is not None:  # (a picture on Base Color, looked up through the UV map)
+                sdl_material, picture = props.blender_material(material, self.warnings)
+                image = ""
+                if picture is not None:  # (a picture on Base Color, looked up through the UV map)
                     self._uv_materials.add(key)
                     sdl_material = dataclasses.replace(sdl_material, texture=1)
+                    image = picture.path
+                    if picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
+                        image = images.linear_copy(image)  # (as Cycles reads it; SDL keeps the file's values)
             else:
                 sdl_material = props.material_to_sdl(material)
                 image = material.sdl.image if material is not None and material.sdl.image else ""
@@ -241,7 +242,7 @@ class SceneBuilder:
         if not self._usable(matrix_world, obj_eval.name):
             return []
         # (the UV map is read only for a material with a picture on it)
-        uvs = READ_UVS and any(self._material(slot.material) is not None and
+        uvs = any(self._material(slot.material) is not None and
                   (slot.material.as_pointer() if slot.material is not None else 0) in self._uv_materials
                   for slot in obj_eval.material_slots)
         kind = f"evaluated mesh {self.mode}" + (" with UVs" if uvs else "")

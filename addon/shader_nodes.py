@@ -12,7 +12,7 @@ Specular IOR Level (the reflectance of the IOR, times 2 x the level) and Emissio
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import NamedTuple, Optional
 
 import bpy
 
@@ -23,6 +23,13 @@ PRINCIPLED, DIFFUSE, GLOSSY, ANISOTROPIC, GLASS, REFRACTION, EMISSION, TRANSPARE
     "ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic",
     "ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction", "ShaderNodeEmission", "ShaderNodeBsdfTransparent",
     "ShaderNodeMixShader", "ShaderNodeAddShader")
+class Picture(NamedTuple):
+    """An Image Texture's picture: its file, and whether its values are sRGB (Cycles makes them linear)."""
+
+    path: str
+    srgb: bool
+
+
 #: How deep a shader tree is followed (a Mix of Mixes...); deeper parts are black.
 MAX_DEPTH = 32
 
@@ -70,7 +77,7 @@ class Reader:
         return _plain(socket.default_value) if hasattr(socket, "default_value") else default
 
     def color(self, node, names, default=(0.8, 0.8, 0.8)):
-        """(colour, picture path or None): an Image Texture node plugged into the input gives its picture, the
+        """(colour, Picture or None): an Image Texture node plugged into the input gives its picture, the
         colour then being white (the picture is the colour)."""
         socket = next((node.inputs[name] for name in names if name in node.inputs), None)
         linked = self._linked_node(socket) if socket is not None else None
@@ -81,7 +88,7 @@ class Reader:
         value = self.value(node, names, default)
         return tuple(float(c) for c in (tuple(value) + (0.0, 0.0, 0.0))[:3]), None
 
-    def _picture(self, node) -> Optional[str]:
+    def _picture(self, node) -> Optional["Picture"]:
         image = node.image
         if image is None:
             return None
@@ -93,7 +100,8 @@ class Reader:
         if vector is not None and not (vector[0].bl_idname == "ShaderNodeUVMap" or
                                        (vector[0].bl_idname == "ShaderNodeTexCoord" and vector[1].name == "UV")):
             self._warn(f"{node.name}: looked up through the UV map, not {vector[0].name}")
-        return bpy.path.abspath(image.filepath, library=image.library)
+        srgb = image.colorspace_settings.name.lower() in ("srgb", "srgb display")  # (values that Cycles linearises)
+        return Picture(bpy.path.abspath(image.filepath, library=image.library), srgb and not image.is_float)
 
     # -- shaders --------------------------------------------------------------------------------------
 

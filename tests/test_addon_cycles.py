@@ -101,3 +101,49 @@ def test_blender_light_units_are_cycles(kind):
     middle = slice(size // 6, size - size // 6)
     ratio = radiance[middle, middle] / expected[middle, middle]
     assert abs(ratio.mean() - 1.0) < 0.015, (kind, ratio.mean(), ratio.min(), ratio.max())
+
+
+def test_a_picture_on_base_color_follows_the_uv_map(tmp_path):
+    """An Image Texture on a Principled Base Color, on a plane whose UV map is turned a quarter (so a picture
+    mapped by position instead would land elsewhere), under a sun: each quadrant of the picture where Cycles
+    shows it, in Cycles' colour (the sRGB picture made linear, as Cycles reads it), within 8/255."""
+    from tracer.imageio import save_image
+
+    picture = np.zeros((64, 64, 3), dtype=np.uint8)  # (row 0 at the top)
+    picture[:32, :32], picture[:32, 32:] = (200, 30, 30), (30, 200, 30)
+    picture[32:, :32], picture[32:, 32:] = (30, 30, 200), (230, 230, 230)
+    save_image(picture, tmp_path / "quadrants.png")
+    fresh()
+    scene = bpy.context.scene
+    set_resolution(64, 64)
+    bpy.ops.mesh.primitive_plane_add(size=2)
+    plane = bpy.context.object
+    uvs = plane.data.uv_layers.active.data
+    for loop in uvs:  # a quarter turn of the UV map about its centre
+        u, v = loop.uv
+        loop.uv = (v, 1.0 - u)
+    material = bpy.data.materials.new("pictured")
+    material.use_nodes = True
+    tree = material.node_tree
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image = bpy.data.images.load(str(tmp_path / "quadrants.png"))
+    tree.links.new(texture.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 1.0
+    plane.data.materials.append(material)
+    bpy.ops.object.light_add(type="SUN")
+    bpy.context.object.data.energy = 3.0
+    bpy.ops.object.camera_add(location=(0.0, 0.0, 5.0))
+    scene.camera = bpy.context.object
+    scene.camera.data.type, scene.camera.data.ortho_scale = "ORTHO", 2.0
+    scene.world = None
+    cycles_scenes.set_up_cycles(16)
+    cycles = cycles_scenes.shown(render_rgba("CYCLES")[..., :3])
+    scene.sdl_render.block_size, scene.sdl_render.progressive = 1, False
+    traced = cycles_scenes.shown(render_rgba("SDL_RAYTRACER")[..., :3])
+    quadrants = [(slice(4, 28), slice(4, 28)), (slice(4, 28), slice(36, 60)), (slice(36, 60), slice(4, 28)),
+                 (slice(36, 60), slice(36, 60))]
+    means = [(cycles[q].reshape(-1, 3).mean(axis=0), traced[q].reshape(-1, 3).mean(axis=0)) for q in quadrants]
+    print([(a.round(1).tolist(), b.round(1).tolist()) for a, b in means])
+    assert len({tuple(np.argsort(a)) for a, _ in means}) > 2  # four different colours in Cycles' picture
+    for a, b in means:
+        assert np.abs(a - b).max() <= OBJECT_TOLERANCE, (a, b)

@@ -35,7 +35,7 @@ EXPECTED = {
     "glass node": {"fresnel": "dielectric", "transparency": 1.0, "diffuse": BLACK},
     "emission node": {"emissive": [3.0] * 3, "diffuse": BLACK, "specular": BLACK},
     "mix": {"diffuse": [0.75, 0.0, 0.0], "transparency": 0.25, "reflectivity": 0.25, "fresnel": "dielectric"},
-    "textured": {"image": str(PICTURE), "diffuse": [0.96] * 3},
+    "textured": {"image": str(PICTURE), "srgb": True, "diffuse": [0.96] * 3},
     "no nodes": {"diffuse": [0.288, 0.576, 0.864], "reflectivity": 0.3},
 }
 
@@ -49,7 +49,7 @@ def _check(proc) -> None:
         got = materials[name]
         assert got["warnings"] == [], (name, got["warnings"])
         for key, value in wanted.items():
-            assert got[key] == (pytest.approx(value, abs=1e-5) if not isinstance(value, str) else value), \
+            assert got[key] == (pytest.approx(value, abs=1e-5) if not isinstance(value, (str, bool)) else value), \
                 (result["blender"], name, key, got[key])
     worlds = result["worlds"]
     assert worlds["background node"]["background"] == pytest.approx([0.1, 0.2, 0.4])  # colour x strength

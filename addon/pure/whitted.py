@@ -63,8 +63,8 @@ class Surface:
     specular_f0: float = 0.04
     emission: Color = BLACK
     alpha: float = 1.0
-    #: A texture on Base Color: ``shader_nodes`` puts the image there; the colour then multiplies it.
-    image: Optional[str] = None
+    #: A texture on Base Color, as the reader describes it (shader_nodes: a Picture); the colour multiplies it.
+    image: Optional[object] = None
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,7 @@ class Whitted:
     #: how much of ``transparency`` is glass (refracting, Fresnel-split) rather than Alpha (straight through)
     glass: float = 0.0
     speed_of_light: float = 1.0
-    image: Optional[str] = None
+    image: Optional[object] = None
 
     def scaled(self, k: float) -> "Whitted":
         return Whitted(_scale(self.diffuse, k), _scale(self.specular, k), self.specular_exponent,

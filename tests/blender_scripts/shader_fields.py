@@ -108,7 +108,8 @@ try:
         fields = {f: getattr(tracer_material, f) for f in ("ambient", "diffuse", "specular", "specular_exponent",
                                                            "emissive", "reflectivity", "transparency",
                                                            "speed_of_light", "fresnel", "fresnel_tint")}
-        result["materials"][name] = dict(fields, image=image, warnings=warnings)
+        result["materials"][name] = dict(fields, image=image and image.path, srgb=image and image.srgb,
+                                         warnings=warnings)
     for name, world in worlds().items():
         settings = props.world_settings(world, 3)
         result["worlds"][name] = {"background": settings.background, "ambient": settings.global_ambient}

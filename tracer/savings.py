@@ -32,6 +32,8 @@ DEFAULT_CUTOFF = 1.0 / 512.0
 #: Shapes that bound a solid (every ray into one comes out again): not the square (a sheet) nor meshes
 #: (which may be open).  The plane is the half-space below it.  (ShapeKind.closed)
 CLOSED_KINDS = frozenset(e.keyword for e in shapes.REGISTRY if e.closed)
+#: Per kind code (the index in the shape registry): whether the kind is closed.
+_CLOSED_CODES = np.array([e.keyword in CLOSED_KINDS for e in shapes.REGISTRY])
 #: A direction for the point-in-solid test that no bundled shape's faces are parallel to.
 _PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
 
@@ -95,9 +97,8 @@ def sealed_lights(compiled: CompiledScene, objects: Optional[np.ndarray] = None)
     index = compiled_objects.primitive_index[chosen]
     plain = np.flatnonzero(index >= 0)
     rows = index[plain]
-    closed = np.zeros(len(table), dtype=bool)
-    closed[table.rows(CLOSED_KINDS)] = True
-    candidates = plain[transparent[table.material_ids[rows]] & closed[rows]].tolist()
+    closed = _CLOSED_CODES[table.kind[rows]]
+    candidates = plain[transparent[table.material_ids[rows]] & closed].tolist()
     booleans = compiled_objects.booleans
     for j in np.flatnonzero(index < 0).tolist():
         obj = booleans[int(chosen[j])]

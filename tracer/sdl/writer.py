@@ -20,7 +20,7 @@ from typing import Iterator, Optional, Union
 
 import numpy as np
 
-from .. import transforms
+from .. import shapes, transforms
 from ..errors import WriteError
 from ..meshio import write_3vn, write_text_atomic
 from ..model import CSG, Material, MeshData, Scene, SceneObject, Shape
@@ -265,14 +265,13 @@ def material_statements(current: Material, wanted: Material) -> list[str]:
 # The scene
 
 def _shape_keyword(shape: Shape, mesh_names: dict[int, str]) -> str:
-    if shape.kind == "taperedCylinder":
-        return f"taperedCylinder {fmt(shape.tapered_radius)}"
-    if shape.kind == "mesh":
+    """The keyword and what follows it: its parameters in SDL order, or a mesh's file."""
+    if shapes.KINDS[shape.kind].file_argument:
         name = mesh_names.get(id(shape), shape.mesh_file)
         if name is None:
             raise WriteError("a mesh shape has no file name; save_sdl writes its mesh beside the scene")
-        return f"mesh {_name(name, 'mesh file')}"
-    return shape.kind  # the analytic shapes, the polyhedra and the teapot are keywords
+        return f"{shape.kind} {_name(name, 'mesh file')}"
+    return " ".join([shape.kind, *map(fmt, shape.parameters)])
 
 
 def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str]) -> str:
@@ -358,7 +357,7 @@ def save_sdl(scene: Scene, path: PathLike) -> None:
     mesh_names: dict[int, str] = {}
     new_meshes: dict[int, tuple[MeshData, Path]] = {}  # by id(mesh): one file per distinct mesh
     for shape in scene.shapes():
-        if shape.kind != "mesh":
+        if not shapes.KINDS[shape.kind].file_argument:
             continue
         if shape.mesh_file is None:
             if shape.mesh is None:

@@ -14,7 +14,8 @@ from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
 import tracer
-from addon import convert, importer, meshes, props
+from addon import importer, meshes, props
+from addon.pure import convert
 from blender_scripts.addon_env import (SCENE_FILES, SCENES, effective_matrix, fresh, import_sdl, shape_objects,
                                        to_blender, world)
 
@@ -432,7 +433,7 @@ def test_objects_and_materials_get_the_names_blender_would_give(tmp_path):
 
 
 def test_datablocks_sorted_as_naming_sort_key_says():
-    from addon import naming
+    from addon.pure import naming
 
     fresh()
     names = ["b", "B2", "a", "sphere.1000", "sphere.999", "sphere", "Zeta", "zeta.001", "é", "e", "_x", "~", "A b",

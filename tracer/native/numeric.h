@@ -42,6 +42,39 @@ static inline double max_abs3(const double *a)
     return m;
 }
 
+/* tracer.numerics.norm3: |v| without overflow or underflow.  Where |v|^2 leaves [2^-900, 2^900], v is
+ * scaled by the power of two nearest its largest component first (exact, so no bit changes where the plain
+ * form would have been right). */
+static inline double norm3(const double *v)
+{
+    double squared = dot3(v, v);
+    if (squared >= 0x1p-900 && squared <= 0x1p900)
+        return sqrt(squared);
+    double largest = max_abs3(v);
+    if (largest == 0.0)
+        return 0.0;
+    int exponent;
+    frexp(isfinite(largest) ? largest : 1.0, &exponent);
+    double s[3] = {ldexp(v[0], -exponent), ldexp(v[1], -exponent), ldexp(v[2], -exponent)};
+    return ldexp(sqrt(dot3(s, s)), exponent);
+}
+
+/* tracer.numerics.feeler_to: the direction from `start` to `target` and the t at which it arrives (1, or a
+ * power of two where the feeler is longer than FEELER_REACH = 2^64 and is scaled by it: no overflow). */
+static inline double feeler_to(const double *start, const double *target, double *d)
+{
+    for (int i = 0; i < 3; i++)
+        d[i] = target[i] - start[i];
+    double largest = max_abs3(d);
+    if (!(largest > 0x1p64) || !isfinite(largest))
+        return 1.0;
+    int exponent;
+    frexp(largest, &exponent);
+    for (int i = 0; i < 3; i++)
+        d[i] = ldexp(d[i], -exponent);
+    return ldexp(1.0, exponent);
+}
+
 /* p' = M p for an affine row-major 4x4 */
 static inline void affine_point(const double *m, const double *p, double *out)
 {

@@ -27,6 +27,18 @@ def drop_unreadable_textures(scene) -> list[str]:
     from dataclasses import replace
 
     shapes = scene.shapes()
+    problems = texture_problems(scene, shapes)
+    for shape in shapes:
+        if shape.material.texture in problems:
+            shape.material = replace(shape.material, texture=0)
+    return [f"{message}: drawn without that texture" for message in dict.fromkeys(problems.values())]
+
+
+def texture_problems(scene, shapes=None) -> dict[int, str]:
+    """Why each texture the scene's shapes use cannot be used (texture number -> one message naming the file:
+    a missing makePixmap, a picture that cannot be read, an unknown solid texture); empty when all can.  Every
+    picture is read to find out."""
+    shapes = scene.shapes() if shapes is None else shapes
     problems: dict[int, str] = {}
     for number in sorted({s.material.texture for s in shapes}):
         problem = _texture_problem(scene, shapes, number)
@@ -37,10 +49,7 @@ def drop_unreadable_textures(scene) -> list[str]:
                 problem = str(err)
         if problem:
             problems[number] = problem
-    for shape in shapes:
-        if shape.material.texture in problems:
-            shape.material = replace(shape.material, texture=0)
-    return [f"{message}: drawn without that texture" for message in dict.fromkeys(problems.values())]
+    return problems
 
 
 def _where_used(scene, shapes, number: int) -> str:
@@ -90,6 +99,14 @@ class TextureSet:
                 if path not in loaded:
                     loaded[path] = _load_for(scene, shapes, number)
                 self.images[number] = loaded[path]
+
+    @classmethod
+    def of_images(cls, primitives, images: dict[int, np.ndarray]) -> "TextureSet":
+        """A TextureSet of these primitives with the pictures already loaded (by texture number): tracer.edit's,
+        which loads only a picture it has not loaded before."""
+        self = cls.__new__(cls)
+        self.primitives, self.images = primitives, dict(images)
+        return self
 
     def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:
         """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` (1 where untextured)."""

@@ -550,20 +550,20 @@ class Importer:
             self.result.sdl_view = sdl_view
             if excluded is not None:
                 excluded.exclude = False
-            # Hide the cutters in the viewport too, and remember what Blender shows of every transform.
-            if ctx.view_layer is not None:
-                ctx.view_layer.update()
+            # Hide the cutters in the viewport too, and remember what Blender shows of every transform: for
+            # an object without a parent, its matrix_basis (location, rotation and scale put together again),
+            # bit for bit what evaluating the scene makes its world matrix, without evaluating 10^5 objects.
             for obj in self.result.objects:
                 if obj.get("sdl_cutter"):
                     try:
                         obj.hide_set(True)
                     except RuntimeError:
                         obj.hide_viewport = True
-                obj[OBJ_SHOWN] = flat(obj.matrix_world)
-            cam_obj[CAM_SHOWN] = flat(cam_obj.matrix_world) + [float(cam_obj.data.lens),
+                obj[OBJ_SHOWN] = flat(obj.matrix_basis)
+            cam_obj[CAM_SHOWN] = flat(cam_obj.matrix_basis) + [float(cam_obj.data.lens),
                                                                float(cam_obj.data.sensor_height)]
             for obj in self.result.lights:
-                obj["sdl_position_shown"] = [float(v) for v in obj.matrix_world.translation]
+                obj["sdl_position_shown"] = [float(v) for v in obj.matrix_basis.translation]
             yield total, total
         except BaseException:
             self.undo()

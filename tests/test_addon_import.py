@@ -469,3 +469,17 @@ def test_an_import_kept_out_of_the_view_layer_while_made_ends_in_it(tmp_path, mo
         seen.append(layer is not None and layer.exclude)
     assert True in seen and seen[-1] is False
     assert all(o.visible_get() for o in imp.result.objects)
+
+
+@pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)
+def test_the_transforms_kept_at_import_are_what_blender_shows(path):
+    """The importer keeps what Blender shows of each transform (the snapshot the exact SDL values are kept
+    against) without evaluating the scene: it must be, bit for bit, the evaluated world matrix."""
+    import_sdl(path)
+    bpy.context.view_layer.update()
+    for obj in shape_objects():
+        assert list(obj["sdl_matrix_shown"]) == world(obj).ravel().tolist(), obj.name
+    camera = bpy.context.scene.camera
+    assert list(camera["sdl_camera_shown"])[:16] == world(camera).ravel().tolist()
+    for light in (o for o in bpy.data.objects if o.type == "LIGHT"):
+        assert list(light["sdl_position_shown"]) == list(light.matrix_world.translation)

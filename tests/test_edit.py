@@ -17,7 +17,7 @@ from tracer.compile import compile_scene
 from tracer.edit import EditableScene
 from tracer.errors import TracerError
 from tracer.meshio import read_3vn
-from tracer.model import CSG, Material, MeshData, Scene, Settings, Shape
+from tracer.model import CSG, Material, MeshData, Scene, Settings, Shape, ShapeTable
 from tracer.render import render
 from tracer.trace import first_hits
 
@@ -237,9 +237,9 @@ def test_parts_of_one_key_are_edited_together(backend):
 _EDIT_NAMES = sorted(set(EDITS) - {"remove"})
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(st.tuples(st.sampled_from(_EDIT_NAMES + ["remove", "add", "lights"]), st.sampled_from(KEYS)),
-                min_size=1, max_size=6))
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.sampled_from(_EDIT_NAMES + ["remove", "add", "lights", "frame", "shared", "batch"]),
+                          st.sampled_from(KEYS)), min_size=1, max_size=8))
 def test_random_edit_sequences_render_as_from_scratch(steps):
     scene, keys = mixed_scene()
     editable = EditableScene(scene, keys)
@@ -249,8 +249,22 @@ def test_random_edit_sequences_render_as_from_scratch(steps):
             editable.add_objects(f"added {number}", [Shape("sphere", translation(number * 0.3 - 1, 1.6, 0), RED)])
         elif edit == "lights":
             editable.set_lights([Light((number - 2.0, 4, 5), (1, 1, 1))])
+        elif edit == "frame":  # (every object moved at once)
+            editable.set_transforms((k, translation(0.05, 0.02 * number, 0) @ _first_matrix(editable, k))
+                                    for k in editable.keys())
+        elif edit == "shared":  # (one shared material edited, wherever it is now)
+            old = next((s.material for obj in editable.scene.objects
+                        for s in ([obj.left, obj.right] if isinstance(obj, CSG) else [obj])), None)
+            if old is not None:
+                editable.replace_material(old, dataclasses.replace(old, diffuse=(0.1 * (number % 10), 0.5, 0.5)))
+        elif edit == "batch":
+            with editable.batch():
+                for k in editable.keys()[:3]:
+                    EDITS["move"](editable, k)
         elif key in editable:
             EDITS[edit](editable, key)
+        if number % 3 == 2:  # (and along the way, on the C core)
+            assert_renders_alike(editable, "c")
     assert_renders_alike(editable, "c")
     assert_renders_alike(editable, "numpy")
 
@@ -336,3 +350,139 @@ def test_edits_change_the_rows_they_concern_and_no_other():
         width = {"prim_inverse": 16, "prim_sphere": 4, "prim_rounding": 4, "object_box": 6}[name]
         rows = np.flatnonzero((flat.arrays[name].reshape(-1, width) != before[name].reshape(-1, width)).any(axis=1))
         assert rows.tolist() == [7], name
+
+
+# ------------------------------------------------------------------------------------------------ live effects
+
+BRICKS = ROOT / "scenes" / "images" / "bricks.png"
+PLAIN = Material(ambient=(0.2, 0.2, 0.2), diffuse=(0, 0, 0), specular=(0, 0, 0))
+
+
+def plain_scene() -> Scene:
+    """Shapes that call for no effect but their kinds: unlit (no light), nothing reflects or is textured."""
+    scene = Scene(objects=[Shape("sphere", translation(-1, 0, 0), PLAIN), Shape("cube", translation(1.5, 0, 0), PLAIN),
+                           Shape("plane", translation(0, -1, 0) @ rotation(-90, 1, 0, 0), PLAIN)],
+                  camera=Camera(eye=(0, 2, 8), look=(0, 0, 0)), settings=Settings(max_recursion_depth=3))
+    scene.pixmaps = {1: str(BRICKS)}
+    return scene
+
+
+EFFECT_STEPS = [  # (what the edit does, the effect it switches on)
+    (lambda e: e.set_lights([Light((3, 4, 5), (1, 1, 1))]), None),  # (a light, but nothing lit yet)
+    (lambda e: e.set_material(0, RED), "lighting"),
+    (lambda e: e.set_material(1, MIRROR), "reflection"),
+    (lambda e: e.set_material(2, GLASS), "refraction"),
+    (lambda e: e.set_material(0, Material(diffuse=(1, 1, 1), texture=1, parameters=(2, 2))), "textures"),
+    (lambda e: e.set_material(1, Material(specular=(0.9, 0.9, 0.9), specular_fraction=0.6, surface_roughness=0.3)),
+     "cook-torrance"),
+    (lambda e: e.set_material(2, dataclasses.replace(GLASS, fresnel="dielectric")), "fresnel"),
+    (lambda e: e.set_lights([Light((3, 4, 5), (1, 1, 1), kind="sphere", radius=0.5, samples=4)]), "soft-shadows"),
+]
+
+
+def test_effects_switch_on_and_off_as_edits_call_for_them(backend):
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend=backend)
+    assert editable.compiled.effects == {"shape:sphere", "shape:cube", "shape:plane"}
+    for step, effect in EFFECT_STEPS:
+        step(editable)
+        if effect is not None:
+            assert effect in editable.compiled.effects
+        assert_renders_alike(editable, backend)
+    for key in (0, 1, 2):  # and off again, one by one
+        editable.set_material(key, PLAIN)
+        assert_renders_alike(editable, backend)
+    editable.set_lights([])
+    assert editable.compiled.effects == {"shape:sphere", "shape:cube", "shape:plane"}
+    assert_renders_alike(editable, backend)
+
+
+def test_a_picture_is_loaded_once_when_a_material_first_asks_for_it(monkeypatch):
+    from tracer import edit
+    loaded = []
+    real = edit.load_image
+    monkeypatch.setattr(edit, "load_image", lambda path: loaded.append(path) or real(path))
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend="c")
+    bricks = Material(diffuse=(1, 1, 1), texture=1)
+    editable.set_material(0, bricks)
+    editable.set_material(1, dataclasses.replace(bricks, parameters=(3, 1)))
+    editable.set_material(0, PLAIN)
+    editable.set_material(0, bricks)
+    assert loaded == [str(BRICKS)]
+    assert_renders_alike(editable, "c")
+
+
+@pytest.mark.parametrize("material, problem", [
+    (Material(texture=2), "texture 2 is used but the scene has no 'makePixmap 2 file'"),
+    (Material(texture=-7), "texture -7 is not a known solid texture")])
+def test_an_unusable_texture_is_refused_naming_the_object_and_changes_nothing(material, problem):
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend="c")
+    before = list(editable.scene.objects)
+    with pytest.raises(TracerError, match=f"object 1: {problem}"):
+        editable.set_material(1, material)
+    assert editable.scene.objects == before
+    assert_renders_alike(editable, "c")
+
+
+def test_a_physical_light_over_unlit_shapes_renders_on_the_c_core():
+    """(The C core refused a sphere light where nothing was lit: it read 'no physical-lights effect' as an
+    unknown light kind.)"""
+    scene = plain_scene()
+    scene.lights = [Light((3, 4, 5), (1, 1, 1), kind="sphere", radius=0.5, samples=4)]
+    c, numpy = render(scene, 16, 12, backend="c"), render(scene, 16, 12, backend="numpy")
+    assert c.backend == "c" and np.abs(c.image - numpy.image).max() <= 1 / 255
+
+
+def test_an_animation_frame_moves_every_object_at_once(backend):
+    scene, keys = mixed_scene()
+    editable = EditableScene(scene, keys)
+    render(editable.compiled, 8, 6, backend="c")
+    frame = {key: translation(0.1 * k, 0.05, -0.1) @ _first_matrix(editable, key) for k, key in enumerate(keys)}
+    frame["csg"] = translation(0.2, 0, 0)  # (a boolean's leaves all get it)
+    editable.set_transforms(frame.items())
+    for key, matrix in frame.items():
+        for obj in editable.objects_of(key):
+            for leaf in ([obj.left, obj.right] if isinstance(obj, CSG) else [obj]):
+                assert np.array_equal(leaf.matrix, matrix)
+    assert editable.done["rebuild"] == 1  # (every object moved: built anew, not refitted)
+    assert_renders_alike(editable, backend)
+    with pytest.raises(TracerError, match="'torus'.*singular"):
+        editable.set_transforms([("red", np.eye(4)), ("torus", np.diag([1.0, 1.0, 0.0, 1.0]))])
+    assert np.array_equal(editable.objects_of("red")[0].matrix, frame["red"])  # (nothing changed)
+
+
+def test_a_scene_read_as_columns_is_edited_as_its_shapes(backend):
+    """A ShapeTable (the C reader's columns: a tapered cylinder, a polyhedron, the teapot) becomes its list of
+    Shapes once, and is edited like any list."""
+    from tracer.sdl.parser import parse_sdl
+    text = ("light 5 5 5 1 1 1\ncamera 0 2 8 0 0 0 0 1 0 40\ndiffuse 1 0 0\ntranslate 1 0 0 sphere\n"
+            "push scale 0.5 1 0.5 rotate 30 0 0 1 cube pop\nreflectivity 0.6 diffuse 0 1 0\n"
+            "push translate -1 0 0 taperedCylinder 0.25 pop\npush translate 0 1 0 scale 0.5 0.5 0.5 octahedron pop\n"
+            "push translate -2 0 0 scale 0.3 0.3 0.3 teapot pop\n")
+    scene = parse_sdl(text, file="table.sdl")
+    scene.objects = ShapeTable.of_shapes(scene.objects)
+    editable = EditableScene(scene)
+    assert isinstance(editable.scene.objects, list) and len(editable) == 5
+    render(editable.compiled, 8, 6, backend=backend)
+    editable.set_transform(2, translation(-1.5, 0.2, 0) @ scaling(1, 1.5, 1))
+    editable.set_material(3, GLASS)
+    editable.remove_objects(4)
+    assert_renders_alike(editable, backend)
+
+
+def test_a_key_whose_parts_change_in_number_is_replaced_whole(backend):
+    """A Blender mesh edited to use one material more: its parts are replaced (removed, added at the end)."""
+    octahedron, pawn = _octahedron(), _pawn()
+    scene = Scene(objects=[Shape("mesh", np.eye(4), RED, mesh=octahedron), Shape("sphere", translation(2, 0, 0), GLASS)],
+                  lights=[Light((4, 5, 6), (1, 1, 1))], camera=Camera(eye=(0, 2, 8), look=(0, 0, 0)))
+    editable = EditableScene(scene, ["mesh object", "ball"])
+    render(editable.compiled, 8, 6, backend=backend)
+    parts = [Shape("mesh", translation(-1, 0, 0), RED, mesh=octahedron),
+             Shape("mesh", translation(-1, 0, 0) @ scaling(0.3, 0.6, 0.3), MIRROR, mesh=pawn)]
+    editable.replace_objects("mesh object", parts)
+    assert editable.objects_of("mesh object") == parts and editable.positions_of("mesh object") == [1, 2]
+    assert_renders_alike(editable, backend)
+    editable.replace_objects("mesh object", parts[1:])
+    assert_renders_alike(editable, backend)

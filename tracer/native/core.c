@@ -35,22 +35,35 @@ const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
 
 const char *rt_build_id(void) { return rt_build_marker; }
 
-int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
-
-/* Offset and size of every SceneDesc field in contract.py's order, for the loader to compare with ctypes';
- * returns the number of fields (nothing is written when capacity is smaller). */
-int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity)
+int64_t rt_struct_size(int64_t which)
 {
-    if (capacity < RT_SCENE_DESC_FIELD_COUNT)
-        return RT_SCENE_DESC_FIELD_COUNT;
+    switch (which) {
+#define RT_STRUCT_SIZE(code, type, fields) case code: return (int64_t)sizeof(type);
+    RT_STRUCTS(RT_STRUCT_SIZE)
+#undef RT_STRUCT_SIZE
+    }
+    return -1;
+}
+
+/* Offset and size of every field of struct `which` (contract.py's STRUCTS) in its table's order, for the
+ * loader to compare with ctypes'; returns the number of fields (nothing is written when capacity is smaller),
+ * -1 for no such struct. */
+int64_t rt_struct_layout(int64_t which, int64_t *offsets, int64_t *sizes, int64_t capacity)
+{
     int64_t k = 0;
-#define RT_FIELD_LAYOUT(name)                                  \
-    offsets[k] = (int64_t)offsetof(SceneDesc, name);           \
-    sizes[k] = (int64_t)sizeof(((const SceneDesc *)0)->name);  \
+#define RT_FIELD_LAYOUT(type, name)                             \
+    if (k < capacity) {                                         \
+        offsets[k] = (int64_t)offsetof(type, name);             \
+        sizes[k] = (int64_t)sizeof(((const type *)0)->name);    \
+    }                                                           \
     k++;
-    RT_SCENE_DESC_FIELDS(RT_FIELD_LAYOUT)
+#define RT_STRUCT_LAYOUT(code, type, fields) case code: fields(RT_FIELD_LAYOUT) return k;
+    switch (which) {
+    RT_STRUCTS(RT_STRUCT_LAYOUT)
+    }
+#undef RT_STRUCT_LAYOUT
 #undef RT_FIELD_LAYOUT
-    return k;
+    return -1;
 }
 
 const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
@@ -635,7 +648,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, NAME);              \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, 0, NAME);           \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -663,7 +676,7 @@ SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
 /* The effects of Blender scenes, traced by shade_general alone. */
-#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL)
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL | FX_SMOOTH_TERMINATOR)
 
 /* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
  * FX_GENERAL pay for that choice per ray, the others never come here. */
@@ -674,7 +687,8 @@ static void shade_general(const Scene *S, Work *w, const double *o, const double
     int l = (fx & FX_LIGHTING) != 0;
     shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
                l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
-               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0, shade_general);
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0,
+               (fx & FX_SMOOTH_TERMINATOR) != 0, shade_general);
 }
 
 static ShadeFn pick_shade(int64_t effects)
@@ -1085,9 +1099,10 @@ static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, in
     for (int64_t m = 0; m < D->n_materials; m++)
         if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
             REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
+    /* (lights are read only where something is lit: then a physical one needs its shading variant) */
     for (int64_t l = 0; l < D->n_lights; l++)
         if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
-            (D->light_kind[l] != LIGHT_POINT && !(D->effects & FX_PHYSICAL_LIGHTS)))
+            (D->light_kind[l] != LIGHT_POINT && (D->effects & FX_LIGHTING) && !(D->effects & FX_PHYSICAL_LIGHTS)))
             REFUSE("light %lld has kind %d and %d samples", (long long)l, (int)D->light_kind[l],
                    (int)D->light_samples[l]);
     if (objects && n >= 0) {
@@ -1145,6 +1160,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
         m->tri_normal = D->mesh_tri_normal[k];
         m->vertices = D->mesh_vertices[k];
         m->normals = D->mesh_normals[k];
+        m->tri_uv = D->mesh_tri_uv[k];
         m->rounding_factor = D->mesh_constants[0];
         m->barycentric_max = D->mesh_constants[1];
         m->parallel_eps = D->mesh_constants[2];
@@ -1514,7 +1530,7 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
  * untextured); for the tests, which compare it with the NumPy reference point by point.  -1 on a bad
  * primitive index. */
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out)
+                      const double *bary, double *out)
 {
     const Scene *S = (const Scene *)scene;
     for (int64_t i = 0; i < n; i++)
@@ -1522,7 +1538,7 @@ int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double
             return -1;
     for (int64_t i = 0; i < n; i++) {
         if (S->d.effects & FX_TEXTURES)
-            texture_color(S, shape[i], points + 3 * i, part[i], out + 3 * i);
+            texture_color(S, shape[i], points + 3 * i, part[i], bary ? bary + 2 * i : NULL, out + 3 * i);
         else
             out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = 1.0;
     }

@@ -120,8 +120,9 @@ class SDLRenderSettings(bpy.types.PropertyGroup):
                                description="Shadow rays per shaded point for each light with an extent (a radius, "
                                            "a sun's angle, an area light): soft shadows")
     target_error: FloatProperty(name="Target Error", default=0.0, min=0.0, soft_max=0.1, precision=4,
-                                description="Final renders: sample each pixel until its estimated error (linear "
-                                            "colour) is below this, and report the estimate; 0 is off")
+                                description="Final renders: sample until the image's estimated RMSE (linear colour) is "
+                                            "below this, rays going where they lower it most, and report the "
+                                            "estimate; 0 is off")
 
 
 CLASSES = (SDLMaterialSettings, SDLWorldSettings, SDLRenderSettings)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tracer import model, native, numerics
-from tracer.native import contract, flatten
+from tracer.native import contract
 from tracer.trace import RAY_KINDS
 
 requires_core = pytest.mark.skipif(native.load_error is not None,
@@ -73,7 +73,7 @@ def test_a_swapped_ctypes_mirror_is_caught(monkeypatch):
     class Swapped(ctypes.Structure):
         _fields_ = fields
 
-    monkeypatch.setattr(flatten, "SceneDesc", Swapped)
+    monkeypatch.setattr(contract, "SceneDesc", Swapped)
     assert ctypes.sizeof(Swapped) == native._lib.rt_desc_size()
     reason = native.layout_mismatch(native._lib)
     assert reason is not None and "offset" in reason
@@ -86,7 +86,7 @@ def test_a_library_from_another_contract_is_refused(monkeypatch):
 
 
 def test_ctypes_fields_follow_the_table():
-    names = [name for name, _ in flatten.SceneDesc._fields_]
+    names = [name for name, _ in contract.SceneDesc._fields_]
     assert names == [f.name for f in contract.SCENE_DESC]
     for f in contract.SCENE_DESC:
         if f.is_pointer:

@@ -14,7 +14,6 @@ E is in linear colour, the unit of the image before it is written as 8 bits (1/2
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -118,22 +117,3 @@ def sample_to_error(camera_rays: Callable[[np.ndarray, np.ndarray], np.ndarray],
                            pixels_at_limit=int(np.count_nonzero(estimate > target)),
                            per_pixel=shown(estimate), samples=shown(count))
     return film, result
-
-
-def render_to_error(compiled, width: int, height: int, target: float, *, backend: str = "auto",
-                    threads: Optional[int] = None, seed: int = 0, savings=None,
-                    cancel: Optional[Callable[[], bool]] = None):
-    """tracer.render.render with ``target_error``: a RenderResult whose ``error_estimate`` is filled in."""
-    from .backend import make_tracer
-    from .camera import CameraFrame, scene_camera
-    from .render import RenderResult
-    from .tiles import camera_rays_for
-
-    started = time.perf_counter()
-    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
-    tracer = make_tracer(compiled, backend, threads, savings)
-    film, estimate = sample_to_error(tracer.camera_rays, camera_rays_for(frame, width, height), width, height,
-                                     target, seed, cancel)
-    return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
-                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
-                        error_estimate=estimate)

@@ -27,7 +27,7 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define TORUS_RING 1.0
 /* the generic torus' tube radius (tracer.model:TORUS_TUBE_RADIUS) */
 #define TORUS_TUBE 0.2
-/* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
+/* nested transparent media a ray keeps track of (tracer.model:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
 /* most octaves of turbulence summed (marble); a larger count is read as this one (tracer.textures.noise:MAX_OCTAVES) */
 #define MAX_OCTAVES 32
@@ -174,6 +174,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 61
-#define RT_CONTRACT_DIGEST "7d416842de0c6c02"
+#define RT_CONTRACT_DIGEST "33395c2613cc4334"
 
 #endif

@@ -82,7 +82,7 @@ class Constant:
 CONSTANTS = (
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
-    Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MEDIA_DEPTH", "tracer.model:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
     Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
              "most octaves of turbulence summed (marble); a larger count is read as this one"),
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
@@ -237,6 +237,12 @@ def field(name: str) -> Field:
 def ctypes_fields() -> list[tuple[str, object]]:
     """``_fields_`` of the ctypes mirror of SceneDesc."""
     return [(f.name, f.ctype) for f in SCENE_DESC]
+
+
+class SceneDesc(ctypes.Structure):
+    """The ctypes mirror of the C core's SceneDesc (flatten.FlatScene fills one; the loader checks its layout)."""
+
+    _fields_ = ctypes_fields()
 
 
 # ------------------------------------------------------------------------------------------------ the header

@@ -28,7 +28,9 @@ from typing import Optional, Union
 import numpy as np
 
 from .. import shapes as shape_registry
-from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
+from ..camera import camera_problem
+from ..model import ANALYTIC_KINDS, POLYHEDRON_KINDS, Camera, Light, Material, MaterialRows, Scene, ShapeTable
+from .materials import COLOR_MATERIAL, FLOAT_MATERIAL, MAX_PARAMETERS
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
 #: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
@@ -92,7 +94,7 @@ class _Setup:
 @functools.lru_cache(maxsize=1)
 def _setup() -> Optional[_Setup]:
     """None when the C core is not loaded (then the Python reader reads everything)."""
-    from .. import native  # here, not at the top: the parser must not import the C core for small texts
+    from .. import native  # deferred: the parser must not load the C core for small texts
     if native.load_error is not None or native._lib is None:
         return None
     lib = native._lib
@@ -107,8 +109,7 @@ def _setup() -> Optional[_Setup]:
         getattr(lib, name).argtypes = []
     lib.rt_sdl_material_width.restype = ctypes.c_int64
     lib.rt_sdl_material_width.argtypes = []
-    from . import parser
-    _check_material_rows(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
+    _check_material_rows(lib.rt_sdl_material_width(), MAX_PARAMETERS)
     actions = {name: code for code, name in enumerate(lib.rt_sdl_action_names().decode().split())}
     vocabulary = _vocabulary()
     words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
@@ -119,17 +120,16 @@ def _setup() -> Optional[_Setup]:
 
 def _vocabulary() -> dict[str, tuple[str, int]]:
     """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names) and argument."""
-    from . import parser
     words = {keyword: (keyword, 0) for keyword in (
         "light", "globalAmbient", "background", "minReflectivity", "minTransparency", "maxRecursionDepth",
         "camera", "texture", "parameters", "defaultMaterials", "translate", "scale", "rotate", "push", "pop",
         "identityAffine")}
-    for keyword, name in parser.COLOR_MATERIAL.items():
+    for keyword, name in COLOR_MATERIAL.items():
         words[keyword] = ("colorMaterial", MaterialRows.SLOTS[name][0])
-    for keyword, name in parser.FLOAT_MATERIAL.items():
+    for keyword, name in FLOAT_MATERIAL.items():
         words[keyword] = ("floatMaterial", MaterialRows.SLOTS[name][0])
     kind_codes = {entry.keyword: code for code, entry in enumerate(shape_registry.REGISTRY)}
-    for kind in parser.ANALYTIC_KINDS + parser.POLYHEDRON_KINDS + ("teapot",):
+    for kind in ANALYTIC_KINDS + POLYHEDRON_KINDS + ("teapot",):
         # (the parser's _read_shape reads a number after taperedCylinder alone)
         words[kind] = ("taperedShape" if kind == "taperedCylinder" else "shape", kind_codes[kind])
     return words
@@ -286,7 +286,6 @@ def read(text: str, file: Optional[str] = None) -> Optional[Scene]:
     columns = scan(text)
     if not isinstance(columns, Columns):
         return None
-    from .parser import camera_problem
     with np.errstate(over="ignore", invalid="ignore"):  # (huge numbers: the checks' answer is what counts)
         for numbers in columns.cameras:  # one the Python reader would refuse: its message is the parser's
             if camera_problem(numbers[0:3], numbers[3:6], numbers[6:9], numbers[9]) is not None:

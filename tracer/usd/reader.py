@@ -23,6 +23,7 @@ import numpy as np
 from .. import shapes
 from ..camera import focal_length, view_angle
 from ..errors import TracerError
+from ..geometry import builtin_mesh
 from ..model import (CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene,
                      SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
@@ -31,6 +32,7 @@ from . import common as C
 from .meshes import sdl_mesh, usd_mesh
 from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
+from .writer import camera_frame
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -346,7 +348,6 @@ class _Reader:
 
     def _mesh(self, prim, world: np.ndarray, kind: Optional[str]) -> Optional[Shape]:
         if kind in POLYHEDRON_KINDS or kind == "teapot":
-            from ..sdl.parser import builtin_mesh
             return Shape(kind, world, mesh=builtin_mesh(kind))
         if kind in _TESSELLATED or kind == "taperedCylinder":
             return Shape("mesh", world)  # the caller makes the exact shape
@@ -505,8 +506,6 @@ class _Reader:
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
         """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
         in another tool since)."""
-        from .writer import camera_frame
-
         eye, look, up = (self.triple(prim, name) for name in (C.A_EYE, C.A_LOOK, C.A_UP))
         angle = self.get(prim, C.A_VIEW_ANGLE)
         if None in (eye, look, up, angle):

@@ -18,7 +18,9 @@ from .. import shapes
 from ..atomic import replacing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
+from ..geometry import builtin_mesh
 from ..geometry.tessellate import tapered_cylinder_mesh
+from ..meshio import _face_normal
 from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
 from ..transforms import translation
 from . import common as C
@@ -294,15 +296,12 @@ class _Writer:
             return tapered_cylinder_mesh(shape.tapered_radius)
         if shape.mesh is None:
             if shape.kind in POLYHEDRON_KINDS or shape.kind == "teapot":
-                from ..sdl.parser import builtin_mesh
                 return builtin_mesh(shape.kind)
             raise TracerError(f"cannot write the {shape.kind}: it has no mesh data")
         return shape.mesh
 
     def _mesh(self, mesh, data: MeshData) -> None:
         """Points, faces and per-corner (faceVarying) normals; faces without normals get their flat one."""
-        from ..meshio import _face_normal
-
         vertices = np.asarray(data.vertices, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(data.normals, dtype=np.float64).reshape(-1, 3)
         counts, indices, corner_normals = [], [], []

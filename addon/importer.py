@@ -17,7 +17,7 @@ from mathutils import Matrix
 from . import meshes, props
 from .pure import convert, primitives
 from .scene_build import (OBJ_FILE, OBJ_KIND, OBJ_MATRIX, OBJ_ORDER, OBJ_PARAM, OBJ_SHOWN, SDL_TO_BOOLEAN, flat)
-from .tracer import model
+from .tracer import model, shapes
 from .tracer.camera import CameraFrame, focal_length, framing_camera
 from .tracer.compile import compile_scene
 from .tracer.errors import TracerError
@@ -141,24 +141,23 @@ class Importer:
         return mat
 
     def _mesh(self, shape, mesh_part: np.ndarray):
-        kind = shape.kind
-        param = shape.tapered_radius if kind == "taperedCylinder" else 1.0
+        kind, parameters = shape.kind, shape.parameters
         mesh_file = None
-        if kind == "mesh":
+        if shapes.KINDS[kind].file_argument:
             mesh_file = os.path.abspath(shape.mesh.origin or shape.mesh_file or "")
         sheared = not np.array_equal(mesh_part, np.eye(4))
-        key = (kind, param, mesh_file)
+        key = (kind, parameters, mesh_file)
         if not sheared and key in self.mesh_cache:
             return self.mesh_cache[key]
-        gm = primitives.generic_mesh(kind, param, shape.mesh)
+        gm = primitives.generic_mesh(kind, parameters, shape.mesh)
         if sheared:
             gm = gm.transformed(mesh_part[:3, :3])
-        name = primitives.mesh_name(kind, param, mesh_file) + (" (sheared)" if sheared else "")
-        mesh = None if sheared else meshes.find_shared(kind, param, mesh_file, gm.hash())
+        name = primitives.mesh_name(kind, parameters, mesh_file) + (" (sheared)" if sheared else "")
+        mesh = None if sheared else meshes.find_shared(kind, parameters, mesh_file, gm.hash())
         if mesh is None:
             mesh = self.created.add("meshes", meshes.build_mesh(name, gm))
             mesh.materials.append(None)  # one slot, linked to each object's own material
-            meshes.mark_generic(mesh, kind, param, mesh_file, mesh_part)
+            meshes.mark_generic(mesh, kind, parameters, mesh_file, mesh_part)
         if not sheared:
             self.mesh_cache[key] = mesh
         return mesh
@@ -193,8 +192,8 @@ class Importer:
         slot.link = "OBJECT"
         slot.material = material if material is not None else self._material(shape.material)
         obj[OBJ_KIND] = shape.kind
-        if shape.kind == "taperedCylinder":
-            obj[OBJ_PARAM] = float(shape.tapered_radius)
+        if shape.parameters:
+            obj[OBJ_PARAM] = primitives.stored_parameters(shape.parameters)
         if shape.kind == "mesh":
             obj[OBJ_FILE] = mesh.get(meshes.FILE, "")
         obj[OBJ_MATRIX] = [float(v) for v in world.ravel()]

@@ -14,7 +14,7 @@ from .importer import COLOUR_MANAGEMENT
 from .pure import convert
 from .tracer import errors, model
 from .tracer.sdl.parser import builtin_mesh
-from .tracer.shapes import REGISTRY
+from .tracer.shapes import KINDS, REGISTRY
 
 #: How many of a file's warnings are shown one by one (the rest are counted).
 SHOWN_WARNINGS = 8
@@ -136,13 +136,17 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     kind: EnumProperty(name="Shape", items=SHAPE_ITEMS, default="sphere")
-    small_radius: FloatProperty(name="Top Radius", default=0.5, description="Top radius of a tapered cylinder")
+    # (and a FloatProperty per registered shape parameter: see _PARAMETERS below)
+
+    def draw(self, context):
+        self.layout.prop(self, "kind")
+        for parameter in KINDS[self.kind].parameters:
+            self.layout.prop(self, parameter.name)
 
     def execute(self, context):
-        shape = model.Shape(self.kind)
-        if self.kind == "taperedCylinder":
-            shape.tapered_radius = self.small_radius
-        if self.kind in model.POLYHEDRON_KINDS or self.kind == "teapot":
+        entry = KINDS[self.kind]
+        shape = model.Shape(self.kind, parameters=tuple(getattr(self, p.name) for p in entry.parameters))
+        if entry.builtin_mesh:
             shape.mesh = builtin_mesh(self.kind)
         matrix = np.eye(4)
         matrix[:3, 3] = tuple(context.scene.cursor.location)
@@ -163,6 +167,13 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
         obj.select_set(True)
         context.view_layer.objects.active = obj
         return {"FINISHED"}
+
+
+#: The Add operator's property for each registered shape parameter (by its name, shared by the kinds that
+#: have it), labelled as the registry says.
+_PARAMETERS = {p.name: FloatProperty(name=p.label, default=p.add_value, description=p.description)
+               for e in REGISTRY for p in e.parameters}
+OBJECT_OT_sdl_add_shape.__annotations__.update(_PARAMETERS)
 
 
 class VIEW3D_MT_sdl_add(bpy.types.Menu):

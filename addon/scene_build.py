@@ -26,6 +26,7 @@ import numpy as np
 from . import meshes, object_cache, props
 from .pure import convert
 from .tracer import model
+from .tracer.shapes import KINDS
 from .tracer.model import FaceList, MeshData
 
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
@@ -192,10 +193,8 @@ class SceneBuilder:
     def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info, own: bool = True):
         kind = info.kind
         shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval),
-                                 name=original.name)
-        if kind == "taperedCylinder":
-            shape.tapered_radius = info.param
-        if kind in self.model.POLYHEDRON_KINDS or kind in ("teapot", "mesh"):
+                                 parameters=info.parameters, name=original.name)
+        if KINDS[kind].family != "analytic":  # (polyhedra, the teapot, meshes)
             data = self.cache.get(obj_eval, "exact mesh", lambda: meshes.exact_mesh_data(info, original.data), own)
             if data is None:  # a mesh file that is gone: Blender's copy, in the mesh's own frame
                 data = self.cache.get(obj_eval, f"mesh {self.mode}",

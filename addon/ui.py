@@ -133,7 +133,7 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
             text = "Edited generic shape: traced as a mesh" if "sdl_kind" in obj.data else "Traced as a mesh"
             layout.label(text=text, icon="MESH_DATA")
             return
-        label = info.kind + (f" {info.param:g}" if info.kind == "taperedCylinder" else "")
+        label = " ".join([info.kind, *(f"{v:g}" for v in info.parameters)])
         # as the final render decides (scene_build.SceneBuilder.object_node)
         others = [m for m in scene_build.enabled_modifiers(obj) if m.type != "BOOLEAN"]
         if others:

@@ -88,7 +88,7 @@ def _grid_rays(n: int = 9):
 def assert_same_rows(edited, fresh) -> None:
     """The edited compiled scene's primitive rows are the fresh compile's, number for number."""
     a, b = edited.table, fresh.table
-    for name in ("kind", "top", "inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes"):
+    for name in ("kind", "parameters", "inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     ma, mb = edited.materials, fresh.materials
     for name in ("ambient", "diffuse", "specular", "reflectivity", "transparency", "texture"):
@@ -336,3 +336,86 @@ def test_edits_change_the_rows_they_concern_and_no_other():
         width = {"prim_inverse": 16, "prim_sphere": 4, "prim_rounding": 4, "object_box": 6}[name]
         rows = np.flatnonzero((flat.arrays[name].reshape(-1, width) != before[name].reshape(-1, width)).any(axis=1))
         assert rows.tolist() == [7], name
+
+
+# ------------------------------------------------------------------------------------------------ live effects
+
+BRICKS = ROOT / "scenes" / "images" / "bricks.png"
+PLAIN = Material(ambient=(0.2, 0.2, 0.2), diffuse=(0, 0, 0), specular=(0, 0, 0))
+
+
+def plain_scene() -> Scene:
+    """Shapes that call for no effect but their kinds: unlit (no light), nothing reflects or is textured."""
+    scene = Scene(objects=[Shape("sphere", translation(-1, 0, 0), PLAIN), Shape("cube", translation(1.5, 0, 0), PLAIN),
+                           Shape("plane", translation(0, -1, 0) @ rotation(-90, 1, 0, 0), PLAIN)],
+                  camera=Camera(eye=(0, 2, 8), look=(0, 0, 0)), settings=Settings(max_recursion_depth=3))
+    scene.pixmaps = {1: str(BRICKS)}
+    return scene
+
+
+EFFECT_STEPS = [  # (what the edit does, the effect it switches on)
+    (lambda e: e.set_lights([Light((3, 4, 5), (1, 1, 1))]), None),  # (a light, but nothing lit yet)
+    (lambda e: e.set_material(0, RED), "lighting"),
+    (lambda e: e.set_material(1, MIRROR), "reflection"),
+    (lambda e: e.set_material(2, GLASS), "refraction"),
+    (lambda e: e.set_material(0, Material(diffuse=(1, 1, 1), texture=1, parameters=(2, 2))), "textures"),
+    (lambda e: e.set_material(1, Material(specular=(0.9, 0.9, 0.9), specular_fraction=0.6, surface_roughness=0.3)),
+     "cook-torrance"),
+    (lambda e: e.set_material(2, dataclasses.replace(GLASS, fresnel="dielectric")), "fresnel"),
+    (lambda e: e.set_lights([Light((3, 4, 5), (1, 1, 1), kind="sphere", radius=0.5, samples=4)]), "soft-shadows"),
+]
+
+
+def test_effects_switch_on_and_off_as_edits_call_for_them(backend):
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend=backend)
+    assert editable.compiled.effects == {"shape:sphere", "shape:cube", "shape:plane"}
+    for step, effect in EFFECT_STEPS:
+        step(editable)
+        if effect is not None:
+            assert effect in editable.compiled.effects
+        assert_renders_alike(editable, backend)
+    for key in (0, 1, 2):  # and off again, one by one
+        editable.set_material(key, PLAIN)
+        assert_renders_alike(editable, backend)
+    editable.set_lights([])
+    assert editable.compiled.effects == {"shape:sphere", "shape:cube", "shape:plane"}
+    assert_renders_alike(editable, backend)
+
+
+def test_a_picture_is_loaded_once_when_a_material_first_asks_for_it(monkeypatch):
+    from tracer import edit
+    loaded = []
+    real = edit.load_image
+    monkeypatch.setattr(edit, "load_image", lambda path: loaded.append(path) or real(path))
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend="c")
+    bricks = Material(diffuse=(1, 1, 1), texture=1)
+    editable.set_material(0, bricks)
+    editable.set_material(1, dataclasses.replace(bricks, parameters=(3, 1)))
+    editable.set_material(0, PLAIN)
+    editable.set_material(0, bricks)
+    assert loaded == [str(BRICKS)]
+    assert_renders_alike(editable, "c")
+
+
+@pytest.mark.parametrize("material, problem", [
+    (Material(texture=2), "texture 2 is used but the scene has no 'makePixmap 2 file'"),
+    (Material(texture=-7), "texture -7 is not a known solid texture")])
+def test_an_unusable_texture_is_refused_naming_the_object_and_changes_nothing(material, problem):
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend="c")
+    before = list(editable.scene.objects)
+    with pytest.raises(TracerError, match=f"object 1: {problem}"):
+        editable.set_material(1, material)
+    assert editable.scene.objects == before
+    assert_renders_alike(editable, "c")
+
+
+def test_a_physical_light_over_unlit_shapes_renders_on_the_c_core():
+    """(The C core refused a sphere light where nothing was lit: it read 'no physical-lights effect' as an
+    unknown light kind.)"""
+    scene = plain_scene()
+    scene.lights = [Light((3, 4, 5), (1, 1, 1), kind="sphere", radius=0.5, samples=4)]
+    c, numpy = render(scene, 16, 12, backend="c"), render(scene, 16, 12, backend="numpy")
+    assert c.backend == "c" and np.abs(c.image - numpy.image).max() <= 1 / 255

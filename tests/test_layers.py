@@ -37,13 +37,15 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
               "tracer.bulk", "tracer.atomic", "tracer.userfiles", "tracer.png", "tracer.imageio",
               "tracer.transforms", "tracer.sampling", "tracer.appearance", "tracer.savings")),
     ("model", ("tracer.meshdata", "tracer.geometry", "tracer.geometry.*", "tracer.model", "tracer.camera")),
-    ("NumPy geometry", ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*")),
+    ("NumPy geometry", ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*",
+                        "tracer.lights", "tracer.fresnel")),
     ("C library", ("tracer.native", "tracer.native.build", "tracer.native.contract")),
     ("readers", ("tracer.meshio", "tracer.sdl", "tracer.sdl.*", "tracer.usd", "tracer.usd.*")),
     ("compile", ("tracer.compile", "tracer.skippable", "tracer.query")),
     ("NumPy tracer", ("tracer.trace",)),
     ("C tracer", ("tracer.native.flatten", "tracer.native.tracer")),
-    ("render", ("tracer.backend", "tracer.edit", "tracer.tiles", "tracer.target", "tracer.render")),
+    ("render", ("tracer.backend", "tracer.edit", "tracer.edit_ledger", "tracer.tiles", "tracer.target",
+                "tracer.render")),
     ("programs", ("tracer", "tracer.__main__", "tracer.cli", "tracer.reporting", "tracer.distributed",
                   "tracer.accuracy", "tracer.extremes")),
     # The add-on: its bpy-free part, then the modules that talk to Blender.  In the add-on the tracer is the
@@ -52,7 +54,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("add-on", ("addon", "addon.*")),
 )
 #: The NumPy reference path: imports nothing of the C core.  The first group not even through other modules.
-REFERENCE_ALONE = ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*")
+REFERENCE_ALONE = ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*", "tracer.lights",
+                   "tracer.fresnel")
 REFERENCE = REFERENCE_ALONE + ("tracer.trace", "tracer.skippable")
 C_CORE = ("tracer.native", "tracer.native.*")
 BLENDER = ("bpy", "bpy_extras", "mathutils", "gpu", "gpu_extras", "bmesh", "bl_math", "aud", "idprop",

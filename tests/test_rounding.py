@@ -41,7 +41,7 @@ def _hits(kind, origin, direction, backend, matrix=None):
     """(t, entering, unit normal) of every crossing of the whole line with one shape."""
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = TAPER
+        solid.parameters = (TAPER,)
     compiled = compile_scene(scene_of(solid))
     o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
     if backend == "c":
@@ -300,7 +300,7 @@ def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, 
     matrix = _affine(seed, 10.0 ** log_condition, size)
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = 0.5
+        solid.parameters = (0.5,)
     compiled = compile_scene(scene_of(solid))
     core = NativeTracer(compiled) if native.load_error is None else None
     rng = np.random.default_rng(seed)
@@ -352,7 +352,7 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
     matrix = _affine(seed, 10.0 ** log_condition, size)
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = 0.5
+        solid.parameters = (0.5,)
     compiled = compile_scene(scene_of(solid))
     rng = np.random.default_rng(seed)
     targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))] @ matrix[:3, :3].T + matrix[:3, 3]

@@ -67,7 +67,7 @@ def assert_same_scene(fast: Scene, slow: Scene) -> None:
         assert a.matrix.dtype == b.matrix.dtype and a.matrix.shape == b.matrix.shape == (4, 4)
         assert a.matrix.tobytes() == b.matrix.tobytes(), (index, a.matrix, b.matrix)
         assert material_bits(a.material) == material_bits(b.material), index
-        assert bits(a.tapered_radius) == bits(b.tapered_radius)
+        assert [bits(x) for x in a.parameters] == [bits(x) for x in b.parameters]
         if a.kind == "mesh":  # (read from its file by each read)
             assert a.mesh.origin == b.mesh.origin and np.array_equal(a.mesh.vertices, b.mesh.vertices)
         else:  # a built-in polyhedron's is the one cached MeshData
@@ -143,7 +143,7 @@ def test_the_shapes_stay_columns_until_asked_for():
     assert columns is not None  # nothing made yet
     assert columns.kinds.tolist() == [REGISTRY_CODES[k] for k in ("sphere", "cube", "taperedCylinder")]
     assert columns.material_ids.tolist() == [0, 1, 1] and len(columns.materials) == 2
-    assert columns.tapered_radii.tolist() == [1.0, 1.0, 0.5]
+    assert columns.parameters[:, 0].tolist() == [0.0, 0.0, 0.5]  # (only the tapered cylinder reads one)
     assert columns.affines[2].tolist() == [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 2.0, 0.0, 0.0, 1.0, 3.0]
     assert (columns.lines.tolist(), columns.columns.tolist()) == ([2, 2, 2], [1, 22, 43])
     assert columns.names == {0: "ball"} and columns.file == "scene.sdl"
@@ -258,7 +258,7 @@ def test_texts_of_the_writer():
         kind = SHAPE_WORDS[index % len(SHAPE_WORDS)]
         material = Material(diffuse=tuple(rng.uniform(0, 1, 3)), reflectivity=float(rng.uniform(0, 1)),
                             parameters=tuple(rng.uniform(0, 1, index % 4)), texture=-(index % 3))
-        objects.append(Shape(kind, matrix, material, tapered_radius=0.5 if kind == "taperedCylinder" else 1.0,
+        objects.append(Shape(kind, matrix, material, parameters=(0.5,) if kind == "taperedCylinder" else (),
                              mesh=parser.builtin_mesh(kind) if kind in parser.POLYHEDRON_KINDS + ("teapot",)
                              else None, name=f"object {index}" if index % 2 else None))
     scene = Scene(objects=objects, lights=[Light((1.0, 2.0, 3.0), (1.0, 1.0, 1.0))],

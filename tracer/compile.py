@@ -29,9 +29,10 @@ from .intersect import analytic
 from .intersect import mesh as mesh_module
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
-from .intersect.torus import intersect_torus
-from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
-                    Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
+from .lights import LightTable
+from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
+                    SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
+                    parameter_rows)
 from .textures import TextureSet
 from .transforms import transform_points
 
@@ -96,25 +97,31 @@ def _checked_inverse(shape: Shape) -> np.ndarray:
 #: The eight corners of the generic cube, for the bounding spheres of the closed-form shapes.
 #: (Shared by every primitive, so read-only.)
 _CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-_DISC_BOX = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
 #: The corners of each registered kind's generic box.
 _BOX_CORNERS = {e.keyword: np.asarray(e.box[0]) + _CORNERS * np.asarray(e.box[1])
                 for e in shapes.REGISTRY if e.box is not None}
-for _constant in (_CORNERS, _DISC_BOX, *_BOX_CORNERS.values()):
+for _constant in (_CORNERS, *_BOX_CORNERS.values()):
     _constant.setflags(write=False)
 
 
 def _analytic_generic_points(shape: Shape) -> Optional[np.ndarray]:
-    """Points whose hull holds a closed-form shape's generic solid (8 of them), or None for the plane,
-    polyhedra and meshes."""
+    """Points whose hull holds a closed-form shape's generic solid (its box's corners, or what its kind's
+    bounds give for its parameters), or None for the plane, polyhedra and meshes."""
     kind = shape.kind
     if kind in _BOX_CORNERS:
         return _BOX_CORNERS[kind]
-    if kind in ("taperedCylinder", "cylinder", "cone"):
-        top = max(shape.small_radius, 0.0)
-        # Corners of the squares that bound the two discs: the frustum lies inside their hull.
-        return np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX * top, np.ones(4)]])
+    entry = shapes.KINDS[kind]
+    if entry.bounds is not None:
+        return entry.function("bounds")(_traced_rows([entry.traced(shape.parameters)]))[0]
     return None
+
+
+def _traced_rows(values: Sequence[tuple[float, ...]]) -> np.ndarray:
+    """(N, shapes.MAX_PARAMETERS) rows of values that kinds' intersections take, 0 after each row's own."""
+    rows = np.zeros((len(values), shapes.MAX_PARAMETERS))
+    for i, row in enumerate(values):
+        rows[i, :len(row)] = row
+    return rows
 
 
 def _sphere_around(world: np.ndarray):
@@ -191,7 +198,7 @@ class Primitive:
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
             self._planes = face_planes(shape.kind)
-        elif shape.kind in ("teapot", "mesh"):
+        elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
             cache = {} if mesh_cache is None else mesh_cache
             key = id(shape.mesh)
@@ -205,7 +212,8 @@ class Primitive:
         entry = shapes.KINDS[self.kind]
         self.thin = entry.thin
         self.bounded = entry.bounded
-        self._intersect = entry.function("intersect") if entry.intersect else None
+        self._entry = entry
+        self._intersect = entry.function("intersect")
         self._normals_agree = entry.normals_agree
         self.tolerances = tolerances
 
@@ -259,10 +267,9 @@ class Primitive:
 
     @cached_property
     def generic_size(self) -> float:
-        """The generic shape's extent (its hit points' coordinates are of this size)."""
-        if self.kind == "torus":
-            return 1.0 + TORUS_TUBE_RADIUS
-        pts = self._generic_points() if self.kind not in ("sphere", "cube", "square", "plane") else None
+        """The generic shape's extent (its hit points' coordinates are of this size): the largest coordinate of
+        the points its bounds are made from, 1 for the plane."""
+        pts = self._generic_points()
         return float(np.max(np.abs(pts))) if pts is not None and pts.size else 1.0
 
     @property
@@ -298,20 +305,15 @@ class Primitive:
         return None if pts is None else transform_points(self.matrix, pts)
 
     def generic_hits(self, o: np.ndarray, d: np.ndarray) -> HitArrays:
-        if self._intersect is not None:
-            return self._intersect(o, d)
-        kind = self.kind
-        if kind == "square":
-            return analytic.intersect_square(o, d, self.tolerances.square_edge)
-        if kind == "plane":
-            return analytic.intersect_plane(o, d)
-        if kind in ("taperedCylinder", "cylinder", "cone"):
-            return analytic.intersect_tapered_cylinder(o, d, self.shape.small_radius)
-        if kind == "torus":
-            return intersect_torus(o, d, self.tolerances)
+        """Every crossing of the generic lines: the kind's registered intersection, given what its family
+        takes (tracer/shapes.py, ShapeKind)."""
         if self._planes is not None:
-            return analytic.intersect_convex_polyhedron(o, d, *self._planes)
-        return self._mesh.all_hits(o, d)
+            return self._intersect(o, d, *self._planes)
+        if self._mesh is not None:
+            return self._intersect(o, d, self._mesh)
+        entry = self._entry
+        budget = (self.tolerances,) if entry.budget else ()
+        return self._intersect(o, d, *entry.traced(self.shape.parameters), *budget)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
         """All hits along the whole world lines, world normals, ``shape`` = this primitive's index."""
@@ -491,6 +493,9 @@ class MaterialTable:
     speed_of_light: np.ndarray = field(init=False)
     #: The texture number (0: none).
     texture: np.ndarray = field(init=False)
+    #: The Material.fresnel mode's index in FRESNEL_MODES, and the tint (a metal's F0).
+    fresnel: np.ndarray = field(init=False)
+    fresnel_tint: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         # A few thousand materials at a time (they stay in the cache while each of their fields is read:
@@ -500,6 +505,8 @@ class MaterialTable:
         if isinstance(self.materials, MaterialRows):  # (columns already: a million materials read as rows)
             for name in _COLOR_FIELDS + _NUMBER_FIELDS + ("texture",):
                 setattr(self, name, self.materials.column(name))
+            self.fresnel = np.zeros(len(self.materials), dtype=np.int32)  # (rows keep SDL's materials only)
+            self.fresnel_tint = np.ones((len(self.materials), 3))
             return
         n = len(self.materials)
         for name in _COLOR_FIELDS:
@@ -519,7 +526,22 @@ class MaterialTable:
                     column[rows] = np.fromiter(chain.from_iterable(values), float, 3 * len(values)).reshape(-1, 3)
                 else:
                     column[rows] = np.fromiter(values, column.dtype, len(values))
+        self._fresnel_columns()
 
+    def _fresnel_columns(self) -> None:
+        """Material.fresnel and fresnel_tint, which only materials made for Blender scenes change from their
+        defaults (looked at one by one only where some material does)."""
+        n = len(self.materials)
+        self.fresnel = np.zeros(n, dtype=np.int32)
+        self.fresnel_tint = np.ones((n, 3))
+        modes = list(map(attrgetter("fresnel"), self.materials))
+        tints = list(map(attrgetter("fresnel_tint"), self.materials))
+        default = Material()  # (its values are the very objects every material has that keeps them)
+        if all(map(operator.is_, modes, repeat(default.fresnel))) and all(
+                map(operator.is_, tints, repeat(default.fresnel_tint))):
+            return
+        self.fresnel[:] = [FRESNEL_MODES.index(mode) for mode in modes]
+        self.fresnel_tint[:] = tints
 
     def put(self, material: Material, row: Optional[int] = None) -> int:
         """Write ``material`` into ``row`` (None: a new row at the end, every array then a new one, longer by
@@ -529,13 +551,14 @@ class MaterialTable:
         if row is None:
             row = len(self.materials)
             self.materials.append(material)
-            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture", "fresnel", "fresnel_tint"):
                 column = getattr(self, name)
                 setattr(self, name, np.concatenate([column, np.zeros((1,) + column.shape[1:], column.dtype)]))
         else:
             self.materials[row] = material
-        for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture"):
+        for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture", "fresnel_tint"):
             getattr(self, name)[row] = getattr(material, name)
+        self.fresnel[row] = FRESNEL_MODES.index(material.fresnel)
         return row
 
 
@@ -552,6 +575,8 @@ class CompiledScene:
     light_positions: np.ndarray  # (L, 3)
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
+    #: Every light's numbers (tracer.lights.LightTable; its position and color are the two above).
+    lights: Optional["LightTable"] = None
     textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
     tolerances: numerics.Tolerances = field(default_factory=lambda: numerics.TOLERANCES)
     #: All primitives' numbers as arrays (what ``primitives`` are views of)
@@ -572,16 +597,18 @@ class PrimitiveTable:
     centres and radii (radius inf and centre 0 for unbounded shapes; ``centers`` and ``radii`` are views of
     it); ``boxes`` (N, 6), world boxes (lo, hi) of the points the spheres are made from (the generic box's
     corners, a mesh's vertices; not padded, meaningless for unbounded shapes); ``material_ids`` (N,);
-    ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``top`` (N,), a tapered cylinder's small
-    radius (0 for other kinds); ``meshes``: the TriangleMesh of each mesh by the id of its MeshData.  The
-    matrices themselves are the shapes' own (not kept twice)."""
+    ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``parameters`` (N,
+    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: a tapered cylinder's
+    top radius, 1 for a cylinder...; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
+    its MeshData.  The matrices themselves are the shapes' own (not kept twice)."""
 
-    def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, tapered_radii: np.ndarray,
+    def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, parameters: np.ndarray,
                  matrices: Optional[np.ndarray], material_ids: np.ndarray):
         """``shapes``: a list of Shapes, or a _RowShapes that makes them from a ShapeTable's rows when asked
-        (the table is then compiled without making any); ``kind`` (N,) their kind codes; ``tapered_radii``
-        (N,) their Shape.tapered_radius; ``matrices``: (N, 4, 4) stacked (see _stacked_matrices) or a
-        table's (N, 12) affines, None when some matrix is not a float64 4x4."""
+        (the table is then compiled without making any); ``kind`` (N,) their kind codes; ``parameters``
+        (N, shapes.MAX_PARAMETERS) their Shape.parameters (ShapeTable.parameters); ``matrices``: (N, 4, 4)
+        stacked (see _stacked_matrices) or a table's (N, 12) affines, None when some matrix is not a float64
+        4x4."""
         n = len(shapes)
         self.shapes = shapes
         self.tolerances = numerics.TOLERANCES
@@ -603,9 +630,7 @@ class PrimitiveTable:
             self._fill_rows(rows, self.matrix_rows(rows))
         for mesh, _ in self.mesh_groups():
             self._build_mesh(mesh)
-        # a tapered cylinder's small radius (Shape.small_radius), 0 for the other kinds
-        self.top = np.where(self.kind == _KIND_INDEX["taperedCylinder"], tapered_radii, 0.0)
-        self.top[self.kind == _KIND_INDEX["cylinder"]] = 1.0
+        self.parameters = _traced_parameters(self.kind, parameters)
         self._fill_sizes_and_bounds()
         self._matrices = None  # (the shapes' or the table's own: not kept twice)
 
@@ -640,8 +665,7 @@ class PrimitiveTable:
         if "kind_counts" in self.__dict__:
             np.subtract.at(self.kind_counts, old_kinds, 1)
             np.add.at(self.kind_counts, self.kind[rows], 1)
-        self.top[rows] = [s.tapered_radius if s.kind == "taperedCylinder" else 1.0 if s.kind == "cylinder" else 0.0
-                          for s in shapes]
+        self.parameters[rows] = _traced_parameters(self.kind[rows], parameter_rows([s.parameters for s in shapes]))
         mesh_codes = list(_MESH_CODES)
         if np.isin(old_kinds, mesh_codes).any() or np.isin(self.kind[rows], mesh_codes).any():
             self.__dict__.pop("_mesh_groups", None)
@@ -660,7 +684,8 @@ class PrimitiveTable:
         """Keep the rows where ``keep`` is true (in order) and append rows for the ``added`` shapes (matrices
         checked) with these material ids, computed as refill computes them.  Every array is a new one."""
         kept = np.flatnonzero(keep)
-        self.shapes = [self.shapes[i] for i in kept.tolist()] + list(added)
+        delete_positions(self.shapes, np.flatnonzero(~keep).tolist())
+        self.shapes.extend(added)
         extra = len(added)
 
         def grown(array: np.ndarray, fill=0) -> np.ndarray:
@@ -671,7 +696,7 @@ class PrimitiveTable:
 
         self.material_ids = np.concatenate([self.material_ids[kept], np.asarray(added_material_ids, np.int32)])
         self.kind = grown(self.kind)
-        self.top = grown(self.top, 0.0)
+        self.parameters = grown(self.parameters, 0.0)
         self.inverses, self.inverse_error, self.inverse_norms = (grown(self.inverses), grown(self.inverse_error),
                                                                  grown(self.inverse_norms))
         self.generic_size = grown(self.generic_size, 1.0)
@@ -725,6 +750,10 @@ class PrimitiveTable:
             return np.zeros(0, dtype=np.int64)
         return np.flatnonzero(np.isin(self.kind, codes))
 
+    def kinds_present(self) -> set[str]:
+        """The SDL kinds of the rows."""
+        return {_KEYWORDS[code] for code in np.flatnonzero(self.kind_counts).tolist()}
+
     @cached_property
     def kind_counts(self) -> np.ndarray:
         """How many rows each kind code has."""
@@ -763,17 +792,16 @@ class PrimitiveTable:
 
     def _fill_sizes_and_bounds(self, subset: Optional[np.ndarray] = None) -> None:
         """generic_size and the bounding spheres of the kinds without a fixed generic box (those are done a
-        chunk at a time with the inverses): per chunk of tapered cylinders, and per mesh (or polyhedron
-        vertex set) with its instances.  Of every row, or of the rows in ``subset`` (sorted indices)."""
-        rows = self.rows(_TAPERED_KINDS)
-        if subset is not None:
-            rows = np.intersect1d(rows, subset)
-        if rows.size:
-            top = np.maximum(self.top[rows], 0.0)
-            self.generic_size[rows] = np.maximum(top, 1.0)
+        chunk at a time with the inverses): per chunk of a kind whose bounds depend on its parameters, and
+        per mesh (or polyhedron vertex set) with its instances.  Of every row, or of the rows in ``subset``
+        (sorted indices)."""
+        for kinds, bounds in _PARAMETER_BOUNDS:
+            rows = self.rows(kinds)
+            if subset is not None:
+                rows = np.intersect1d(rows, subset)
             for part in row_chunks(rows.size):
-                points = np.broadcast_to(_TAPERED_POINTS, (len(top[part]), 8, 3)).copy()
-                points[:, 4:, :2] *= top[part, None, None]
+                points = bounds(self.parameters[rows[part]])
+                self.generic_size[rows[part]] = np.abs(points).reshape(len(points), -1).max(axis=1)
                 self._bound(rows[part], points)
         groups: dict = {}
         if subset is None:
@@ -847,8 +875,24 @@ _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
 _KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
 _MESH_CODES = frozenset(_KIND_INDEX[k] for k in MESH_KINDS)
 #: Per kind code: whether its bounds come from vertices (a mesh's, a polyhedron's).
-_HAS_VERTICES = np.array([e.keyword in MESH_KINDS or e.keyword in POLYHEDRON_KINDS for e in shapes.REGISTRY])
-_TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
+_HAS_VERTICES = np.array([e.family != "analytic" for e in shapes.REGISTRY])
+#: Per kind code, which parameter slots are the kind's own and the values of the others (ShapeKind.traced).
+_OWN_PARAMETER = np.array([[k < len(e.parameters) for k in range(shapes.MAX_PARAMETERS)] for e in shapes.REGISTRY])
+_FIXED_PARAMETER = np.array([[e.fixed[k] if k < len(e.fixed) else 0.0 for k in range(shapes.MAX_PARAMETERS)]
+                             for e in shapes.REGISTRY])
+
+
+def _traced_parameters(codes: np.ndarray, parameters: np.ndarray) -> np.ndarray:
+    """The values the kinds (codes (N,)) of rows of Shape.parameters ((N, shapes.MAX_PARAMETERS)) give their
+    intersections (ShapeKind.traced): each kind's own parameters where it reads them, its fixed values where
+    it has those, 0 after."""
+    return np.where(_OWN_PARAMETER[codes], parameters, _FIXED_PARAMETER[codes])
+
+
+#: (keywords, bounds function) of the kinds whose generic bounds depend on their parameters, by function.
+_PARAMETER_BOUNDS = [(tuple(e.keyword for e in shapes.REGISTRY if e.bounds == name),
+                      next(e for e in shapes.REGISTRY if e.bounds == name).function("bounds"))
+                     for name in dict.fromkeys(e.bounds for e in shapes.REGISTRY if e.bounds)]
 #: Per kind code: whether the kind has a fixed generic box, the box's low and high corners, and the generic
 #: size (Primitive.generic_size) of such a kind.
 _HAS_BOX = np.array([e.keyword in _BOX_CORNERS for e in shapes.REGISTRY])
@@ -856,11 +900,8 @@ _BOX_LO = np.array([_BOX_CORNERS[e.keyword].min(axis=0) if e.keyword in _BOX_COR
                     for e in shapes.REGISTRY])
 _BOX_HI = np.array([_BOX_CORNERS[e.keyword].max(axis=0) if e.keyword in _BOX_CORNERS else np.zeros(3)
                     for e in shapes.REGISTRY])
-_BOX_SIZE = np.array([(1.0 + TORUS_TUBE_RADIUS if e.keyword == "torus" else float(np.max(np.abs(_BOX_CORNERS[e.keyword]))))
-                      if e.keyword in _BOX_CORNERS else 1.0 for e in shapes.REGISTRY])
-#: The generic points of a tapered cylinder of top radius 1: the squares round its two discs (the frustum
-#: lies in their hull; the top's x and y are scaled by the top radius).
-_TAPERED_POINTS = np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX, np.ones(4)]])
+_BOX_SIZE = np.array([float(np.max(np.abs(_BOX_CORNERS[e.keyword]))) if e.keyword in _BOX_CORNERS else 1.0
+                      for e in shapes.REGISTRY])
 #: Rows per batch of the table's stacked computations: their temporaries stay a few MB at any size.
 _CHUNK = 1 << 15
 
@@ -868,6 +909,17 @@ _CHUNK = 1 << 15
 def row_chunks(n: int):
     """Slices of range(n), _CHUNK long."""
     return (slice(start, min(n, start + _CHUNK)) for start in range(0, n, _CHUNK))
+
+
+def delete_positions(items: list, positions: Sequence[int]) -> None:
+    """Delete these positions (ascending) from a list in place: a few deletions move the tail a few times, with
+    no Python loop over the whole list; many make the list anew."""
+    if len(positions) > 64:
+        gone = set(positions)
+        items[:] = [item for i, item in enumerate(items) if i not in gone]
+        return
+    for p in reversed(positions):
+        del items[p]
 
 
 def _position(index, length: int) -> int:
@@ -952,51 +1004,57 @@ def live_effects(scene: Scene) -> frozenset[str]:
                     any(isinstance(o, CSG) for o in scene.objects))
 
 
+#: What a material can call for (material_traits' columns).
+TRAITS = ("lit", "reflects", "transmits", "textured", "cook-torrance", "fresnel-reflects", "fresnel-transmits")
+
+
+def material_traits(table: MaterialTable, settings, rows=slice(None)) -> np.ndarray:
+    """Per material (of every row, or of ``rows``), which TRAITS it has, (M, 7) bool: lit (a diffuse or specular
+    colour), reflects and transmits (above the settings' thresholds), textured, a Cook–Torrance share, and
+    reflects or transmits with a Fresnel mode."""
+    r, t = table.reflectivity[rows], table.transparency[rows]
+    reflects, transmits = (r >= settings.min_reflectivity) & (r > 0), (t >= settings.min_transparency) & (t > 0)
+    fresnel = table.fresnel[rows] != 0
+    return np.stack([(table.diffuse[rows] > 0).any(axis=1) | (table.specular[rows] > 0).any(axis=1),
+                     reflects, transmits, table.texture[rows] != 0, table.specular_fraction[rows] > 0,
+                     fresnel & reflects, fresnel & transmits], axis=1)
+
+
 def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool,
              used: Optional[np.ndarray] = None) -> frozenset[str]:
     """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes;
     ``used``: which of its rows count, default all)."""
+    traits = np.zeros((0, len(TRAITS)), dtype=bool) if table is None else material_traits(table, scene.settings)
+    return effects_of_traits(scene, kinds, (traits if used is None else traits[used]).any(axis=0), any_boolean)
+
+
+def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_boolean: bool) -> frozenset[str]:
+    """The live effects of a scene whose shapes are of ``kinds`` and whose materials have, together, the
+    TRAITS where ``present`` (a bool per trait) is true."""
     settings = scene.settings
+    has = dict(zip(TRAITS, np.asarray(present, dtype=bool).tolist()))
     effects = {f"shape:{kind}" for kind in kinds}
-    if table is None:
-        table = MaterialTable([])
-    elif used is not None:
-        table = _UsedRows(table, used)
-    lit = bool((table.diffuse > 0).any() or (table.specular > 0).any())
-    if scene.lights and lit:
+    if scene.lights and has["lit"]:
         effects.add("lighting")
         effects.add("shadows")
+        if any(light.kind != "point" for light in scene.lights):
+            effects.add("physical-lights")
+        if any(light.soft for light in scene.lights):
+            effects.add("soft-shadows")
     deep = settings.max_recursion_depth > 0
-    r, t = table.reflectivity, table.transparency
-    if deep and ((r >= settings.min_reflectivity) & (r > 0)).any():
+    if deep and has["reflects"]:
         effects.add("reflection")
-    if deep and ((t >= settings.min_transparency) & (t > 0)).any():
+    if deep and has["transmits"]:
         effects.add("refraction")
     if any_boolean:
         effects.add("csg")
-    if (table.texture != 0).any():
+    if has["textured"]:
         effects.add("textures")
-    if "lighting" in effects and (table.specular_fraction > 0).any():
+    if "lighting" in effects and has["cook-torrance"]:
         effects.add("cook-torrance")
+    if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
+        effects.add("fresnel")
     return frozenset(effects)
-
-
-class _UsedRows:
-    """The columns _effects reads of some rows of a MaterialTable."""
-
-    def __init__(self, table: MaterialTable, used: np.ndarray):
-        for name in ("diffuse", "specular", "reflectivity", "transparency", "texture", "specular_fraction"):
-            setattr(self, name, getattr(table, name)[used])
-
-
-def effects_of(compiled: CompiledScene) -> frozenset[str]:
-    """The live effects of a compiled scene as it is now (tracer.edit, after an edit): from the kinds present,
-    the materials in use, the lights and settings; what compile_scene gives the same scene."""
-    table = compiled.table
-    kinds = {_KEYWORDS[code] for code in np.flatnonzero(table.kind_counts).tolist()}
-    used = np.bincount(table.material_ids, minlength=len(compiled.materials.materials)) > 0
-    return _effects(compiled.scene, kinds, compiled.materials if len(table) else None,
-                    bool(compiled.objects.booleans), used)
 
 
 #: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same
@@ -1107,11 +1165,11 @@ class _Columns:
     matrices: Optional[np.ndarray]  # (N, 4, 4) (see _stacked_matrices), or a table's (N, 12) affines
     kinds: tuple[str, ...] = ()
     materials: tuple[Material, ...] = ()
-    tapered_radii: tuple[float, ...] = ()
+    parameters: tuple[tuple[float, ...], ...] = ()
     table: Optional[ShapeColumns] = None
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, list[Material], np.ndarray]:
-        """(kind codes, material ids, the materials by id, tapered radii) of the shapes."""
+        """(kind codes, material ids, the materials by id, parameter rows) of the shapes."""
         table = self.table
         if table is not None:
             ids, materials = table.material_ids, table.materials
@@ -1120,11 +1178,11 @@ class _Columns:
                 ids = (np.cumsum(used) - 1)[ids].astype(np.int32)
                 materials = (materials.used(used) if isinstance(materials, MaterialRows) else
                              [m for m, kept in zip(materials, used.tolist()) if kept])
-            return table.kinds, ids, materials, table.tapered_radii
+            return table.kinds, ids, materials, table.parameters
         n = len(self.kinds)
         material_ids, materials = _material_ids(self.materials)
         return (np.fromiter(map(_KIND_INDEX.__getitem__, self.kinds), dtype=np.int16, count=n), material_ids,
-                materials, np.fromiter(self.tapered_radii, dtype=np.float64, count=n))
+                materials, parameter_rows(self.parameters))
 
 
 class _RowShapes(Sequence):
@@ -1150,7 +1208,7 @@ class _RowShapes(Sequence):
     def mesh_of(self, index: int) -> Optional[MeshData]:
         """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
         kind = _KEYWORDS[self.columns.kinds[index]]
-        if kind in POLYHEDRON_KINDS or kind == "teapot":
+        if shapes.KINDS[kind].builtin_mesh:
             return builtin_mesh(kind)
         return None
 
@@ -1197,8 +1255,8 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
     meshes = dict(zip(map(id, mesh_list), mesh_list))
     meshes.pop(id(None), None)
     columns = _Columns(nodes, shapes, bool(structure), stack,
-                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius")))
-    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
+                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "parameters")))
+    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.parameters,
            _ids_digest(mesh_list), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
            matrices.digest()) + _scene_wide_key(scene)
     return key, columns
@@ -1218,7 +1276,7 @@ def _table_content(scene: Scene, table: ShapeColumns) -> tuple[tuple, _Columns]:
 
 def _builtin_mesh_rows(table: ShapeColumns) -> list[int]:
     """One row of each kind present in the table that holds a built-in mesh (polyhedra, the teapot)."""
-    codes = [_KIND_INDEX[k] for k in POLYHEDRON_KINDS + ("teapot",)]
+    codes = [code for code, e in enumerate(shapes.REGISTRY) if e.builtin_mesh]
     present = np.isin(table.kinds, codes)
     if not present.any():
         return []
@@ -1298,11 +1356,9 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
 def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
     """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
     docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
-    pending = [f"a {light.kind} light" for light in scene.lights if light.kind != "point"]
+    pending = []
     if scene.settings.smooth_terminator:
         pending.append("smooth_terminator")
-    if not isinstance(materials, MaterialRows):
-        pending += [f"fresnel {m.fresnel!r}" for m in materials if m.fresnel != "constant"]
     pending += ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
     if pending:
         raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")
@@ -1317,8 +1373,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     if columns is None:
         columns = _content(scene)[1]
     shapes = columns.shapes
-    kind, material_ids, materials, tapered_radii = columns.arrays()
-    table = PrimitiveTable(shapes, kind, tapered_radii, columns.matrices, material_ids)
+    kind, material_ids, materials, parameters = columns.arrays()
+    table = PrimitiveTable(shapes, kind, parameters, columns.matrices, material_ids)
     _refuse_untraced(scene, materials, table)
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
@@ -1328,9 +1384,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     textures = None
     if "textures" in effects:
         textures = TextureSet(scene, primitives)
-    lights = scene.lights
+    lights = LightTable.of(scene.lights)
     return CompiledScene(
         scene=scene, objects=objects, primitives=primitives, materials=material_table,
-        light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
-        light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
+        light_positions=lights.position, light_colors=lights.color, lights=lights,
         effects=effects, textures=textures, tolerances=table.tolerances, table=table)

@@ -32,6 +32,7 @@ while a render of the same scene is tracing.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Hashable, Iterable, Sequence
 from contextlib import contextmanager
 from typing import Optional
@@ -40,15 +41,28 @@ import numpy as np
 
 from collections import Counter
 
-from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, effects_of, fold_tree
+from .bulk import one_blas_thread
+from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, delete_positions, fold_tree
+from .edit_ledger import MaterialLedger
 from .errors import TracerError
 from .model import CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
+from .lights import LightTable
 from .native import flatten
 from .skippable import sealed_lights
 from .textures import TextureSet
 from .textures.images import load_image
 from .textures.solid import SOLID_TEXTURES
 from .threads import default_threads
+
+
+def _edit(method):
+    """An edit: with OpenBLAS on one thread (as compile_scene inverts its matrices; else each small inverse
+    wakes its threads, milliseconds each on a busy machine)."""
+    @functools.wraps(method)
+    def edit(self, *args, **kwargs):
+        with one_blas_thread():
+            return method(self, *args, **kwargs)
+    return edit
 
 
 class EditableScene:
@@ -65,13 +79,17 @@ class EditableScene:
         if len(keys) != n:
             raise TracerError(f"{len(keys)} keys for {n} objects")
         self.scene = scene
-        self._keys: list[Hashable] = keys
-        self._positions: dict[Hashable, list[int]] = {}
-        self._index_keys()
+        # Each top-level object has a serial number for life; a key names the serials of its objects, and
+        # _position (by serial) says where each is now: a removal renumbers positions with one array
+        # operation, and touches no other key.
+        self._serials_of: dict[Hashable, list[int]] = {}
+        for serial, key in enumerate(keys):
+            self._serials_of.setdefault(key, []).append(serial)
+        self._serial = np.arange(n, dtype=np.int64)  # by position
+        self._position = np.arange(n, dtype=np.int64)  # by serial (-1: removed)
         self.compiled: CompiledScene = compile_scene(scene)
         compiled = self.compiled
-        # (a compiled list's materials are its distinct Material objects, by identity: kept alive by the table)
-        self._material_rows = {id(m): k for k, m in enumerate(compiled.materials.materials)}
+        self._materials = MaterialLedger(compiled)
         self._leaf_counts = np.ones(n, dtype=np.int64)
         for k, obj in compiled.objects.booleans.items():
             self._leaf_counts[k] = sum(1 for _ in obj.leaves())
@@ -82,7 +100,8 @@ class EditableScene:
         self._pending_objects: set[int] = set()
         self._pending_meshes = self._pending_rebuild = self._pending_flat = False
         self._refitted = 0  # objects refitted since the hierarchy was last built
-        self._materials_dirty = False  # a material row written since the FlatScene last read them
+        # material rows the FlatScene has not read yet (written in place, or added)
+        self._rows_written: set[int] = set()
         #: what the last edits did, for the tests and the bench: "rows", "materials", "effects", "textures",
         #: "refit", "rebuild", "flat" (the FlatScene made anew), counted since the scene was made editable
         self.done: Counter = Counter()
@@ -91,14 +110,14 @@ class EditableScene:
 
     def keys(self) -> list[Hashable]:
         """The keys, each once, in the order of their first object."""
-        return list(self._positions)
+        return list(self._serials_of)
 
     def __contains__(self, key: Hashable) -> bool:
-        return key in self._positions
+        return key in self._serials_of
 
     def __len__(self) -> int:
         """The number of top-level objects."""
-        return len(self._keys)
+        return len(self._serial)
 
     def objects_of(self, key: Hashable) -> list[SceneObject]:
         """The key's top-level objects, in scene order."""
@@ -110,6 +129,7 @@ class EditableScene:
 
     # -- edits --------------------------------------------------------------------------------------------
 
+    @_edit
     def set_transform(self, key: Hashable, matrix) -> None:
         """Every shape of the key gets ``matrix`` (4 x 4, affine, invertible) as its own: for plain shapes
         (and the parts of one mesh) the new world matrix.  A boolean's leaves all get it too; to place a
@@ -117,6 +137,7 @@ class EditableScene:
         positions = self._where(key)
         self.set_matrices(key, [matrix] * int(self._leaf_counts[positions].sum()))
 
+    @_edit
     def set_matrices(self, key: Hashable, matrices: Sequence) -> None:
         """The key's shapes get these matrices, one per shape in scene order (a boolean's leaves left to
         right)."""
@@ -128,38 +149,39 @@ class EditableScene:
         self._replace_in_place(key, [_with_leaves(obj, lambda shape: _moved(shape, next(checked)))
                                      for obj in objects], checked=True)
 
+    @_edit
     def set_material(self, key: Hashable, material: Material) -> None:
         """Every shape of the key gets ``material``."""
         self._replace_in_place(key, [_with_leaves(obj, lambda shape: dataclasses.replace(shape, material=material))
                                      for obj in self.objects_of(key)])
 
+    @_edit
     def replace_material(self, old: Material, new: Material) -> None:
         """Every shape whose material is the object ``old`` gets ``new`` instead (a material edited where
         many shapes share it: its one row changes, if ``new`` has none yet)."""
-        row = self._material_rows.get(id(old))
+        row = self._materials.rows.get(id(old))
         if row is None or old is new:
             return
         self._check_material(new, "a material")
         rows = np.flatnonzero(self.compiled.table.material_ids == row)
         positions = np.unique(np.searchsorted(self._starts, rows, side="right") - 1).tolist()
-        if id(new) not in self._material_rows:  # (the row is the new material's from now on)
-            self.compiled.materials.put(new, row)
-            del self._material_rows[id(old)]
-            self._material_rows[id(new)] = row
-            self._materials_dirty = True
+        if id(new) not in self._materials.rows:  # (the row is the new material's from now on)
+            self._rows_written.add(self._materials.rewrite(old, new))
             self.done["materials"] += 1
         with self.batch():
             for p in positions:
                 obj = self.scene.objects[p]
                 self._replace_at([p], [_with_leaves(
-                    obj, lambda s: dataclasses.replace(s, material=new) if s.material is old else s)], True)
+                    obj, lambda s: dataclasses.replace(s, material=new) if s.material is old else s)])
 
+    @_edit
     def replace_mesh(self, key: Hashable, mesh: MeshData) -> None:
         """Every mesh (and teapot) shape of the key gets ``mesh`` as its triangles."""
         def remesh(shape: Shape) -> Shape:
             return dataclasses.replace(shape, mesh=mesh) if shape.kind in MESH_KINDS else shape
         self._replace_in_place(key, [_with_leaves(obj, remesh) for obj in self.objects_of(key)])
 
+    @_edit
     def replace_objects(self, key: Hashable, objects: Iterable[SceneObject]) -> None:
         """The key's objects become ``objects`` (any number, any kind; none removes the key).  Of the same
         structure as before (as many shapes, the same booleans), the rows are updated in place; else the
@@ -174,6 +196,7 @@ class EditableScene:
                 self._check_object(obj, key)
             self._restructure(self._where(key), key, objects)
 
+    @_edit
     def add_objects(self, key: Hashable, objects: Iterable[SceneObject]) -> None:
         """Add ``objects`` at the end of the scene under ``key`` (a new key, or more objects for one)."""
         objects = list(objects)
@@ -182,25 +205,22 @@ class EditableScene:
         if objects:
             self._restructure([], key, objects)
 
+    @_edit
     def remove_objects(self, key: Hashable) -> None:
         """Remove every object of ``key`` (the key is then unknown)."""
         self._restructure(self._where(key), key, [])
 
+    @_edit
     def set_lights(self, lights: Sequence[Light]) -> None:
         """The scene's lights become ``lights``."""
         compiled = self.compiled
         self.scene.lights = list(lights)
-        compiled.light_positions = np.array([l.position for l in lights], dtype=float).reshape(-1, 3)
-        compiled.light_colors = np.array([l.color for l in lights], dtype=float).reshape(-1, 3)
-        effects_before = compiled.effects
-        self._refresh_effects()
+        compiled.lights = LightTable.of(self.scene.lights)
+        compiled.light_positions, compiled.light_colors = compiled.lights.position, compiled.lights.color
         self._forget_sealed()
-        flat = _flat_of(compiled)
-        if flat is not None:
-            flat.edit(compiled, _NONE, _NONE, materials=compiled.effects != effects_before, lights=True)
-            self._pending_flat = True
-        self._sync()
+        self._take_edit(_NONE, [], materials_touched=False, lights=True)
 
+    @_edit
     def rebuild_hierarchy(self) -> None:
         """Build the C core's object hierarchy anew (refits keep it valid, but many large moves can make it
         slower to traverse than a fresh build)."""
@@ -224,40 +244,47 @@ class EditableScene:
         if not checked:
             for obj in objects:
                 self._check_object(obj, key)
-        self._replace_at(self._where(key), objects, checked)
+        self._replace_at(self._where(key), objects)
 
-    def _replace_at(self, positions: list[int], objects: list[SceneObject], checked: bool) -> None:
+    def _replace_at(self, positions: list[int], objects: list[SceneObject]) -> None:
         """Objects of the same structure as those at ``positions`` take their places: their rows recomputed."""
-        compiled, table = self.compiled, self.compiled.table
+        table = self.compiled.table
         leaves = [leaf for obj in objects for leaf in _leaves(obj)]
         rows = np.concatenate([np.arange(self._starts[p], self._starts[p + 1]) for p in positions])
         material_ids = np.array([self._material_row(leaf.material) for leaf in leaves], dtype=np.int32)
-        kinds_before = table.kind[rows].copy()
-        same_materials = bool(np.array_equal(table.material_ids[rows], material_ids))
+        before = table.material_ids[rows].copy()
         for p, obj in zip(positions, objects):
             self.scene.objects[p] = obj
         table.refill(rows, leaves)
         table.material_ids[rows] = material_ids
+        self._materials.reassign(before, material_ids)
         self._renew_nodes(rows, positions)
-        effects_before = compiled.effects
-        materials_changed, self._materials_dirty = self._materials_dirty, False
-        if materials_changed or not (same_materials and np.array_equal(kinds_before, table.kind[rows])):
-            self._refresh_effects()
         self._update_sealed(positions)
+        touched = bool(self._rows_written) or not np.array_equal(before, material_ids)
+        self._take_edit(rows, positions, materials_touched=touched, lights=False)
+
+    def _take_edit(self, rows: np.ndarray, positions: list[int], materials_touched: bool, lights: bool) -> None:
+        """After the compiled rows of an in-place edit are done: the effects (and pictures) again, the FlatScene's
+        rows of these primitives, objects and materials, and the C core told (now, or at the batch's end)."""
+        compiled = self.compiled
+        refreshed = self._refresh_effects(materials_touched)
         self.done["rows"] += 1
         flat = _flat_of(compiled)
         if flat is not None:
-            meshes = flat.edit(compiled, rows, np.asarray(positions, dtype=np.int64),
-                               materials=materials_changed or compiled.effects != effects_before, lights=False)
+            # (every material row read again where the effects or pictures changed, else the rows written)
+            materials = True if refreshed else np.array(sorted(self._rows_written), dtype=np.int64)
+            meshes = flat.edit(compiled, rows, np.asarray(positions, dtype=np.int64), materials=materials,
+                               lights=lights)
             self._pending_meshes |= meshes
             self._pending_objects.update(positions)
+            self._pending_flat |= lights
+        self._rows_written = set()
         self._sync()
 
     def _material_row(self, material: Material) -> int:
-        row = self._material_rows.get(id(material))
-        if row is None:
-            row = self._material_rows[id(material)] = self.compiled.materials.put(material)
-            self._materials_dirty = True
+        row, new = self._materials.row(material)
+        if new:
+            self._rows_written.add(row)
             self.done["materials"] += 1
         return row
 
@@ -284,16 +311,25 @@ class EditableScene:
         """Remove the objects at ``removed`` and append ``added`` under ``key``: their own rows, then the
         FlatScene made anew and the object hierarchy rebuilt."""
         compiled, table = self.compiled, self.compiled.table
-        n = len(self._keys)
+        n = len(self._serial)
         keep = np.ones(n, dtype=bool)
         keep[removed] = False
         keep_rows = np.repeat(keep, self._leaf_counts)
         leaves = [leaf for obj in added for leaf in _leaves(obj)]
         material_ids = np.array([self._material_row(leaf.material) for leaf in leaves], dtype=np.int32)
+        self._materials.reassign(table.material_ids[~keep_rows], material_ids)
         kept = np.flatnonzero(keep)
-        self.scene.objects[:] = [self.scene.objects[i] for i in kept.tolist()] + added
-        self._keys = [self._keys[i] for i in kept.tolist()] + [key] * len(added)
-        self._index_keys()
+        delete_positions(self.scene.objects, removed)
+        self.scene.objects.extend(added)
+        if removed:
+            del self._serials_of[key]
+        serials = np.arange(len(self._position), len(self._position) + len(added))
+        if len(added):
+            self._serials_of.setdefault(key, []).extend(serials.tolist())
+        self._position[self._serial[removed]] = -1
+        self._serial = np.concatenate([self._serial[kept], serials])
+        self._position = np.concatenate([self._position, serials])  # (the new serials' entries)
+        self._position[self._serial] = np.arange(len(self._serial))
         self._leaf_counts = np.concatenate([self._leaf_counts[kept], [_leaf_count(obj) for obj in added]]).astype(np.int64)
         self._starts = np.concatenate([[0], np.cumsum(self._leaf_counts)])
         table.resize(keep_rows, leaves, material_ids)
@@ -303,11 +339,11 @@ class EditableScene:
         compiled.objects = CompiledObjects(compiled.primitives, index, {})
         for p in np.flatnonzero(index < 0).tolist():
             compiled.objects.booleans[p] = self._boolean_node(p)
-        self._refresh_effects()
-        self._materials_dirty = False  # (the new FlatScene reads them all)
+        self._refresh_effects(True)
+        self._rows_written = set()  # (the new FlatScene reads them all)
         sealed = compiled.__dict__.get(_SEALED)
         if sealed is not None:
-            fresh = sealed_lights(compiled, np.arange(len(kept), len(self._keys)))
+            fresh = sealed_lights(compiled, np.arange(len(kept), len(self._serial)))
             compiled.__dict__[_SEALED] = np.concatenate([sealed[kept], fresh])
         self.done["rows"] += 1
         old = _flat_of(compiled)
@@ -321,25 +357,30 @@ class EditableScene:
 
     # -- what depends on many rows ------------------------------------------------------------------------
 
-    def _refresh_effects(self) -> None:
-        """The live effects again, and the textures where they changed (each picture loaded once)."""
+    def _refresh_effects(self, materials_touched: bool) -> bool:
+        """The live effects again (from the ledger's counts: no pass over the materials), and the pictures
+        where the materials in use may have changed (each picture loaded once).  Whether either changed."""
         compiled = self.compiled
-        effects = effects_of(compiled)
-        if effects != compiled.effects:
+        effects = self._materials.effects(compiled.table.kinds_present(), bool(compiled.objects.booleans))
+        changed = effects != compiled.effects
+        if changed:
             compiled.effects = effects
             self.done["effects"] += 1
         if "textures" not in effects:
             compiled.textures = None
-            return
-        table = compiled.table
-        used = np.bincount(table.material_ids, minlength=len(compiled.materials.materials)) > 0
-        numbers = {int(t) for t in np.unique(compiled.materials.texture[used]).tolist() if t > 0}
+            return changed
+        if not (changed or materials_touched) and compiled.textures is not None:
+            return False
+        numbers = self._materials.pictures_in_use()
         for number in numbers - set(self._images):
             self._images[number] = load_image(self.scene.pixmaps[number])  # (checked with the material)
         images = {k: self._images[k] for k in sorted(numbers)}
-        if compiled.textures is None or compiled.textures.images != images:
+        current = getattr(compiled.textures, "images", None)
+        if current is None or current.keys() != images.keys() or any(current[k] is not images[k] for k in images):
             compiled.textures = TextureSet.of_images(compiled.primitives, images)
             self.done["textures"] += 1
+            return True
+        return changed
 
     def _update_sealed(self, positions: list[int]) -> None:
         """The sealed-lights rows of these objects again, where the table has been made (as a new array)."""
@@ -369,7 +410,7 @@ class EditableScene:
             self._pending_meshes = self._pending_rebuild = self._pending_flat = False
             return
         self._refitted += objects.size
-        rebuild = self._pending_rebuild or self._refitted > REBUILD_SHARE * max(1, len(self._keys))
+        rebuild = self._pending_rebuild or self._refitted > REBUILD_SHARE * max(1, len(self._serial))
         core.edit(flat, objects, meshes=self._pending_meshes, rebuild=rebuild, threads=default_threads())
         if rebuild:
             self._refitted = 0
@@ -403,15 +444,10 @@ class EditableScene:
 
     def _where(self, key: Hashable) -> list[int]:
         try:
-            return self._positions[key]
+            serials = self._serials_of[key]
         except KeyError:
             raise TracerError(f"no object has the key {key!r}") from None
-
-    def _index_keys(self) -> None:
-        positions: dict[Hashable, list[int]] = {}
-        for i, key in enumerate(self._keys):
-            positions.setdefault(key, []).append(i)
-        self._positions = positions
+        return self._position[serials].tolist()
 
 
 #: A rebuild instead of a refit once more objects than this share of all have been refitted since the last

@@ -7,6 +7,7 @@ coordinates (column vectors: ``world = matrix @ generic``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from itertools import repeat
 from pathlib import Path
 from collections.abc import MutableSequence, Sequence
 from typing import Optional, Union
@@ -177,14 +178,15 @@ class Shape:
     """One generic shape placed in the world.
 
     ``kind`` is the SDL keyword (``cylinder`` and ``cone`` stay themselves so that they are written back
-    as they were read; :attr:`small_radius` gives their taper).  ``mesh`` is filled for polyhedra, the
+    as they were read).  ``parameters`` are the numbers its keyword takes (tracer.shapes: the kind's
+    Parameters, in SDL order; its defaults when none are given).  ``mesh`` is filled for polyhedra, the
     teapot and meshes; ``mesh_file`` keeps the file name a ``mesh`` statement gave.
     """
 
     kind: str
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     material: Material = field(default_factory=Material)
-    tapered_radius: float = 1.0  # only for taperedCylinder
+    parameters: tuple[float, ...] = ()
     mesh: Optional[MeshData] = None
     mesh_file: Optional[str] = None
     #: Names of the def macros this shape was made inside, outermost first (for grouping in Blender).
@@ -194,8 +196,11 @@ class Shape:
     name: Optional[str] = None
 
     def __post_init__(self) -> None:
-        if self.kind not in SHAPE_KINDS:
+        arity = _ARITY.get(self.kind)
+        if arity is None:
             raise SceneError(f"unknown shape kind {self.kind!r}")
+        if type(self.parameters) is not tuple or len(self.parameters) != arity:
+            self.parameters = _parameters_of(self.kind, self.parameters)
         matrix = np.array(self.matrix, dtype=np.float64)  # a copy of its own
         # (16 numbers are reshaped and copied again: a reshaped view would keep a second array per shape.)
         self.matrix = matrix if matrix.shape == (4, 4) else matrix.reshape(4, 4).copy()
@@ -206,20 +211,30 @@ class Shape:
         if not isinstance(other, Shape):
             return NotImplemented
         return (self.kind == other.kind and np.array_equal(self.matrix, other.matrix)
-                and self.material == other.material and self.tapered_radius == other.tapered_radius
+                and self.material == other.material and self.parameters == other.parameters
                 and _same_mesh(self.mesh, other.mesh) and self.mesh_file == other.mesh_file
                 and self.groups == other.groups and self.source == other.source and self.name == other.name)
 
     __hash__ = None  # (mutable)
 
     @property
-    def small_radius(self) -> float:
-        """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
-        return {"cylinder": 1.0, "cone": 0.0}.get(self.kind, self.tapered_radius)
-
-    @property
     def inverse(self) -> np.ndarray:
         return np.linalg.inv(self.matrix)
+
+
+#: How many parameters each kind's keyword takes.
+_ARITY = {e.keyword: len(e.parameters) for e in shapes.REGISTRY}
+
+
+def _parameters_of(kind: str, given) -> tuple[float, ...]:
+    """A shape's parameters as floats: the kind's defaults for none, else exactly as many as it takes."""
+    entry = shapes.KINDS[kind]
+    values = tuple(float(v) for v in given) if given is not None else ()
+    if not values:
+        return entry.defaults
+    if len(values) != len(entry.parameters):
+        raise SceneError(f"{kind} takes {len(entry.parameters)} parameter(s), not {len(values)}")
+    return values
 
 
 def _same_mesh(a: Optional[MeshData], b: Optional[MeshData]) -> bool:
@@ -246,7 +261,7 @@ class ShapeColumns:
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
     materials: Sequence[Material]  # a tuple, or a MaterialRows
-    tapered_radii: np.ndarray  # (N,) float64
+    parameters: np.ndarray  # (N, shapes.MAX_PARAMETERS) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
     file: Optional[str] = None
@@ -264,7 +279,7 @@ class ShapeColumns:
         mesh = None
         if kind in POLYHEDRON_KINDS or kind == "teapot":
             mesh = builtin_mesh(kind)
-        return Shape(kind, matrix, self.materials[self.material_ids[i]], float(self.tapered_radii[i]), mesh,
+        return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]), mesh,
                      None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
                      None if self.names is None else self.names.get(i))
 
@@ -274,23 +289,38 @@ class ShapeColumns:
         used = set(np.unique(self.kinds).tolist())
         meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
         names = self.names or {}
+        with_parameters = any(_ARITY[_KEYWORD_OF_CODE[code]] for code in used)
         out: list[Shape] = []
         with collector_paused():
             for start in range(0, len(self), _ROWS_AT_ONCE):
                 rows = slice(start, start + _ROWS_AT_ONCE)
                 matrices = matrices_of_affines(self.affines[rows])
-                for i, (kind, matrix, material, taper, line, column) in enumerate(zip(
-                        map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()), matrices,
-                        map(self.materials.__getitem__, self.material_ids[rows].tolist()),
-                        self.tapered_radii[rows].tolist(), self.lines[rows].tolist(),
-                        self.columns[rows].tolist()), start):
-                    out.append(Shape(kind, matrix, material, taper, meshes.get(kind), None, (),
+                kinds = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()))
+                values = (map(tuple, map(list.__getitem__, self.parameters[rows].tolist(),
+                                         (slice(_ARITY[k]) for k in kinds))) if with_parameters else repeat(()))
+                for i, (kind, matrix, material, parameters, line, column) in enumerate(zip(
+                        kinds, matrices, map(self.materials.__getitem__, self.material_ids[rows].tolist()),
+                        values, self.lines[rows].tolist(), self.columns[rows].tolist()), start):
+                    out.append(Shape(kind, matrix, material, parameters, meshes.get(kind), None, (),
                                      SourceLocation(self.file, line, column), names.get(i)))
         return out
+
+    @staticmethod
+    def _parameters(kind: str, row: np.ndarray) -> tuple[float, ...]:
+        return tuple(row[:_ARITY[kind]].tolist())
 
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
 _ROWS_AT_ONCE = 1 << 15
+
+
+def parameter_rows(parameters: Sequence[tuple[float, ...]]) -> np.ndarray:
+    """(N, tracer.shapes.MAX_PARAMETERS) float64 rows of these shapes' parameters, 0 after each one's own."""
+    rows = np.zeros((len(parameters), shapes.MAX_PARAMETERS))
+    for i, values in enumerate(parameters):
+        if values:  # (most kinds take none)
+            rows[i, :len(values)] = values
+    return rows
 
 
 def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
@@ -334,7 +364,8 @@ class ShapeTable(MutableSequence):
     ``kinds`` (N,) int16, each shape's kind as its index in tracer.shapes.REGISTRY; ``affines`` (N, 12)
     float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1);
     ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects, or a MaterialRows);
-    ``tapered_radii`` (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
+    ``parameters`` (N, tracer.shapes.MAX_PARAMETERS) float64, each row's Shape.parameters and then anything
+    (a single column may be given as (N,)); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
     shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
     polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
     the arrays over: nobody may change them afterwards (compile_scene knows a table by its identity).  They,
@@ -346,7 +377,7 @@ class ShapeTable(MutableSequence):
     (:attr:`columns` is then None).  :meth:`shape_at` makes one Shape without making the rest.  Pickled and
     copied as the arrays while nothing has been made (scenes travel to Dask workers)."""
 
-    def __init__(self, kinds, affines, material_ids, materials, tapered_radii, lines, columns,
+    def __init__(self, kinds, affines, material_ids, materials, parameters, lines, columns,
                  file=None, names=None):
         kinds = np.asarray(kinds)
         n = len(kinds)
@@ -359,7 +390,7 @@ class ShapeTable(MutableSequence):
             raise ValueError("ShapeTable: a material id is not an index into materials")
         self._columns: Optional[ShapeColumns] = ShapeColumns(
             kinds, _read_only(affines, np.float64, (n, 12), "affines"), material_ids, materials,
-            _read_only(tapered_radii, np.float64, (n,), "tapered_radii"),
+            _read_only(parameters, np.float64, (n, shapes.MAX_PARAMETERS), "parameters"),
             _read_only(lines, np.int32, (n,), "lines"), _read_only(columns, np.int32, (n,), "columns"),
             file, None if names is None else dict(names))
         self._shapes: Optional[list[SceneObject]] = None
@@ -387,7 +418,7 @@ class ShapeTable(MutableSequence):
         return cls(np.array([_KIND_CODE[s.kind] for s in shapes], dtype=np.int16).reshape(n),
                    np.array([np.asarray(s.matrix, dtype=np.float64)[:3].reshape(12) for s in shapes]).reshape(n, 12),
                    np.array([material_index[id(s.material)] for s in shapes], dtype=np.int32).reshape(n), materials,
-                   np.array([s.tapered_radius for s in shapes], dtype=np.float64).reshape(n),
+                   parameter_rows([s.parameters for s in shapes]),
                    np.array([s.source.line for s in shapes], dtype=np.int32).reshape(n),
                    np.array([s.source.column for s in shapes], dtype=np.int32).reshape(n),
                    files.pop() if files else None,
@@ -497,7 +528,7 @@ class ShapeTable(MutableSequence):
         c = self._columns
         if c is None:
             return ShapeTable._of_list, (self._shapes,)
-        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.tapered_radii, c.lines,
+        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.parameters, c.lines,
                             c.columns, c.file, c.names)
 
 

@@ -8,9 +8,13 @@ from typing import Optional
 
 import numpy as np
 
+from . import shapes
 from .compile import CompiledScene, fold_tree
+from .lights import POINT, SPHERE, SPOT
 from .savings import CLOSED_KINDS
 
+#: Per kind code (the index in the shape registry): whether the kind is closed.
+_CLOSED_CODES = np.array([e.keyword in CLOSED_KINDS for e in shapes.REGISTRY])
 #: A direction for the point-in-solid test that no bundled shape's faces are parallel to.
 _PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
 
@@ -57,17 +61,20 @@ def sealed_lights(compiled: CompiledScene, objects: Optional[np.ndarray] = None)
     index = compiled_objects.primitive_index[chosen]
     plain = np.flatnonzero(index >= 0)
     rows = index[plain]
-    closed = np.zeros(len(table), dtype=bool)
-    closed[table.rows(CLOSED_KINDS)] = True
-    candidates = plain[transparent[table.material_ids[rows]] & closed[rows]].tolist()
+    closed = _CLOSED_CODES[table.kind[rows]]
+    candidates = plain[transparent[table.material_ids[rows]] & closed].tolist()
     booleans = compiled_objects.booleans
     for j in np.flatnonzero(index < 0).tolist():
         obj = booleans[int(chosen[j])]
         if any(transparent[p.material_id] for p in obj.leaves()) and _closed(obj):
             candidates.append(j)
+    # Only lights that are one point can be said to be outside (a sun, an area light or a sphere of some
+    # radius sends feelers to points that may lie inside).
+    points = [light for light in range(n_lights) if compiled.lights.kind[light] in (POINT, SPHERE, SPOT)
+              and (compiled.lights.kind[light] == POINT or compiled.lights.param[light, 0] == 0.0)]
     for j in sorted(candidates):
         obj = compiled_objects[int(chosen[j])]
-        for light in range(n_lights):
+        for light in points:
             sealed[j, light] = _contains(obj, compiled.light_positions[light]) is False
     return sealed
 

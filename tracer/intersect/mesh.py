@@ -654,3 +654,9 @@ def _dedupe_window(slot, t, tol_scale, touching):
     """How far apart hits i and i+1 (of a sorted list) may be and still be one place: (len - 1,)."""
     scale = np.maximum(np.abs(t[1:]), np.abs(t[:-1])) + tol_scale[1:]
     return np.where(touching(slot[1:], slot[:-1]), DEDUPE_RELATIVE_ADJACENT, DEDUPE_RELATIVE) * scale
+
+
+def intersect_mesh(origins: np.ndarray, directions: np.ndarray, mesh: TriangleMesh) -> HitArrays:
+    """Every crossing of the whole generic lines with ``mesh`` (the mesh kinds' registered intersection,
+    tracer/shapes.py: TriangleMesh.all_hits)."""
+    return mesh.all_hits(origins, directions)

@@ -203,35 +203,20 @@ static inline int prim_may_hit(const double *sphere, const double *o, const doub
     return dot3(perp, perp) <= sphere[3] * sphere[3];
 }
 
-/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out). */
+/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out): each kind's
+ * registered C function, called as contract.h's RT_SHAPE_HITS spells it in these names. */
 static int analytic_hits(const Scene *S, int64_t p, const double *o, const double *d, Hit *out, int *inside)
 {
     const SceneDesc *D = &S->d;
+    const double *param = D->prim_param + PRIM_PARAMS * p;
+    const int64_t *aux = D->prim_aux + 2 * p;
+    (void)param;
+    (void)aux;
     *inside = 0;
     switch (D->prim_kind[p]) {
-#define REGISTERED_HITS(kind, hits) case kind: return hits(o, d, out);
-    RT_SHAPE_HITS(REGISTERED_HITS)  /* the kinds tracer/shapes.py names a C function for */
+#define REGISTERED_HITS(kind, call) case kind: return call;
+    RT_SHAPE_HITS(REGISTERED_HITS)
 #undef REGISTERED_HITS
-    case K_SQUARE: {
-        /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
-        int n = hits_z_plane(o, d, out, 1, D->tol_square_edge);
-        if (n) {
-            out[1] = out[0];
-            out[0].entering = 1;
-            out[1].entering = 0;
-        }
-        return 2 * n;
-    }
-    case K_PLANE:
-        *inside = plane_inside_at_start(o, d);
-        return hits_z_plane(o, d, out, 0, D->tol_square_edge);
-    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS:
-        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
-    case K_POLYHEDRON: {
-        const int64_t *aux = D->prim_aux + 2 * p;
-        return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
-    }
     }
     return 0;
 }
@@ -268,7 +253,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     double og[3], dg[3];
     double shift = prim_generic_ray(inv, o, d, og, dg);
     int64_t n;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         const MeshView *m = &S->meshes[D->prim_aux[2 * p]];
         n = mesh_all(m, og, dg, w->mesh_stack, &w->raw, &out->h, &out->cap);
         if (n < 0) {
@@ -306,7 +291,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
         return 0;
     const double *inv = D->prim_inverse + 16 * p, *rounding = D->prim_rounding + 4 * p;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         double og[3], dg[3];
         affine_point(inv, o, og);
         affine_vector(inv, d, dg);
@@ -355,7 +340,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
                          double t_max)
 {
     const SceneDesc *D = &S->d;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
             return 0;
         const double *inv = D->prim_inverse + 16 * p;
@@ -650,7 +635,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, NAME);                    \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, NAME);              \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -677,8 +662,25 @@ SHADE_PAIR(11101, 1, 1, 1, 0, 1)
 SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
+/* The effects of Blender scenes, traced by shade_general alone. */
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL)
+
+/* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
+ * FX_GENERAL pay for that choice per ray, the others never come here. */
+static void shade_general(const Scene *S, Work *w, const double *o, const double *d, int64_t level,
+                          const Media *media, double weight, double *out)
+{
+    int64_t fx = S->d.effects;
+    int l = (fx & FX_LIGHTING) != 0;
+    shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
+               l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0, shade_general);
+}
+
 static ShadeFn pick_shade(int64_t effects)
 {
+    if (effects & FX_GENERAL)
+        return shade_general;
     int l = (effects & FX_LIGHTING) != 0;
     int s = l && (effects & FX_SHADOWS) != 0, ct = l && (effects & FX_COOK_TORRANCE) != 0;
     int rl = (effects & FX_REFLECTION) != 0, rr = (effects & FX_REFRACTION) != 0;
@@ -998,9 +1000,65 @@ void rt_destroy(void *handle)
         return 0;                                                \
     } while (0)
 
+/* How deep object_ok follows booleans (MAX_CSG_DEPTH of tracer.backend, and some). */
+#define MAX_CSG_CHECK 4096
+
+/* Primitive p's kind, material and mesh in range; 0 (and the reason in `error`) if not. */
+static int prim_ok(const SceneDesc *D, int64_t p, char *error, int64_t capacity)
+{
+    int kind = D->prim_kind[p];
+    if (kind < 0 || kind >= K_COUNT)
+        REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
+    if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
+        REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
+               (long long)D->n_materials);
+    if (RT_IS_MESH(kind) && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
+        REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
+               (long long)D->n_meshes);
+    return 1;
+}
+
+/* CSG node c's operation and children in range; 0 (and the reason in `error`) if not. */
+static int csg_ok(const SceneDesc *D, int64_t c, char *error, int64_t capacity)
+{
+    if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
+        !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
+        REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
+               (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
+    return 1;
+}
+
+/* Object i's reference, and every primitive and CSG node under it, in range (an edit's objects). */
+static int object_ok(const SceneDesc *D, int64_t i, char *error, int64_t capacity)
+{
+    if (!ref_ok(D, D->object_ref[i]))
+        REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
+    int64_t ref = D->object_ref[i], visited = 0;
+    int64_t stack[2 * MAX_CSG_CHECK + 2], top = 0;
+    stack[top++] = ref;
+    while (top) {
+        ref = stack[--top];
+        if (ref >= 0) {
+            if (!prim_ok(D, ref, error, capacity))
+                return 0;
+            continue;
+        }
+        if (++visited > D->n_csg || top + 2 > 2 * MAX_CSG_CHECK + 2)
+            REFUSE("object %lld: its booleans are not a tree of at most %d levels", (long long)i, MAX_CSG_CHECK);
+        if (!csg_ok(D, -ref - 1, error, capacity))
+            return 0;
+        stack[top++] = D->csg_right[-ref - 1];
+        stack[top++] = D->csg_left[-ref - 1];
+    }
+    return 1;
+}
+
 /* Takes the description and checks every index the tracer will follow, so that a bad description fails here,
- * not in a worker; the CSG depth.  0 (and the reason in `error`) when refused. */
-static int take_desc(Scene *S, const SceneDesc *desc, char *error, int64_t capacity)
+ * not in a worker; the CSG depth.  With `objects` (n >= 0 of them: an edit that changed only those objects'
+ * rows), only what they refer to is checked again, and the CSG depth is kept.  0 (and the reason in `error`)
+ * when refused. */
+static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, int64_t n, char *error,
+                     int64_t capacity)
 {
     S->d = *desc;
     /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
@@ -1011,17 +1069,6 @@ static int take_desc(Scene *S, const SceneDesc *desc, char *error, int64_t capac
     if (S->d.max_depth < 0)
         S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
-    for (int64_t p = 0; p < D->n_prims; p++) {
-        int kind = D->prim_kind[p];
-        if (kind < 0 || kind >= K_COUNT)
-            REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
-        if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
-            REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
-                   (long long)D->n_materials);
-        if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
-            REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
-                   (long long)D->n_meshes);
-    }
     if (D->effects & FX_TEXTURES) {
         for (int64_t m = 0; m < D->n_materials; m++) {
             int32_t texture = D->mat_texture[m];
@@ -1035,11 +1082,30 @@ static int take_desc(Scene *S, const SceneDesc *desc, char *error, int64_t capac
                 REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
                        (long long)D->image_info[2 * i + 1]);
     }
+    for (int64_t m = 0; m < D->n_materials; m++)
+        if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
+            REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
+    /* (lights are read only where something is lit: then a physical one needs its shading variant) */
+    for (int64_t l = 0; l < D->n_lights; l++)
+        if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
+            (D->light_kind[l] != LIGHT_POINT && (D->effects & FX_LIGHTING) && !(D->effects & FX_PHYSICAL_LIGHTS)))
+            REFUSE("light %lld has kind %d and %d samples", (long long)l, (int)D->light_kind[l],
+                   (int)D->light_samples[l]);
+    if (objects && n >= 0) {
+        for (int64_t k = 0; k < n; k++) {
+            if (objects[k] < 0 || objects[k] >= D->n_objects)
+                REFUSE("edited object %lld of %lld", (long long)objects[k], (long long)D->n_objects);
+            if (!object_ok(D, objects[k], error, capacity))
+                return 0;
+        }
+        return 1;
+    }
+    for (int64_t p = 0; p < D->n_prims; p++)
+        if (!prim_ok(D, p, error, capacity))
+            return 0;
     for (int64_t c = 0; c < D->n_csg; c++)
-        if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
-            !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
-            REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
-                   (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
+        if (!csg_ok(D, c, error, capacity))
+            return 0;
     for (int64_t i = 0; i < D->n_objects; i++)
         if (!ref_ok(D, D->object_ref[i]))
             REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
@@ -1136,7 +1202,7 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
             snprintf(error, (size_t)capacity, "out of memory");
         return NULL;
     }
-    if (!take_desc(S, desc, error, capacity) || !take_meshes(S, error, capacity))
+    if (!take_desc(S, desc, NULL, -1, error, capacity) || !take_meshes(S, error, capacity))
         goto fail;
     if (!build_tree(S, threads)) {
         if (error && capacity > 0)
@@ -1177,7 +1243,10 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
             rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0) != (desc->object_bounded[i] != 0);
         }
     }
-    if (!take_desc(S, desc, error, capacity))
+    /* an edit in place (no object added or removed, the meshes as they were) checks its own objects again */
+    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD)) && desc->n_objects == n_objects &&
+                   desc->n_csg == S->d.n_csg && desc->n_prims == S->d.n_prims && n >= 0;
+    if (!take_desc(S, desc, in_place ? objects : NULL, in_place ? n : -1, error, capacity))
         return -1;
     if ((flags & EDIT_MESHES) && !take_meshes(S, error, capacity))
         return -1;

@@ -11,7 +11,7 @@ with a reason, and the NumPy path takes the scene.
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -44,6 +44,7 @@ MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tr
                "vertices": np.float64, "normals": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
+PRIM_PARAMS = _SHARED["PRIM_PARAMS"]
 
 
 
@@ -135,7 +136,7 @@ class FlatScene:
         a["prim_kind"] = _CODE_OF_ENTRY[table.kind]
         a["prim_inverse"] = table.inverses.reshape(n, 16)  # (a view: the C core reads the table's own inverses)
         a["prim_sphere"] = table.spheres
-        a["prim_param"] = table.top  # (0 but for tapered cylinders)
+        a["prim_param"] = table.parameters  # (PRIM_PARAMS per primitive: what its kind's intersection takes)
         a["prim_material"] = table.material_ids
         a["prim_rounding"] = _rounding(table)
 
@@ -212,19 +213,36 @@ class FlatScene:
             self._mesh_owners.append(mesh)
         return number
 
-    def _take_materials(self, compiled: CompiledScene) -> None:
+    def _take_materials(self, compiled: CompiledScene, rows: Optional[np.ndarray] = None) -> None:
+        """The material tables (views of the compiled scene's columns), and the texture tables: all of them,
+        or (``rows``: tracer.edit's materials written or added, the pictures and effects as they were) only
+        those rows."""
         mats = compiled.materials
         self.arrays.update(mat_ambient=mats.ambient, mat_diffuse=mats.diffuse, mat_specular=mats.specular,
                            mat_emissive=mats.emissive, mat_exponent=mats.specular_exponent,
                            mat_reflectivity=mats.reflectivity, mat_transparency=mats.transparency,
                            mat_speed=mats.speed_of_light,
                            mat_specular_fraction=getattr(mats, "specular_fraction", np.zeros(len(mats.materials))),
-                           mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))))
-        self._counts.update(n_materials=len(mats.materials), n_images=self._flatten_textures(compiled))
+                           mat_roughness=getattr(mats, "surface_roughness", np.ones(len(mats.materials))),
+                           mat_fresnel=mats.fresnel, mat_fresnel_tint=mats.fresnel_tint)
+        if rows is None:
+            self._counts.update(n_materials=len(mats.materials), n_images=self._flatten_textures(compiled))
+            return
+        self._counts["n_materials"] = len(mats.materials)
+        if "textures" in compiled.effects:
+            for name, fill in (("mat_texture", 0), ("mat_tex_param", 0.0), ("mat_tex_image", -1)):
+                table = self.arrays[name]
+                width = TEX_PARAMS if name == "mat_tex_param" else 1
+                missing = len(mats.materials) * width - len(table)
+                if missing > 0:  # (materials added: their rows are among ``rows``)
+                    self.arrays[name] = np.concatenate([table, np.full(missing, fill, dtype=table.dtype)])
+            self._flatten_textures(compiled, rows)
 
     def _take_lights(self, compiled: CompiledScene) -> None:
-        self.arrays.update(light_pos=compiled.light_positions, light_color=compiled.light_colors)
-        self._counts["n_lights"] = len(compiled.light_positions)
+        lights = compiled.lights
+        self.arrays.update(light_pos=lights.position, light_color=lights.color, light_kind=lights.kind,
+                           light_samples=lights.samples, light_frame=lights.frame, light_param=lights.param)
+        self._counts["n_lights"] = len(lights.position)
 
     def _describe(self, compiled: CompiledScene) -> None:
         """Every field of the SceneDesc: the pointers into the arrays as they are now, the counts, the
@@ -243,29 +261,35 @@ class FlatScene:
                        tol_torus_residual_ulps=float(tol.torus_residual_ulps),
                        tol_torus_newton_steps=int(tol.torus_newton_steps),
                        tol_torus_pair_shortcut=float(tol.torus_pair_shortcut), tol_square_edge=float(tol.square_edge))
+        pointed = self.__dict__.setdefault("_pointed", {})  # field -> the array it points into now
         for f in contract.SCENE_DESC:
             if not f.is_pointer:
                 value = counts[f.name] if f.name in counts else scalars[f.name]
                 setattr(self.desc, f.name, f.ctype(*value) if isinstance(value, tuple) else value)
                 continue
-            array = np.ascontiguousarray(np.asarray(a.get(f.name, ()), dtype=f.dtype).reshape(-1))
+            array = a.get(f.name, ())
+            if pointed.get(f.name) is array:  # (an edit changed it in place, or not at all)
+                continue
+            array = np.ascontiguousarray(np.asarray(array, dtype=f.dtype).reshape(-1))
             if array.size == 0:  # a valid pointer even for empty tables
                 array = np.zeros(1, dtype=f.dtype)
-            a[f.name] = array
+            a[f.name] = pointed[f.name] = array
             setattr(self.desc, f.name, array.ctypes.data_as(f.ctype))
 
-    def edit(self, compiled: CompiledScene, prims: np.ndarray, objects: np.ndarray, materials: bool,
-             lights: bool) -> bool:
+    def edit(self, compiled: CompiledScene, prims: np.ndarray, objects: np.ndarray,
+             materials: Union[bool, np.ndarray], lights: bool) -> bool:
         """Take tracer.edit's in-place edits of ``compiled`` (the scene this was made from, no object added or
         removed): primitive rows ``prims`` and top-level objects ``objects`` (index arrays) recomputed, the
-        materials (``materials``: all of them, their table may have grown) and lights read again, the
+        materials read again (``materials``: True for all of them, their table may have grown or the
+        effects or pictures changed; or the rows written, in place) and the lights (``lights``), the
         description pointed anew.  Returns whether the mesh tables changed."""
         a, table = self.arrays, compiled.table
         touched_meshes = bool((a["prim_kind"][prims] == KIND_CODES["mesh"]).any())  # (before: was a mesh)
         a["prim_kind"][prims] = _CODE_OF_ENTRY[table.kind[prims]]
         a["prim_rounding"].reshape(-1, 4)[prims] = _rounding(table, prims)
         for name, column, width in (("prim_inverse", table.inverses, 16), ("prim_sphere", table.spheres, 4),
-                                    ("prim_param", table.top, 1), ("prim_material", table.material_ids, 1)):
+                                    ("prim_param", table.parameters, PRIM_PARAMS),
+                                    ("prim_material", table.material_ids, 1)):
             a[name].reshape(-1, width)[prims] = column[prims].reshape(-1, width)  # (no-ops where a is a view)
         aux = a["prim_aux"].reshape(-1, 2)
         meshes_before, plane_kinds = len(self._meshes), len(self._planes_of)
@@ -299,8 +323,10 @@ class FlatScene:
             bounded[k] = box is not None
             if box is not None:
                 object_box[k, :3], object_box[k, 3:] = box
-        if materials:
+        if materials is True:
             self._take_materials(compiled)
+        elif materials is not False and len(materials):
+            self._take_materials(compiled, materials)
         if lights:
             self._take_lights(compiled)
         self._describe(compiled)
@@ -322,38 +348,52 @@ class FlatScene:
         self._mesh_index = {id(mesh): number for number, mesh in enumerate(self._mesh_owners)}
         return True
 
-    def _flatten_textures(self, compiled: CompiledScene) -> int:
+    def _flatten_textures(self, compiled: CompiledScene, rows: Optional[np.ndarray] = None) -> int:
         """Per-material texture numbers, parameters (defaults filled in as tracer.textures does) and image
         indices; the pictures (by address: each is already one contiguous array, no copy); the noise
-        tables.  Nothing for a scene without textures.  Returns the number of pictures."""
+        tables.  Nothing for a scene without textures.  With ``rows`` (tracer.edit: the pictures and the
+        number of materials as they were), only those materials' rows.  Returns the number of pictures."""
 
         a = self.arrays
         if "textures" not in compiled.effects:  # the C core never reads these tables then
             return 0
         images = getattr(compiled.textures, "images", None) or {}
         numbers = sorted(images)
-        pictures = [np.ascontiguousarray(images[k], dtype=np.uint8) for k in numbers]  # 8-bit, as loaded
         materials = compiled.materials.materials
-        texture = np.zeros(len(materials), dtype=np.int32)
-        params = np.zeros((len(materials), TEX_PARAMS))
-        image_index = np.full(len(materials), -1, dtype=np.int64)
-        for m, material in enumerate(materials):
+        if rows is not None:
+            self._texture_rows(materials, rows, numbers)
+            return len(numbers)
+        pictures = [np.ascontiguousarray(images[k], dtype=np.uint8) for k in numbers]  # 8-bit, as loaded
+        a.update(mat_texture=np.zeros(len(materials), dtype=np.int32), mat_tex_param=np.zeros((len(materials), TEX_PARAMS)),
+                 mat_tex_image=np.full(len(materials), -1, dtype=np.int64))
+        # (only the textured materials' rows differ from those defaults: 10^5 materials of their own colours
+        # are not each looked at in Python)
+        self._texture_rows(materials, np.flatnonzero(compiled.materials.texture != 0).tolist(), numbers)
+        self._pictures = pictures  # the C side points into these
+        a.update(image_info=[(p.shape[1], p.shape[0]) for p in pictures],
+                 image_data=np.array([p.ctypes.data for p in pictures], dtype=np.uintp),
+                 noise_perm=PERM, noise_gradients=GRADIENTS)
+        return len(pictures)
+
+    def _texture_rows(self, materials, rows, numbers: list[int]) -> None:
+        """The texture tables' rows of these materials (``numbers``: the pictures' texture numbers, in order)."""
+        a = self.arrays
+        texture, image_index = a["mat_texture"], a["mat_tex_image"]
+        params = a["mat_tex_param"].reshape(-1, TEX_PARAMS)
+        for m in list(rows):
+            material = materials[m]
             number = int(material.texture)
             texture[m] = number
+            image_index[m] = -1
             if number < 0 and number in SOLID_DEFAULTS:
                 values = with_defaults(tuple(material.parameters), SOLID_DEFAULTS[number])
             elif number > 0:
                 values = image_repeats(material.parameters)
-                image_index[m] = numbers.index(number) if number in images else -1
+                image_index[m] = numbers.index(number) if number in numbers else -1
             else:
                 values = ()
+            params[m] = 0.0
             params[m, :len(values)] = values
-        self._pictures = pictures  # the C side points into these
-        a.update(mat_texture=texture, mat_tex_param=params, mat_tex_image=image_index,
-                 image_info=[(p.shape[1], p.shape[0]) for p in pictures],
-                 image_data=np.array([p.ctypes.data for p in pictures], dtype=np.uintp),
-                 noise_perm=PERM, noise_gradients=GRADIENTS)
-        return len(pictures)
 
     @staticmethod
     def _mesh_constants(meshes) -> tuple:

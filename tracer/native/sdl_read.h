@@ -2,7 +2,7 @@
  * (tracer/sdl/fastread.py is its Python side, tracer/sdl/parser.py the reference it must equal).
  *
  * It either reads the whole text into columns (one row per shape: kind, the top three rows of its matrix,
- * material, taper, line and column of its keyword; plus lights, cameras, settings and name comments), or it
+ * material, parameters, line and column of its keyword; plus lights, cameras, settings and name comments), or it
  * declines: it stops at the first thing outside its subset (a def, a brace, a boolean, a mesh, an unknown
  * word, a word where a number belongs, a statement cut short by the end of the text, a pop without a push,
  * a transform that is not clearly invertible, a value the Python reader would refuse or clamp) and says why
@@ -23,10 +23,12 @@
  *   "+ 0.0" terms included;
  * - materials: one row per distinct value of the fields (compared with ==, so -0.0 equals 0.0 and the first
  *   value seen is kept), as the Python reader's dict of Materials;
- * - ``! name: text`` comments name the next shape keyword (a later one before it wins).
+ * - ``! name: text`` comments name the next shape keyword (a later one before it wins); one before a
+ *   ``light`` names the light, which is left to the Python reader.
  *
- * The keywords come from the caller (its vocabulary: word, action, argument), so the tables of material
- * keywords and shape kinds are the Python reader's own; the actions are named in sdl_action_names.
+ * The keywords come from the caller (its vocabulary: word, action, argument, count of numbers), so the tables
+ * of material keywords and shape kinds (with how many parameters each reads) are the Python reader's own;
+ * the actions are named in sdl_action_names.
  * Memory is O(text size); there is no recursion. */
 #ifndef RT_SDL_READ_H
 #define RT_SDL_READ_H
@@ -40,24 +42,23 @@ enum {
     SDL_LIGHT, SDL_GLOBAL_AMBIENT, SDL_BACKGROUND, SDL_MIN_REFLECTIVITY, SDL_MIN_TRANSPARENCY,
     SDL_MAX_RECURSION_DEPTH, SDL_CAMERA, SDL_COLOR_MATERIAL, SDL_FLOAT_MATERIAL, SDL_TEXTURE, SDL_PARAMETERS,
     SDL_DEFAULT_MATERIALS, SDL_TRANSLATE, SDL_SCALE, SDL_ROTATE, SDL_PUSH, SDL_POP, SDL_IDENTITY, SDL_SHAPE,
-    SDL_TAPERED_SHAPE, SDL_ACTIONS
+    SDL_ACTIONS
 };
 
 /* In the enum's order: the Python side finds each action's code by its name here. */
 static const char sdl_action_names[] =
     "light globalAmbient background minReflectivity minTransparency maxRecursionDepth camera colorMaterial "
-    "floatMaterial texture parameters defaultMaterials translate scale rotate push pop identityAffine shape "
-    "taperedShape";
+    "floatMaterial texture parameters defaultMaterials translate scale rotate push pop identityAffine shape";
 
 /* Why a text was declined (0: read). */
 enum {
     SDL_READ = 0, SDL_DECLINE_WORD, SDL_DECLINE_BRACE, SDL_DECLINE_NUMBER, SDL_DECLINE_END, SDL_DECLINE_VALUE,
     SDL_DECLINE_POP, SDL_DECLINE_AXIS, SDL_DECLINE_TRANSFORM, SDL_DECLINE_SIZE, SDL_DECLINE_MEMORY,
-    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII
+    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII, SDL_DECLINE_NAMED_LIGHT
 };
 
 static const char sdl_decline_names[] =
-    "read word brace number end value pop axis transform size memory vocabulary angle ascii";
+    "read word brace number end value pop axis transform size memory vocabulary angle ascii namedLight";
 
 /* A material row: the Material's fields in its order (four colours, six numbers), then the texture, the
  * count of parameters and the parameters (unused ones 0). */
@@ -80,7 +81,7 @@ typedef struct {
     int16_t *kinds;          /* shapes */
     double *affines;         /* shapes x 12 */
     int32_t *material_ids;   /* shapes */
-    double *tapered_radii;   /* shapes */
+    double *parameters;      /* shapes x PRIM_PARAMS: the numbers after each shape's keyword, 0 after them */
     int32_t *lines, *columns;
     double *material_rows;   /* materials x SDL_MATERIAL_WIDTH */
     double *light_rows;      /* lights x 6 */
@@ -132,6 +133,7 @@ typedef struct {
     int32_t length[SDL_VOCABULARY_SLOTS];
     int32_t action[SDL_VOCABULARY_SLOTS];  /* -1: empty */
     int32_t argument[SDL_VOCABULARY_SLOTS];
+    int32_t count[SDL_VOCABULARY_SLOTS];   /* numbers a shape keyword reads (its parameters) */
 } SdlVocabulary;
 
 static uint32_t sdl_hash_word(const char *word, int64_t length)
@@ -142,7 +144,7 @@ static uint32_t sdl_hash_word(const char *word, int64_t length)
     return h;
 }
 
-/* words: the words, each ended by a NUL; codes: (action, argument) for each.  0 if they do not fit. */
+/* words: the words, each ended by a NUL; codes: (action, argument, count) for each.  0 if they do not fit. */
 static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_length, const int32_t *codes,
                           int64_t count)
 {
@@ -153,7 +155,8 @@ static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_len
     int64_t at = 0;
     for (int64_t n = 0; n < count; n++) {
         const char *end = at < words_length ? memchr(words + at, '\0', (size_t)(words_length - at)) : NULL;
-        if (end == NULL || codes[2 * n] < 0 || codes[2 * n] >= SDL_ACTIONS)
+        const int32_t *code = codes + 3 * n;
+        if (end == NULL || code[0] < 0 || code[0] >= SDL_ACTIONS || code[2] < 0 || code[2] > PRIM_PARAMS)
             return 0;
         int64_t length = end - (words + at);
         uint32_t slot = sdl_hash_word(words + at, length) & (SDL_VOCABULARY_SLOTS - 1);
@@ -161,8 +164,9 @@ static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_len
             slot = (slot + 1) & (SDL_VOCABULARY_SLOTS - 1);
         v->word[slot] = words + at;
         v->length[slot] = (int32_t)length;
-        v->action[slot] = codes[2 * n];
-        v->argument[slot] = codes[2 * n + 1];
+        v->action[slot] = code[0];
+        v->argument[slot] = code[1];
+        v->count[slot] = code[2];
         at += length + 1;
     }
     return 1;
@@ -471,8 +475,8 @@ static int sdl_whole(double value)
     return value == floor(value);  /* (values are finite here) */
 }
 
-static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int32_t material, double taper,
-                         int64_t line, int64_t column)
+static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int32_t material,
+                         const double *parameters, int64_t line, int64_t column)
 {
     int64_t n = res->shapes;
     if (n == res->shape_capacity) {  /* the shape columns grow together */
@@ -480,7 +484,7 @@ static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int
         if (!sdl_resize((void **)&res->kinds, capacity, sizeof(int16_t)) ||
             !sdl_resize((void **)&res->affines, capacity, 12 * sizeof(double)) ||
             !sdl_resize((void **)&res->material_ids, capacity, sizeof(int32_t)) ||
-            !sdl_resize((void **)&res->tapered_radii, capacity, sizeof(double)) ||
+            !sdl_resize((void **)&res->parameters, capacity, PRIM_PARAMS * sizeof(double)) ||
             !sdl_resize((void **)&res->lines, capacity, sizeof(int32_t)) ||
             !sdl_resize((void **)&res->columns, capacity, sizeof(int32_t)))
             return 0;
@@ -489,7 +493,7 @@ static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int
     res->kinds[n] = kind;
     memcpy(res->affines + 12 * n, affine, 12 * sizeof(double));
     res->material_ids[n] = material;
-    res->tapered_radii[n] = taper;
+    memcpy(res->parameters + PRIM_PARAMS * n, parameters, PRIM_PARAMS * sizeof(double));
     res->lines[n] = (int32_t)line;
     res->columns[n] = (int32_t)column;
     res->shapes = n + 1;
@@ -548,6 +552,8 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
         int status = SDL_READ;
         switch (vocabulary->action[slot]) {
         case SDL_LIGHT:
+            if (lx->name_length > 0)  /* a name comment names the light: Light.name, left to the Python reader */
+                return SDL_DECLINE_NAMED_LIGHT;
             if ((status = sdl_numbers(lx, 6, v)) == SDL_READ &&
                 !sdl_add_row(&res->light_rows, &res->lights, &res->light_capacity, v, 6))
                 status = SDL_DECLINE_MEMORY;
@@ -668,13 +674,12 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
             memcpy(top, sdl_identity, sizeof sdl_identity);
             checked = 0;
             break;
-        case SDL_SHAPE:
-        case SDL_TAPERED_SHAPE: {
+        case SDL_SHAPE: {
             int64_t line = lx->line, column = start - lx->line_start + 1;
             int64_t name_start = lx->name_start, name_length = lx->name_length;
             lx->name_length = 0;  /* a name comment names the first shape keyword after it */
-            double taper = 1.0;
-            if (vocabulary->action[slot] == SDL_TAPERED_SHAPE && (status = sdl_numbers(lx, 1, &taper)) != SDL_READ)
+            double parameters[PRIM_PARAMS] = {0.0};
+            if ((status = sdl_numbers(lx, vocabulary->count[slot], parameters)) != SDL_READ)
                 break;
             if (!checked && !sdl_clearly_invertible(top))
                 return SDL_DECLINE_TRANSFORM;
@@ -689,7 +694,7 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
                     return SDL_DECLINE_MEMORY;
                 memcpy(res->name_rows + 3 * res->names++, row, sizeof row);
             }
-            if (!sdl_add_shape(res, (int16_t)argument, top, material_id, taper, line, column))
+            if (!sdl_add_shape(res, (int16_t)argument, top, material_id, parameters, line, column))
                 return SDL_DECLINE_MEMORY;
             break;
         }
@@ -714,7 +719,7 @@ void rt_sdl_free(SdlResult *res)
     free(res->kinds);
     free(res->affines);
     free(res->material_ids);
-    free(res->tapered_radii);
+    free(res->parameters);
     free(res->lines);
     free(res->columns);
     free(res->material_rows);

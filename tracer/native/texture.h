@@ -145,7 +145,73 @@ static void tex_marble(const int64_t *perm, const double *grad, const double *q,
 /* atan2 mapped to [0, 1), the seam at angle 0 (+x) */
 static inline double angle01(double y, double x) { return np_mod(atan2(y, x) / TWO_PI_VALUE, 1.0); }
 
-/* surface_uv for one generic point on a primitive of kind `kind`, hit on `part`. */
+/* Each kind's (u, v) at a generic point hit on `part`, and whether each wraps: the C form of the mappings in
+ * tracer/textures/mapping.py, which tracer/shapes.py names for each kind (contract.h's RT_SHAPE_UV). */
+
+static void sphere_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)part;
+    *u = angle01(y, x);
+    *v = 0.5 + asin(clip(z, -1.0, 1.0)) / M_PI_VALUE;
+    *wrap_u = 1;
+    *wrap_v = 0;
+}
+
+static void square_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)z;
+    (void)part;
+    *u = (x + 1.0) / 2.0;
+    *v = (y + 1.0) / 2.0;
+    *wrap_u = *wrap_v = 0;
+}
+
+static void plane_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)z;
+    (void)part;
+    *u = np_mod((x + 1.0) / 2.0, 1.0);
+    *v = np_mod((y + 1.0) / 2.0, 1.0);
+    *wrap_u = *wrap_v = 1;
+}
+
+/* part = 2 * axis + (1 on the + side); each face upright and unmirrored from outside */
+static void cube_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    switch (part) {
+    case 0: *u = (z + 1) / 2; *v = (y + 1) / 2; break;
+    case 1: *u = (1 - z) / 2; *v = (y + 1) / 2; break;
+    case 2: *u = (x + 1) / 2; *v = (z + 1) / 2; break;
+    case 3: *u = (x + 1) / 2; *v = (1 - z) / 2; break;
+    case 4: *u = (1 - x) / 2; *v = (y + 1) / 2; break;
+    case 5: *u = (x + 1) / 2; *v = (y + 1) / 2; break;
+    default: *u = 0.0; *v = 0.0; break;
+    }
+    *wrap_u = *wrap_v = 0;
+}
+
+static void torus_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)part;
+    *u = angle01(y, x);
+    *v = angle01(z, hypot(x, y) - 1.0);
+    *wrap_u = *wrap_v = 1;
+}
+
+/* polyhedra, meshes: the direction from the generic centre, as on a globe */
+static void direction_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u,
+                         int *wrap_v)
+{
+    (void)part;
+    double r = sqrt(x * x + y * y + z * z);  /* np.linalg.norm sums left to right */
+    if (!(r >= 1e-300))  /* np.maximum: NaN stays NaN */
+        r = r != r ? r : 1e-300;
+    *u = angle01(y, x);
+    *v = 0.5 + asin(clip(z / r, -1.0, 1.0)) / M_PI_VALUE;
+    *wrap_u = 1;
+    *wrap_v = 0;
+}
+
 /* mapping.wall_and_discs_uv: a wall about z (part 0) by angle and height, its discs as squares; u wraps on
  * all parts.  The tapered cylinders' mapping, and any registered shape's that names it. */
 static void wall_and_discs_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u,
@@ -162,56 +228,17 @@ static void wall_and_discs_uv(double x, double y, double z, int32_t part, double
     *wrap_v = 0;
 }
 
+/* surface_uv for one generic point on a primitive of kind `kind`, hit on `part`. */
 static void surface_uv(int kind, const double *p, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
 {
     double x = p[0], y = p[1], z = p[2];
     switch (kind) {
 #define REGISTERED_UV(shape_kind, mapping) case shape_kind: mapping(x, y, z, part, u, v, wrap_u, wrap_v); return;
-    RT_SHAPE_UV(REGISTERED_UV)  /* the kinds tracer/shapes.py names a C mapping for */
+    RT_SHAPE_UV(REGISTERED_UV)  /* every kind's mapping, as tracer/shapes.py names it */
 #undef REGISTERED_UV
-    case K_SPHERE:
-        *u = angle01(y, x);
-        *v = 0.5 + asin(clip(z, -1.0, 1.0)) / M_PI_VALUE;
-        *wrap_u = 1;
-        *wrap_v = 0;
-        return;
-    case K_SQUARE:
-        *u = (x + 1.0) / 2.0;
-        *v = (y + 1.0) / 2.0;
+    default:  /* (no such kind: rt_create refuses it) */
+        *u = *v = 0.0;
         *wrap_u = *wrap_v = 0;
-        return;
-    case K_PLANE:
-        *u = np_mod((x + 1.0) / 2.0, 1.0);
-        *v = np_mod((y + 1.0) / 2.0, 1.0);
-        *wrap_u = *wrap_v = 1;
-        return;
-    case K_CUBE:  /* part = 2 * axis + (1 on the + side); each face upright and unmirrored from outside */
-        switch (part) {
-        case 0: *u = (z + 1) / 2; *v = (y + 1) / 2; break;
-        case 1: *u = (1 - z) / 2; *v = (y + 1) / 2; break;
-        case 2: *u = (x + 1) / 2; *v = (z + 1) / 2; break;
-        case 3: *u = (x + 1) / 2; *v = (1 - z) / 2; break;
-        case 4: *u = (1 - x) / 2; *v = (y + 1) / 2; break;
-        case 5: *u = (x + 1) / 2; *v = (y + 1) / 2; break;
-        default: *u = 0.0; *v = 0.0; break;
-        }
-        *wrap_u = *wrap_v = 0;
-        return;
-    case K_TORUS:
-        *u = angle01(y, x);
-        *v = angle01(z, hypot(x, y) - 1.0);
-        *wrap_u = *wrap_v = 1;
-        return;
-    default: {  /* polyhedra, meshes: the direction from the generic centre, as on a globe */
-        double r = sqrt(x * x + y * y + z * z);  /* np.linalg.norm sums left to right */
-        if (!(r >= 1e-300))  /* np.maximum: NaN stays NaN */
-            r = r != r ? r : 1e-300;
-        *u = angle01(y, x);
-        *v = 0.5 + asin(clip(z / r, -1.0, 1.0)) / M_PI_VALUE;
-        *wrap_u = 1;
-        *wrap_v = 0;
-        return;
-    }
     }
 }
 

@@ -8,7 +8,7 @@ clearly invertible) it stops and :func:`read` answers None, and :func:`tracer.sd
 the text with the Python reader as before.  So every message stays the Python reader's, strict or lenient.
 
 What it reads equals what the Python reader makes of the same text, bit for bit: the same shapes (kind,
-matrix, material by value, taper, place, name), lights, camera and settings (tests/test_sdl_fastread.py
+matrix, material by value, parameters, place, name), lights, camera and settings (tests/test_sdl_fastread.py
 compares the two).  The shapes come as columns, which the scene holds without making a Shape per row.
 
 The keyword tables are the parser's: each keyword the C side knows is given to it with an action (named
@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import shapes as shape_registry
 from ..camera import camera_problem
-from ..model import ANALYTIC_KINDS, POLYHEDRON_KINDS, Camera, Light, Material, MaterialRows, Scene, ShapeTable
+from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
 from .materials import COLOR_MATERIAL, FLOAT_MATERIAL, MAX_PARAMETERS
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
@@ -40,7 +40,10 @@ SHARED_LIBM = sys.platform != "win32"
 _SURROGATE = re.compile(r"[\ud800-\udfff]")
 
 #: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
-DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference"))
+DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference",
+                      # the extensions for Blender scenes
+                      "sphereLight", "spotLight", "sunLight", "areaLight", "ellipseLight", "fresnel", "fresnelTint",
+                      "smoothTerminator"))
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,7 @@ class _Result(ctypes.Structure):
                 ("cameras", ctypes.c_int64), ("names", ctypes.c_int64),
                 ("kinds", ctypes.POINTER(ctypes.c_int16)), ("affines", ctypes.POINTER(ctypes.c_double)),
                 ("material_ids", ctypes.POINTER(ctypes.c_int32)),
-                ("tapered_radii", ctypes.POINTER(ctypes.c_double)),
+                ("parameters", ctypes.POINTER(ctypes.c_double)),
                 ("lines", ctypes.POINTER(ctypes.c_int32)), ("columns", ctypes.POINTER(ctypes.c_int32)),
                 ("material_rows", ctypes.POINTER(ctypes.c_double)),
                 ("light_rows", ctypes.POINTER(ctypes.c_double)), ("camera_rows", ctypes.POINTER(ctypes.c_double)),
@@ -86,7 +89,7 @@ class _Setup:
 
     lib: ctypes.CDLL
     words: bytes
-    codes: np.ndarray  # (action, argument) per word, int32
+    codes: np.ndarray  # (action, argument, count) per word, int32
     defaults: np.ndarray  # the default material's row
     reasons: tuple[str, ...]
 
@@ -113,25 +116,26 @@ def _setup() -> Optional[_Setup]:
     actions = {name: code for code, name in enumerate(lib.rt_sdl_action_names().decode().split())}
     vocabulary = _vocabulary()
     words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
-    codes = np.array([(actions[action], argument) for action, argument in vocabulary.values()], dtype=np.int32)
+    codes = np.array([(actions[action], argument, count) for action, argument, count in vocabulary.values()],
+                     dtype=np.int32)
     defaults = MaterialRows.row_of(Material())
     return _Setup(lib, words, codes, defaults, tuple(lib.rt_sdl_decline_names().decode().split()))
 
 
-def _vocabulary() -> dict[str, tuple[str, int]]:
-    """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names) and argument."""
-    words = {keyword: (keyword, 0) for keyword in (
+def _vocabulary() -> dict[str, tuple[str, int, int]]:
+    """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names), argument and
+    count of numbers (a shape kind's parameters)."""
+    words = {keyword: (keyword, 0, 0) for keyword in (
         "light", "globalAmbient", "background", "minReflectivity", "minTransparency", "maxRecursionDepth",
         "camera", "texture", "parameters", "defaultMaterials", "translate", "scale", "rotate", "push", "pop",
         "identityAffine")}
     for keyword, name in COLOR_MATERIAL.items():
-        words[keyword] = ("colorMaterial", MaterialRows.SLOTS[name][0])
+        words[keyword] = ("colorMaterial", MaterialRows.SLOTS[name][0], 0)
     for keyword, name in FLOAT_MATERIAL.items():
-        words[keyword] = ("floatMaterial", MaterialRows.SLOTS[name][0])
-    kind_codes = {entry.keyword: code for code, entry in enumerate(shape_registry.REGISTRY)}
-    for kind in ANALYTIC_KINDS + POLYHEDRON_KINDS + ("teapot",):
-        # (the parser's _read_shape reads a number after taperedCylinder alone)
-        words[kind] = ("taperedShape" if kind == "taperedCylinder" else "shape", kind_codes[kind])
+        words[keyword] = ("floatMaterial", MaterialRows.SLOTS[name][0], 0)
+    for code, entry in enumerate(shape_registry.REGISTRY):
+        if not entry.file_argument:  # (a mesh's file is left to the Python reader)
+            words[entry.keyword] = ("shape", code, len(entry.parameters))
     return words
 
 
@@ -148,7 +152,7 @@ class Columns:
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
     materials: MaterialRows
-    tapered_radii: np.ndarray  # (N,) float64
+    parameters: np.ndarray  # (N, tracer.shapes.MAX_PARAMETERS) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
     names: Optional[dict[int, str]]
@@ -275,7 +279,8 @@ def _columns(res: _Result, utf8: _Utf8) -> Columns:
     if res.settings_set & _SET_MAX_DEPTH:
         settings["max_recursion_depth"] = int(res.max_recursion_depth)
     return Columns(_array(res.kinds, (n,), np.int16), _array(res.affines, (n, 12), np.float64),
-                   _array(res.material_ids, (n,), np.int32), materials, _array(res.tapered_radii, (n,), np.float64),
+                   _array(res.material_ids, (n,), np.int32), materials,
+                   _array(res.parameters, (n, shape_registry.MAX_PARAMETERS), np.float64),
                    _array(res.lines, (n,), np.int32), _array(res.columns, (n,), np.int32), names, lights, cameras,
                    settings)
 
@@ -290,7 +295,7 @@ def read(text: str, file: Optional[str] = None) -> Optional[Scene]:
         for numbers in columns.cameras:  # one the Python reader would refuse: its message is the parser's
             if camera_problem(numbers[0:3], numbers[3:6], numbers[6:9], numbers[9]) is not None:
                 return None
-    shapes = ShapeTable(columns.kinds, columns.affines, columns.material_ids, columns.materials, columns.tapered_radii,
+    shapes = ShapeTable(columns.kinds, columns.affines, columns.material_ids, columns.materials, columns.parameters,
                         columns.lines, columns.columns, file, columns.names)
     scene = Scene(objects=shapes, lights=columns.lights)
     if columns.cameras:

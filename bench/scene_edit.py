@@ -9,6 +9,7 @@ over a checkered plane, one light.  After a first render (the viewport's state b
 * ``move``: ``set_transform`` of one sphere (its rows, its object box, the refit of the C core's hierarchy);
 * ``move + first block``: that, then the first 64 x 48 render of the scene (all it takes to see the edit);
 * ``material``: ``set_material`` of one sphere to a new material (one new material row);
+* ``animation frame``: ``set_transforms`` of every sphere at once (one pass over the rows, one rebuild);
 * ``add`` / ``remove``: one sphere added / removed (rows resized, the FlatScene made anew, the hierarchy rebuilt);
 * ``rebuild + first block``: what the add-on did before: compile the edited scene from scratch (a new Scene of
   the same objects) and render its first 64 x 48 image (the C core's scene made anew, hierarchy and all).
@@ -88,6 +89,8 @@ def measure(n: int, repeat: int, threads: int) -> dict:
         k = int(rng.integers(n))
         material = Material(diffuse=tuple(rng.uniform(0, 1, 3)), reflectivity=0.2)
         record("material", lambda: editable.set_material(k, material))
+        frame = [(k, translation(0, 0.01 * (r + 1), 0) @ editable.objects_of(k)[0].matrix) for k in range(n)]
+        record("animation frame", lambda: editable.set_transforms(frame))
         record("add", lambda: editable.add_objects(("added", r), [
             Shape("sphere", translation(*rng.uniform(-2, 2, 3)) @ scaling(0.3, 0.3, 0.3), Material())]))
         record("remove", lambda: editable.remove_objects(("added", r)))

@@ -38,7 +38,9 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
               "tracer.transforms", "tracer.sampling", "tracer.appearance", "tracer.savings")),
     ("model", ("tracer.meshdata", "tracer.geometry", "tracer.geometry.*", "tracer.model", "tracer.camera")),
     ("NumPy geometry", ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*",
-                        "tracer.lights", "tracer.fresnel")),
+                        "tracer.lights", "tracer.fresnel", "tracer.terminator")),
+    # the SDL statement table (both readers', and the C reader's actions in contract.h)
+    ("SDL statements", ("tracer.sdl", "tracer.sdl.statements", "tracer.sdl.lights")),
     ("C library", ("tracer.native", "tracer.native.build", "tracer.native.contract")),
     ("readers", ("tracer.meshio", "tracer.sdl", "tracer.sdl.*", "tracer.usd", "tracer.usd.*")),
     ("compile", ("tracer.compile", "tracer.skippable", "tracer.query")),
@@ -55,7 +57,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
 )
 #: The NumPy reference path: imports nothing of the C core.  The first group not even through other modules.
 REFERENCE_ALONE = ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*", "tracer.lights",
-                   "tracer.fresnel")
+                   "tracer.fresnel", "tracer.terminator")
 REFERENCE = REFERENCE_ALONE + ("tracer.trace", "tracer.skippable")
 C_CORE = ("tracer.native", "tracer.native.*")
 BLENDER = ("bpy", "bpy_extras", "mathutils", "gpu", "gpu_extras", "bmesh", "bl_math", "aud", "idprop",

@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracer import transforms
+from tracer import shapes, transforms
+from tracer.native import contract
 from tracer.errors import SDLError
 from tracer.model import CSG, Camera, Light, Material, Scene, Settings, Shape, ShapeTable
 from tracer.shapes import REGISTRY
-from tracer.sdl import fastread, parser
+from tracer.sdl import fastread, parser, statements
 from tracer.sdl.parser import KEYWORDS, load, parse_sdl
 from tracer.sdl.writer import write_sdl
 
@@ -422,10 +423,10 @@ def test_a_def_is_declined_where_it_stands():
 
 
 def test_every_keyword_of_the_python_reader_is_read_or_declined():
-    """A keyword added to the parser reaches the C reader only through fastread's vocabulary: until then it
-    is declined, so the Python reader keeps reading it."""
+    """A keyword reaches the C reader only through its statement's action (tracer/sdl/statements.py): until
+    it has one it is declined, so the Python reader keeps reading it."""
     assert fastread.available()
-    vocabulary = fastread._vocabulary()
+    vocabulary = statements.vocabulary()
     assert set(vocabulary) | fastread.DECLINED == KEYWORDS
     assert not set(vocabulary) & fastread.DECLINED
     for keyword in KEYWORDS - set(vocabulary):
@@ -582,3 +583,23 @@ def test_a_lone_surrogate_is_declined_without_an_exception():
 def test_the_decline_offset_counts_characters_after_a_comment_beyond_ascii():
     text = "sphere ! \U0001F600\u2603\u00e9\ncube def a { sphere }"
     assert fastread.scan(text) == fastread.Declined("word", text.index("def"))
+
+
+def test_one_statement_table_drives_both_readers():
+    """tracer/sdl/statements.py is the one list of statements: the Python reader's usage texts and handlers,
+    the C reader's vocabulary and its table of actions (generated into contract.h) all come from it."""
+    assert set(parser.USAGE) == set(statements.BY_KEYWORD) == KEYWORDS
+    reader = parser._Reader("", None, None, True)
+    for s in statements.STATEMENTS:
+        assert reader.handlers[s.keyword].__name__ == s.handler
+        assert parser.USAGE[s.keyword] == s.usage
+    header = contract.HEADER.read_text()
+    assert "#define RT_SDL_ACTIONS(X) " + " ".join(f"X({k}, {a})" for k, a in enumerate(statements.ACTIONS)) in header
+    source = (contract.HEADER.parent / "sdl_read.h").read_text()
+    for action in statements.ACTIONS:  # each a function of the C reader
+        assert f"static int {action}(SdlReader *r, int32_t argument, int32_t count)" in source
+    # one shape action for every kind, told how many parameters follow the keyword (the registry's)
+    vocabulary = statements.vocabulary()
+    for code, entry in enumerate(shapes.REGISTRY):
+        if not entry.file_argument:
+            assert vocabulary[entry.keyword] == (statements.ACTIONS.index("sdl_shape"), code, len(entry.parameters))

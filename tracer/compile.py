@@ -1000,8 +1000,17 @@ def live_effects(scene: Scene) -> frozenset[str]:
     """Which effects this scene can show at all; the tracer computes nothing for the others."""
     shapes = scene.shapes()
     materials = list({id(s.material): s.material for s in shapes}.values())
+    uv_textured = any(s.material.texture > 0 and s.mesh is not None and s.mesh.corner_uvs is not None
+                      for s in shapes)
     return _effects(scene, {s.kind for s in shapes}, MaterialTable(materials) if materials else None,
-                    any(isinstance(o, CSG) for o in scene.objects))
+                    any(isinstance(o, CSG) for o in scene.objects), uv_textured=uv_textured)
+
+
+def uv_textured_of(table: "PrimitiveTable", texture: np.ndarray) -> bool:
+    """Whether an image texture lies on a mesh with texture coordinates (``texture``: per material id): the
+    live effect mesh-uv."""
+    return any(mesh.corner_uvs is not None and (texture[table.material_ids[rows]] > 0).any()
+               for mesh, rows in table.mesh_groups())
 
 
 #: What a material can call for (material_traits' columns).
@@ -1021,16 +1030,20 @@ def material_traits(table: MaterialTable, settings, rows=slice(None)) -> np.ndar
 
 
 def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool,
-             used: Optional[np.ndarray] = None) -> frozenset[str]:
+             used: Optional[np.ndarray] = None, uv_textured: bool = False) -> frozenset[str]:
     """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes;
-    ``used``: which of its rows count, default all)."""
+    ``used``: which of its rows count, default all); ``uv_textured``: an image texture lies on a mesh with
+    texture coordinates."""
     traits = np.zeros((0, len(TRAITS)), dtype=bool) if table is None else material_traits(table, scene.settings)
-    return effects_of_traits(scene, kinds, (traits if used is None else traits[used]).any(axis=0), any_boolean)
+    return effects_of_traits(scene, kinds, (traits if used is None else traits[used]).any(axis=0), any_boolean,
+                             uv_textured)
 
 
-def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_boolean: bool) -> frozenset[str]:
+def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_boolean: bool,
+                      uv_textured: bool = False) -> frozenset[str]:
     """The live effects of a scene whose shapes are of ``kinds`` and whose materials have, together, the
-    TRAITS where ``present`` (a bool per trait) is true."""
+    TRAITS where ``present`` (a bool per trait) is true; ``uv_textured``: an image texture lies on a mesh
+    with texture coordinates (uv_textured_of)."""
     settings = scene.settings
     has = dict(zip(TRAITS, np.asarray(present, dtype=bool).tolist()))
     effects = {f"shape:{kind}" for kind in kinds}
@@ -1050,8 +1063,12 @@ def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_bo
         effects.add("csg")
     if has["textured"]:
         effects.add("textures")
+        if uv_textured:
+            effects.add("mesh-uv")
     if "lighting" in effects and has["cook-torrance"]:
         effects.add("cook-torrance")
+    if "shadows" in effects and settings.smooth_terminator and kinds & set(MESH_KINDS):
+        effects.add("smooth-terminator")
     if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
         effects.add("fresnel")
     return frozenset(effects)
@@ -1353,17 +1370,6 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
     return number[which], list(map(materials.__getitem__, first[order].tolist()))
 
 
-def _refuse_untraced(scene: Scene, materials, table: "PrimitiveTable") -> None:
-    """A TracerError for the model's Blender extensions that neither backend traces yet (being built: see
-    docs/tracer.md, "Lights"), rather than a picture that silently ignores them."""
-    pending = []
-    if scene.settings.smooth_terminator:
-        pending.append("smooth_terminator")
-    pending += ["mesh corner_uvs" for mesh, _ in table.mesh_groups() if mesh.corner_uvs is not None]
-    if pending:
-        raise TracerError(f"not traced yet: {', '.join(dict.fromkeys(pending))}")
-
-
 def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     """Compile ``scene`` (``columns``: what compile_scene's content key gathered, when the caller has it).
 
@@ -1375,12 +1381,12 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     shapes = columns.shapes
     kind, material_ids, materials, parameters = columns.arrays()
     table = PrimitiveTable(shapes, kind, parameters, columns.matrices, material_ids)
-    _refuse_untraced(scene, materials, table)
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
     material_table = MaterialTable(materials or [Material()])
     kinds = {_KEYWORDS[code] for code in np.unique(kind).tolist()}
-    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean)
+    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean,
+                       uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
         textures = TextureSet(scene, primitives)

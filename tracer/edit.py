@@ -12,16 +12,15 @@ then, 0, 1, ...).  Several objects may share one key — the parts of one Blende
 and are then edited together, in their order in the scene.  Keys stay valid across every edit;
 positions do not (a removal shifts the objects after it).
 
-What each edit costs (see docs/tracer.md, "Editing a compiled scene"):
+What each edit recomputes (docs/tracer.md, "Editing a compiled scene", has the table and the costs):
 
-* ``set_transform`` / ``set_matrices``: the key's primitive rows (matrix, inverse, rounding, bounds) and
-  its objects' boxes, then a *refit* of the C core's object hierarchy (each changed leaf's boxes up to the
-  root); nothing else.
-* ``set_material`` / ``replace_material``: one material row (a new row for a new material).
-* ``replace_mesh``: that mesh's BVH, built once per content (meshes stay shared by content), and the rows
-  of the shapes that use it.
-* ``add_objects`` / ``remove_objects`` / ``replace_objects`` with another structure: their own rows, then a
-  rebuild of the object hierarchy (on the tracer's threads).
+* a move (``set_transform``, ``set_transforms``, ``set_matrices``): the key's primitive rows (inverse,
+  rounding, bounds) and its objects' boxes, then a *refit* of the C core's object hierarchy;
+* a material (``set_material``, ``replace_material``): one material row (a new row for a new material);
+* a mesh (``replace_mesh``): that mesh's BVH, built once per content (meshes stay shared by content), and
+  the rows of the shapes that use it;
+* ``add_objects`` / ``remove_objects`` / ``replace_objects`` with another structure: their own rows, the
+  FlatScene made anew, a rebuild of the object hierarchy (on the tracer's threads);
 * ``set_lights``: the light rows.
 
 An edit that changes which *live effects* the scene has (the first reflective material, the first texture,
@@ -86,6 +85,9 @@ class EditableScene:
         for serial, key in enumerate(keys):
             self._serials_of.setdefault(key, []).append(serial)
         self._serial = np.arange(n, dtype=np.int64)  # by position
+        # Shapes this scene made (by id; each in the scene once): a later move or material edit changes them
+        # in place instead of making another (an animation frame makes no new Shape after the first)
+        self._owned: set[int] = set()
         self._position = np.arange(n, dtype=np.int64)  # by serial (-1: removed)
         self.compiled: CompiledScene = compile_scene(scene)
         compiled = self.compiled
@@ -120,7 +122,8 @@ class EditableScene:
         return len(self._serial)
 
     def objects_of(self, key: Hashable) -> list[SceneObject]:
-        """The key's top-level objects, in scene order."""
+        """The key's top-level objects, in scene order (as they are now: a shape an edit made may be changed
+        in place by a later edit; a shape the caller gave never is)."""
         return [self.scene.objects[i] for i in self._where(key)]
 
     def positions_of(self, key: Hashable) -> list[int]:
@@ -146,14 +149,35 @@ class EditableScene:
         if len(matrices) != count:
             raise TracerError(f"object {key!r} has {count} shapes, not {len(matrices)} matrices")
         checked = iter([_checked_matrix(m, key) for m in matrices])
-        self._replace_in_place(key, [_with_leaves(obj, lambda shape: _moved(shape, next(checked)))
+        self._replace_in_place(key, [_with_leaves(obj, lambda shape: self._changed(shape, "matrix", next(checked)))
                                      for obj in objects], checked=True)
+
+    @_edit
+    def set_transforms(self, changes: Iterable[tuple[Hashable, object]]) -> None:
+        """Many set_transform at once, ``(key, matrix)`` pairs (the last one wins for a key given twice): one
+        pass over their rows and one refit (or rebuild) of the hierarchy, as for an animation frame that
+        moves every object.  Every matrix is checked before anything changes."""
+        wanted = dict(changes)
+        keys = list(wanted)
+        matrices = _checked_matrices([wanted[k] for k in keys], keys)
+        serials = [self._serials_of.get(key) for key in keys]
+        for key, found in zip(keys, serials):
+            if found is None:
+                self._where(key)  # (raises naming it)
+        counts = np.fromiter(map(len, serials), dtype=np.int64, count=len(keys))
+        positions = self._position[np.concatenate(serials)].tolist() if keys else []
+        scene_objects, changed = self.scene.objects, self._changed
+        objects = [_with_leaves(scene_objects[p], lambda shape: changed(shape, "matrix", matrix))
+                   for p, matrix in zip(positions, np.repeat(matrices, counts, axis=0))]
+        if positions:
+            self._replace_at(positions, objects, same_materials=True)
 
     @_edit
     def set_material(self, key: Hashable, material: Material) -> None:
         """Every shape of the key gets ``material``."""
-        self._replace_in_place(key, [_with_leaves(obj, lambda shape: dataclasses.replace(shape, material=material))
-                                     for obj in self.objects_of(key)])
+        self._check_material(material, f"object {key!r}")  # (before any shape changes)
+        self._replace_in_place(key, [_with_leaves(obj, lambda shape: self._changed(shape, "material", material))
+                                     for obj in self.objects_of(key)], checked=True)
 
     @_edit
     def replace_material(self, old: Material, new: Material) -> None:
@@ -172,7 +196,7 @@ class EditableScene:
             for p in positions:
                 obj = self.scene.objects[p]
                 self._replace_at([p], [_with_leaves(
-                    obj, lambda s: dataclasses.replace(s, material=new) if s.material is old else s)])
+                    obj, lambda s: self._changed(s, "material", new) if s.material is old else s)])
 
     @_edit
     def replace_mesh(self, key: Hashable, mesh: MeshData) -> None:
@@ -187,6 +211,7 @@ class EditableScene:
         structure as before (as many shapes, the same booleans), the rows are updated in place; else the
         old objects are removed and the new ones added at the end."""
         objects = list(objects)
+        self._disown(objects)
         if not objects:
             self.remove_objects(key)
         elif _same_structure(self.objects_of(key), objects):
@@ -202,6 +227,7 @@ class EditableScene:
         objects = list(objects)
         for obj in objects:
             self._check_object(obj, key)
+        self._disown(objects)
         if objects:
             self._restructure([], key, objects)
 
@@ -246,15 +272,22 @@ class EditableScene:
                 self._check_object(obj, key)
         self._replace_at(self._where(key), objects)
 
-    def _replace_at(self, positions: list[int], objects: list[SceneObject]) -> None:
-        """Objects of the same structure as those at ``positions`` take their places: their rows recomputed."""
+    def _replace_at(self, positions: list[int], objects: list[SceneObject], same_materials: bool = False) -> None:
+        """Objects of the same structure as those at ``positions`` take their places: their rows recomputed
+        (``same_materials``: the caller knows that every shape keeps its material)."""
         table = self.compiled.table
         leaves = [leaf for obj in objects for leaf in _leaves(obj)]
-        rows = np.concatenate([np.arange(self._starts[p], self._starts[p + 1]) for p in positions])
-        material_ids = np.array([self._material_row(leaf.material) for leaf in leaves], dtype=np.int32)
+        rows = self._rows_of(positions)
         before = table.material_ids[rows].copy()
+        material_ids = before if same_materials else np.array([self._material_row(leaf.material) for leaf in leaves],
+                                                              dtype=np.int32)
+        scene_objects = self.scene.objects
         for p, obj in zip(positions, objects):
-            self.scene.objects[p] = obj
+            old = scene_objects[p]
+            if old is not obj and self._owned:  # (shapes replaced by others leave the scene)
+                kept = set(map(id, _leaves(obj)))
+                self._disown(leaf for leaf in _leaves(old) if id(leaf) not in kept)
+            scene_objects[p] = obj
         table.refill(rows, leaves)
         table.material_ids[rows] = material_ids
         self._materials.reassign(before, material_ids)
@@ -280,6 +313,31 @@ class EditableScene:
             self._pending_flat |= lights
         self._rows_written = set()
         self._sync()
+
+    def _changed(self, shape: Shape, field: str, value) -> Shape:
+        """``shape`` with ``field`` (its matrix or material) set to ``value``: changed in place if this scene
+        made it, else a new Shape that it then owns (a shape the caller made is never changed)."""
+        if id(shape) in self._owned:
+            setattr(shape, field, value)
+            return shape
+        new = dataclasses.replace(shape, **{field: value})
+        self._owned.add(id(new))
+        return new
+
+    def _disown(self, objects: Iterable[SceneObject]) -> None:
+        """These objects' shapes leave the scene, or come from the caller: none is changed in place again."""
+        owned = self._owned
+        if owned:
+            for obj in objects:
+                for leaf in _leaves(obj):
+                    owned.discard(id(leaf))
+
+    def _rows_of(self, positions: Sequence[int]) -> np.ndarray:
+        """The primitive rows of the objects at these positions, object after object."""
+        positions = np.asarray(positions, dtype=np.int64)
+        counts = self._leaf_counts[positions]
+        first = np.repeat(self._starts[positions], counts)
+        return first + np.arange(len(first)) - np.repeat(np.cumsum(counts) - counts, counts)
 
     def _material_row(self, material: Material) -> int:
         row, new = self._materials.row(material)
@@ -319,6 +377,7 @@ class EditableScene:
         material_ids = np.array([self._material_row(leaf.material) for leaf in leaves], dtype=np.int32)
         self._materials.reassign(table.material_ids[~keep_rows], material_ids)
         kept = np.flatnonzero(keep)
+        self._disown(self.scene.objects[p] for p in removed)
         delete_positions(self.scene.objects, removed)
         self.scene.objects.extend(added)
         if removed:
@@ -463,20 +522,20 @@ def _flat_of(compiled: CompiledScene):
     return None if cached is None else cached[1]
 
 
-def _moved(shape: Shape, matrix: np.ndarray) -> Shape:
-    return dataclasses.replace(shape, matrix=matrix)
-
-
 def _leaves(obj: SceneObject) -> list[Shape]:
+    if type(obj) is Shape:  # (the common case, without a tree walk)
+        return [obj]
     return fold_tree(obj, lambda shape: [shape], lambda _, left, right: left + right)
 
 
 def _leaf_count(obj: SceneObject) -> int:
-    return fold_tree(obj, lambda _: 1, lambda _, left, right: left + right)
+    return 1 if type(obj) is Shape else fold_tree(obj, lambda _: 1, lambda _, left, right: left + right)
 
 
 def _with_leaves(obj: SceneObject, change) -> SceneObject:
     """``obj`` with each leaf shape replaced by ``change(shape)`` (booleans made anew above changed leaves)."""
+    if type(obj) is Shape:
+        return change(obj)
     return fold_tree(obj, change, lambda node, left, right: dataclasses.replace(node, left=left, right=right))
 
 
@@ -486,6 +545,25 @@ def _structure(obj: SceneObject):
 
 def _same_structure(old: list[SceneObject], new: list[SceneObject]) -> bool:
     return len(old) == len(new) and all(_structure(a) == _structure(b) for a, b in zip(old, new))
+
+
+def _checked_matrices(matrices: Sequence, keys: Sequence[Hashable]) -> np.ndarray:
+    """_checked_matrix of each (keys[i] names matrices[i]), checked all at once: (N, 4, 4) float64."""
+    try:
+        stack = np.array(matrices, dtype=np.float64).reshape(-1, 4, 4)
+    except (TypeError, ValueError):
+        stack = None
+    if stack is None or len(stack) != len(keys) or not np.isfinite(stack).all() or \
+            np.any(stack[:, 3] != (0, 0, 0, 1)):
+        return np.array([_checked_matrix(m, k) for m, k in zip(matrices, keys)]).reshape(-1, 4, 4)
+    try:
+        fine = np.isfinite(np.linalg.inv(stack)).all()
+    except np.linalg.LinAlgError:
+        fine = False
+    if not fine:  # (one by one, to name the first bad one)
+        for m, k in zip(matrices, keys):
+            _checked_matrix(m, k)
+    return stack
 
 
 def _checked_matrix(matrix, key: Hashable) -> np.ndarray:

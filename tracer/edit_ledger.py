@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .compile import CompiledScene, effects_of_traits, material_traits
+from .compile import CompiledScene, effects_of_traits, material_traits, uv_textured_of
 from .model import Material
 
 
@@ -61,7 +61,9 @@ class MaterialLedger:
 
     def effects(self, kinds: set[str], any_boolean: bool) -> frozenset[str]:
         """The compiled scene's live effects as they are now (shapes of ``kinds``)."""
-        return effects_of_traits(self.compiled.scene, kinds, self.present(), any_boolean)
+        compiled = self.compiled
+        return effects_of_traits(compiled.scene, kinds, self.present(), any_boolean,
+                                 uv_textured_of(compiled.table, compiled.materials.texture))
 
     def pictures_in_use(self) -> set[int]:
         """The image texture numbers (> 0) of the materials in use."""

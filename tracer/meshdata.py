@@ -96,13 +96,18 @@ class FaceList(Sequence):
 
     __hash__ = None
 
-    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """MeshData.triangles() for these faces, without a Python loop over them."""
+    def triangle_corners(self) -> np.ndarray:
+        """(T, 3) the corners (indices into ``vertex_index``: face after face) of the fan triangles of
+        :meth:`triangles`, in its order."""
         fans = np.maximum(self.sizes - 2, 0)
         face = np.repeat(np.arange(len(self.sizes)), fans)
         k = np.arange(len(face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. size - 2 in each face
         start = self.offsets[:-1][face]
-        corners = np.stack([start, start + k, start + k + 1], axis=1)
+        return np.stack([start, start + k, start + k + 1], axis=1)
+
+    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """MeshData.triangles() for these faces, without a Python loop over them."""
+        corners = self.triangle_corners()
         tri_v = self.vertex_index[corners].astype(np.int64)
         tri_n = (np.full(tri_v.shape, -1, dtype=np.int64) if self.normal_index is None
                  else self.normal_index[corners].astype(np.int64))
@@ -126,6 +131,24 @@ class MeshData:
     #: ... (C = the sum of the faces' sizes; Blender's loop UVs).  An image texture on a mesh that has them is
     #: looked up at the (u, v) interpolated at the hit, instead of the shape's own mapping.
     corner_uvs: Optional[np.ndarray] = None
+
+    def triangle_corners(self) -> np.ndarray:
+        """(T, 3) int64: for each triangle of :meth:`triangles`, its corners' places among all the faces'
+        corners (face after face: the rows of ``corner_uvs``)."""
+        if isinstance(self.faces, FaceList):
+            return self.faces.triangle_corners()
+        out: list[tuple[int, int, int]] = []
+        start = 0
+        for verts, _ in self.faces:
+            out += [(start, start + k, start + k + 1) for k in range(1, len(verts) - 1)]
+            start += len(verts)
+        return np.asarray(out, dtype=np.int64).reshape(-1, 3)
+
+    def corner_count(self) -> int:
+        """How many face corners there are (the rows ``corner_uvs`` must have)."""
+        if isinstance(self.faces, FaceList):
+            return len(self.faces.vertex_index)
+        return sum(len(verts) for verts, _ in self.faces)
 
     def triangles(self) -> tuple[np.ndarray, np.ndarray]:
         """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""

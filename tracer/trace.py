@@ -11,7 +11,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from .compile import CompiledScene
-from . import fresnel, lights, numerics
+from . import fresnel, lights, numerics, terminator
 from .model import MEDIA_DEPTH, traced_depth
 from .savings import SKIP_REASONS, RaySavings
 from .skippable import dark_materials, sealed_table
@@ -253,12 +253,16 @@ class Tracer:
         offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
-            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx])
+            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx], hits.uv[idx])
             ambient, diffuse = ambient * texture, diffuse * texture
         local = mats.emissive[mat] + self.ambient_light * ambient
         if "lighting" in self.effects:
             inside_of = np.where(hits.entering[idx], -1, hits.obj[idx])  # the object the ray was inside
-            local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of)
+            base = point  # where feelers start, before the rounding offset
+            if "smooth-terminator" in self.effects:
+                base = terminator.lifted_points(self.scene, hits.shape[idx], hits.part[idx], hits.uv[idx],
+                                                hits.entering[idx], point)
+            local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of, base)
         color[idx] = local
         if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
             reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
@@ -280,10 +284,10 @@ class Tracer:
             skip = skip | inside
         return skip
 
-    def _direct_light(self, point, normal, direction, mat, diffuse, offset, inside_of) -> np.ndarray:
+    def _direct_light(self, point, normal, direction, mat, diffuse, offset, inside_of, base) -> np.ndarray:
         total = np.zeros_like(point)
         to_eye = -direction / np.linalg.norm(direction, axis=1, keepdims=True)
-        feeler_start = point + offset * normal
+        feeler_start = base + offset * normal
         kinds = self.scene.lights.kind
         shading = Shading(point, normal, to_eye, mat, diffuse, feeler_start, inside_of)
         for light, (light_pos, light_color) in enumerate(zip(self.scene.light_positions, self.scene.light_colors)):

@@ -9,7 +9,8 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
        K_MESH = 7, K_PARABOLOID = 8 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
-       FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256 };
+       FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
+       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
@@ -43,6 +44,10 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
 /* Kinds made of triangles, traced by their BVH (the mesh family). */
 #define RT_IS_MESH(kind) ((kind) == K_MESH)
+/* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index
+ * (tracer/sdl/statements.py names each statement's). */
+#define RT_SDL_ACTIONS(X) X(0, sdl_light) X(1, sdl_global_ambient) X(2, sdl_background) X(3, sdl_min_reflectivity) X(4, sdl_min_transparency) X(5, sdl_max_recursion_depth) X(6, sdl_camera) X(7, sdl_color_material) X(8, sdl_float_material) X(9, sdl_texture) X(10, sdl_parameters) X(11, sdl_default_materials) X(12, sdl_translate) X(13, sdl_scale) X(14, sdl_rotate) X(15, sdl_push) X(16, sdl_pop) X(17, sdl_identity) X(18, sdl_shape)
+#define RT_SDL_ACTION_COUNT 19
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
 
@@ -88,6 +93,7 @@ typedef struct {
     const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
     const double *const *mesh_vertices;      /* per mesh: 3 per vertex */
     const double *const *mesh_normals;       /* per mesh: 3 per normal (made unit where used) */
+    const double *const *mesh_tri_uv;        /* per mesh: 6 per triangle, its corners' (u, v) (MeshData.corner_uvs), or NULL */
     /* CSG */
     int64_t n_csg;
     const int32_t *csg_op;                   /* OP_* per node */
@@ -166,6 +172,7 @@ typedef struct {
     X(mesh_tri_normal) \
     X(mesh_vertices) \
     X(mesh_normals) \
+    X(mesh_tri_uv) \
     X(n_csg) \
     X(csg_op) \
     X(csg_left) \
@@ -214,7 +221,7 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 67
-#define RT_CONTRACT_DIGEST "ccb404af874edc91"
+#define RT_SCENE_DESC_FIELD_COUNT 68
+#define RT_CONTRACT_DIGEST "160be56827e82704"
 
 #endif

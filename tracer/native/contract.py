@@ -27,6 +27,7 @@ import numpy as np
 from .. import model as _model
 from .. import savings as _savings
 from .. import shapes as _shapes
+from ..sdl import statements as _statements
 
 HEADER = Path(__file__).resolve().parent / "contract.h"
 
@@ -38,7 +39,7 @@ CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
            # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
-           "physical-lights", "soft-shadows", "fresnel")
+           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv")
 #: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
 LIGHT_KINDS = _model.LIGHT_KINDS
 #: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).
@@ -190,6 +191,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mesh_tri_normal", "**i32", "per mesh: 3 normal indices per triangle (< 0: none), or NULL"),
     F("mesh_vertices", "**f64", "per mesh: 3 per vertex"),
     F("mesh_normals", "**f64", "per mesh: 3 per normal (made unit where used)"),
+    F("mesh_tri_uv", "**f64", "per mesh: 6 per triangle, its corners' (u, v) (MeshData.corner_uvs), or NULL"),
     F("n_csg", "i64", section="CSG"),
     F("csg_op", "*i32", "OP_* per node"),
     F("csg_left", "*i64"),
@@ -354,6 +356,10 @@ def header_text() -> str:
     out.append(_enum("EDIT", EDIT_FLAGS, [1 << k for k in range(len(EDIT_FLAGS))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
     out += _shape_dispatch()
+    out += ["/* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index",
+            " * (tracer/sdl/statements.py names each statement's). */",
+            "#define RT_SDL_ACTIONS(X) " + " ".join(f"X({k}, {a})" for k, a in enumerate(_statements.ACTIONS)),
+            f"#define RT_SDL_ACTION_COUNT {len(_statements.ACTIONS)}"]
     out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")
     out.append(f"#define N_COUNTS {len(RAY_KINDS) + len(SKIP_REASONS)}  /* rays cast per kind, then skipped per reason */")
     out.append("")

@@ -635,7 +635,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, NAME);              \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, 0, NAME);           \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -663,7 +663,7 @@ SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
 /* The effects of Blender scenes, traced by shade_general alone. */
-#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL)
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL | FX_SMOOTH_TERMINATOR)
 
 /* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
  * FX_GENERAL pay for that choice per ray, the others never come here. */
@@ -674,7 +674,8 @@ static void shade_general(const Scene *S, Work *w, const double *o, const double
     int l = (fx & FX_LIGHTING) != 0;
     shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
                l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
-               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0, shade_general);
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0,
+               (fx & FX_SMOOTH_TERMINATOR) != 0, shade_general);
 }
 
 static ShadeFn pick_shade(int64_t effects)
@@ -1146,6 +1147,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
         m->tri_normal = D->mesh_tri_normal[k];
         m->vertices = D->mesh_vertices[k];
         m->normals = D->mesh_normals[k];
+        m->tri_uv = D->mesh_tri_uv[k];
         m->rounding_factor = D->mesh_constants[0];
         m->barycentric_max = D->mesh_constants[1];
         m->parallel_eps = D->mesh_constants[2];
@@ -1515,7 +1517,7 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
  * untextured); for the tests, which compare it with the NumPy reference point by point.  -1 on a bad
  * primitive index. */
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out)
+                      const double *bary, double *out)
 {
     const Scene *S = (const Scene *)scene;
     for (int64_t i = 0; i < n; i++)
@@ -1523,7 +1525,7 @@ int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double
             return -1;
     for (int64_t i = 0; i < n; i++) {
         if (S->d.effects & FX_TEXTURES)
-            texture_color(S, shape[i], points + 3 * i, part[i], out + 3 * i);
+            texture_color(S, shape[i], points + 3 * i, part[i], bary ? bary + 2 * i : NULL, out + 3 * i);
         else
             out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = 1.0;
     }

@@ -56,6 +56,6 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
                        int32_t *part, double *uv, int8_t *inside_at_start);
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out);
+                      const double *bary, double *out);
 
 #endif

@@ -39,9 +39,10 @@ MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILO
                   "DEDUPE_RELATIVE_ADJACENT")
 #: SceneDesc's per-mesh address fields and the MeshArrays field each points into, with its element type.
 MESH_ADDRESSES = {"mesh_nodes": "nodes", "mesh_order": "tri_order", "mesh_tri_vertex": "tri_vertex",
-                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals"}
+                  "mesh_tri_normal": "tri_normal", "mesh_vertices": "vertices", "mesh_normals": "normals",
+                  "mesh_tri_uv": "tri_uv"}
 MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tri_normal": np.int32,
-               "vertices": np.float64, "normals": np.float64}
+               "vertices": np.float64, "normals": np.float64, "tri_uv": np.float64}
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
 PRIM_PARAMS = _SHARED["PRIM_PARAMS"]
@@ -85,6 +86,8 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
 #: Per shape registry entry: its C kind code, and whether it is bounded.
 _CODE_OF_ENTRY = np.array([KIND_CODES[e.keyword] for e in shapes.REGISTRY], dtype=np.int32)
 _BOUNDED = np.array([e.bounded for e in shapes.REGISTRY])
+#: Per shape registry entry: whether its primitives have a prim_aux entry (polyhedra's planes, meshes).
+_HAS_AUX = np.array([e.keyword in POLYHEDRON_KINDS or e.keyword in MESH_KINDS for e in shapes.REGISTRY])
 
 
 def _padded_boxes(table: PrimitiveTable, rows=slice(None)) -> np.ndarray:
@@ -293,36 +296,21 @@ class FlatScene:
             a[name].reshape(-1, width)[prims] = column[prims].reshape(-1, width)  # (no-ops where a is a view)
         aux = a["prim_aux"].reshape(-1, 2)
         meshes_before, plane_kinds = len(self._meshes), len(self._planes_of)
-        for i, kind in zip(prims.tolist(), table.kind[prims].tolist()):
+        aux[prims] = 0
+        special = prims[_HAS_AUX[table.kind[prims]]]  # (polyhedra and meshes: the rest have no aux)
+        for i, kind in zip(special.tolist(), table.kind[special].tolist()):
             keyword = shapes.REGISTRY[kind].keyword
             if keyword in POLYHEDRON_KINDS:
                 aux[i] = self._plane_range(keyword)
-            elif keyword in MESH_KINDS:
-                aux[i] = (self._mesh_number(table.meshes[id(table.shapes[i].mesh)]), 0)
             else:
-                aux[i] = 0
+                aux[i] = (self._mesh_number(table.meshes[id(table.shapes[i].mesh)]), 0)
         if len(self._planes_of) != plane_kinds:
             a["planes"] = np.concatenate(self._plane_blocks)
         touched_meshes |= bool((a["prim_kind"][prims] == KIND_CODES["mesh"]).any())
         meshes_changed = len(self._meshes) != meshes_before or (touched_meshes and self._drop_unused_meshes(table))
         if meshes_changed:
             self._flatten_meshes(self._meshes)
-        # (the padded boxes of these rows alone, by row: _box reads them by primitive index)
-        padded = _padded_boxes(table, prims)
-        lo, hi = dict(zip(prims.tolist(), padded[:, :3])), dict(zip(prims.tolist(), padded[:, 3:]))
-        prim_bounded = dict(zip(prims.tolist(), _BOUNDED[table.kind[prims]].tolist()))
-        object_box, bounded = a["object_box"].reshape(-1, 6), a["object_bounded"]
-        index = compiled.objects.primitive_index
-        for k in objects.tolist():
-            obj = compiled.objects.booleans.get(k)
-            if obj is None:
-                i = int(index[k])
-                object_box[k, :3], object_box[k, 3:], bounded[k] = lo[i], hi[i], prim_bounded[i]
-                continue
-            box = _box(obj, lo, hi, prim_bounded)
-            bounded[k] = box is not None
-            if box is not None:
-                object_box[k, :3], object_box[k, 3:] = box
+        self._object_rows(compiled, prims, objects)
         if materials is True:
             self._take_materials(compiled)
         elif materials is not False and len(materials):
@@ -331,6 +319,28 @@ class FlatScene:
             self._take_lights(compiled)
         self._describe(compiled)
         return meshes_changed
+
+    def _object_rows(self, compiled: CompiledScene, prims: np.ndarray, objects: np.ndarray) -> None:
+        """The boxes and boundedness of these top-level objects, from their primitives' rows ``prims``: the
+        plain shapes at once, each boolean by walking its tree."""
+        table, a = compiled.table, self.arrays
+        object_box, bounded = a["object_box"].reshape(-1, 6), a["object_bounded"]
+        index = compiled.objects.primitive_index[objects]
+        plain = index >= 0
+        rows = index[plain]
+        object_box[objects[plain]] = _padded_boxes(table, rows)
+        bounded[objects[plain]] = _BOUNDED[table.kind[rows]]
+        if plain.all():
+            return
+        # (the padded boxes of the booleans' rows, by row: _box reads them by primitive index)
+        padded = _padded_boxes(table, prims)
+        lo, hi = dict(zip(prims.tolist(), padded[:, :3])), dict(zip(prims.tolist(), padded[:, 3:]))
+        prim_bounded = dict(zip(prims.tolist(), _BOUNDED[table.kind[prims]].tolist()))
+        for k in objects[~plain].tolist():
+            box = _box(compiled.objects.booleans[k], lo, hi, prim_bounded)
+            bounded[k] = box is not None
+            if box is not None:
+                object_box[k, :3], object_box[k, 3:] = box
 
     def _drop_unused_meshes(self, table: PrimitiveTable) -> bool:
         """Drop the meshes no primitive refers to any more (renumbering the others); whether any was."""

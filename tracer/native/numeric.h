@@ -96,6 +96,19 @@ static inline void normal_to_world(const double *inv, const double *n, double *o
         out[j] = n[0] * inv[j] + n[1] * inv[4 + j] + n[2] * inv[8 + j];
 }
 
+/* tracer.terminator.world_vectors: the generic vector v in world coordinates, x with inverse x = v (the
+ * 3 x 3 part of the primitive's inverse, row-major in 16), by cofactors. */
+static inline void generic_to_world_vector(const double *a, const double *v, double *out)
+{
+    double c00 = a[5] * a[10] - a[6] * a[9], c01 = a[6] * a[8] - a[4] * a[10], c02 = a[4] * a[9] - a[5] * a[8];
+    double c10 = a[2] * a[9] - a[1] * a[10], c11 = a[0] * a[10] - a[2] * a[8], c12 = a[1] * a[8] - a[0] * a[9];
+    double c20 = a[1] * a[6] - a[2] * a[5], c21 = a[2] * a[4] - a[0] * a[6], c22 = a[0] * a[5] - a[1] * a[4];
+    double det = a[0] * c00 + a[1] * c01 + a[2] * c02;
+    out[0] = (c00 * v[0] + c10 * v[1] + c20 * v[2]) / det;
+    out[1] = (c01 * v[0] + c11 * v[1] + c21 * v[2]) / det;
+    out[2] = (c02 * v[0] + c12 * v[1] + c22 * v[2]) / det;
+}
+
 /* tracer.numerics.generic_time_error for the hits of one generic ray, its per-ray parts computed once.
  * `r` is the primitive's prim_rounding: rounding / size, size, |inverse|, |translation|. */
 typedef struct {

@@ -112,6 +112,21 @@ light_response(const SceneDesc *D, const ShadePoint *p, const double *s, double 
 
 #include "lights.h"
 
+/* tracer.terminator.lifted_points for one hit: where its feelers start before the rounding offset (the hit
+ * point, lifted onto the smooth surface on a smooth mesh triangle hit from its outer side). */
+static inline void feeler_base(const Scene *S, const Hit *h, const double *point, double *base)
+{
+    const SceneDesc *D = &S->d;
+    double lift[3], world[3];
+    memcpy(base, point, 3 * sizeof(double));
+    if (D->prim_kind[h->shape] != K_MESH || !h->entering ||
+        !mesh_smooth_lift(&S->meshes[D->prim_aux[2 * h->shape]], h->part, h->uv[0], h->uv[1], lift))
+        return;
+    generic_to_world_vector(D->prim_inverse + 16 * h->shape, lift, world);
+    for (int i = 0; i < 3; i++)
+        base[i] = point[i] + world[i];
+}
+
 /* Tracer._direct_light: every light's share at the point, added to `color`.  SDL's point lights here, the
  * physical ones (only where use_physical) in lights.h. */
 static inline __attribute__((always_inline)) void
@@ -274,7 +289,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
            double weight, double *out,
            const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
            const int use_refraction, const int use_textures, const int use_physical, const int use_fresnel,
-           ShadeFn self)
+           const int use_terminator, ShadeFn self)
 {
     const SceneDesc *D = &S->d;
     out[0] = D->background[0];
@@ -302,7 +317,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     double textured_ambient[3], textured_diffuse[3];
     if (use_textures) {  /* the texture colour multiplies ambient and diffuse (1 where untextured) */
         double texture[3];
-        texture_color(S, h.shape, p.point, h.part, texture);
+        texture_color(S, h.shape, p.point, h.part, h.uv, texture);
         for (int c = 0; c < 3; c++) {
             textured_ambient[c] = ambient[c] * texture[c];
             textured_diffuse[c] = p.diffuse[c] * texture[c];
@@ -314,10 +329,14 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     for (int c = 0; c < 3; c++)
         color[c] = emissive[c] + D->global_ambient[c] * ambient[c];
     if (use_lighting) {
-        double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), base[3];
+        if (use_terminator)
+            feeler_base(S, &h, p.point, base);
+        else
+            memcpy(base, p.point, sizeof base);
         for (int i = 0; i < 3; i++) {
             p.to_eye[i] = -d[i] / length;
-            p.feeler[i] = p.point[i] + offset * p.facing[i];
+            p.feeler[i] = base[i] + offset * p.facing[i];
         }
         direct_light(S, w, &p, use_shadows, use_cook_torrance, use_physical, color);
     }

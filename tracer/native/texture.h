@@ -284,10 +284,28 @@ static void sample_bilinear(const uint8_t *image, int64_t width, int64_t height,
 }
 
 /* ------------------------------------------------------------------------------------------------------
- * TextureSet.colors for one hit: the colour at world `point` on primitive `shape` (hit on `part`);
- * 1 where the primitive's material has no texture. */
+ * TextureSet.colors for one hit: the colour at world `point` on primitive `shape` (hit on `part`, at
+ * barycentrics `bary` on a mesh, or NULL); 1 where the primitive's material has no texture. */
 
-static void texture_color(const Scene *S, int64_t shape, const double *point, int32_t part, double *out)
+/* TriangleMesh.texture_uv: a hit's texture coordinates on a mesh that has them (`bary`: its barycentrics);
+ * 0 where the mesh has none (or the triangle is not one of it). */
+static inline int mesh_uv(const Scene *S, int64_t shape, int32_t part, const double *bary, double *u, double *v)
+{
+    const SceneDesc *D = &S->d;
+    if (!bary || !(D->effects & FX_MESH_UV) || D->prim_kind[shape] != K_MESH)
+        return 0;
+    const MeshView *m = &S->meshes[D->prim_aux[2 * shape]];
+    if (!m->tri_uv || part < 0 || part >= m->n_tris)
+        return 0;
+    const double *c = m->tri_uv + 6 * (int64_t)part;
+    double b1 = bary[0], b2 = bary[1], w0 = 1.0 - b1 - b2;
+    *u = (w0 * c[0] + b1 * c[2]) + b2 * c[4];
+    *v = (w0 * c[1] + b1 * c[3]) + b2 * c[5];
+    return 1;
+}
+
+static void texture_color(const Scene *S, int64_t shape, const double *point, int32_t part, const double *bary,
+                          double *out)
 {
     const SceneDesc *D = &S->d;
     int64_t mat = D->prim_material[shape];
@@ -311,7 +329,10 @@ static void texture_color(const Scene *S, int64_t shape, const double *point, in
     }
     double u, v;
     int wrap_u, wrap_v;
-    surface_uv(D->prim_kind[shape], generic, part, &u, &v, &wrap_u, &wrap_v);
+    if (mesh_uv(S, shape, part, bary, &u, &v))  /* a mesh's own texture coordinates repeat both ways */
+        wrap_u = wrap_v = 1;
+    else
+        surface_uv(D->prim_kind[shape], generic, part, &u, &v, &wrap_u, &wrap_v);
     double repeat_u = q[0], repeat_v = q[1];
     if (!(repeat_u == 1.0 && repeat_v == 1.0)) {  /* tiled: both directions wrap */
         u = u * repeat_u;

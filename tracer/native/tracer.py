@@ -25,7 +25,7 @@ from ..savings import RaySavings
 from ..skippable import sealed_table
 from ..threads import default_threads
 from ..trace import RayCounts
-from . import contract, flatten
+from . import _ptr, _rays, contract, flatten
 
 
 def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
@@ -73,8 +73,8 @@ class CoreScene:
             done = library._lib.rt_set_sealed(self.handle, None, 0)
         else:
             flat = np.ascontiguousarray(sealed, dtype=np.uint8).reshape(-1)
-            done = library._lib.rt_set_sealed(self.handle, library._ptr(flat if flat.size else np.zeros(1, np.uint8), ctypes.c_uint8),
-                                      flat.size)
+            table = _ptr(flat if flat.size else np.zeros(1, np.uint8), ctypes.c_uint8)
+            done = library._lib.rt_set_sealed(self.handle, table, flat.size)
         if done != 0:
             raise MemoryError("the C core ran out of memory (or the sealed table has the wrong size)")
         self._sealed_sent = sealed
@@ -87,8 +87,8 @@ class CoreScene:
         flags = (contract.EDIT_BITS["meshes"] if meshes else 0) | (contract.EDIT_BITS["rebuild"] if rebuild else 0)
         listed = np.ascontiguousarray(np.zeros(1, np.int64) if objects is None else objects, dtype=np.int64)
         message = ctypes.create_string_buffer(256)
-        if library._lib.rt_edit(self.handle, ctypes.byref(flat.desc), library._ptr(listed, ctypes.c_int64),
-                        -1 if objects is None else len(listed), flags, threads, message, len(message)) != 0:
+        if library._lib.rt_edit(self.handle, ctypes.byref(flat.desc), _ptr(listed, ctypes.c_int64),
+                                -1 if objects is None else len(listed), flags, threads, message, len(message)) != 0:
             self._release()  # (a scene refused half way is never traced)
             flat.core = None
             reason = message.value.decode(errors="replace") or "no reason given"
@@ -130,10 +130,10 @@ class NativeTracer:
         """The C core's object hierarchy as built (for tests): its PairNode records as bytes, the bounded
         objects in leaf order, and (root leaf's first item, its count, depth, items)."""
         root = np.zeros(5, dtype=np.int64)
-        count = library._lib.rt_object_tree(self._handle, None, None, library._ptr(root, ctypes.c_int64))
+        count = library._lib.rt_object_tree(self._handle, None, None, _ptr(root, ctypes.c_int64))
         pairs = ctypes.create_string_buffer(max(1, int(count * root[4])))
         items = np.zeros(max(1, int(root[3])), dtype=np.int64)
-        library._lib.rt_object_tree(self._handle, pairs, library._ptr(items, ctypes.c_int64), library._ptr(root, ctypes.c_int64))
+        library._lib.rt_object_tree(self._handle, pairs, _ptr(items, ctypes.c_int64), _ptr(root, ctypes.c_int64))
         return pairs.raw[:int(count * root[4])], items[:int(root[3])], tuple(root[:4].tolist())
 
     def close(self) -> None:
@@ -141,57 +141,60 @@ class NativeTracer:
         self._handle = self._core = None
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        o, d = library._rays(origins, directions)
+        o, d = _rays(origins, directions)
         colors = np.empty_like(o)
         counts = np.zeros(len(fields(RayCounts)), dtype=np.int64)
-        if library._lib.rt_trace(self._handle, len(o), library._ptr(o, ctypes.c_double), library._ptr(d, ctypes.c_double),
-                         library._ptr(colors, ctypes.c_double), library._ptr(counts, ctypes.c_int64), self.threads,
-                         float(self.savings.cutoff), self.savings.flags()) != 0:
+        if library._lib.rt_trace(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                                 _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads,
+                                 float(self.savings.cutoff), self.savings.flags()) != 0:
             raise MemoryError("the C core ran out of memory")
         self.counts.add(RayCounts(*(int(c) for c in counts)))
         return colors
 
     def first_hits(self, origins, directions) -> dict[str, np.ndarray]:
         """The nearest hit with t > 0 per ray: t (inf on a miss), unit world normal, shape, object, entering."""
-        o, d = library._rays(origins, directions)
+        o, d = _rays(origins, directions)
         n = len(o)
         out = dict(t=np.empty(n), normal=np.empty((n, 3)), shape=np.empty(n, np.int32),
                    obj=np.empty(n, np.int32), entering=np.empty(n, np.int8))
-        if library._lib.rt_first_hits(self._handle, n, library._ptr(o, ctypes.c_double), library._ptr(d, ctypes.c_double),
-                              library._ptr(out["t"], ctypes.c_double), library._ptr(out["normal"], ctypes.c_double),
-                              library._ptr(out["shape"], ctypes.c_int32), library._ptr(out["obj"], ctypes.c_int32),
-                              library._ptr(out["entering"], ctypes.c_int8), self.threads) != 0:
+        if library._lib.rt_first_hits(self._handle, n, _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                                      _ptr(out["t"], ctypes.c_double), _ptr(out["normal"], ctypes.c_double),
+                                      _ptr(out["shape"], ctypes.c_int32), _ptr(out["obj"], ctypes.c_int32),
+                                      _ptr(out["entering"], ctypes.c_int8), self.threads) != 0:
             raise MemoryError("the C core ran out of memory")
         out["entering"] = out["entering"].astype(bool)
         return out
 
     def occluded(self, origins, directions, t_max: float = 1.0) -> np.ndarray:
         """Shadow feelers: is anything on origin + t direction, 0 < t < t_max?"""
-        o, d = library._rays(origins, directions)
+        o, d = _rays(origins, directions)
         blocked = np.empty(len(o), np.int8)
-        if library._lib.rt_occluded(self._handle, len(o), library._ptr(o, ctypes.c_double), library._ptr(d, ctypes.c_double),
-                            float(t_max), library._ptr(blocked, ctypes.c_int8), self.threads) != 0:
+        if library._lib.rt_occluded(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+                                    float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) != 0:
             raise MemoryError("the C core ran out of memory")
         return blocked.astype(bool)
 
-    def texture_colors(self, shape, points, parts) -> np.ndarray:
-        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts``, as
-        ``compiled.textures.colors`` (1 where untextured)."""
+    def texture_colors(self, shape, points, parts, uv=None) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts`` (at barycentrics
+        ``uv`` (N, 2) on meshes, or None), as ``compiled.textures.colors`` (1 where untextured)."""
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         s = np.ascontiguousarray(np.asarray(shape, dtype=np.int32).reshape(-1))
         q = np.ascontiguousarray(np.asarray(parts, dtype=np.int32).reshape(-1))
-        if not len(p) == len(s) == len(q):
-            raise ValueError("shape, points and parts must have the same length")
+        b = None if uv is None else np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+        if not len(p) == len(s) == len(q) or (b is not None and len(b) != len(p)):
+            raise ValueError("shape, points, parts and uv must have the same length")
         out = np.empty_like(p)
-        if library._lib.rt_texture_colors(self._handle, len(p), library._ptr(s, ctypes.c_int32), library._ptr(p, ctypes.c_double),
-                                  library._ptr(q, ctypes.c_int32), library._ptr(out, ctypes.c_double)) != 0:
+        bary = None if b is None else _ptr(b, ctypes.c_double)
+        if library._lib.rt_texture_colors(self._handle, len(p), _ptr(s, ctypes.c_int32),
+                                          _ptr(p, ctypes.c_double), _ptr(q, ctypes.c_int32), bary,
+                                          _ptr(out, ctypes.c_double)) != 0:
             raise IndexError("primitive index out of range")
         return out
 
     def object_hits(self, index: int, origin, direction) -> HitArrays:
         """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``
         (world normals, not unit; only finite hits, so K is the number of hits)."""
-        o, d = library._rays(origin, direction)
+        o, d = _rays(origin, direction)
         capacity = 64
         while True:
             t = np.empty(capacity)
@@ -201,11 +204,11 @@ class NativeTracer:
             part = np.empty(capacity, np.int32)
             uv = np.empty((capacity, 2))
             inside = np.zeros(1, np.int8)
-            n = library._lib.rt_object_hits(self._handle, int(index), library._ptr(o, ctypes.c_double), library._ptr(d, ctypes.c_double),
-                                    capacity, library._ptr(t, ctypes.c_double), library._ptr(entering, ctypes.c_int8),
-                                    library._ptr(normal, ctypes.c_double), library._ptr(shape, ctypes.c_int32),
-                                    library._ptr(part, ctypes.c_int32), library._ptr(uv, ctypes.c_double),
-                                    library._ptr(inside, ctypes.c_int8))
+            n = library._lib.rt_object_hits(self._handle, int(index), _ptr(o, ctypes.c_double),
+                                            _ptr(d, ctypes.c_double), capacity, _ptr(t, ctypes.c_double),
+                                            _ptr(entering, ctypes.c_int8), _ptr(normal, ctypes.c_double),
+                                            _ptr(shape, ctypes.c_int32), _ptr(part, ctypes.c_int32),
+                                            _ptr(uv, ctypes.c_double), _ptr(inside, ctypes.c_int8))
             if n < 0:
                 raise MemoryError("the C core ran out of memory (or the object index is out of range)")
             if n <= capacity:

@@ -11,10 +11,9 @@ What it reads equals what the Python reader makes of the same text, bit for bit:
 matrix, material by value, parameters, place, name), lights, camera and settings (tests/test_sdl_fastread.py
 compares the two).  The shapes come as columns, which the scene holds without making a Shape per row.
 
-The keyword tables are the parser's: each keyword the C side knows is given to it with an action (named
-by the C side's ``sdl_action_names``) and an argument (a material field's slot, a shape's kind), so a
-material keyword or shape kind added to the parser's tables reaches the C side without a change there; a
-keyword the parser learns otherwise is declined until :func:`_vocabulary` gives it an action.
+Which keywords it reads, and how (its action, with an argument such as a material field's slot or a
+shape's kind and parameter count), is tracer/sdl/statements.py's table, the one the Python reader's handlers
+come from too: a statement without an action there is declined, and so read by the Python reader.
 """
 from __future__ import annotations
 
@@ -30,7 +29,7 @@ import numpy as np
 from .. import shapes as shape_registry
 from ..camera import camera_problem
 from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
-from .materials import COLOR_MATERIAL, FLOAT_MATERIAL, MAX_PARAMETERS
+from . import statements
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
 #: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
@@ -40,10 +39,7 @@ SHARED_LIBM = sys.platform != "win32"
 _SURROGATE = re.compile(r"[\ud800-\udfff]")
 
 #: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
-DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference",
-                      # the extensions for Blender scenes
-                      "sphereLight", "spotLight", "sunLight", "areaLight", "ellipseLight", "fresnel", "fresnelTint",
-                      "smoothTerminator"))
+DECLINED = statements.DECLINED
 
 
 @dataclass(frozen=True)
@@ -107,36 +103,16 @@ def _setup() -> Optional[_Setup]:
                                 ctypes.c_int64]
     lib.rt_sdl_free.restype = None
     lib.rt_sdl_free.argtypes = [ctypes.POINTER(_Result)]
-    for name in ("rt_sdl_action_names", "rt_sdl_decline_names"):
-        getattr(lib, name).restype = ctypes.c_char_p
-        getattr(lib, name).argtypes = []
+    lib.rt_sdl_decline_names.restype = ctypes.c_char_p
+    lib.rt_sdl_decline_names.argtypes = []
     lib.rt_sdl_material_width.restype = ctypes.c_int64
     lib.rt_sdl_material_width.argtypes = []
-    _check_material_rows(lib.rt_sdl_material_width(), MAX_PARAMETERS)
-    actions = {name: code for code, name in enumerate(lib.rt_sdl_action_names().decode().split())}
-    vocabulary = _vocabulary()
+    _check_material_rows(lib.rt_sdl_material_width(), statements.MAX_PARAMETERS)
+    vocabulary = statements.vocabulary()  # (the library speaks its actions' codes: the contract's digest)
     words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
-    codes = np.array([(actions[action], argument, count) for action, argument, count in vocabulary.values()],
-                     dtype=np.int32)
+    codes = np.array(list(vocabulary.values()), dtype=np.int32).reshape(-1, 3)
     defaults = MaterialRows.row_of(Material())
     return _Setup(lib, words, codes, defaults, tuple(lib.rt_sdl_decline_names().decode().split()))
-
-
-def _vocabulary() -> dict[str, tuple[str, int, int]]:
-    """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names), argument and
-    count of numbers (a shape kind's parameters)."""
-    words = {keyword: (keyword, 0, 0) for keyword in (
-        "light", "globalAmbient", "background", "minReflectivity", "minTransparency", "maxRecursionDepth",
-        "camera", "texture", "parameters", "defaultMaterials", "translate", "scale", "rotate", "push", "pop",
-        "identityAffine")}
-    for keyword, name in COLOR_MATERIAL.items():
-        words[keyword] = ("colorMaterial", MaterialRows.SLOTS[name][0], 0)
-    for keyword, name in FLOAT_MATERIAL.items():
-        words[keyword] = ("floatMaterial", MaterialRows.SLOTS[name][0], 0)
-    for code, entry in enumerate(shape_registry.REGISTRY):
-        if not entry.file_argument:  # (a mesh's file is left to the Python reader)
-            words[entry.keyword] = ("shape", code, len(entry.parameters))
-    return words
 
 
 def available() -> bool:

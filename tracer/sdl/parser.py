@@ -44,35 +44,24 @@ from ..userfiles import read_text
 from . import fastread
 from .lexer import Tokens, to_float, to_floats
 from .lights import LIGHT_USAGE, argument_count, light_of
-from .materials import COLOR_MATERIAL, FLOAT_MATERIAL, MAX_PARAMETERS
+# (the writer reads COLOR_MATERIAL and FLOAT_MATERIAL here)
+from .statements import COLOR_MATERIAL, FLOAT_MATERIAL, MAX_PARAMETERS, STATEMENTS  # noqa: F401
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 # ---------------------------------------------------------------------------------------------------------
-# Keyword tables (the writer uses them too, so that both sides agree on spelling).
+# Keyword tables (tracer/sdl/statements.py has every statement; the writer uses them too, so that both sides
+# agree on spelling).
 
 #: Image numbers ``makePixmap`` accepts.
 PIXMAP_RANGE = range(16)
 CSG_OPS = CSG.OPS
 
 #: Every keyword with the arguments it takes, for messages ("expected 'translate dx dy dz'").
-USAGE: dict[str, str] = {
-    "light": "x y z r g b", "globalAmbient": "r g b", "background": "r g b", "minReflectivity": "f",
-    "minTransparency": "f", "maxRecursionDepth": "n", "makePixmap": "i file",
-    "camera": "ex ey ez lx ly lz ux uy uz viewAngle",
-    **{k: "r g b" for k in COLOR_MATERIAL}, **{k: "f" for k in FLOAT_MATERIAL},
-    "texture": "t", "parameters": "n p1 ... pn", "defaultMaterials": "",
-    "translate": "dx dy dz", "scale": "sx sy sz", "rotate": "angle ux uy uz",
-    "push": "", "pop": "", "identityAffine": "",
-    **{e.keyword: e.usage for e in shapes.REGISTRY},
-    **{k: "object object" for k in CSG_OPS},
-    "def": "name { tokens }", "use": "name",
-    # extensions for Blender scenes (docs/sdl.md)
-    **LIGHT_USAGE, "fresnel": "constant|metal|dielectric", "fresnelTint": "r g b", "smoothTerminator": "0|1",
-}
+USAGE: dict[str, str] = {s.keyword: s.usage for s in STATEMENTS}
 KEYWORDS = frozenset(USAGE)
 #: The keywords of the extensions for Blender scenes (not the book's; their own tests use them).
-EXTENSION_KEYWORDS = frozenset((*LIGHT_USAGE, "fresnel", "fresnelTint", "smoothTerminator"))
+EXTENSION_KEYWORDS = frozenset(s.keyword for s in STATEMENTS if s.extension and s.keyword not in SHAPE_KINDS)
 #: The statements that add a light (a name comment names them as it names shapes).
 LIGHT_KEYWORDS = ("light", *LIGHT_USAGE)
 
@@ -315,28 +304,7 @@ class _Reader:
         self.macro_locations: dict[int, SourceLocation] = {}  # shapes in macro bodies: one per body token
         self.reported: set[str] = set()
         self.handlers: dict[str, Callable[[str, int, tuple[str, ...]], None]] = {
-            "light": self._light, "globalAmbient": self._global_ambient, "background": self._background,
-            "minReflectivity": self._min_reflectivity, "minTransparency": self._min_transparency,
-            "maxRecursionDepth": self._max_recursion_depth, "makePixmap": self._make_pixmap,
-            "camera": self._camera,
-            "texture": self._texture, "parameters": self._parameters,
-            "defaultMaterials": self._default_materials,
-            "translate": self._translate, "scale": self._scale, "rotate": self._rotate,
-            "push": self._push, "pop": self._pop, "identityAffine": self._identity,
-            "def": self._def, "use": self._use,
-            "fresnel": self._fresnel, "fresnelTint": self._fresnel_tint, "smoothTerminator": self._smooth_terminator,
-        }
-        for keyword in LIGHT_USAGE:
-            self.handlers[keyword] = self._physical_light
-        for keyword in COLOR_MATERIAL:
-            self.handlers[keyword] = self._color_material
-        for keyword in FLOAT_MATERIAL:
-            self.handlers[keyword] = self._float_material
-        for keyword in SHAPE_KINDS:
-            self.handlers[keyword] = self._shape
-        for keyword in CSG_OPS:
-            self.handlers[keyword] = self._boolean
-        assert set(self.handlers) == KEYWORDS
+            s.keyword: getattr(self, s.handler) for s in STATEMENTS}
 
     def _new_block(self, tokens: list[str], first: int) -> None:
         self.shape_names.add_block(tokens, first, self.tokens.name_comments)

@@ -108,8 +108,11 @@ class TextureSet:
         self.primitives, self.images = primitives, dict(images)
         return self
 
-    def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:
-        """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` (1 where untextured)."""
+    def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray,
+               uv: np.ndarray | None = None) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` hit on ``parts`` (1 where
+        untextured); ``uv``: the hits' barycentrics on meshes (a mesh with texture coordinates is looked up
+        at them), or None."""
         out = np.ones_like(points)
         for index in np.unique(shape_index):
             prim = self.primitives[index]
@@ -121,7 +124,11 @@ class TextureSet:
             if material.texture < 0:
                 out[rows] = SOLID_TEXTURES[material.texture](generic, material.parameters)
             else:
-                u, v, wrap_u, wrap_v = surface_uv(prim.kind, generic, parts[rows])
+                mesh = prim.triangle_mesh
+                if uv is not None and mesh is not None and mesh.tri_uv is not None:  # its own coordinates repeat
+                    (u, v), wrap_u, wrap_v = mesh.texture_uv(parts[rows], uv[rows, 0], uv[rows, 1]), True, True
+                else:
+                    u, v, wrap_u, wrap_v = surface_uv(prim.kind, generic, parts[rows])
                 repeat_u, repeat_v = image_repeats(material.parameters)
                 if (repeat_u, repeat_v) != (1.0, 1.0):
                     u, v, wrap_u, wrap_v = u * repeat_u, v * repeat_v, True, True

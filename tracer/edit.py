@@ -26,7 +26,7 @@ What each edit recomputes (docs/tracer.md, "Editing a compiled scene", has the t
 
 An edit that changes which *live effects* the scene has (the first reflective material, the first texture,
 the last light) recomputes what depends on the effects (the effect set, textures, the shading variant);
-the ray savings of tracer.savings (sealed lights, dark materials) follow every edit.  Edits must not run
+the ray savings (tracer.skippable: sealed lights, dark materials) follow every edit.  Edits must not run
 while a render of the same scene is tracing.
 """
 from __future__ import annotations
@@ -48,13 +48,13 @@ from .edit_ledger import MaterialLedger
 from .errors import TracerError
 from .model import (CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Settings, Shape,
                     ShapeTable)
-from .native import flatten
-from .threads import default_threads
 from .lights import LightTable
-from .savings import sealed_lights
+from .native import flatten
+from .skippable import sealed_lights
 from .textures import TextureSet
 from .textures.images import load_image
 from .textures.solid import SOLID_TEXTURES
+from .threads import default_threads
 
 
 def _edit(method):
@@ -563,7 +563,7 @@ class EditableScene:
 #: build: refitted boxes of objects moved far apart overlap more and more.
 REBUILD_SHARE = 0.5
 _NONE = np.zeros(0, dtype=np.int64)
-_SEALED = "_sealed_lights"  # (where tracer.savings.sealed_table keeps its table)
+_SEALED = "_sealed_lights"  # (where tracer.skippable.sealed_table keeps its table)
 
 
 def _stamp(path: str) -> tuple:

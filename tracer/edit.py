@@ -34,13 +34,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+from collections import Counter
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Optional
 
 import numpy as np
-
-from collections import Counter
 
 from .bulk import one_blas_thread
 from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, delete_positions, fold_tree
@@ -88,10 +87,10 @@ class EditableScene:
         for serial, key in enumerate(keys):
             self._serials_of.setdefault(key, []).append(serial)
         self._serial = np.arange(n, dtype=np.int64)  # by position
+        self._position = np.arange(n, dtype=np.int64)  # by serial (-1: removed)
         # Shapes this scene made (by id; each in the scene once): a later move or material edit changes them
         # in place instead of making another (an animation frame makes no new Shape after the first)
         self._owned: set[int] = set()
-        self._position = np.arange(n, dtype=np.int64)  # by serial (-1: removed)
         self.compiled: CompiledScene = compile_scene(scene)
         compiled = self.compiled
         self._materials = MaterialLedger(compiled)

@@ -20,7 +20,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import deps
+from .tracer import errors
+from .tracer.imageio import save_image
+from .tracer.textures import images as limits
 
 
 def _existing(path: Path):
@@ -61,7 +63,6 @@ def forget(*_args) -> None:
 def decode(path: Path) -> np.ndarray:
     """(height, width, 3) float32 in [0, 1], row 0 at the bottom (Blender's order too); read-only, and the
     same array for every file of the same content."""
-    errors = deps.module("errors")
     path = Path(path)
     if not path.is_file():
         raise errors.TracerError(f"{path}: texture image not found")
@@ -77,7 +78,6 @@ def decode(path: Path) -> np.ndarray:
 
 
 def _decode_with_blender(path: Path) -> np.ndarray:
-    errors, limits = deps.module("errors"), deps.module("textures.images")
     image = _existing(path)
     if image is not None and image.is_float and image.colorspace_settings.name != "Non-Color":
         image = None  # its pixels are linearised: read the file again rather than change the user's image
@@ -107,13 +107,40 @@ def _decode_with_blender(path: Path) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
+#: The linear copies of sRGB pictures made so far (linear_copy): content digest -> file.
+_linear: dict[bytes, str] = {}
+_linear_folder = None  # a tempfile.TemporaryDirectory, made on first use, removed at exit
+
+
+def linear_copy(path: str) -> str:
+    """An 8-bit picture file holding ``path``'s colours made linear (the sRGB curve undone), as Cycles reads
+    an sRGB Image Texture; the tracer, which uses a picture's values as they are stored (as SDL does), is
+    given this copy for a Blender material's texture.  One copy per content, in a temporary folder.  (8 bits
+    of linear values are coarse in the darkest tenth: a stored 10 of 255 becomes 1.)"""
+    global _linear_folder
+    digest = _digest(Path(path))
+    made = _linear.get(digest)
+    if made is not None and os.path.isfile(made):
+        return made
+    import tempfile
+
+    if _linear_folder is None:
+        _linear_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")
+    stored = np.clip(decode(Path(path)), 0.0, 1.0)
+    linear = np.where(stored <= 0.04045, stored / 12.92, ((stored + 0.055) / 1.055) ** 2.4)
+    made = os.path.join(_linear_folder.name, digest.hex()[:24] + "-linear.png")
+    save_image(np.rint(linear[::-1] * 255.0).astype(np.uint8), made)  # (rows top first for the file)
+    _linear[digest] = made
+    return made
+
+
 def register() -> None:
-    deps.module("textures.images").set_fallback_decoder(decode)
+    limits.set_fallback_decoder(decode)
     bpy.app.handlers.load_post.append(forget)
 
 
 def unregister() -> None:
-    deps.module("textures.images").set_fallback_decoder(None)
+    limits.set_fallback_decoder(None)
     while forget in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(forget)
     forget()

@@ -7,7 +7,11 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import deps, primitives
+from .pure import primitives
+from .tracer import model, shapes
+from .tracer.compile import remember_digest
+from .tracer.meshio import read_3vn
+from .tracer.sdl.parser import builtin_mesh
 
 #: Custom properties on a mesh that stands for a generic shape.
 KIND, PARAM, FILE, MATRIX, HASH = "sdl_kind", "sdl_param", "sdl_mesh_file", "sdl_mesh_matrix", "sdl_hash"
@@ -55,9 +59,10 @@ def mesh_hash(mesh) -> str:
     return primitives.geometry_hash(co, loops, totals)
 
 
-def mark_generic(mesh, kind: str, param: float, mesh_file: Optional[str], mesh_matrix: np.ndarray) -> None:
+def mark_generic(mesh, kind: str, parameters: tuple[float, ...], mesh_file: Optional[str],
+                 mesh_matrix: np.ndarray) -> None:
     mesh[KIND] = kind
-    mesh[PARAM] = float(param)
+    mesh[PARAM] = primitives.stored_parameters(parameters)
     if mesh_file is not None:
         mesh[FILE] = mesh_file
     mesh[MATRIX] = [float(v) for v in np.asarray(mesh_matrix, dtype=np.float64).ravel()]
@@ -67,9 +72,9 @@ def mark_generic(mesh, kind: str, param: float, mesh_file: Optional[str], mesh_m
 class GenericInfo:
     """What a mesh stands for, if it is an unedited generic shape."""
 
-    def __init__(self, kind: str, param: float, mesh_file: Optional[str], mesh_matrix: np.ndarray):
+    def __init__(self, kind: str, parameters: tuple[float, ...], mesh_file: Optional[str], mesh_matrix: np.ndarray):
         self.kind = kind
-        self.param = param
+        self.parameters = parameters
         self.mesh_file = mesh_file
         self.mesh_matrix = mesh_matrix
 
@@ -83,9 +88,9 @@ def generic_info(mesh, cache: Optional[dict] = None) -> Optional[GenericInfo]:
         return cache[key]
     info = None
     kind = str(mesh[KIND])
-    if kind in deps.module("model").SHAPE_KINDS and mesh.get(HASH) == mesh_hash(mesh):
+    if kind in model.SHAPE_KINDS and mesh.get(HASH) == mesh_hash(mesh):
         matrix = np.array(list(mesh.get(MATRIX, np.eye(4).ravel())), dtype=np.float64).reshape(4, 4)
-        info = GenericInfo(kind, float(mesh.get(PARAM, 1.0)), mesh.get(FILE), matrix)
+        info = GenericInfo(kind, primitives.parameters_of(kind, mesh.get(PARAM)), mesh.get(FILE), matrix)
     if cache is not None:
         cache[key] = info
     return info
@@ -132,11 +137,12 @@ HANDLERS = (("depsgraph_update_post", forget_edited), ("load_post", forget_all),
             ("redo_post", forget_all))
 
 
-def find_shared(kind: str, param: float, mesh_file: Optional[str], digest: str):
+def find_shared(kind: str, parameters: tuple[float, ...], mesh_file: Optional[str], digest: str):
     """An existing unedited mesh for this generic shape (so that imports share mesh data)."""
     identity = np.eye(4).ravel()
     for mesh in bpy.data.meshes:
-        if (mesh.get(KIND) == kind and mesh.get(HASH) == digest and float(mesh.get(PARAM, 1.0)) == float(param)
+        if (mesh.get(KIND) == kind and mesh.get(HASH) == digest
+                and primitives.parameters_of(kind, mesh.get(PARAM)) == tuple(parameters)
                 and mesh.get(FILE) == mesh_file and mesh.library is None and mesh.get(MATRIX) is not None
                 and np.array_equal(list(mesh[MATRIX]), identity) and mesh_hash(mesh) == digest):
             return mesh
@@ -210,32 +216,46 @@ def _triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return tri_verts, tri_loops, tri_polygons, mat_index
 
 
-def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
+def triangle_meshes(mesh, origin: str = "", uvs: bool = False) -> dict[int, object]:
     """The mesh's triangles (as Blender splits its polygons) with its shading normals, as one tracer MeshData
     per material index.  Faces are kept as flat arrays (model.FaceList): a million-polygon mesh as Python
     tuples took seconds to make and to hash.  The parts share the vertex and normal arrays.  Their digest
-    (compile.mesh_digest) is taken here, once: whoever keeps them must not change them."""
-    model = deps.module("model")
+    (compile.mesh_digest) is taken here, once: whoever keeps them must not change them.  With ``uvs``, each
+    triangle corner's texture coordinates from the UV map that renders (``corner_uvs``; none without one)."""
     tri_verts, tri_loops, tri_polygons, mat_index = _triangles(mesh)
     if len(mat_index) == 0:
         return {}
     vertices = _read(mesh.vertices, "co", len(mesh.vertices) * 3, np.float32).reshape(-1, 3).astype(np.float64)
     normals, normal_index = _triangle_normals(mesh, tri_verts, tri_loops, tri_polygons)
     materials = np.unique(mat_index)
+    loop_uvs = _render_uvs(mesh) if uvs else None
     out = {}
     for index in materials:
-        if len(materials) == 1:
+        corners = None if len(materials) == 1 else _corners_of(np.nonzero(mat_index == index)[0])
+        if corners is None:
             verts, norms = tri_verts, normal_index
         else:
-            corners = _corners_of(np.nonzero(mat_index == index)[0])
             verts = tri_verts[corners]
             # (normals per vertex: one index array serves both, as FaceList allows)
             norms = verts if normal_index is tri_verts else normal_index[corners]
         faces = model.FaceList(np.full(len(verts) // 3, 3, dtype=np.int64), verts, norms)
-        data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin)
+        corner_uvs = None
+        if loop_uvs is not None:
+            corner_uvs = loop_uvs[tri_loops if corners is None else tri_loops[corners]]
+        data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin, corner_uvs=corner_uvs)
         # Never changed after this (a changed object is converted anew): hashed here, once, not at every compile.
-        out[int(index)] = deps.module("compile").remember_digest(data)
+        out[int(index)] = remember_digest(data)
     return out
+
+
+def _render_uvs(mesh) -> Optional[np.ndarray]:
+    """(corners, 2) float64: the UV map that renders (Blender's active_render layer), per corner; None if
+    the mesh has no UV map."""
+    layers = mesh.uv_layers
+    layer = next((layer for layer in layers if layer.active_render), None) or layers.active
+    if layer is None:
+        return None
+    return _read(layer.data, "uv", len(mesh.loops) * 2, np.float32).reshape(-1, 2).astype(np.float64)
 
 
 def _corners_of(triangles: np.ndarray) -> np.ndarray:
@@ -250,15 +270,15 @@ _exact_files: dict[str, tuple[float, object]] = {}
 def exact_mesh_data(info: GenericInfo, mesh):
     """The float64 mesh behind an unedited generic polyhedron, teapot or ``mesh`` file (None: use Blender's)."""
     kind = info.kind
-    if kind in deps.module("model").POLYHEDRON_KINDS or kind == "teapot":
-        return deps.module("sdl.parser").builtin_mesh(kind)
+    if shapes.KINDS[kind].builtin_mesh:
+        return builtin_mesh(kind)
     if kind == "mesh" and info.mesh_file and os.path.isfile(info.mesh_file):
         mtime = os.path.getmtime(info.mesh_file)
         mtime_read, data = _exact_files.get(info.mesh_file, (None, None))
         if mtime_read != mtime:
             try:
                 # (kept unchanged while the file is: its digest is taken once)
-                data = deps.module("compile").remember_digest(deps.module("meshio").read_3vn(info.mesh_file))
+                data = remember_digest(read_3vn(info.mesh_file))
             except Exception:  # noqa: BLE001 - a changed or broken file: fall back to Blender's copy
                 return None
             _exact_files[info.mesh_file] = (mtime, data)

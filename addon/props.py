@@ -9,12 +9,16 @@
 from __future__ import annotations
 
 from array import array
+from typing import Optional
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        PointerProperty, StringProperty)
 
-from . import convert, deps
+from . import shader_nodes
+from .pure import convert
+from .tracer.appearance import display_roughness
+from .tracer.model import Material, Settings
 
 COLOR_FIELDS = ("ambient", "diffuse", "specular", "emissive")
 FLOAT_FIELDS = ("specular_exponent", "reflectivity", "transparency", "speed_of_light", "specular_fraction",
@@ -40,7 +44,7 @@ def _sync_material(self, context) -> None:
 
 def _sync_world(self, context) -> None:
     world = self.id_data
-    if isinstance(world, bpy.types.World):
+    if isinstance(world, bpy.types.World) and world.sdl.use_sdl:
         apply_world_colors(world)
 
 
@@ -75,6 +79,14 @@ class SDLMaterialSettings(bpy.types.PropertyGroup):
 
 
 class SDLWorldSettings(bpy.types.PropertyGroup):
+    use_sdl: BoolProperty(name="SDL World", default=False,
+                          description="Use these SDL values when ray tracing (otherwise the world's colour, or its "
+                                      "Background node's colour times strength, is the background and the ambient "
+                                      "light, as in Cycles); an imported SDL file's world has it ticked")
+    smooth_terminator: BoolProperty(name="Smooth Terminator", default=False,
+                                    description="Shadow feelers of smooth-shaded meshes start from the smooth "
+                                                "surface their normals describe (SDL smoothTerminator); Blender "
+                                                "worlds always have it")
     background: FloatVectorProperty(name="Background", subtype="COLOR", size=3, default=(0.0, 0.0, 0.6),
                                     min=0.0, soft_max=1.0, update=_sync_world,
                                     description="Colour of rays that hit nothing")
@@ -104,9 +116,13 @@ class SDLRenderSettings(bpy.types.PropertyGroup):
                                  "than the threshold")])
     threshold: FloatProperty(name="Threshold", default=0.05, min=0.0, soft_max=1.0,
                              description="Adaptive sampling: colour difference that makes a pixel refined")
+    light_samples: IntProperty(name="Light Samples", default=16, min=1, max=1024,
+                               description="Shadow rays per shaded point for each light with an extent (a radius, "
+                                           "a sun's angle, an area light): soft shadows")
     target_error: FloatProperty(name="Target Error", default=0.0, min=0.0, soft_max=0.1, precision=4,
-                                description="Final renders: sample each pixel until its estimated error (linear "
-                                            "colour) is below this, and report the estimate; 0 is off")
+                                description="Final renders: sample until the image's estimated RMSE (linear colour) is "
+                                            "below this, rays going where they lower it most, and report the "
+                                            "estimate; 0 is off")
 
 
 CLASSES = (SDLMaterialSettings, SDLWorldSettings, SDLRenderSettings)
@@ -229,63 +245,148 @@ def take_base_color_edit(material) -> bool:
     return True
 
 
-def apply_principled(material, take_edits: bool = True) -> None:
+def principled_inputs(s) -> list[tuple[tuple[str, ...], object]]:
+    """The Principled BSDF inputs that show an SDL material ``s`` (``Material.sdl``, or anything with its field
+    names), each as (its names in the Blender versions that have it, value): Base Color is the diffuse colour."""
+    return [(("Base Color",), (*tuple(s.diffuse), 1.0)),
+            (("Emission Color", "Emission"), (*tuple(s.emissive), 1.0)),
+            (("Emission Strength",), 1.0),
+            (("Roughness",), display_roughness(s)),
+            (("Specular IOR Level", "Specular"), min(1.0, sum(s.specular) / 3.0)),
+            (("Metallic",), s.reflectivity),
+            (("Transmission Weight", "Transmission"), s.transparency),
+            (("IOR",), min(100.0, 1.0 / max(s.speed_of_light, 1e-6)))]
+
+
+class PrincipledWriter:
+    """Writes the Principled inputs of new materials that are copies of one material (the importer's), all at
+    once with ``inputs.foreach_set``, which, unlike setting a socket's value, does not make Blender look
+    through every node tree in the file (see _set_input): importing 10^4 materials took minutes that way.
+    Only for materials Blender has not evaluated yet (a copy just made): no update is sent.
+
+    ``values`` is every input of the node as one flat list (each input's value, as many numbers as it has),
+    read from the node the writer is made for and kept as written last: the copies have that node's values in
+    the inputs it does not write.  None (``of`` returns None) where an input's value is not numbers."""
+
+    def __init__(self, slots: dict[str, tuple[int, int]], values: list[float]):
+        self.slots = slots  # input name -> (first number, count)
+        self.values = values
+
+    @classmethod
+    def of(cls, material) -> "Optional[PrincipledWriter]":
+        node = _principled(material)
+        if node is None:
+            return None
+        slots, at = {}, 0
+        for socket in node.inputs:
+            value = getattr(socket, "default_value", None)
+            if isinstance(value, (bool, int, float)):
+                count = 1
+            else:
+                try:
+                    count = len(value)
+                    if not all(isinstance(v, (bool, int, float)) for v in value):
+                        return None
+                except TypeError:  # a string, a menu, no value at all
+                    return None
+            slots.setdefault(socket.name, (at, count))
+            at += count
+        values = [0.0] * at
+        try:
+            node.inputs.foreach_get("default_value", values)
+        except (TypeError, RuntimeError):
+            return None
+        return cls(slots, values)
+
+    def write(self, material, inputs) -> bool:
+        """Give ``material``'s Principled node these inputs (principled_inputs); False where it cannot (no
+        Principled node; the caller then sets them one by one)."""
+        node = _principled(material)
+        if node is None or len(node.inputs) != len(self.slots):
+            return False
+        values = self.values
+        for names, value in inputs:
+            for name in names:
+                slot = self.slots.get(name)
+                if slot is not None:
+                    start, count = slot
+                    values[start:start + count] = list(value)[:count] if count > 1 else [float(value)]
+                    break
+        node.inputs.foreach_set("default_value", values)
+        return True
+
+
+def apply_principled(material, take_edits: bool = True, writer: "Optional[PrincipledWriter]" = None) -> None:
     """Make the Principled BSDF and the viewport colour look like the SDL material (after taking a Base
-    Color the user edited into it, unless ``take_edits`` is False: the SDL values were just set in code)."""
+    Color the user edited into it, unless ``take_edits`` is False: the SDL values were just set in code).
+    ``writer``: for a new copy of the material the writer was made for (see PrincipledWriter)."""
     if take_edits:
         take_base_color_edit(material)
     s = material.sdl
     diffuse = tuple(s.diffuse)
     material.diffuse_color = (*[min(c, 1.0) for c in diffuse], 1.0)
-    roughness = deps.module("appearance").display_roughness(s)
+    roughness = display_roughness(s)
     material.roughness = roughness
     material.metallic = s.reflectivity
-    node = _principled(material)
-    if node is not None:
-        _set_input(node, ("Base Color",), (*diffuse, 1.0))
+    inputs = principled_inputs(s)
+    if writer is None or not writer.write(material, inputs):
+        node = _principled(material)
+        for names, value in inputs:
+            if node is not None:
+                _set_input(node, names, value)
     material[BASE_SHOWN] = list(_base_color(material))
-    if node is None:
-        return
-    _set_input(node, ("Emission Color", "Emission"), (*tuple(s.emissive), 1.0))
-    _set_input(node, ("Emission Strength",), 1.0)
-    _set_input(node, ("Roughness",), roughness)
-    _set_input(node, ("Specular IOR Level", "Specular"), min(1.0, sum(s.specular) / 3.0))
-    _set_input(node, ("Metallic",), s.reflectivity)
-    _set_input(node, ("Transmission Weight", "Transmission"), s.transparency)
-    _set_input(node, ("IOR",), min(100.0, 1.0 / max(s.speed_of_light, 1e-6)))
 
 
-def set_material(material, sdl_material) -> None:
+def set_material(material, sdl_material, before=None, writer: "Optional[PrincipledWriter]" = None) -> None:
     """Fill ``material.sdl`` from a tracer Material, keeping the exact values (the Principled BSDF synced
-    once, not once a property)."""
+    once, not once a property).  ``before``: the tracer Material ``material`` already holds (it is a copy of
+    the one made from it): only the fields that differ are set."""
     key = material.as_pointer()
     _filling.add(key)
     try:
-        _fill_sdl(material, sdl_material)
+        _fill_sdl(material, sdl_material, before)
     finally:
         _filling.discard(key)
-    apply_principled(material, take_edits=False)  # the diffuse just set wins over an older Base Color edit
+    # (the diffuse just set wins over an older Base Color edit)
+    apply_principled(material, take_edits=False, writer=writer)
 
 
-def _fill_sdl(material, sdl_material) -> None:
+def _fill_sdl(material, sdl_material, before=None) -> None:
     s = material.sdl
-    for name in COLOR_FIELDS:
-        setattr(s, name, getattr(sdl_material, name))
-    for name in FLOAT_FIELDS:
-        setattr(s, name, getattr(sdl_material, name))
-    s.texture = int(sdl_material.texture)
     params = tuple(sdl_material.parameters)[:MAX_PARAMETERS]
-    s.parameter_count = len(params)
-    s.parameters = params + (0.0,) * (MAX_PARAMETERS - len(params))
-    s.use_sdl = True
+    padded = params + (0.0,) * (MAX_PARAMETERS - len(params))
     values = {name: getattr(sdl_material, name) for name in COLOR_FIELDS + FLOAT_FIELDS}
-    values["parameters"] = tuple(params) + (0.0,) * (MAX_PARAMETERS - len(params))
+    values["parameters"] = padded
+    if before is not None and material.get("sdl_exact") is not None and material.get("sdl_shown") is not None:
+        old = {name: getattr(before, name) for name in COLOR_FIELDS + FLOAT_FIELDS}
+        old_params = tuple(before.parameters)[:MAX_PARAMETERS]
+        old["parameters"] = old_params + (0.0,) * (MAX_PARAMETERS - len(old_params))
+        changed = [name for name in values if values[name] != old[name]]
+        for name in changed:
+            setattr(s, name, values[name])
+        if sdl_material.texture != before.texture:
+            s.texture = int(sdl_material.texture)
+        if len(params) != len(old_params):
+            s.parameter_count = len(params)
+        exact, shown = material["sdl_exact"], material["sdl_shown"]
+        for name in changed:
+            value = values[name]
+            exact[name] = [float(x) for x in (value if isinstance(value, (tuple, list)) else (value,))]
+            shown[name] = _shown(s, name)
+        return
+    for name in COLOR_FIELDS + FLOAT_FIELDS:
+        setattr(s, name, values[name])
+    s.texture = int(sdl_material.texture)
+    s.parameter_count = len(params)
+    s.parameters = padded
+    s.use_sdl = True
     store_exact(material, s, values)
 
 
-def material_to_sdl(material):
-    """The tracer Material for a Blender material (None: SDL's default material)."""
-    Material = deps.module("model").Material
+def material_to_sdl(material, warnings: Optional[list] = None):
+    """The tracer Material for a Blender material (None: SDL's default material): its SDL values where SDL
+    Material is ticked, else what its shader nodes make of it (blender_material; a picture on it is left
+    out here)."""
     if material is None:
         return Material()
     s = material.sdl
@@ -297,17 +398,18 @@ def material_to_sdl(material):
         values.update({name: exact_field(material, s, name)[0] for name in FLOAT_FIELDS})
         params = exact_field(material, s, "parameters")[: s.parameter_count]
         return Material(texture=int(s.texture), parameters=tuple(params), **values)
-    # A Blender material: its base colour as the diffuse colour, its emission as emissive.
-    node = _principled(material)
-    if node is not None:
-        base = tuple(_get_input(node, ("Base Color",), (0.8, 0.8, 0.8, 1.0)))[:3]
-        emission = tuple(_get_input(node, ("Emission Color", "Emission"), (0.0, 0.0, 0.0, 1.0)))[:3]
-        strength = float(_get_input(node, ("Emission Strength",), 1.0))
-        emissive = tuple(convert.shortest32(c * strength) for c in emission)
-    else:
-        base = tuple(material.diffuse_color)[:3]
-        emissive = (0.0, 0.0, 0.0)
-    return Material(diffuse=tuple(convert.shortest32(c) for c in base), emissive=emissive)
+    return blender_material(material, warnings)[0]
+
+
+def blender_material(material, warnings: Optional[list] = None):
+    """(tracer Material, shader_nodes.Picture or None) of a material traced by its shader nodes, by the rules
+    of addon/pure/whitted.py; the picture is an Image Texture's on its Base Color, which the caller numbers
+    (the Material's texture is 0 here)."""
+    fields = shader_nodes.material_fields(material, warnings)
+    image = fields.pop("image")
+    fields = {name: tuple(convert.shortest32(c) for c in value) if isinstance(value, tuple) else
+              (convert.shortest32(value) if isinstance(value, float) else value) for name, value in fields.items()}
+    return Material(**fields), image
 
 
 @bpy.app.handlers.persistent
@@ -323,6 +425,9 @@ def take_material_edits(scene, depsgraph) -> None:
 # World
 
 WORLD_FIELDS = ("background", "global_ambient", "min_reflectivity", "min_transparency")
+#: A Blender world's minReflectivity and minTransparency: every mirror and glass gets its rays (what is too
+#: faint to matter is left to the tracer's contribution cutoff).
+BLENDER_MIN_WEIGHT = 1e-3
 
 
 def apply_world_colors(world) -> None:
@@ -337,6 +442,8 @@ def apply_world_colors(world) -> None:
 
 def set_world(world, settings) -> None:
     s = world.sdl
+    s.use_sdl = True
+    s.smooth_terminator = bool(settings.smooth_terminator)
     s.background = settings.background
     s.global_ambient = settings.global_ambient
     s.min_reflectivity = settings.min_reflectivity
@@ -345,17 +452,20 @@ def set_world(world, settings) -> None:
     apply_world_colors(world)
 
 
-def world_settings(world, max_recursion_depth: int):
-    """Tracer Settings from a world (None: SDL's defaults) and the render settings' recursion depth."""
-    Settings = deps.module("model").Settings
-    if world is None:
-        return Settings(max_recursion_depth=max_recursion_depth)
+def world_settings(world, max_recursion_depth: int, warnings: Optional[list] = None):
+    """Tracer Settings from a world and the render settings' recursion depth: an SDL world's values, or a
+    Blender world's (none: black) as Cycles uses it, its colour the background and the ambient light."""
+    if world is None or not world.sdl.use_sdl:
+        color = shader_nodes.world_color(world, warnings) if world is not None else (0.0, 0.0, 0.0)
+        return Settings(global_ambient=color, background=color, min_reflectivity=BLENDER_MIN_WEIGHT,
+                        min_transparency=BLENDER_MIN_WEIGHT, max_recursion_depth=int(max_recursion_depth),
+                        smooth_terminator=True)
     s = world.sdl
     return Settings(global_ambient=tuple(exact_field(world, s, "global_ambient")),
                     background=tuple(exact_field(world, s, "background")),
                     min_reflectivity=exact_field(world, s, "min_reflectivity")[0],
                     min_transparency=exact_field(world, s, "min_transparency")[0],
-                    max_recursion_depth=int(max_recursion_depth))
+                    max_recursion_depth=int(max_recursion_depth), smooth_terminator=bool(s.smooth_terminator))
 
 
 # ---------------------------------------------------------------------------------------------------------

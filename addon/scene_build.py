@@ -8,7 +8,8 @@
   a CSG or a mesh.
 * Anything else that has geometry is traced as the triangles Blender makes of its evaluated mesh, one
   tracer mesh per material slot.
-* Lights become point lights at their position (sun lights far away against their direction).
+* Lights: see blender_lights (SDL's lights stay SDL's; Blender's are physical lights in Blender's units).
+* Materials: SDL's values where SDL Material is ticked, else the shader nodes' (shader_nodes, pure/whitted).
 * A material's texture above 0 is its own image (Material.sdl.image), numbered per image: its own number
   unless an earlier material's other image has it (two imported files may both use ``makePixmap 1``).
 """
@@ -23,13 +24,15 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import convert, deps, meshes, object_cache, props
+from . import blender_lights, images, meshes, object_cache, props
+from .pure import convert
+from .tracer import model
+from .tracer.shapes import KINDS
+from .tracer.model import FaceList, MeshData
 
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
-#: A sun light is put this far from the scene's origin, against its direction.
-SUN_DISTANCE = 1.0e6
 
 #: Custom properties on an imported object.
 OBJ_KIND, OBJ_PARAM, OBJ_FILE = "sdl_kind", "sdl_param", "sdl_mesh_file"
@@ -69,22 +72,34 @@ class SceneBuilder:
         self.mode = mode
         self.cache = object_cache.ObjectCache() if cache is None else cache
         self.to_target = np.eye(4) if to_target is None else np.asarray(to_target, dtype=np.float64)
-        self.model = deps.module("model")
+        self.model = model
         self.warnings: list[str] = []
         self._generic_cache: dict = {}
         #: id(shape) -> the Blender object's name, for each mesh shape (the exporter names mesh files by it)
         self.mesh_object_names: dict[int, str] = {}
         self._materials: dict = {}
         self._pixmaps: dict[str, int] = {}  # image file -> its texture number in the built scene
+        self._uv_materials: set[int] = set()  # materials whose picture is looked up through the UV map
 
     # -- helpers --------------------------------------------------------------------------------------
 
     def _material(self, material):
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
-            sdl_material = props.material_to_sdl(material)
+            if material is not None and not material.sdl.use_sdl:  # Blender's own: its shader nodes
+                sdl_material, picture = props.blender_material(material, self.warnings)
+                image = ""
+                if picture is not None:  # (a picture on Base Color, looked up through the UV map)
+                    self._uv_materials.add(key)
+                    sdl_material = dataclasses.replace(sdl_material, texture=1)
+                    image = picture.path
+                    if picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
+                        image = images.linear_copy(image)  # (as Cycles reads it; SDL keeps the file's values)
+            else:
+                sdl_material = props.material_to_sdl(material)
+                image = material.sdl.image if material is not None and material.sdl.image else ""
+                image = bpy.path.abspath(image, library=material.library) if image else ""
             if sdl_material.texture > 0:
-                image = bpy.path.abspath(material.sdl.image, library=material.library) if material.sdl.image else ""
                 if os.path.isfile(image):
                     number = self._pixmap_number(sdl_material.texture, image)
                 else:  # drawn with its own colours, as a lenient read draws it, and said
@@ -115,6 +130,8 @@ class SceneBuilder:
         return self.to_target @ world_matrix
 
     def _evaluated(self, obj):
+        if getattr(obj, "is_evaluated", False):  # (an instance's own object: its original may be its instancer)
+            return obj
         try:
             return obj.evaluated_get(self.depsgraph)
         except (RuntimeError, ReferenceError):
@@ -161,7 +178,7 @@ class SceneBuilder:
         if original.name in visiting:
             self.warnings.append(f"{original.name}: Boolean operands form a loop; traced as a mesh")
             return self.mesh_nodes(obj_eval, matrix_world, top_level)
-        info = self.generic(obj_eval, own)
+        info = self.generic(obj_eval, own) if own else None  # (an instance is not its instancer's shape)
         enabled = enabled_modifiers(original, self.mode) if info is not None else []
         if info is None or any(m.type != "BOOLEAN" for m in enabled):
             return self.mesh_nodes(obj_eval, matrix_world, top_level, own)
@@ -187,10 +204,8 @@ class SceneBuilder:
     def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info, own: bool = True):
         kind = info.kind
         shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval),
-                                 name=original.name)
-        if kind == "taperedCylinder":
-            shape.tapered_radius = info.param
-        if kind in self.model.POLYHEDRON_KINDS or kind in ("teapot", "mesh"):
+                                 parameters=info.parameters, name=original.name)
+        if KINDS[kind].family != "analytic":  # (polyhedra, the teapot, meshes)
             data = self.cache.get(obj_eval, "exact mesh", lambda: meshes.exact_mesh_data(info, original.data), own)
             if data is None:  # a mesh file that is gone: Blender's copy, in the mesh's own frame
                 data = self.cache.get(obj_eval, f"mesh {self.mode}",
@@ -202,12 +217,13 @@ class SceneBuilder:
             self.mesh_object_names[id(shape)] = original.name
         return shape
 
-    def _blender_mesh(self, mesh, name: Optional[str] = None) -> dict:
-        """A Blender mesh as tracer meshes, one per material: polygons for export, else triangles."""
+    def _blender_mesh(self, mesh, name: Optional[str] = None, uvs: bool = False) -> dict:
+        """A Blender mesh as tracer meshes, one per material: polygons for export, else triangles (with their
+        corners' UVs where ``uvs``)."""
         name = mesh.name if name is None else name
-        return polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, name)
+        return polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, name, uvs)
 
-    def _evaluated_mesh(self, obj_eval) -> dict:
+    def _evaluated_mesh(self, obj_eval, uvs: bool = False) -> dict:
         """_blender_mesh of the object's evaluated geometry (modifiers applied; curves and text as meshes)."""
         try:
             mesh = obj_eval.to_mesh()
@@ -216,7 +232,7 @@ class SceneBuilder:
         if mesh is None:
             return {}
         try:
-            return self._blender_mesh(mesh, obj_eval.name)
+            return self._blender_mesh(mesh, obj_eval.name, uvs)
         finally:
             obj_eval.to_mesh_clear()
 
@@ -225,7 +241,12 @@ class SceneBuilder:
             return []
         if not self._usable(matrix_world, obj_eval.name):
             return []
-        parts = self.cache.get(obj_eval, f"evaluated mesh {self.mode}", lambda: self._evaluated_mesh(obj_eval), own)
+        # (the UV map is read only for a material with a picture on it)
+        uvs = any(self._material(slot.material) is not None and
+                  (slot.material.as_pointer() if slot.material is not None else 0) in self._uv_materials
+                  for slot in obj_eval.material_slots)
+        kind = f"evaluated mesh {self.mode}" + (" with UVs" if uvs else "")
+        parts = self.cache.get(obj_eval, kind, lambda: self._evaluated_mesh(obj_eval, uvs), own)
         shapes = []
         for index, data in sorted(parts.items()):
             shapes.append(self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=data,
@@ -244,50 +265,51 @@ class SceneBuilder:
     # -- the scene ------------------------------------------------------------------------------------
 
     def light(self, obj_eval, matrix_world: np.ndarray):
-        data = obj_eval.data
-        position = matrix_world[:3, 3].copy()
-        exact, shown = obj_eval.original.get("sdl_position"), obj_eval.original.get("sdl_position_shown")
-        if exact is not None and shown is not None and [float(v) for v in position] == list(shown):
-            position = np.array(list(exact), dtype=np.float64)
-        if data.type == "SUN":
-            direction = -matrix_world[:3, 2]
-            direction /= max(np.linalg.norm(direction), 1e-300)
-            position = -SUN_DISTANCE * direction
-        position = (self.to_target @ np.append(position, 1.0))[:3]
-        return self.model.Light(tuple(float(v) for v in position), props.light_color(data))
+        samples = self.depsgraph.scene.sdl_render.light_samples if hasattr(self.depsgraph.scene, "sdl_render") else 16
+        return blender_lights.tracer_light(obj_eval, matrix_world, self.to_target, samples, self.warnings)
 
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
         """The tracer Scene of everything the depsgraph shows (its object instances)."""
         model = self.model
-        objects, lights = [], []
-        entries = []
+        # (sort key, what it made): import order first (so that files round-trip in their own order), then by
+        # name, then as the depsgraph listed them
+        made: list[tuple[tuple, list]] = []
+        lights: list[tuple[tuple, object, np.ndarray]] = []
+        later: list[tuple[tuple, object, np.ndarray]] = []
         self.cache.begin_build(self.depsgraph)
-        for inst in (instances if instances is not None else self.depsgraph.object_instances):
-            obj = inst.instance_object if inst.is_instance else inst.object
+        for count, inst in enumerate(instances if instances is not None else self.depsgraph.object_instances):
+            obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
             original = obj.original
             if skip_hidden_render and original.hide_render:
                 continue
+            if not inst.is_instance and not getattr(inst, "show_self", True):
+                continue  # an instancer that does not show itself (Show Instancer off; particles, vertices...)
             if selected_only and not (inst.is_instance and inst.parent and inst.parent.original.select_get()) \
                     and not original.select_get():
                 continue
-            # An instance whose original is its instancer was made by geometry nodes: not that object's mesh.
-            own = not inst.is_instance or inst.parent is None or \
-                original.as_pointer() != inst.parent.original.as_pointer()
-            entries.append((obj, matrix_np(inst.matrix_world), own))
-        # Import order first (so that files round-trip in their own order), then by name.
-        entries.sort(key=lambda e: (e[0].original.get(OBJ_ORDER, math.inf), e[0].original.name))
-        shape_entries = []
-        for obj, matrix, own in entries:
+            key = (original.get(OBJ_ORDER, math.inf), original.name, count)
+            matrix = matrix_np(inst.matrix_world)
+            # An instance whose original is its instancer was made by geometry nodes: its geometry is not that
+            # object's, and only ``inst.object`` carries it, until the iteration moves on: made now.
+            if inst.is_instance and inst.parent is not None and \
+                    original.as_pointer() == inst.parent.original.as_pointer():
+                if obj.type in GEOMETRY_TYPES:
+                    made.append((key, self.object_node(obj, matrix, own=False)))
+                continue
+            stable = inst.instance_object if inst.is_instance else obj  # (the instanced object itself)
             if obj.type == "LIGHT":
-                lights.append(self.light(obj, matrix))
+                lights.append((key, stable, matrix))
             elif obj.type in GEOMETRY_TYPES:
-                shape_entries.append((obj, matrix, own))
-        for obj, matrix, own in shape_entries:
-            objects.extend(self.object_node(obj, matrix, own=own))
+                later.append((key, stable, matrix))
+        for key, obj, matrix in later:
+            made.append((key, self.object_node(obj, matrix)))
+        made.sort(key=lambda entry: entry[0])
+        objects = [node for _, nodes in made for node in nodes]
+        lights = [self.light(obj, matrix) for _, obj, matrix in sorted(lights, key=lambda entry: entry[0])]
         self.cache.end_build()
         world = scene.world
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
-                                        if hasattr(scene, "sdl_render") else 3)
+                                        if hasattr(scene, "sdl_render") else 3, self.warnings)
         tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
         tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
         return tracer_scene
@@ -295,7 +317,6 @@ class SceneBuilder:
 
 def polygon_meshes(mesh) -> dict:
     """The mesh's polygons with corner normals, one tracer MeshData per material index (for export)."""
-    MeshData = deps.module("model").MeshData
     count = len(mesh.polygons)
     if count == 0:
         return {}
@@ -327,7 +348,6 @@ def polygon_meshes(mesh) -> dict:
 def merge_mesh_data(parts, MeshData):
     """One MeshData from parts that share their vertex array (the pieces of one mesh)."""
     vertices = parts[0].vertices
-    FaceList = deps.module("model").FaceList
     if all(isinstance(p.faces, FaceList) and p.normals is parts[0].normals for p in parts):
         # triangle_meshes' parts: one normal array too, so their faces are simply put together
         faces = FaceList(*(np.concatenate([getattr(p.faces, name) for p in parts])

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import bpy
 
+from . import blender_lights, meshes, object_cache, props, scene_build
 from .engine import ENGINE_ID
 
 
@@ -42,6 +43,7 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         row = sub.row()
         row.active = settings.sampling == "ADAPTIVE"
         row.prop(settings, "threshold")
+        layout.column().prop(settings, "light_samples")
         layout.column().prop(settings, "target_error")
         # Blender's own switch (Cycles shows it under Performance): keep this engine between final renders,
         # so that F12 after moving a light or editing a material rebuilds only what changed.
@@ -77,26 +79,35 @@ class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
 
 
 class SDL_PT_light(_PropertiesPanel, bpy.types.Panel):
-    """What the engine uses of a light: its colour times its power, as an SDL point light's colour."""
+    """What the engine makes of a light: an imported SDL light keeps SDL's meaning (colour x power / 1000 W,
+    no falloff); any other is a physical light in Blender's units, with its extent (soft shadows)."""
     bl_idname = "SDL_PT_light"
     bl_label = "SDL Light"
     bl_context = "data"
     COMPAT_ENGINES = {ENGINE_ID}
+    #: Per Blender light type, the settings that shape it for the tracer.
+    SHAPE = {"POINT": ("shadow_soft_size",), "SPOT": ("shadow_soft_size", "spot_size", "spot_blend"),
+             "SUN": ("angle",), "AREA": ("shape", "size", "size_y")}
 
     @classmethod
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
 
     def draw(self, context):
-        from . import props
-
         layout = self.layout
         layout.use_property_split = True
         light = context.light
         layout.prop(light, "color")
         layout.prop(light, "energy", text="Strength" if light.type == "SUN" else "Power")
-        rgb = props.light_color(light)
-        layout.label(text="SDL light colour: " + " ".join(f"{c:g}" for c in rgb), icon="LIGHT")
+        if blender_lights.is_sdl_light(light):
+            rgb = props.light_color(light)
+            layout.label(text="SDL light colour: " + " ".join(f"{c:g}" for c in rgb), icon="LIGHT")
+            return
+        for name in self.SHAPE.get(light.type, ()):
+            if name == "size_y" and light.shape not in ("RECTANGLE", "ELLIPSE"):
+                continue
+            layout.prop(light, name, text="Radius" if name == "shadow_soft_size" else None)
+        layout.prop(context.scene.sdl_render, "light_samples")
 
 
 class SDL_PT_world(_PropertiesPanel, bpy.types.Panel):
@@ -108,12 +119,18 @@ class SDL_PT_world(_PropertiesPanel, bpy.types.Panel):
     def poll(cls, context):
         return context.world is not None
 
+    def draw_header(self, context):
+        self.layout.prop(context.world.sdl, "use_sdl", text="")
+
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
         s = context.world.sdl
-        for name in ("background", "global_ambient", "min_reflectivity", "min_transparency"):
-            layout.prop(s, name)
+        col = layout.column()
+        col.active = s.use_sdl
+        for name in ("background", "global_ambient", "min_reflectivity", "min_transparency", "smooth_terminator"):
+            col.prop(s, name)
+
 
 
 class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
@@ -127,8 +144,6 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
         return obj is not None and obj.type == "MESH"
 
     def draw(self, context):
-        from . import meshes, scene_build
-
         obj = context.object
         info = meshes.cached_generic_info(obj.data)  # hashes the mesh only after it changed
         layout = self.layout
@@ -136,7 +151,7 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
             text = "Edited generic shape: traced as a mesh" if "sdl_kind" in obj.data else "Traced as a mesh"
             layout.label(text=text, icon="MESH_DATA")
             return
-        label = info.kind + (f" {info.param:g}" if info.kind == "taperedCylinder" else "")
+        label = " ".join([info.kind, *(f"{v:g}" for v in info.parameters)])
         # as the final render decides (scene_build.SceneBuilder.object_node)
         others = [m for m in scene_build.enabled_modifiers(obj) if m.type != "BOOLEAN"]
         if others:
@@ -154,8 +169,6 @@ CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_light, SDL_PT_world, SDL_PT_ob
 
 def _cache_handlers() -> tuple:
     """The handlers that keep the add-on's caches in step with Blender's data (panels' and engine's)."""
-    from . import meshes, object_cache
-
     return meshes.HANDLERS + object_cache.HANDLERS
 
 
@@ -167,8 +180,6 @@ def register() -> None:
 
 
 def unregister() -> None:
-    from . import meshes, object_cache
-
     for name, handler in _cache_handlers():
         handlers = getattr(bpy.app.handlers, name)
         while handler in handlers:

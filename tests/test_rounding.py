@@ -23,6 +23,7 @@ from hypothesis import given, settings, strategies as st
 
 from helpers import scaling, scene_of, shape, translation
 from tracer import native, numerics
+from tracer.native.tracer import NativeTracer
 from tracer.compile import compile_scene
 from tracer.trace import first_hits, occluded
 
@@ -40,11 +41,11 @@ def _hits(kind, origin, direction, backend, matrix=None):
     """(t, entering, unit normal) of every crossing of the whole line with one shape."""
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = TAPER
+        solid.parameters = (TAPER,)
     compiled = compile_scene(scene_of(solid))
     o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
     if backend == "c":
-        h = native.NativeTracer(compiled).object_hits(0, o, d)
+        h = NativeTracer(compiled).object_hits(0, o, d)
     else:
         h = compiled.objects[0].intersect(o[None], d[None])
     keep = np.isfinite(h.t[0])
@@ -326,9 +327,9 @@ def _spawn_from_hits(kind, matrix, generic_targets, distance, rng):
     each hit rays spawned outward and inward: none finds the surface it left."""
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = 0.5
+        solid.parameters = (0.5,)
     compiled = compile_scene(scene_of(solid))
-    core = native.NativeTracer(compiled) if native.load_error is None else None
+    core = NativeTracer(compiled) if native.load_error is None else None
     targets = generic_targets @ matrix[:3, :3].T + matrix[:3, 3]
     away = rng.normal(size=targets.shape)
     origins = targets + distance * away / np.linalg.norm(away, axis=1, keepdims=True)
@@ -417,10 +418,10 @@ def test_claimed_bounds_hold_against_the_oracle(kind, family, backend):
         world_d = matrix[:3, :3] @ direction
         solid = shape(kind, matrix)
         if kind == "taperedCylinder":
-            solid.tapered_radius = TAPER
+            solid.parameters = (TAPER,)
         compiled = compile_scene(scene_of(solid))
         if backend == "c":
-            h = native.NativeTracer(compiled).object_hits(0, world_o, world_d)
+            h = NativeTracer(compiled).object_hits(0, world_o, world_d)
         else:
             h = compiled.objects[0].intersect(world_o[None], world_d[None])
         keep = np.isfinite(h.t[0])
@@ -455,7 +456,7 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
     matrix = _affine(seed, 10.0 ** log_condition, size)
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = 0.5
+        solid.parameters = (0.5,)
     compiled = compile_scene(scene_of(solid))
     rng = np.random.default_rng(seed)
     targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))] @ matrix[:3, :3].T + matrix[:3, 3]
@@ -467,7 +468,7 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
         return
     lights = eyes[rows] + hit.t[rows, None] * (targets - eyes)[rows]
     normal = hit.normal[rows]
-    core = native.NativeTracer(compiled) if native.load_error is None else None
+    core = NativeTracer(compiled) if native.load_error is None else None
     for light, n in zip(lights, normal):
         w = rng.normal(size=(32, 3))
         w = np.where((w @ n < 0)[:, None], -w, w) + 0.2 * n * np.linalg.norm(w, axis=1, keepdims=True)
@@ -484,7 +485,7 @@ def test_a_feeler_is_blocked_before_a_light_on_a_surface_but_not_by_that_surface
     # from (0, 0, -3) it passes through the sphere first (blocked); the light 1e-12 inside the sphere is
     # blocked from above, and a light at (0, 0, 1 + 1e-15) from below.
     compiled = compile_scene(scene_of(shape("sphere")))
-    ask = (native.NativeTracer(compiled).occluded if backend == "c"
+    ask = (NativeTracer(compiled).occluded if backend == "c"
            else lambda o, d: occluded(compiled, np.asarray(o, float), np.asarray(d, float)))
     light = np.array([0.0, 0.0, 1.0])
     starts = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -3.0], [2.0, 0.5, 1.5], [0.3, -0.2, -2.0]])
@@ -554,7 +555,7 @@ def test_touching_pairs_count_only_where_proven(kind, matrix):
     # backends agree on every count, and the middle of every pair is inside the solid exactly.
     rng = np.random.default_rng(len(kind) + (0 if matrix is None else int(1 / matrix[0, 0])))
     compiled = compile_scene(scene_of(shape(kind, matrix)))
-    core = native.NativeTracer(compiled) if native.load_error is None else None
+    core = NativeTracer(compiled) if native.load_error is None else None
     linear = np.eye(3) if matrix is None else matrix[:3, :3]
     rays = _tube_tangent_rays(rng, 150) if kind == "torus" else _apex_rays(rng, 150)
     for origin, direction in rays:

@@ -57,7 +57,7 @@ def assert_same_scene(a: Scene, b: Scene, tol: float = 0.0, groups: bool = True)
             assert x.op == y.op
             pairs += [(x.left, y.left), (x.right, y.right)]
             continue
-        assert (x.kind, x.small_radius, x.material) == (y.kind, y.small_radius, y.material)
+        assert (x.kind, x.parameters, x.material) == (y.kind, y.parameters, y.material)
         error = float(np.max(np.abs(x.matrix - y.matrix)))
         assert error <= tol * max(1.0, float(np.max(np.abs(x.matrix)))), (x.kind, error)
         assert (x.mesh is None) == (y.mesh is None)
@@ -160,7 +160,7 @@ def random_objects(draw, depth=0):
     shape = Shape(kind, random_matrix(draw), draw(random_materials()),
                   groups=tuple(draw(st.lists(st.sampled_from(["jack", "arm", "x.y"]), max_size=3))))
     if kind == "taperedCylinder":
-        shape.tapered_radius = draw(st.floats(0, 3))
+        shape.parameters = (draw(st.floats(0, 3)),)
     if kind == "mesh":
         shape.mesh = TRIANGLES
     if kind == "octahedron":
@@ -467,11 +467,10 @@ def test_foreign_stage_materials_lights_and_camera(foreign):
     assert by_kind["sphere"].material.diffuse == (0.0, 1.0, 0.0)  # displayColor, no material bound
     assert by_kind["mesh"].material == Material()  # nothing said: SDL's defaults
     key, sun = scene.lights
-    assert key == Light(z_up((0.0, -10.0, 10.0)), (1.0, 1.0, 1.0))
-    assert sun.color == (0.5, 0.5, 0.5)
-    # the sun shines along the stage's -y: it is far away towards its +y
-    far = Z_UP.T @ np.asarray(sun.position)  # back in the stage's frame
-    assert far[1] > 1e5 and abs(far[0]) < 1e-4 * far[1] and abs(far[2]) < 1e-4 * far[1]
+    assert key == Light(z_up((0.0, -10.0, 10.0)), (1.0, 1.0, 1.0), name="Key")  # (named as its prim)
+    assert (sun.kind, sun.name, sun.color, sun.angle) == ("sun", "Sun", (0.5, 0.5, 0.5), 0.0)
+    # the sun shines along the stage's -y
+    np.testing.assert_allclose(Z_UP.T @ np.asarray(sun.direction), (0.0, -1.0, 0.0), atol=1e-12)
     camera = scene.camera  # at the stage's z = 30 looking down its -z, its +y up
     assert camera.eye == z_up((0.0, 0.0, 30.0)) and camera.look == z_up((0.0, 0.0, 29.0))
     assert camera.up == z_up((0.0, 1.0, 0.0))
@@ -592,7 +591,7 @@ def test_foreign_plane_and_tapered_cylinder(tmp_path):
     stage.GetRootLayer().Export(str(path))
     scene = load_usd(path)
     wall, cone = scene.shapes()
-    assert wall.kind == "square" and cone.kind == "taperedCylinder" and cone.tapered_radius == 0.5
+    assert wall.kind == "square" and cone.kind == "taperedCylinder" and cone.parameters == (0.5,)
     assert ray_hits(scene, (1.9, 5, 2.9), (0, -1, 0)) == [(5, True, "square"), (5, False, "square")]  # a sheet
     assert ray_hits(scene, (2.1, 5, 0), (0, -1, 0)) == [] and ray_hits(scene, (0, 5, 3.1), (0, -1, 0)) == []
     # the frustum: z from 18 (radius 2) to 22 (radius 1); at z = 20 the radius is 1.5

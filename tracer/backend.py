@@ -12,31 +12,21 @@ from __future__ import annotations
 import warnings
 from typing import Optional
 
-from .compile import CompiledScene, boolean_depth
+from .compile import MAX_CSG_DEPTH, CompiledScene, boolean_depth
 from .errors import FallbackWarning, TracerError
-from .model import CSG, Scene, ShapeTable
 from .savings import RaySavings
 from .trace import Tracer
 
 BACKENDS = ("auto", "c", "numpy")
 
-#: The deepest nesting of booleans any backend traces.  The C core evaluates a boolean tree recursively,
-#: about 100 bytes of a worker's stack per level; the NumPy path walks it iteratively but its time grows with
-#: pixels x depth (5,000 levels at 64x48: 48 s), so a deeper tree (only ever seen in generated or hostile
-#: files) is refused up front rather than traced for hours.
-MAX_CSG_DEPTH = 2000
-
-
-def check_boolean_depth(scene: Scene) -> None:
-    """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep."""
-    if isinstance(scene.objects, ShapeTable) and scene.objects.columns is not None:
-        return  # (a table's rows are shapes: looking would make them into Shape objects for nothing)
-    for obj in scene.objects:
-        if not isinstance(obj, CSG):
-            continue
-        depth = boolean_depth(obj)
+def check_boolean_depth(compiled: CompiledScene) -> None:
+    """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep.  (Read from
+    the compiled booleans: a scene of 10^5 plain shapes is not walked again before every render.)"""
+    for k in sorted(compiled.objects.booleans):
+        depth = boolean_depth(compiled.objects.booleans[k])
         if depth > MAX_CSG_DEPTH:
-            where = f"{obj.source}: " if obj.source is not None else ""
+            obj = compiled.scene.objects[k]
+            where = f"{obj.source}: " if getattr(obj, "source", None) is not None else ""
             raise TracerError(f"{where}{obj.op}: booleans nested {depth} deep; the tracer follows at most "
                               f"{MAX_CSG_DEPTH}")
 
@@ -46,7 +36,8 @@ def load_core(backend: str = "auto") -> None:
     timing a render does not count a one-off compile as render time.  Problems surface later, in make_tracer."""
     if backend in ("auto", "c"):
         try:
-            from . import native  # noqa: F401  (importing loads or builds the library)
+            # deferred: importing loads (in a checkout: builds) the library, which only a C render wants
+            from . import native  # noqa: F401
         except ImportError:
             pass
 
@@ -59,10 +50,10 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
         raise TracerError(f"threads must be 1 or more, not {threads}")
     if backend not in BACKENDS:
         raise TracerError(f"unknown backend {backend!r} (use one of {', '.join(BACKENDS)})")
-    check_boolean_depth(compiled.scene)
+    check_boolean_depth(compiled)
     if backend in ("auto", "c"):
         try:
-            from .native import NativeTracer
+            from .native.tracer import NativeTracer  # deferred: (loads the C core, as in load_core)
         except ImportError:  # no C core in this source tree at all: NumPy is simply the backend
             if backend == "c":
                 raise TracerError("the C core is not part of this installation") from None

@@ -7,6 +7,7 @@ coordinates (column vectors: ``world = matrix @ generic``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from itertools import repeat
 from pathlib import Path
 from collections.abc import MutableSequence, Sequence
 from typing import Optional, Union
@@ -14,7 +15,10 @@ from typing import Optional, Union
 import numpy as np
 
 from . import shapes
+from .bulk import collector_paused
 from .errors import SceneError
+from .geometry import builtin_mesh
+from .meshdata import FaceList, MeshData
 from .shapes import TORUS_TUBE_RADIUS  # noqa: F401 - part of the model's vocabulary
 
 Color = tuple[float, float, float]
@@ -26,6 +30,8 @@ ANALYTIC_KINDS = shapes.keywords("analytic")
 POLYHEDRON_KINDS = shapes.keywords("polyhedron")
 #: Shapes made of triangles.
 MESH_KINDS = shapes.keywords("mesh")
+#: Kinds whose shapes hold the kind's own mesh (tracer.geometry.builtin_mesh): the polyhedra and the teapot.
+BUILTIN_MESH_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.builtin_mesh)
 SHAPE_KINDS = shapes.keywords()
 
 
@@ -169,150 +175,20 @@ class MaterialRows(Sequence):
         return MaterialRows, (self.rows,)
 
 
-class FaceList(Sequence):
-    """Polygons kept as three flat arrays instead of a list of tuples (how big meshes are read: a million
-    faces as tuples would take ~300 MB and seconds to make).  It reads like the list: item k is
-    ``(vertex indices, normal indices)`` of face k, as tuples of ints.
-
-    ``sizes`` (F,) corners per face; ``vertex_index`` (sum of sizes,) every face's vertex indices, face
-    after face; ``normal_index`` the same for normals, or None when no face has normals (or the very same
-    array as ``vertex_index`` when corner k of every face uses normal k of its vertex: one array, not two).
-    Faces that all have one size (a triangle or quad mesh) keep only that size: ``sizes`` and ``offsets``
-    are then made when asked for.
-    """
-
-    def __init__(self, sizes, vertex_index, normal_index=None):
-        shared = normal_index is not None and normal_index is vertex_index
-        self.vertex_index = np.asarray(vertex_index).reshape(-1)
-        self.normal_index = (None if normal_index is None else self.vertex_index if shared
-                             else np.asarray(normal_index).reshape(-1))
-        sizes = np.asarray(sizes, dtype=np.int64).reshape(-1)
-        self._count = len(sizes)
-        self._uniform = int(sizes[0]) if len(sizes) and (sizes == sizes[0]).all() else None
-        self._sizes = None if self._uniform is not None else sizes
-        self._offsets = None if self._uniform is not None else np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        total = self._count * self._uniform if self._uniform is not None else self._offsets[-1]
-        if total != len(self.vertex_index) or (
-                self.normal_index is not None and len(self.normal_index) != len(self.vertex_index)):
-            raise ValueError("face sizes do not match the number of indices")
-
-    @property
-    def sizes(self) -> np.ndarray:
-        return np.full(self._count, self._uniform, dtype=np.int64) if self._sizes is None else self._sizes
-
-    @property
-    def offsets(self) -> np.ndarray:
-        """(F + 1,) where each face's indices start, and the total."""
-        if self._offsets is None:
-            return np.arange(self._count + 1, dtype=np.int64) * self._uniform
-        return self._offsets
-
-    @property
-    def uniform_size(self) -> Optional[int]:
-        """The corner count of every face when they all have the same, else None."""
-        return self._uniform
-
-    def all_triangles(self) -> bool:
-        return self._count == 0 or self._uniform == 3
-
-    def arrays(self) -> list[np.ndarray]:
-        """The arrays this list keeps (each once)."""
-        kept = [self.vertex_index] + [a for a in (self._sizes, self._offsets) if a is not None]
-        return kept + ([] if self.normal_index is None or self.normal_index is self.vertex_index
-                       else [self.normal_index])
-
-    def __len__(self) -> int:
-        return self._count
-
-    def __getitem__(self, k):
-        if isinstance(k, slice):
-            return [self[i] for i in range(*k.indices(len(self)))]
-        k = range(len(self))[k]  # negative indices, IndexError
-        if self._uniform is not None:
-            a, b = k * self._uniform, (k + 1) * self._uniform
-        else:
-            a, b = int(self._offsets[k]), int(self._offsets[k + 1])
-        verts = tuple(self.vertex_index[a:b].tolist())
-        return verts, (() if self.normal_index is None else tuple(self.normal_index[a:b].tolist()))
-
-    def __iter__(self):
-        verts = self.vertex_index.tolist()
-        norms = None if self.normal_index is None else self.normal_index.tolist()
-        bounds = self.offsets.tolist()
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            yield tuple(verts[a:b]), (() if norms is None else tuple(norms[a:b]))
-
-    def __eq__(self, other) -> bool:
-        if isinstance(other, FaceList):
-            return (np.array_equal(self.sizes, other.sizes) and np.array_equal(self.vertex_index, other.vertex_index)
-                    and (self.normal_index is None) == (other.normal_index is None)
-                    and (self.normal_index is None or np.array_equal(self.normal_index, other.normal_index)))
-        try:
-            return len(self) == len(other) and all(a == tuple(map(tuple, b)) for a, b in zip(self, other))
-        except TypeError:
-            return NotImplemented
-
-    __hash__ = None
-
-    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """MeshData.triangles() for these faces, without a Python loop over them."""
-        fans = np.maximum(self.sizes - 2, 0)
-        face = np.repeat(np.arange(len(self.sizes)), fans)
-        k = np.arange(len(face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. size - 2 in each face
-        start = self.offsets[:-1][face]
-        corners = np.stack([start, start + k, start + k + 1], axis=1)
-        tri_v = self.vertex_index[corners].astype(np.int64)
-        tri_n = (np.full(tri_v.shape, -1, dtype=np.int64) if self.normal_index is None
-                 else self.normal_index[corners].astype(np.int64))
-        return tri_v.reshape(-1, 3), tri_n.reshape(-1, 3)
-
-
-@dataclass
-class MeshData:
-    """A polygon mesh in generic coordinates.
-
-    ``faces`` holds, per polygon, its vertex indices and its normal indices (same length, 0-based),
-    as the ``.3vn`` format does.  ``normals`` may be empty: then flat face normals are used.
-    """
-
-    vertices: np.ndarray  # (V, 3) float64
-    normals: np.ndarray  # (N, 3) float64
-    faces: Union[list[tuple[tuple[int, ...], tuple[int, ...]]], FaceList]
-    #: Where the data came from (a file path, or e.g. "built-in:icosahedron").
-    origin: str = ""
-    #: Texture coordinates per face corner, (C, 2) float64, or None: the corners of face 0, then of face 1,
-    #: ... (C = the sum of the faces' sizes; Blender's loop UVs).  An image texture on a mesh that has them is
-    #: looked up at the (u, v) interpolated at the hit, instead of the shape's own mapping.
-    corner_uvs: Optional[np.ndarray] = None
-
-    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""
-        if isinstance(self.faces, FaceList):
-            return self.faces.triangles()
-        tri_v: list[tuple[int, int, int]] = []
-        tri_n: list[tuple[int, int, int]] = []
-        for verts, norms in self.faces:
-            norms = tuple(norms) if len(norms) == len(verts) else (-1,) * len(verts)
-            for k in range(1, len(verts) - 1):
-                tri_v.append((verts[0], verts[k], verts[k + 1]))
-                tri_n.append((norms[0], norms[k], norms[k + 1]))
-        return (np.asarray(tri_v, dtype=np.int64).reshape(-1, 3),
-                np.asarray(tri_n, dtype=np.int64).reshape(-1, 3))
-
-
 @dataclass(slots=True)  # slots: a scene may hold 10^6 shapes, and a __dict__ each would add 160 bytes to each
 class Shape:
     """One generic shape placed in the world.
 
     ``kind`` is the SDL keyword (``cylinder`` and ``cone`` stay themselves so that they are written back
-    as they were read; :attr:`small_radius` gives their taper).  ``mesh`` is filled for polyhedra, the
+    as they were read).  ``parameters`` are the numbers its keyword takes (tracer.shapes: the kind's
+    Parameters, in SDL order; its defaults when none are given).  ``mesh`` is filled for polyhedra, the
     teapot and meshes; ``mesh_file`` keeps the file name a ``mesh`` statement gave.
     """
 
     kind: str
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     material: Material = field(default_factory=Material)
-    tapered_radius: float = 1.0  # only for taperedCylinder
+    parameters: tuple[float, ...] = ()
     mesh: Optional[MeshData] = None
     mesh_file: Optional[str] = None
     #: Names of the def macros this shape was made inside, outermost first (for grouping in Blender).
@@ -322,8 +198,11 @@ class Shape:
     name: Optional[str] = None
 
     def __post_init__(self) -> None:
-        if self.kind not in SHAPE_KINDS:
+        arity = _ARITY.get(self.kind)
+        if arity is None:
             raise SceneError(f"unknown shape kind {self.kind!r}")
+        if type(self.parameters) is not tuple or len(self.parameters) != arity:
+            self.parameters = _parameters_of(self.kind, self.parameters)
         matrix = np.array(self.matrix, dtype=np.float64)  # a copy of its own
         # (16 numbers are reshaped and copied again: a reshaped view would keep a second array per shape.)
         self.matrix = matrix if matrix.shape == (4, 4) else matrix.reshape(4, 4).copy()
@@ -334,20 +213,30 @@ class Shape:
         if not isinstance(other, Shape):
             return NotImplemented
         return (self.kind == other.kind and np.array_equal(self.matrix, other.matrix)
-                and self.material == other.material and self.tapered_radius == other.tapered_radius
+                and self.material == other.material and self.parameters == other.parameters
                 and _same_mesh(self.mesh, other.mesh) and self.mesh_file == other.mesh_file
                 and self.groups == other.groups and self.source == other.source and self.name == other.name)
 
     __hash__ = None  # (mutable)
 
     @property
-    def small_radius(self) -> float:
-        """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
-        return {"cylinder": 1.0, "cone": 0.0}.get(self.kind, self.tapered_radius)
-
-    @property
     def inverse(self) -> np.ndarray:
         return np.linalg.inv(self.matrix)
+
+
+#: How many parameters each kind's keyword takes.
+_ARITY = {e.keyword: len(e.parameters) for e in shapes.REGISTRY}
+
+
+def _parameters_of(kind: str, given) -> tuple[float, ...]:
+    """A shape's parameters as floats: the kind's defaults for none, else exactly as many as it takes."""
+    entry = shapes.KINDS[kind]
+    values = tuple(float(v) for v in given) if given is not None else ()
+    if not values:
+        return entry.defaults
+    if len(values) != len(entry.parameters):
+        raise SceneError(f"{kind} takes {len(entry.parameters)} parameter(s), not {len(values)}")
+    return values
 
 
 def _same_mesh(a: Optional[MeshData], b: Optional[MeshData]) -> bool:
@@ -374,7 +263,7 @@ class ShapeColumns:
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
     materials: Sequence[Material]  # a tuple, or a MaterialRows
-    tapered_radii: np.ndarray  # (N,) float64
+    parameters: np.ndarray  # (N, shapes.MAX_PARAMETERS) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
     file: Optional[str] = None
@@ -390,38 +279,50 @@ class ShapeColumns:
         kind = _KEYWORD_OF_CODE[self.kinds[i]]
         matrix = matrices_of_affines(self.affines[i:i + 1])[0]
         mesh = None
-        if kind in POLYHEDRON_KINDS or kind == "teapot":
-            from .geometry import builtin_mesh
+        if kind in BUILTIN_MESH_KINDS:
             mesh = builtin_mesh(kind)
-        return Shape(kind, matrix, self.materials[self.material_ids[i]], float(self.tapered_radii[i]), mesh,
+        return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]), mesh,
                      None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
                      None if self.names is None else self.names.get(i))
 
     def shapes(self) -> list[Shape]:
         """Every row's Shape, in order (as shape() makes them; a chunk of rows' matrices at a time, with the
         collector paused: a million new objects would otherwise run it hundreds of times)."""
-        from .bulk import collector_paused
-        from .geometry import builtin_mesh
         used = set(np.unique(self.kinds).tolist())
-        meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
+        meshes = {kind: builtin_mesh(kind) for kind in BUILTIN_MESH_KINDS if _KIND_CODE[kind] in used}
         names = self.names or {}
+        with_parameters = any(_ARITY[_KEYWORD_OF_CODE[code]] for code in used)
         out: list[Shape] = []
         with collector_paused():
             for start in range(0, len(self), _ROWS_AT_ONCE):
                 rows = slice(start, start + _ROWS_AT_ONCE)
                 matrices = matrices_of_affines(self.affines[rows])
-                for i, (kind, matrix, material, taper, line, column) in enumerate(zip(
-                        map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()), matrices,
-                        map(self.materials.__getitem__, self.material_ids[rows].tolist()),
-                        self.tapered_radii[rows].tolist(), self.lines[rows].tolist(),
-                        self.columns[rows].tolist()), start):
-                    out.append(Shape(kind, matrix, material, taper, meshes.get(kind), None, (),
+                kinds = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()))
+                values = (map(tuple, map(list.__getitem__, self.parameters[rows].tolist(),
+                                         (slice(_ARITY[k]) for k in kinds))) if with_parameters else repeat(()))
+                for i, (kind, matrix, material, parameters, line, column) in enumerate(zip(
+                        kinds, matrices, map(self.materials.__getitem__, self.material_ids[rows].tolist()),
+                        values, self.lines[rows].tolist(), self.columns[rows].tolist()), start):
+                    out.append(Shape(kind, matrix, material, parameters, meshes.get(kind), None, (),
                                      SourceLocation(self.file, line, column), names.get(i)))
         return out
+
+    @staticmethod
+    def _parameters(kind: str, row: np.ndarray) -> tuple[float, ...]:
+        return tuple(row[:_ARITY[kind]].tolist())
 
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
 _ROWS_AT_ONCE = 1 << 15
+
+
+def parameter_rows(parameters: Sequence[tuple[float, ...]]) -> np.ndarray:
+    """(N, tracer.shapes.MAX_PARAMETERS) float64 rows of these shapes' parameters, 0 after each one's own."""
+    rows = np.zeros((len(parameters), shapes.MAX_PARAMETERS))
+    for i, values in enumerate(parameters):
+        if values:  # (most kinds take none)
+            rows[i, :len(values)] = values
+    return rows
 
 
 def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
@@ -465,7 +366,8 @@ class ShapeTable(MutableSequence):
     ``kinds`` (N,) int16, each shape's kind as its index in tracer.shapes.REGISTRY; ``affines`` (N, 12)
     float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1);
     ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects, or a MaterialRows);
-    ``tapered_radii`` (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
+    ``parameters`` (N, tracer.shapes.MAX_PARAMETERS) float64, each row's Shape.parameters and then anything
+    (a single column may be given as (N,)); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
     shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
     polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
     the arrays over: nobody may change them afterwards (compile_scene knows a table by its identity).  They,
@@ -477,7 +379,7 @@ class ShapeTable(MutableSequence):
     (:attr:`columns` is then None).  :meth:`shape_at` makes one Shape without making the rest.  Pickled and
     copied as the arrays while nothing has been made (scenes travel to Dask workers)."""
 
-    def __init__(self, kinds, affines, material_ids, materials, tapered_radii, lines, columns,
+    def __init__(self, kinds, affines, material_ids, materials, parameters, lines, columns,
                  file=None, names=None):
         kinds = np.asarray(kinds)
         n = len(kinds)
@@ -490,7 +392,7 @@ class ShapeTable(MutableSequence):
             raise ValueError("ShapeTable: a material id is not an index into materials")
         self._columns: Optional[ShapeColumns] = ShapeColumns(
             kinds, _read_only(affines, np.float64, (n, 12), "affines"), material_ids, materials,
-            _read_only(tapered_radii, np.float64, (n,), "tapered_radii"),
+            _read_only(parameters, np.float64, (n, shapes.MAX_PARAMETERS), "parameters"),
             _read_only(lines, np.int32, (n,), "lines"), _read_only(columns, np.int32, (n,), "columns"),
             file, None if names is None else dict(names))
         self._shapes: Optional[list[SceneObject]] = None
@@ -500,12 +402,11 @@ class ShapeTable(MutableSequence):
         """The table of these shapes' columns (shapes sharing a material object share its id).  Each must be
         a row a table can hold: no groups, no mesh file, its kind's built-in mesh or none, and all from one
         file; a ValueError says which is not."""
-        from .geometry import builtin_mesh
         n = len(shapes)
         files = {s.source.file for s in shapes if isinstance(s, Shape) and s.source is not None}
         for i, s in enumerate(shapes):
             if not isinstance(s, Shape) or s.groups or s.mesh_file is not None or s.source is None or (
-                    s.mesh is not (builtin_mesh(s.kind) if s.kind in POLYHEDRON_KINDS + ("teapot",) else None)) or (
+                    s.mesh is not (builtin_mesh(s.kind) if s.kind in BUILTIN_MESH_KINDS else None)) or (
                     np.asarray(s.matrix)[3].tolist() != [0.0, 0.0, 0.0, 1.0]):
                 raise ValueError(f"ShapeTable.of_shapes: object {i} cannot be a row of a table")
         if len(files) > 1:
@@ -519,7 +420,7 @@ class ShapeTable(MutableSequence):
         return cls(np.array([_KIND_CODE[s.kind] for s in shapes], dtype=np.int16).reshape(n),
                    np.array([np.asarray(s.matrix, dtype=np.float64)[:3].reshape(12) for s in shapes]).reshape(n, 12),
                    np.array([material_index[id(s.material)] for s in shapes], dtype=np.int32).reshape(n), materials,
-                   np.array([s.tapered_radius for s in shapes], dtype=np.float64).reshape(n),
+                   parameter_rows([s.parameters for s in shapes]),
                    np.array([s.source.line for s in shapes], dtype=np.int32).reshape(n),
                    np.array([s.source.column for s in shapes], dtype=np.int32).reshape(n),
                    files.pop() if files else None,
@@ -629,7 +530,7 @@ class ShapeTable(MutableSequence):
         c = self._columns
         if c is None:
             return ShapeTable._of_list, (self._shapes,)
-        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.tapered_radii, c.lines,
+        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.parameters, c.lines,
                             c.columns, c.file, c.names)
 
 
@@ -738,6 +639,8 @@ class Camera:
 #: a warning: each level adds at most 1/2^level-ish light in any physical scene, while an unbounded depth lets
 #: one file run a thread out of stack (the C core recurses about 1 KB per level) or for ever.
 MAX_RECURSION_DEPTH = 64
+#: How many nested transparent objects a ray remembers being inside (both tracers: a fixed-size stack per ray).
+MEDIA_DEPTH = 8
 
 
 def traced_depth(depth: int) -> int:

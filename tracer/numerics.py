@@ -56,16 +56,19 @@ def norm3(v: np.ndarray) -> np.ndarray:
     return np.where(plain, np.sqrt(squared), np.where(largest == 0.0, 0.0, rescaled))
 
 
-def feeler_to(starts: np.ndarray, targets: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def feeler_to(starts: np.ndarray, targets: np.ndarray,
+              lengths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Shadow feelers from ``starts`` (N, 3) to ``targets``: directions and the parameter t_max (N,) at which
-    each reaches its target.  Normally the direction is ``target - start`` and t_max 1; a feeler longer than
-    FEELER_REACH (by ``lengths``, the distances to the targets from the hit points the feelers start near)
-    is scaled by a power of two (exactly, so t_max is that power), so that no length, dot product or hit
-    time along it overflows (a light at 1e300)."""
+    each reaches its target.  Normally the direction is ``target - start`` and t_max 1; a feeler whose
+    largest component exceeds FEELER_REACH is scaled by a power of two (exactly, so t_max is that power), so
+    that no length, dot product or hit time along it overflows (a light at 1e300).  ``lengths``, where the
+    caller knows them (the distances to the targets from the hit points the feelers start near), spare the
+    look at the components below FEELER_REACH (the C core's feeler_to_known)."""
     directions = targets - starts
-    with np.errstate(invalid="ignore"):
-        largest = np.where(lengths > FEELER_REACH, np.max(np.abs(directions), axis=1), 0.0)
-    far = (largest > 0.0) & np.isfinite(largest)
+    largest = np.max(np.abs(directions), axis=1)
+    far = (largest > FEELER_REACH) & np.isfinite(largest)
+    if lengths is not None:
+        far &= lengths > FEELER_REACH
     t_max = np.ones(len(starts))
     if far.any():
         _, exponent = np.frexp(np.where(far, largest, 1.0))

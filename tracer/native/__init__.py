@@ -1,41 +1,34 @@
 """The C core: the per-ray work of tracer.trace.Tracer in C, on all cores, loaded with ctypes.
 
-``load_error`` is None when the library is built and loaded, else a short reason (no compiler, a
-compile error...); then :class:`NativeTracer` cannot be made and tracer.backend uses the NumPy path.
-An installed package loads the library CMake built for it; a checkout compiles it on first import when
-missing or out of date (see :mod:`tracer.native.build`).
+This package's own module is the library: loaded (and checked against tracer/native/contract.py) on
+import, with the C readers and builders the lower layers use (:func:`scan_numbers` and :func:`scan_3vn` for
+the readers, :func:`build_mesh_bvh` for tracer.compile).  ``load_error`` is None when the library is built
+and loaded, else a short reason (no compiler, a compile error...); then the C core's tracer cannot be made
+and tracer.backend uses the NumPy path.  An installed package loads the library CMake built for it; a
+checkout compiles it on first import when missing or out of date (see :mod:`tracer.native.build`).
 
-:class:`NativeTracer` is a backend (see tracer.backend): ``name``, ``counts``, ``camera_rays``.  It also
-answers the queries the tests compare with the NumPy path: :meth:`NativeTracer.object_hits` (whole-line
-hits of one top-level object, as ``obj.intersect``), :meth:`NativeTracer.first_hits`,
-:meth:`NativeTracer.occluded` and :meth:`NativeTracer.texture_colors`.
+The C core as a backend, tracing compiled scenes, is :class:`tracer.native.tracer.NativeTracer` (with
+:mod:`tracer.native.flatten`, which lays a compiled scene out for it): a layer above tracer.compile and
+tracer.trace, which this module is below.
 """
 from __future__ import annotations
 
 import ctypes
 import os
-from dataclasses import fields
 from typing import BinaryIO, Optional
 
 import numpy as np
 
-from ..compile import CompiledScene
 from ..errors import TracerError
-from ..intersect.hits import HitArrays
-from ..savings import RaySavings, sealed_lights
-from ..trace import RayCounts
-from . import contract, flatten
+from ..intersect.mesh import NODE
+from ..threads import default_threads
 from . import build as _builder
+from . import contract
 from .build import BuildError
 
 _lib: Optional[ctypes.CDLL] = None
 load_error: Optional[str] = None
 
-_dp = ctypes.POINTER(ctypes.c_double)
-_i8p = ctypes.POINTER(ctypes.c_int8)
-_i32p = ctypes.POINTER(ctypes.c_int32)
-_i64p = ctypes.POINTER(ctypes.c_int64)
-_u8p = ctypes.POINTER(ctypes.c_uint8)
 
 
 #: A library file to load instead of looking for one ($SDL_TRACER_LIBRARY; make sanitize uses it).
@@ -62,101 +55,50 @@ def _load() -> ctypes.CDLL:
 
 
 def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
-    """Declares the functions' types and checks that the library speaks this contract."""
-    lib.rt_desc_size.restype = ctypes.c_int64
-    lib.rt_desc_size.argtypes = []
-    lib.rt_create.restype = ctypes.c_void_p
-    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_char_p, ctypes.c_int64]
-    lib.rt_create_threaded.restype = ctypes.c_void_p
-    lib.rt_create_threaded.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_int64, ctypes.c_char_p,
-                                       ctypes.c_int64]
-    lib.rt_object_tree.restype = ctypes.c_int64
-    lib.rt_object_tree.argtypes = [ctypes.c_void_p, ctypes.c_void_p, _i64p, _i64p]
-    lib.rt_destroy.restype = None
-    lib.rt_destroy.argtypes = [ctypes.c_void_p]
-    lib.rt_set_savings.restype = ctypes.c_int
-    lib.rt_set_savings.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_int64, _u8p]
-    lib.rt_trace.restype = ctypes.c_int
-    lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64]
-    lib.rt_first_hits.restype = ctypes.c_int
-    lib.rt_first_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _dp, _i32p, _i32p, _i8p,
-                                  ctypes.c_int64]
-    lib.rt_occluded.restype = ctypes.c_int
-    lib.rt_occluded.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_double, _i8p, ctypes.c_int64]
-    lib.rt_object_hits.restype = ctypes.c_int64
-    lib.rt_object_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_int64, _dp, _i8p, _dp,
-                                   _i32p, _i32p, _dp, _i8p, _dp, _dp]
-    lib.rt_texture_colors.restype = ctypes.c_int
-    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
-    lib.rt_scan_numbers.restype = ctypes.c_int64
-    lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
-    lib.rt_scan3_state_size.restype = ctypes.c_int64
-    lib.rt_scan3_state_size.argtypes = []
-    lib.rt_scan_3vn.restype = ctypes.c_int64
-    lib.rt_scan_3vn.argtypes = [_i64p, ctypes.c_char_p, ctypes.c_int64, _dp, _dp, _i64p, _i32p, _i32p]
-    lib.rt_scan_3vn_end.restype = ctypes.c_int64
-    lib.rt_scan_3vn_end.argtypes = [_i64p, ctypes.c_int]
-    lib.rt_build_mesh_bvh.restype = ctypes.c_int64
-    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _i32p, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
-                                      ctypes.c_int64, _i32p, ctypes.POINTER(ctypes.c_void_p)]
-    lib.rt_free.restype = None
-    lib.rt_free.argtypes = [ctypes.c_void_p]
-    lib.rt_desc_layout.restype = ctypes.c_int64
-    lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
-    lib.rt_contract_digest.restype = ctypes.c_char_p
-    lib.rt_contract_digest.argtypes = []
+    """Declares the functions' types (contract.FUNCTIONS) and checks that the library speaks this contract."""
+    contract.declare(lib)
     mismatch = layout_mismatch(lib)
     if mismatch:
         raise BuildError(mismatch)
     return lib
 
 
-def c_layout(lib: ctypes.CDLL) -> list[tuple[int, int]]:
-    """(offset, size) of every SceneDesc field as the C compiler laid it out, in contract.py's order."""
-    capacity = len(contract.SCENE_DESC)
+def c_layout(lib: ctypes.CDLL, which: int = 0) -> list[tuple[int, int]]:
+    """(offset, size) of every field of struct ``which`` of contract.STRUCTS (SceneDesc by default) as the C
+    compiler laid it out, in the table's order."""
+    capacity = len(contract.STRUCTS[which].fields)
     offsets, sizes = np.zeros(capacity, np.int64), np.zeros(capacity, np.int64)
-    count = lib.rt_desc_layout(_ptr(offsets, ctypes.c_int64), _ptr(sizes, ctypes.c_int64), capacity)
+    count = lib.rt_struct_layout(which, _ptr(offsets, ctypes.c_int64), _ptr(sizes, ctypes.c_int64), capacity)
     if count != capacity:
-        return [(-1, -1)] * int(count)
+        return [(-1, -1)] * max(0, int(count))
     return list(zip(offsets.tolist(), sizes.tolist()))
 
 
-def ctypes_layout() -> list[tuple[int, int]]:
-    """(offset, size) of every field of flatten.SceneDesc, the ctypes mirror."""
-    return [(getattr(flatten.SceneDesc, f.name).offset, getattr(flatten.SceneDesc, f.name).size)
-            for f in contract.SCENE_DESC]
+def ctypes_layout(which: int = 0) -> list[tuple[int, int]]:
+    """(offset, size) of every field of the ctypes mirror of struct ``which`` (contract.CTYPES)."""
+    struct = contract.STRUCTS[which]
+    mirror = contract.CTYPES[struct.name]
+    return [(getattr(mirror, f.name).offset, getattr(mirror, f.name).size) for f in struct.fields]
 
 
 def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
-    """None if the library was built from this contract and lays SceneDesc out as ctypes does, else why not."""
+    """None if the library was built from this contract and lays every struct out as ctypes does, else why
+    not."""
     built_from = lib.rt_contract_digest().decode()
     if built_from != contract.digest():
         return (f"the C core was built from another contract ({built_from}, not {contract.digest()}): "
                 "regenerate contract.h (python -m tracer.native.contract) and rebuild")
-    c, py = c_layout(lib), ctypes_layout()
-    if len(c) != len(py):
-        return f"the C core's SceneDesc has {len(c)} fields, contract.py {len(py)}"
-    for f, (c_off, c_size), (py_off, py_size) in zip(contract.SCENE_DESC, c, py):
-        if (c_off, c_size) != (py_off, py_size):
-            return (f"SceneDesc.{f.name} is at offset {c_off} ({c_size} bytes) in C but {py_off} ({py_size} bytes) "
-                    "in ctypes")
-    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
-        return "the C core's SceneDesc size differs from flatten.py's"
+    for which, struct in enumerate(contract.STRUCTS):
+        c, py = c_layout(lib, which), ctypes_layout(which)
+        if len(c) != len(py):
+            return f"the C core's {struct.name} has {len(c)} fields, contract.py {len(py)}"
+        for f, (c_off, c_size), (py_off, py_size) in zip(struct.fields, c, py):
+            if (c_off, c_size) != (py_off, py_size):
+                return (f"{struct.name}.{f.name} is at offset {c_off} ({c_size} bytes) in C but {py_off} "
+                        f"({py_size} bytes) in ctypes")
+        if lib.rt_struct_size(which) != ctypes.sizeof(contract.CTYPES[struct.name]):
+            return f"the C core's {struct.name} size differs from its ctypes mirror's"
     return None
-
-
-def default_threads() -> int:
-    """$SDL_TRACER_THREADS if set, else every core this process may run on."""
-    env = os.environ.get("SDL_TRACER_THREADS")
-    if env:
-        try:
-            return max(1, int(env))
-        except ValueError:
-            pass
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
@@ -250,8 +192,6 @@ def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int,
     triangles ``tri_vertex`` ((T, 3) indices, in range) of ``vertices`` ((V, 3)): NODE records with boxes
     grown by ``pad`` and rounded outward, and the leaf order (int32).  On ``threads`` threads (default:
     default_threads()); the tree does not depend on how many.  Needs the C core."""
-    from ..intersect.mesh import NODE
-
     if _lib is None:
         raise TracerError(f"the C core is not available: {load_error}")
     vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
@@ -274,157 +214,7 @@ def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int,
     return nodes, order
 
 
-def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
-    """The FlatScene of a compiled scene, made once per compiled scene and kept on it (a second render of
-    it flattens nothing), again only when the mesh constants it reads have changed.  (The tolerances it
-    passes on are the compiled scene's own: compile_scene compiles again when they change.)"""
-    from ..intersect import mesh as mesh_module
-
-    key = tuple(getattr(mesh_module, name, None) for name in flatten.MESH_CONSTANTS)
-    cached = getattr(compiled, "_flat_cache", None)
-    if cached is not None and cached[0] == key:
-        return cached[1]
-    flat = flatten.FlatScene(compiled)
-    compiled._flat_cache = (key, flat)
-    return flat
-
-
 try:
     _lib = _load()
 except (BuildError, OSError) as err:
     load_error = str(err) or type(err).__name__
-
-
-class NativeTracer:
-    """Shades batches of camera rays in C for one compiled scene, counting every ray it casts."""
-
-    name = "c"
-
-    @staticmethod
-    def unsupported(compiled: CompiledScene) -> Optional[str]:
-        """None if the C core can trace this scene, else the reason it cannot."""
-        if _lib is None:
-            return f"the C core is not available: {load_error}"
-        return flatten.unsupported_reason(compiled)
-
-    def __init__(self, compiled: CompiledScene, threads: Optional[int] = None,
-                 savings: Optional[RaySavings] = None):
-        if _lib is None:
-            raise TracerError(f"the C core is not available: {load_error}")
-        reason = flatten.unsupported_reason(compiled)
-        if reason is not None:
-            raise TracerError(f"the C core cannot trace this scene: {reason}")
-        self.scene = compiled
-        self.counts = RayCounts()
-        self.threads = threads or default_threads()
-        self._flat = _flat_scene(compiled)  # owns the arrays the C side points into
-        message = ctypes.create_string_buffer(256)
-        # (the object hierarchy is built on the tracer's threads; it is the same tree on any number)
-        self._handle = _lib.rt_create_threaded(ctypes.byref(self._flat.desc), self.threads, message, len(message))
-        if not self._handle:
-            reason = message.value.decode(errors="replace") or "no reason given"
-            raise TracerError(f"the C core refused the scene description: {reason}")
-        self.savings = RaySavings() if savings is None else savings
-        effects = compiled.effects
-        sealed = (sealed_lights(compiled) if self.savings.inside_shadows and "shadows" in effects
-                  else np.zeros((len(compiled.objects), len(compiled.light_positions)), dtype=bool))
-        sealed = np.ascontiguousarray(sealed, dtype=np.uint8).reshape(-1)
-        if sealed.size == 0:
-            sealed = np.zeros(1, dtype=np.uint8)
-        if _lib.rt_set_savings(self._handle, float(self.savings.cutoff), self.savings.flags(),
-                               _ptr(sealed, ctypes.c_uint8)) != 0:
-            raise MemoryError("the C core ran out of memory")
-
-    def object_tree(self) -> tuple[bytes, np.ndarray, tuple[int, ...]]:
-        """The C core's object hierarchy as built (for tests): its PairNode records as bytes, the bounded
-        objects in leaf order, and (root leaf's first item, its count, depth, items)."""
-        root = np.zeros(5, dtype=np.int64)
-        count = _lib.rt_object_tree(self._handle, None, None, _ptr(root, ctypes.c_int64))
-        pairs = ctypes.create_string_buffer(max(1, int(count * root[4])))
-        items = np.zeros(max(1, int(root[3])), dtype=np.int64)
-        _lib.rt_object_tree(self._handle, pairs, _ptr(items, ctypes.c_int64), _ptr(root, ctypes.c_int64))
-        return pairs.raw[:int(count * root[4])], items[:int(root[3])], tuple(root[:4].tolist())
-
-    def close(self) -> None:
-        handle, self._handle = getattr(self, "_handle", None), None
-        if handle and _lib is not None:
-            _lib.rt_destroy(handle)
-
-    def __del__(self) -> None:
-        self.close()
-
-    def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        o, d = _rays(origins, directions)
-        colors = np.empty_like(o)
-        counts = np.zeros(len(fields(RayCounts)), dtype=np.int64)
-        if _lib.rt_trace(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                         _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads) != 0:
-            raise MemoryError("the C core ran out of memory")
-        self.counts.add(RayCounts(*(int(c) for c in counts)))
-        return colors
-
-    def first_hits(self, origins, directions) -> dict[str, np.ndarray]:
-        """The nearest hit with t > 0 per ray: t (inf on a miss), unit world normal, shape, object, entering."""
-        o, d = _rays(origins, directions)
-        n = len(o)
-        out = dict(t=np.empty(n), normal=np.empty((n, 3)), shape=np.empty(n, np.int32),
-                   obj=np.empty(n, np.int32), entering=np.empty(n, np.int8))
-        if _lib.rt_first_hits(self._handle, n, _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                              _ptr(out["t"], ctypes.c_double), _ptr(out["normal"], ctypes.c_double),
-                              _ptr(out["shape"], ctypes.c_int32), _ptr(out["obj"], ctypes.c_int32),
-                              _ptr(out["entering"], ctypes.c_int8), self.threads) != 0:
-            raise MemoryError("the C core ran out of memory")
-        out["entering"] = out["entering"].astype(bool)
-        return out
-
-    def occluded(self, origins, directions, t_max: float = 1.0) -> np.ndarray:
-        """Shadow feelers: is anything on origin + t direction, 0 < t < t_max?"""
-        o, d = _rays(origins, directions)
-        blocked = np.empty(len(o), np.int8)
-        if _lib.rt_occluded(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                            float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) != 0:
-            raise MemoryError("the C core ran out of memory")
-        return blocked.astype(bool)
-
-    def texture_colors(self, shape, points, parts) -> np.ndarray:
-        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts``, as
-        ``compiled.textures.colors`` (1 where untextured)."""
-        p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        s = np.ascontiguousarray(np.asarray(shape, dtype=np.int32).reshape(-1))
-        q = np.ascontiguousarray(np.asarray(parts, dtype=np.int32).reshape(-1))
-        if not len(p) == len(s) == len(q):
-            raise ValueError("shape, points and parts must have the same length")
-        out = np.empty_like(p)
-        if _lib.rt_texture_colors(self._handle, len(p), _ptr(s, ctypes.c_int32), _ptr(p, ctypes.c_double),
-                                  _ptr(q, ctypes.c_int32), _ptr(out, ctypes.c_double)) != 0:
-            raise IndexError("primitive index out of range")
-        return out
-
-    def object_hits(self, index: int, origin, direction) -> HitArrays:
-        """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``
-        (world normals, not unit, error bounds and offsets; only finite hits, so K is the number of hits)."""
-        o, d = _rays(origin, direction)
-        capacity = 64
-        while True:
-            t = np.empty(capacity)
-            entering = np.empty(capacity, np.int8)
-            normal = np.empty((capacity, 3))
-            shape = np.empty(capacity, np.int32)
-            part = np.empty(capacity, np.int32)
-            uv = np.empty((capacity, 2))
-            inside = np.zeros(1, np.int8)
-            error, offset = np.empty(capacity), np.empty(capacity)
-            n = _lib.rt_object_hits(self._handle, int(index), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                                    capacity, _ptr(t, ctypes.c_double), _ptr(entering, ctypes.c_int8),
-                                    _ptr(normal, ctypes.c_double), _ptr(shape, ctypes.c_int32),
-                                    _ptr(part, ctypes.c_int32), _ptr(uv, ctypes.c_double),
-                                    _ptr(inside, ctypes.c_int8), _ptr(error, ctypes.c_double),
-                                    _ptr(offset, ctypes.c_double))
-            if n < 0:
-                raise MemoryError("the C core ran out of memory (or the object index is out of range)")
-            if n <= capacity:
-                break
-            capacity = int(n)
-        return HitArrays(t=t[None, :n].copy(), entering=entering[None, :n].astype(bool), normal=normal[None, :n].copy(),
-                         part=part[None, :n].copy(), uv=uv[None, :n].copy(), inside_at_start=inside.astype(bool),
-                         shape=shape[None, :n].copy(), error=error[None, :n].copy(), offset=offset[None, :n].copy())

@@ -35,22 +35,35 @@ const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
 
 const char *rt_build_id(void) { return rt_build_marker; }
 
-int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
-
-/* Offset and size of every SceneDesc field in contract.py's order, for the loader to compare with ctypes';
- * returns the number of fields (nothing is written when capacity is smaller). */
-int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity)
+int64_t rt_struct_size(int64_t which)
 {
-    if (capacity < RT_SCENE_DESC_FIELD_COUNT)
-        return RT_SCENE_DESC_FIELD_COUNT;
+    switch (which) {
+#define RT_STRUCT_SIZE(code, type, fields) case code: return (int64_t)sizeof(type);
+    RT_STRUCTS(RT_STRUCT_SIZE)
+#undef RT_STRUCT_SIZE
+    }
+    return -1;
+}
+
+/* Offset and size of every field of struct `which` (contract.py's STRUCTS) in its table's order, for the
+ * loader to compare with ctypes'; returns the number of fields (nothing is written when capacity is smaller),
+ * -1 for no such struct. */
+int64_t rt_struct_layout(int64_t which, int64_t *offsets, int64_t *sizes, int64_t capacity)
+{
     int64_t k = 0;
-#define RT_FIELD_LAYOUT(name)                                  \
-    offsets[k] = (int64_t)offsetof(SceneDesc, name);           \
-    sizes[k] = (int64_t)sizeof(((const SceneDesc *)0)->name);  \
+#define RT_FIELD_LAYOUT(type, name)                             \
+    if (k < capacity) {                                         \
+        offsets[k] = (int64_t)offsetof(type, name);             \
+        sizes[k] = (int64_t)sizeof(((const type *)0)->name);    \
+    }                                                           \
     k++;
-    RT_SCENE_DESC_FIELDS(RT_FIELD_LAYOUT)
+#define RT_STRUCT_LAYOUT(code, type, fields) case code: fields(RT_FIELD_LAYOUT) return k;
+    switch (which) {
+    RT_STRUCTS(RT_STRUCT_LAYOUT)
+    }
+#undef RT_STRUCT_LAYOUT
 #undef RT_FIELD_LAYOUT
-    return k;
+    return -1;
 }
 
 const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
@@ -64,7 +77,7 @@ const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 typedef struct {
     double b[3][2][2];    /* [axis][0: lo, 1: hi][child] */
     int32_t child[2];     /* inner: pair index; leaf: first item */
-    int32_t count[2];     /* leaf: items (> 0); inner: 0 */
+    int32_t count[2];     /* leaf: items (> 0; -1: none left after removals); inner: 0 */
 } PairNode;
 
 typedef struct {
@@ -80,15 +93,21 @@ typedef struct {
     PairNode *pairs;      /* none when the whole hierarchy is one leaf */
     int64_t n_pairs;
     int32_t root_first, root_count;  /* the root when it is a leaf */
-    int64_t *items;       /* bounded objects in leaf order */
-    int64_t *unbounded;
-    int64_t n_unbounded;
+    int64_t *items;       /* bounded objects in leaf order (after removals, a leaf may list one twice) */
+    int64_t n_items;
+    int64_t *unbounded;   /* the objects outside the hierarchy, each tried by every ray: the unbounded ones, */
+    int64_t n_unbounded;  /* and those added since it was built (n_loose of them) */
+    int64_t n_loose;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
-    /* tracer.savings: which useless rays are skipped (rt_set_savings) */
-    double cutoff;        /* a secondary ray of smaller cumulative weight is not traced */
-    int64_t savings;      /* SAVE_* bits */
-    uint8_t *sealed;      /* objects x lights: a feeler from inside the object to the light is blocked */
+    int64_t n_mesh_views;
+    /* tracer.savings: objects x lights, a feeler from inside the object to the light is blocked (rt_set_sealed;
+     * NULL: none known).  Which savings a trace uses is the trace's own (rt_trace's cutoff and flags). */
+    uint8_t *sealed;
+    /* for refitting the hierarchy (made when first needed, dropped when it is built again): per object, its
+     * leaf as 2 * pair + child (< 0: outside the hierarchy, or in a root leaf), and per pair its parent as
+     * 2 * pair + child */
+    int64_t *leaf_of, *parent_of;
 } Scene;
 
 #define SHADOW_CACHE 16
@@ -107,6 +126,8 @@ typedef struct {
     TreeEntry *tree_stack;
     int64_t counts[N_COUNTS];
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
+    double cutoff;        /* tracer.savings: a secondary ray of smaller cumulative weight is not traced */
+    int64_t savings;      /* SAVE_* bits: the other savings this trace makes */
     int oom;
 } Work;
 
@@ -198,35 +219,20 @@ static inline int prim_may_hit(const double *sphere, const double *o, const doub
     return dot3(perp, perp) <= sphere[3] * sphere[3];
 }
 
-/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out). */
+/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out): each kind's
+ * registered C function, called as contract.h's RT_SHAPE_HITS spells it in these names. */
 static int analytic_hits(const Scene *S, int64_t p, const double *o, const double *d, Hit *out, int *inside)
 {
     const SceneDesc *D = &S->d;
+    const double *param = D->prim_param + PRIM_PARAMS * p;
+    const int64_t *aux = D->prim_aux + 2 * p;
+    (void)param;
+    (void)aux;
     *inside = 0;
     switch (D->prim_kind[p]) {
-#define REGISTERED_HITS(kind, hits) case kind: return hits(o, d, out);
-    RT_SHAPE_HITS(REGISTERED_HITS)  /* the kinds tracer/shapes.py names a C function for */
+#define REGISTERED_HITS(kind, call) case kind: return call;
+    RT_SHAPE_HITS(REGISTERED_HITS)
 #undef REGISTERED_HITS
-    case K_SQUARE: {
-        /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
-        int n = hits_z_plane(o, d, out, 1, D->tol_square_edge);
-        if (n) {
-            out[1] = out[0];
-            out[0].entering = 1;
-            out[1].entering = 0;
-        }
-        return 2 * n;
-    }
-    case K_PLANE:
-        *inside = plane_inside_at_start(o, d);
-        return hits_z_plane(o, d, out, 0, D->tol_square_edge);
-    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], D->tol_hit_ulps, out);
-    case K_TORUS:
-        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
-    case K_POLYHEDRON: {
-        const int64_t *aux = D->prim_aux + 2 * p;
-        return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
-    }
     }
     return 0;
 }
@@ -279,7 +285,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     double og[3], dg[3];
     double shift = prim_generic_ray(inv, o, d, og, dg);
     int64_t n;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         const MeshView *m = &S->meshes[D->prim_aux[2 * p]];
         n = mesh_all(m, og, dg, w->mesh_stack, &w->raw, &out->h, &out->cap);
         if (n < 0) {
@@ -317,7 +323,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
         return 0;
     const double *inv = D->prim_inverse + 16 * p, *rounding = D->prim_rounding + 4 * p;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         double og[3], dg[3];
         affine_point(inv, o, og);
         affine_vector(inv, d, dg);
@@ -365,7 +371,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
                          double t_max)
 {
     const SceneDesc *D = &S->d;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
             return 0;
         const double *inv = D->prim_inverse + 16 * p;
@@ -708,7 +714,7 @@ static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, NAME);                    \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, 0, NAME);           \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -735,8 +741,26 @@ SHADE_PAIR(11101, 1, 1, 1, 0, 1)
 SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
+/* The effects of Blender scenes, traced by shade_general alone. */
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL | FX_SMOOTH_TERMINATOR)
+
+/* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
+ * FX_GENERAL pay for that choice per ray, the others never come here. */
+static void shade_general(const Scene *S, Work *w, const double *o, const double *d, int64_t level,
+                          const Media *media, double weight, double *out)
+{
+    int64_t fx = S->d.effects;
+    int l = (fx & FX_LIGHTING) != 0;
+    shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
+               l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0,
+               (fx & FX_SMOOTH_TERMINATOR) != 0, shade_general);
+}
+
 static ShadeFn pick_shade(int64_t effects)
 {
+    if (effects & FX_GENERAL)
+        return shade_general;
     int l = (effects & FX_LIGHTING) != 0;
     int s = l && (effects & FX_SHADOWS) != 0, ct = l && (effects & FX_COOK_TORRANCE) != 0;
     int rl = (effects & FX_REFLECTION) != 0, rr = (effects & FX_REFRACTION) != 0;
@@ -804,23 +828,59 @@ static int pair_tree(Scene *S)
     return 1;
 }
 
+/* An object's box as the slab test sees it: an axis whose bounds are in the wrong order is the slab between
+ * them, one with a NaN bound is no constraint at all; and its centre (0 where not finite). */
+static void clean_box(const double *box, double *clean, double *centre)
+{
+    for (int k = 0; k < 3; k++) {
+        double lo = box[k], hi = box[3 + k];
+        if (lo != lo || hi != hi) {
+            lo = -INFINITY;
+            hi = INFINITY;
+        } else if (lo > hi) {
+            double x = lo; lo = hi; hi = x;
+        }
+        clean[k] = lo;
+        clean[3 + k] = hi;
+        double c = 0.5 * (lo + hi);
+        centre[k] = isfinite(c) ? c : 0.0;
+    }
+}
+
+/* Drops the hierarchy (and what refits keep about it). */
+static void drop_tree(Scene *S)
+{
+    free(S->nodes);
+    free(S->pairs);
+    free(S->items);
+    free(S->unbounded);
+    free(S->leaf_of);
+    free(S->parent_of);
+    S->nodes = NULL;
+    S->pairs = NULL;
+    S->items = S->unbounded = S->leaf_of = S->parent_of = NULL;
+    S->n_nodes = S->n_pairs = S->n_unbounded = S->n_items = S->n_loose = 0;
+    S->root_first = S->root_count = 0;
+}
+
 /* The object hierarchy over the bounded objects (bvh_build.h) on up to `threads` threads, as PairNodes;
  * the unbounded objects listed apart.  0 when memory runs out. */
 static int build_tree(Scene *S, int64_t threads)
 {
     const SceneDesc *D = &S->d;
+    drop_tree(S);
     int64_t nb = 0;
     for (int64_t i = 0; i < D->n_objects; i++)
         nb += D->object_bounded[i] != 0;
     if (nb >= INT32_MAX)
         return 0;
     S->n_unbounded = D->n_objects - nb;
+    S->n_items = nb;
     S->unbounded = (int64_t *)malloc((size_t)(S->n_unbounded + 1) * sizeof(int64_t));
     S->items = (int64_t *)malloc((size_t)(nb + 1) * sizeof(int64_t));
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
-    /* The boxes as the slab test sees them: an axis whose bounds are in the wrong order is the slab
-     * between them, one with a NaN bound is no constraint at all.  Like centre[], by position in items[]
-     * (the partition moves them with their items): the passes over a node then read memory in order. */
+    /* The boxes as the slab test sees them (clean_box), like centre[] by position in items[] (the partition
+     * moves them with their items): the passes over a node then read memory in order. */
     double *boxes = (double *)malloc((size_t)(6 * nb + 1) * sizeof(double));
     if (!S->unbounded || !S->items || !centre || !boxes) {
         free(centre);
@@ -830,21 +890,7 @@ static int build_tree(Scene *S, int64_t threads)
     int64_t u = 0, b = 0;
     for (int64_t i = 0; i < D->n_objects; i++) {
         if (D->object_bounded[i]) {
-            const double *box = D->object_box + 6 * i;
-            double *clean = boxes + 6 * b;
-            for (int k = 0; k < 3; k++) {
-                double lo = box[k], hi = box[3 + k];
-                if (lo != lo || hi != hi) {
-                    lo = -INFINITY;
-                    hi = INFINITY;
-                } else if (lo > hi) {
-                    double x = lo; lo = hi; hi = x;
-                }
-                clean[k] = lo;
-                clean[3 + k] = hi;
-                double c = 0.5 * (lo + hi);
-                centre[3 * b + k] = isfinite(c) ? c : 0.0;
-            }
+            clean_box(D->object_box + 6 * i, boxes + 6 * b, centre + 3 * b);
             S->items[b++] = i;
         } else {
             S->unbounded[u++] = i;
@@ -861,6 +907,97 @@ static int build_tree(Scene *S, int64_t threads)
     if (nb > 0 && !S->nodes)
         return 0;
     return pair_tree(S);
+}
+
+/* Where each bounded object's leaf is and each pair's parent (Scene.leaf_of, parent_of), for refits.
+ * 0 when memory runs out. */
+static int tree_links(Scene *S)
+{
+    if (S->leaf_of)
+        return 1;
+    int64_t n = S->d.n_objects;
+    S->leaf_of = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    S->parent_of = (int64_t *)malloc((size_t)(S->n_pairs + 1) * sizeof(int64_t));
+    if (!S->leaf_of || !S->parent_of) {
+        free(S->leaf_of);
+        free(S->parent_of);
+        S->leaf_of = S->parent_of = NULL;
+        return 0;
+    }
+    for (int64_t i = 0; i < n; i++)
+        S->leaf_of[i] = -1;
+    if (S->n_pairs)
+        S->parent_of[0] = -1;
+    for (int64_t p = 0; p < S->n_pairs; p++)
+        for (int c = 0; c < 2; c++) {
+            const PairNode *pair = &S->pairs[p];
+            if (pair->count[c] == 0) {
+                S->parent_of[pair->child[c]] = 2 * p + c;
+                continue;
+            }
+            for (int64_t k = pair->child[c]; k < (int64_t)pair->child[c] + pair->count[c]; k++)
+                S->leaf_of[S->items[k]] = 2 * p + c;
+        }
+    return 1;
+}
+
+/* The box of child c of pair p, from its objects (a leaf) or its own pair's two children. */
+static void child_box(const Scene *S, int64_t p, int c, double *lo, double *hi)
+{
+    const PairNode *pair = &S->pairs[p];
+    box_empty(lo, hi);
+    if (pair->count[c] == 0) {
+        const PairNode *below = &S->pairs[pair->child[c]];
+        for (int k = 0; k < 2; k++) {
+            double blo[3] = {below->b[0][0][k], below->b[1][0][k], below->b[2][0][k]};
+            double bhi[3] = {below->b[0][1][k], below->b[1][1][k], below->b[2][1][k]};
+            box_grow(lo, hi, blo, bhi);
+        }
+        return;
+    }
+    for (int64_t k = pair->child[c]; k < (int64_t)pair->child[c] + pair->count[c]; k++) {
+        double box[6], centre[3];
+        clean_box(S->d.object_box + 6 * S->items[k], box, centre);
+        box_grow(lo, hi, box, box + 3);
+    }
+}
+
+static void set_child_box(Scene *S, int64_t p, int c)
+{
+    double lo[3], hi[3];
+    child_box(S, p, c, lo, hi);
+    for (int i = 0; i < 3; i++) {
+        S->pairs[p].b[i][0][c] = lo[i];
+        S->pairs[p].b[i][1][c] = hi[i];
+    }
+}
+
+/* Refit: the hierarchy keeps its shape and takes the objects' boxes as they are now (D->object_box), so
+ * that every box still holds its objects.  `objects` (n of them) are the objects whose boxes changed: each
+ * leaf holding one, and the pairs above it up to the root, are fitted again; with n < 0 (or many objects)
+ * every pair is, bottom up.  Which objects are bounded must not have changed (rt_edit rebuilds then).
+ * 0 when memory runs out.  (Kept apart from the build so that either can be reimplemented alone.) */
+static int refit_tree(Scene *S, const int64_t *objects, int64_t n)
+{
+    if (S->n_pairs == 0)  /* no boxes: the root leaf's objects are all tested */
+        return 1;
+    if (n < 0 || n > S->n_pairs / 8) {
+        /* children are numbered after their parents: the pairs in reverse order go bottom up */
+        for (int64_t p = S->n_pairs - 1; p >= 0; p--)
+            for (int c = 0; c < 2; c++)
+                set_child_box(S, p, c);
+        return 1;
+    }
+    if (!tree_links(S))
+        return 0;
+    for (int64_t k = 0; k < n; k++) {
+        int64_t link = S->leaf_of[objects[k]];
+        while (link >= 0) {
+            set_child_box(S, link / 2, (int)(link % 2));
+            link = S->parent_of[link / 2];
+        }
+    }
+    return 1;
 }
 
 static int64_t csg_depth_of(const SceneDesc *D, int64_t ref, int64_t guard)
@@ -922,6 +1059,87 @@ static int mesh_check_indices(const MeshView *m)
     return 1;
 }
 
+/* Most objects added since the hierarchy was built that are kept outside it (each is tried by every ray)
+ * before it is built again. */
+#define LOOSE_MAX 64
+
+/* After objects were removed (`removed`: their indices before, ascending, n of them) and added (the objects
+ * after the old_n - n survivors): the hierarchy keeps its shape, its objects renumbered; a leaf's slots of a
+ * removed object take a surviving object of the same leaf (tried twice, found once), or the leaf lists none
+ * (count -1: an empty box, never entered by a ray the fast box test sees, and nothing in it if entered); the
+ * added objects go outside the hierarchy; the leaves that lost objects are refitted.  S->d is the new description; leaf_of and parent_of are those of the old numbering
+ * (tree_links).  1 when done; 0 when the hierarchy must be built again instead (or memory ran out). */
+static int restructure_tree(Scene *S, int64_t old_n, const int64_t *removed, int64_t n)
+{
+    int64_t new_n = S->d.n_objects, added = new_n - (old_n - n);
+    if (S->n_pairs == 0 || added < 0 || S->n_loose + added > LOOSE_MAX)
+        return 0;
+    int64_t *renumber = (int64_t *)malloc((size_t)(old_n + 1) * sizeof(int64_t));
+    int64_t *touched = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    int64_t *leaf_of = (int64_t *)malloc((size_t)(new_n + 1) * sizeof(int64_t));
+    int64_t *outside = (int64_t *)malloc((size_t)(S->n_unbounded + added + 1) * sizeof(int64_t));
+    int ok = renumber && touched && leaf_of && outside;
+    for (int64_t o = 0, r = 0; ok && o < old_n; o++) {
+        if (r < n && removed[r] == o) {
+            renumber[o] = -1;
+            r++;
+            ok = r == n || removed[r] > o;  /* (ascending, in range) */
+        } else {
+            renumber[o] = o - r;
+        }
+    }
+    ok = ok && (n == 0 || removed[n - 1] < old_n);
+    int64_t n_touched = 0;
+    for (int64_t r = 0; ok && r < n; r++) {
+        int64_t link = S->leaf_of[removed[r]];
+        if (link < 0)
+            continue;
+        PairNode *pair = &S->pairs[link / 2];
+        int64_t first = pair->child[link % 2], end = first + pair->count[link % 2], survivor = -1;
+        for (int64_t k = first; k < end && survivor < 0; k++)
+            if (renumber[S->items[k]] >= 0)
+                survivor = S->items[k];
+        if (survivor < 0)  /* no object left in the leaf: a count of -1 lists none (and its box is empty) */
+            pair->count[link % 2] = -1;
+        for (int64_t k = first; k < end; k++)
+            if (renumber[S->items[k]] < 0)
+                S->items[k] = survivor;
+        touched[n_touched++] = link;
+    }
+    if (!ok) {
+        free(renumber);
+        free(touched);
+        free(leaf_of);
+        free(outside);
+        return 0;
+    }
+    for (int64_t k = 0; k < S->n_items; k++)  /* (slots of emptied leaves hold -1, and are never read) */
+        S->items[k] = S->items[k] < 0 ? -1 : renumber[S->items[k]];
+    int64_t u = 0;
+    for (int64_t k = 0; k < S->n_unbounded; k++)
+        if (renumber[S->unbounded[k]] >= 0)
+            outside[u++] = renumber[S->unbounded[k]];
+    for (int64_t o = new_n - added; o < new_n; o++)
+        outside[u++] = o;
+    for (int64_t o = 0; o < old_n; o++)
+        if (renumber[o] >= 0)
+            leaf_of[renumber[o]] = S->leaf_of[o];
+    for (int64_t o = new_n - added; o < new_n; o++)
+        leaf_of[o] = -2;  /* (outside, though maybe bounded) */
+    free(S->unbounded);
+    free(S->leaf_of);
+    S->unbounded = outside;
+    S->n_unbounded = u;
+    S->n_loose += added;
+    S->leaf_of = leaf_of;
+    for (int64_t t = 0; t < n_touched; t++)
+        for (int64_t link = touched[t]; link >= 0; link = S->parent_of[link / 2])
+            set_child_box(S, link / 2, (int)(link % 2));
+    free(renumber);
+    free(touched);
+    return 1;
+}
+
 /* Releases a buffer the library allocated for the caller (rt_build_mesh_bvh's nodes). */
 void rt_free(void *buffer) { free(buffer); }
 
@@ -930,33 +1148,80 @@ void rt_destroy(void *handle)
     Scene *S = (Scene *)handle;
     if (!S)
         return;
+    drop_tree(S);
     free(S->meshes);
-    free(S->nodes);
-    free(S->pairs);
-    free(S->items);
-    free(S->unbounded);
     free(S->sealed);
     free(S);
 }
 
-/* Writes what rt_create refused into the caller's buffer (when it gave one) and fails. */
+/* Writes what was refused into the caller's buffer (when it gave one) and fails. */
 #define REFUSE(...)                                              \
     do {                                                         \
         if (error && capacity > 0)                               \
             snprintf(error, (size_t)capacity, __VA_ARGS__);      \
-        goto fail;                                               \
+        return 0;                                                \
     } while (0)
 
-void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity)
+/* How deep object_ok follows booleans (MAX_CSG_DEPTH of tracer.backend, and some). */
+#define MAX_CSG_CHECK 4096
+
+/* Primitive p's kind, material and mesh in range; 0 (and the reason in `error`) if not. */
+static int prim_ok(const SceneDesc *D, int64_t p, char *error, int64_t capacity)
 {
-    if (error && capacity > 0)
-        error[0] = '\0';
-    Scene *S = (Scene *)calloc(1, sizeof(Scene));
-    if (!S) {
-        if (error && capacity > 0)
-            snprintf(error, (size_t)capacity, "out of memory");
-        return NULL;
+    int kind = D->prim_kind[p];
+    if (kind < 0 || kind >= K_COUNT)
+        REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
+    if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
+        REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
+               (long long)D->n_materials);
+    if (RT_IS_MESH(kind) && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
+        REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
+               (long long)D->n_meshes);
+    return 1;
+}
+
+/* CSG node c's operation and children in range; 0 (and the reason in `error`) if not. */
+static int csg_ok(const SceneDesc *D, int64_t c, char *error, int64_t capacity)
+{
+    if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
+        !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
+        REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
+               (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
+    return 1;
+}
+
+/* Object i's reference, and every primitive and CSG node under it, in range (an edit's objects). */
+static int object_ok(const SceneDesc *D, int64_t i, char *error, int64_t capacity)
+{
+    if (!ref_ok(D, D->object_ref[i]))
+        REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
+    int64_t ref = D->object_ref[i], visited = 0;
+    int64_t stack[2 * MAX_CSG_CHECK + 2], top = 0;
+    stack[top++] = ref;
+    while (top) {
+        ref = stack[--top];
+        if (ref >= 0) {
+            if (!prim_ok(D, ref, error, capacity))
+                return 0;
+            continue;
+        }
+        if (++visited > D->n_csg || top + 2 > 2 * MAX_CSG_CHECK + 2)
+            REFUSE("object %lld: its booleans are not a tree of at most %d levels", (long long)i, MAX_CSG_CHECK);
+        if (!csg_ok(D, -ref - 1, error, capacity))
+            return 0;
+        stack[top++] = D->csg_right[-ref - 1];
+        stack[top++] = D->csg_left[-ref - 1];
     }
+    return 1;
+}
+
+/* Takes the description and checks every index the tracer will follow, so that a bad description fails here,
+ * not in a worker; the CSG depth.  With `objects` (n >= 0 of them: an edit that changed only those objects'
+ * rows), only what they refer to is checked again, and the CSG depth is kept.  0 (and the reason in `error`)
+ * when refused. */
+static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, int64_t n, char *error,
+                     int64_t capacity)
+{
     S->d = *desc;
     /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
      * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
@@ -966,18 +1231,6 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
     if (S->d.max_depth < 0)
         S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
-    /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
-    for (int64_t p = 0; p < D->n_prims; p++) {
-        int kind = D->prim_kind[p];
-        if (kind < 0 || kind >= K_COUNT)
-            REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
-        if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
-            REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
-                   (long long)D->n_materials);
-        if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
-            REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
-                   (long long)D->n_meshes);
-    }
     if (D->effects & FX_TEXTURES) {
         for (int64_t m = 0; m < D->n_materials; m++) {
             int32_t texture = D->mat_texture[m];
@@ -991,23 +1244,58 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
                 REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
                        (long long)D->image_info[2 * i + 1]);
     }
+    for (int64_t m = 0; m < D->n_materials; m++)
+        if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
+            REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
+    /* (lights are read only where something is lit: then a physical one needs its shading variant) */
+    for (int64_t l = 0; l < D->n_lights; l++)
+        if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
+            (D->light_kind[l] != LIGHT_POINT && (D->effects & FX_LIGHTING) && !(D->effects & FX_PHYSICAL_LIGHTS)))
+            REFUSE("light %lld has kind %d and %d samples", (long long)l, (int)D->light_kind[l],
+                   (int)D->light_samples[l]);
+    if (objects && n >= 0) {
+        for (int64_t k = 0; k < n; k++) {
+            if (objects[k] < 0 || objects[k] >= D->n_objects)
+                REFUSE("edited object %lld of %lld", (long long)objects[k], (long long)D->n_objects);
+            if (!object_ok(D, objects[k], error, capacity))
+                return 0;
+        }
+        return 1;
+    }
+    for (int64_t p = 0; p < D->n_prims; p++)
+        if (!prim_ok(D, p, error, capacity))
+            return 0;
     for (int64_t c = 0; c < D->n_csg; c++)
-        if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
-            !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
-            REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
-                   (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
+        if (!csg_ok(D, c, error, capacity))
+            return 0;
     for (int64_t i = 0; i < D->n_objects; i++)
         if (!ref_ok(D, D->object_ref[i]))
             REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
+    S->csg_depth = 0;
     for (int64_t i = 0; i < D->n_objects; i++) {
         int64_t depth = csg_depth_of(D, D->object_ref[i], 0);
         if (depth > S->csg_depth)
             S->csg_depth = depth;
     }
+    return 1;
+}
+
+/* The meshes' views of the description's arrays, each checked (a mesh whose arrays and counts are those of
+ * the view it had before keeps that view's check).  0 (and the reason in `error`) when refused. */
+static int take_meshes(Scene *S, char *error, int64_t capacity)
+{
+    const SceneDesc *D = &S->d;
+    MeshView *old = S->meshes;
+    int64_t n_old = S->n_mesh_views;
     S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
-    if (!S->meshes)
+    S->n_mesh_views = D->n_meshes;
+    S->mesh_depth = 0;
+    if (!S->meshes) {
+        free(old);
         REFUSE("out of memory");
-    for (int64_t k = 0; k < D->n_meshes; k++) {
+    }
+    int ok = 1;
+    for (int64_t k = 0; k < D->n_meshes && ok; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         MeshView *m = &S->meshes[k];
         m->nodes = (const MeshNode *)D->mesh_nodes[k];
@@ -1020,30 +1308,127 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
         m->tri_normal = D->mesh_tri_normal[k];
         m->vertices = D->mesh_vertices[k];
         m->normals = D->mesh_normals[k];
+        m->tri_uv = D->mesh_tri_uv[k];
         m->rounding_factor = D->mesh_constants[0];
         m->barycentric_max = D->mesh_constants[1];
         m->parallel_eps = D->mesh_constants[2];
         m->dedupe = D->mesh_constants[3];
         m->dedupe_adjacent = D->mesh_constants[4];
         m->extent = D->mesh_extent[k];
-        if (m->n_nodes < 0 || m->n_tris < 0 || m->n_vertices < 0 || m->n_normals < 0 ||
-            ((m->n_nodes || m->n_tris) && (!m->nodes || !m->order || !m->tri_vertex || !m->vertices)) ||
-            (m->tri_normal && !m->normals))
-            REFUSE("mesh %lld: missing arrays or negative counts", (long long)k);
-        if (!mesh_check_indices(m))
-            REFUSE("mesh %lld: an index is out of range", (long long)k);
-        m->depth = mesh_check_depth(m);
-        if (m->depth < 0)
-            REFUSE("mesh %lld: inconsistent hierarchy (or out of memory)", (long long)k);
+        const MeshView *seen = NULL;
+        for (int64_t j = 0; j < n_old && !seen; j++)
+            if (old[j].nodes == m->nodes && old[j].n_nodes == m->n_nodes && old[j].n_tris == m->n_tris &&
+                old[j].n_vertices == m->n_vertices && old[j].n_normals == m->n_normals && old[j].order == m->order &&
+                old[j].tri_vertex == m->tri_vertex && old[j].tri_normal == m->tri_normal &&
+                old[j].vertices == m->vertices && old[j].normals == m->normals)
+                seen = &old[j];
+        if (seen) {
+            m->depth = seen->depth;
+        } else {
+            if (m->n_nodes < 0 || m->n_tris < 0 || m->n_vertices < 0 || m->n_normals < 0 ||
+                ((m->n_nodes || m->n_tris) && (!m->nodes || !m->order || !m->tri_vertex || !m->vertices)) ||
+                (m->tri_normal && !m->normals)) {
+                if (error && capacity > 0)
+                    snprintf(error, (size_t)capacity, "mesh %lld: missing arrays or negative counts", (long long)k);
+                ok = 0;
+                break;
+            }
+            if (!mesh_check_indices(m)) {
+                if (error && capacity > 0)
+                    snprintf(error, (size_t)capacity, "mesh %lld: an index is out of range", (long long)k);
+                ok = 0;
+                break;
+            }
+            m->depth = mesh_check_depth(m);
+            if (m->depth < 0) {
+                if (error && capacity > 0)
+                    snprintf(error, (size_t)capacity, "mesh %lld: inconsistent hierarchy (or out of memory)",
+                             (long long)k);
+                ok = 0;
+                break;
+            }
+        }
         if (m->depth > S->mesh_depth)
             S->mesh_depth = m->depth;
     }
-    if (!build_tree(S, threads))
-        REFUSE("out of memory (or more than 2^31 bounded objects) building the object hierarchy");
+    free(old);
+    return ok;
+}
+
+void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity)
+{
+    if (error && capacity > 0)
+        error[0] = '\0';
+    Scene *S = (Scene *)calloc(1, sizeof(Scene));
+    if (!S) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
+        return NULL;
+    }
+    if (!take_desc(S, desc, NULL, -1, error, capacity) || !take_meshes(S, error, capacity))
+        goto fail;
+    if (!build_tree(S, threads)) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity,
+                     "out of memory (or more than 2^31 bounded objects) building the object hierarchy");
+        goto fail;
+    }
     return S;
 fail:
     rt_destroy(S);
     return NULL;
+}
+
+/* An edit of the scene in place (tracer.edit): `desc` describes the scene as it is now (its arrays edited,
+ * or new ones), and is checked and taken as rt_create takes it.  flags: EDIT_MESHES when the meshes may have
+ * changed (each mesh not seen before is checked); EDIT_REBUILD to build the object hierarchy anew (on
+ * `threads` threads); EDIT_OBJECTS when the objects `objects` (n of them, their indices before, ascending)
+ * were removed and the objects after the survivors added (restructure_tree: the hierarchy renumbered, the
+ * added objects outside it, until LOOSE_MAX of them call for a build); else the hierarchy is refitted to the
+ * boxes of `objects` (n of them; n < 0: every object's), or rebuilt where an object in it became unbounded.
+ * Keeps the sealed table only while the numbers of objects and lights stay.  0 on success; -1 (with the reason
+ * in `error`) when the description is refused or memory runs out: the scene must then be destroyed, not
+ * traced. */
+int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads,
+            char *error, int64_t capacity)
+{
+    Scene *S = (Scene *)scene;
+    if (error && capacity > 0)
+        error[0] = '\0';
+    int64_t n_objects = S->d.n_objects, n_lights = S->d.n_lights;
+    int restructured = (flags & EDIT_OBJECTS) != 0;
+    int rebuild = (flags & EDIT_REBUILD) || (desc->n_objects != n_objects && !restructured) || S->n_pairs == 0;
+    if (!rebuild && (n != 0 || restructured) && !tree_links(S)) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
+        return -1;
+    }
+    /* an object in the hierarchy that became unbounded has no box to be found by: only a build puts it right
+     * (one outside it may be bounded or not: every ray tries it) */
+    for (int64_t k = 0; !rebuild && !restructured && k < (n < 0 ? n_objects : n); k++) {
+        int64_t i = n < 0 ? k : objects[k];
+        rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0 && !desc->object_bounded[i]);
+    }
+    /* an edit in place (no object added or removed, the meshes as they were) checks its own objects again */
+    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD | EDIT_OBJECTS)) && desc->n_objects == n_objects &&
+                   desc->n_csg == S->d.n_csg && desc->n_prims == S->d.n_prims && n >= 0;
+    if (!take_desc(S, desc, in_place ? objects : NULL, in_place ? n : -1, error, capacity))
+        return -1;
+    if ((flags & EDIT_MESHES) && !take_meshes(S, error, capacity))
+        return -1;
+    if (S->d.n_objects != n_objects || S->d.n_lights != n_lights) {
+        free(S->sealed);
+        S->sealed = NULL;
+    }
+    if (restructured && !rebuild)
+        rebuild = !restructure_tree(S, n_objects, objects, n);
+    int fitted = rebuild ? build_tree(S, threads) : restructured ? 1 : refit_tree(S, objects, n);
+    if (!fitted) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory fitting the object hierarchy");
+        return -1;
+    }
+    return 0;
 }
 #undef REFUSE
 
@@ -1054,7 +1439,7 @@ fail:
 int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *root)
 {
     const Scene *S = (const Scene *)scene;
-    int64_t n_items = S->d.n_objects - S->n_unbounded;
+    int64_t n_items = S->n_items;
     if (pairs && S->n_pairs)
         memcpy(pairs, S->pairs, (size_t)S->n_pairs * sizeof(PairNode));
     if (items && n_items)
@@ -1075,21 +1460,24 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
     return rt_create_threaded(desc, 1, error, capacity);
 }
 
-/* Which useless rays to skip (see tracer.savings); `sealed` has n_objects x n_lights entries, copied.
- * 0 on success, -1 out of memory. */
-int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed)
+/* tracer.savings.sealed_lights of the scene: `sealed` has `count` = n_objects x n_lights entries, copied
+ * (NULL: none known, no feeler is skipped for being inside).  0 on success, -1 for a wrong count or out of
+ * memory. */
+int rt_set_sealed(void *scene, const uint8_t *sealed, int64_t count)
 {
     Scene *S = (Scene *)scene;
-    size_t n = (size_t)(S->d.n_objects * S->d.n_lights);
-    uint8_t *copy = (uint8_t *)malloc(n ? n : 1);
-    if (!copy)
-        return -1;
-    if (n)
-        memcpy(copy, sealed, n);
+    uint8_t *copy = NULL;
+    if (sealed) {
+        if (count != S->d.n_objects * S->d.n_lights)
+            return -1;
+        copy = (uint8_t *)malloc(count ? (size_t)count : 1);
+        if (!copy)
+            return -1;
+        if (count)
+            memcpy(copy, sealed, (size_t)count);
+    }
     free(S->sealed);
     S->sealed = copy;
-    S->cutoff = cutoff;
-    S->savings = flags;
     return 0;
 }
 
@@ -1109,6 +1497,8 @@ typedef struct {
     int8_t *flags;
     double t_max;
     ShadeFn shade;
+    double cutoff;        /* JOB_TRACE: the savings it makes (Work.cutoff, Work.savings) */
+    int64_t savings;
     _Atomic int64_t next;
 } Job;
 
@@ -1130,6 +1520,8 @@ static void *run_worker(void *arg)
         wk->failed = 1;
         return NULL;
     }
+    w.cutoff = job->cutoff;
+    w.savings = job->savings;
     Media air;
     memset(&air, 0, sizeof(air));
     for (;;) {
@@ -1206,7 +1598,7 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
 }
 
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
-             int64_t *counts, int64_t threads)
+             int64_t *counts, int64_t threads, double cutoff, int64_t savings)
 {
     const Scene *S = (const Scene *)scene;
     Job job;
@@ -1218,6 +1610,8 @@ int rt_trace(void *scene, int64_t n, const double *origins, const double *direct
     job.d = directions;
     job.colors = colors;
     job.shade = pick_shade(S->d.effects);
+    job.cutoff = cutoff;
+    job.savings = savings;
     counts[RAY_CAMERA] += n;
     return run_job(&job, threads, counts);
 }
@@ -1294,7 +1688,7 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
  * untextured); for the tests, which compare it with the NumPy reference point by point.  -1 on a bad
  * primitive index. */
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out)
+                      const double *bary, double *out)
 {
     const Scene *S = (const Scene *)scene;
     for (int64_t i = 0; i < n; i++)
@@ -1302,7 +1696,7 @@ int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double
             return -1;
     for (int64_t i = 0; i < n; i++) {
         if (S->d.effects & FX_TEXTURES)
-            texture_color(S, shape[i], points + 3 * i, part[i], out + 3 * i);
+            texture_color(S, shape[i], points + 3 * i, part[i], bary ? bary + 2 * i : NULL, out + 3 * i);
         else
             out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = 1.0;
     }

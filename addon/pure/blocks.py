@@ -1,27 +1,29 @@
 """Tracing an image in blocks, coarse to fine, for the render engine and the viewport (no bpy).
 
-The passes, tiles, new-at-this-stride rule and pixel sampling are the tracer's own (``tracer.tiles``, the
-same scheduler the command line and a Dask cluster use), so the add-on's image is the command line's.
-What differs here is where the rays come from (any function of pixel rows and columns, so that Blender's
-camera and viewport can be matched exactly), and how the work is driven: a tile of a pass is one work
-item; items are traced in chunks of rays with a cancel check between chunks (so Esc is honoured *within*
-a block), by several threads at once, or a time slice at a time for the viewport.
+The passes, tiles, new-at-this-stride rule and pixel sampling are the tracer's own, and so is the loop that
+drives the tiles (``tracer.tiles``: the scheduler and TileRun the command line and a Dask cluster use), so
+the add-on's image is the command line's.  What differs here is where the rays come from (any function of
+pixel rows and columns, so that Blender's camera and viewport can be matched exactly), and how the work is
+cut: a tile of a pass is one work item; items are traced in chunks of rays with a cancel check between
+chunks (so Esc is honoured *within* a block), by several threads at once, or a time slice at a time for the
+viewport.
 
 The film is stored bottom row first, as Blender's render results and textures are.
 """
 from __future__ import annotations
 
-import concurrent.futures
 import threading
 import time
-from typing import TYPE_CHECKING, Callable, Iterator, Optional
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 
-from . import deps
-
-if TYPE_CHECKING:  # a work item is one tile of one pass
-    from tracer.tiles import Tile
+from ..tracer import tiles
+from ..tracer.backend import make_tracer
+from ..tracer.errors import RenderCancelled
+from ..tracer.target import sample_to_error
+from ..tracer.threads import default_threads
+from ..tracer.trace import RayCounts, first_hits
 
 RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]  # (rows, cols, dy, dx) -> (origins, directions)
 
@@ -30,12 +32,12 @@ DEFAULT_CHUNK = 4096  # rays per call into the tracer: a 64 x 64 tile in one, Es
 
 
 def block_passes(block_size: int, progressive: bool) -> list[int]:
-    return deps.module("tiles").block_passes(int(block_size), bool(progressive))
+    return tiles.block_passes(int(block_size), bool(progressive))
 
 
 def resolve_threads(threads: int) -> int:
     """0 means the tracer's default: $SDL_TRACER_THREADS, else every core this process may run on."""
-    return int(threads) if threads and threads > 0 else deps.module("native").default_threads()
+    return int(threads) if threads and threads > 0 else default_threads()
 
 
 def _work_items(plan) -> list:
@@ -43,7 +45,6 @@ def _work_items(plan) -> list:
     pass traces one ray per stride x stride block, so each work item still traces about tile x tile rays
     (at 1080p with block size 8 this is 700 items instead of 2,040, and a second less in Blender 3.4).
     Sub-pixel offsets depend on the pixel alone, so the image is the same for any tiling."""
-    tiles = deps.module("tiles")
     finest = plan.passes[-1]
     items = []
     for p, stride in enumerate(plan.passes):
@@ -71,7 +72,7 @@ class BlockRenderer:
                  progressive: bool = False, threads: int = 1, tile: int = DEFAULT_TILE,
                  chunk: Optional[int] = None, alpha: bool = False, backend: str = "auto", samples: int = 1,
                  sampling: str = "jittered", threshold: float = 0.05, seed: int = 0):
-        self.plan = deps.module("tiles").TilePlan(
+        self.plan = tiles.TilePlan(
             int(width), int(height), block_size=int(block_size), progressive=bool(progressive), tile=int(tile),
             samples=int(samples), sampling_mode=sampling, threshold=float(threshold), seed=int(seed))
         self.compiled = compiled
@@ -97,7 +98,7 @@ class BlockRenderer:
         self._local = threading.local()
         self._tracers = []
         self._lock = threading.Lock()
-        self._refine: Optional[np.ndarray] = None
+        self._tiles = tiles.TileRun(self.plan, self._traced, self._shade)
         self.backend_name = ""
 
     # -- tracing ---------------------------------------------------------------------------------------
@@ -105,7 +106,7 @@ class BlockRenderer:
     def _tracer(self):
         tracer = getattr(self._local, "tracer", None)
         if tracer is None:
-            tracer = deps.module("backend").make_tracer(self.compiled, self.backend)
+            tracer = make_tracer(self.compiled, self.backend)
             if getattr(tracer, "name", "") == "c":
                 tracer.threads = self.threads  # the C core spreads each chunk over its own threads
             self._local.tracer = tracer
@@ -128,81 +129,46 @@ class BlockRenderer:
         """Which rays hit anything (for the film's alpha), by the same backend that shades them."""
         if hasattr(tracer, "first_hits"):
             return np.isfinite(tracer.first_hits(origins, directions)["t"])
-        return deps.module("trace").first_hits(self.compiled, origins, directions).hit
+        return first_hits(self.compiled, origins, directions).hit
 
-    def _refine_mask(self) -> np.ndarray:
-        with self._lock:  # judged once, on the film every block pass has finished
-            if self._refine is None:
-                self._refine = self.plan.refine_mask(self.color)
-            return self._refine
-
-    def trace_item(self, item, cancel: Optional[Callable[[], bool]] = None):
-        """Trace one tile of one pass (a ``tracer.tiles.Tile``) into the film, asking ``cancel`` between
-        chunks of rays."""
-        def checkpoint() -> None:
-            if cancel is not None and cancel():
-                raise Cancelled()
-
+    def _shade(self, checkpoint: Optional[tiles.Checkpoint]) -> tiles.PixelTracer:
+        """The pixel tracer of one work item, with the calling thread's backend tracer."""
         tracer = self._tracer()
-        shade = deps.module("tiles").PixelTracer(
-            self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint, alpha=self.want_alpha,
-            first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
-        refine = self._refine_mask() if self.plan.is_refinement(item) else None
-        deps.module("tiles").trace_tile(self.plan, item, self._traced, shade, refine)
-        return item
+        return tiles.PixelTracer(self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint,
+                                 alpha=self.want_alpha,
+                                 first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
 
-    def pass_items(self, pass_index: int) -> list[Tile]:
+    def pass_items(self, pass_index: int) -> list[tiles.Tile]:
         return [item for item in self.items if item.pass_index == pass_index]
 
     def run(self, cancel: Optional[Callable[[], bool]] = None,
-            on_item: Optional[Callable[[Tile], None]] = None, poll: float = 0.05) -> None:
+            on_item: Optional[Callable[[tiles.Tile], None]] = None, poll: float = 0.05) -> None:
         """Trace everything.  ``cancel`` and ``on_item`` are only ever called on the calling thread (Blender's
-        API wants that); worker threads see cancellation through an event checked between chunks."""
+        API wants that); worker threads see cancellation between chunks (tracer.tiles.TileRun)."""
         started = time.perf_counter()
-        stop = threading.Event()
-
-        def stopped() -> bool:
-            return stop.is_set()
-
         try:
             if self.item_threads == 1:
-                for item in self.items:
-                    self.trace_item(item, cancel)
-                    self.done += 1
-                    if on_item is not None:
-                        on_item(item)
-                return
-            with concurrent.futures.ThreadPoolExecutor(max_workers=self.item_threads,
-                                                       thread_name_prefix="sdl-trace") as pool:
-                try:
-                    for p in range(self.pass_count):  # a pass reuses the samples of the one before
-                        pending = {pool.submit(self.trace_item, item, stopped) for item in self.pass_items(p)}
-                        while pending:
-                            finished, pending = concurrent.futures.wait(
-                                pending, timeout=poll, return_when=concurrent.futures.FIRST_COMPLETED)
-                            for future in finished:
-                                item = future.result()
-                                self.done += 1
-                                if on_item is not None:
-                                    on_item(item)
-                            if cancel is not None and cancel():
-                                raise Cancelled()
-                except BaseException:
-                    stop.set()
-                    raise
+                traced = self._tiles.run(self.items, cancel)
+            else:
+                traced = self._tiles.run_on_threads(self.items, self.item_threads, cancel, poll)
+            for item in traced:
+                self.done += 1
+                if on_item is not None:
+                    on_item(item)
+        except RenderCancelled:
+            raise Cancelled() from None
         finally:
             self.seconds += time.perf_counter() - started
 
     def run_to_error(self, target: float, cancel: Optional[Callable[[], bool]] = None):
-        """Trace the whole film to an error target instead of the block plan (tracer.target: pixels sampled
-        until their estimated error is below ``target``); returns the tracer's ErrorEstimate.  The alpha
+        """Trace the whole film to an error target instead of the block plan (tracer.target: rays where they
+        lower the image's estimated RMSE most, until it is below ``target``); returns the tracer's ErrorEstimate.  The alpha
         stays 1: the target's sampling shades colour only."""
         started = time.perf_counter()
-        target_module = deps.module("target")
         try:
-            film, estimate = target_module.sample_to_error(self._tracer().camera_rays, self.rays_for, self.width,
-                                                           self.height, float(target), self.plan.seed, cancel)
-        except deps.module("errors").RenderCancelled:
+            film, estimate = sample_to_error(self._tracer().camera_rays, self.rays_for, self.width, self.height,
+                                             float(target), self.plan.seed, cancel)
+        except RenderCancelled:
             raise Cancelled() from None
         finally:
             self.seconds += time.perf_counter() - started
@@ -210,12 +176,12 @@ class BlockRenderer:
         self.done = len(self.items)
         return estimate
 
-    def steps(self) -> Iterator[Tile]:
+    def steps(self) -> Iterator[tiles.Tile]:
         """The remaining items one at a time, on the calling thread (for time-sliced viewport drawing)."""
         while self.done < len(self.items):
             item = self.items[self.done]
             started = time.perf_counter()
-            self.trace_item(item)
+            self._tiles.trace(item)
             self.seconds += time.perf_counter() - started
             self.done += 1
             yield item
@@ -247,7 +213,7 @@ class BlockRenderer:
         return self._film
 
     def counts(self):
-        total = deps.module("trace").RayCounts()
+        total = RayCounts()
         for tracer in self._tracers:
             total.add(tracer.counts)
         return total

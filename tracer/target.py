@@ -76,6 +76,10 @@ PILOT_SALT = 0x5EED_C0DE
 #: errors up.
 FLOOR_SIGNIFICANCE = 2.0
 MAX_ROUNDS = 16
+#: Image target: bisection steps of a plan's scale (its logarithm's range, about 10, is then cut to 1e-8),
+#: and the groups of nearly equal e0 a plan is made for (about 1 % apart over 10 decades).
+PLAN_STEPS = 32
+PLAN_BINS = 2048
 
 #: Pixel target: every pixel's first batch of rays (enough for a variance, one 4 x 4 grid of strata).
 FIRST_BATCH = 16
@@ -191,30 +195,66 @@ def _fit_line(x: np.ndarray, y: np.ndarray, fallback: tuple[float, float]) -> tu
 def plan_halves(e0: np.ndarray, model: ErrorModel, squared_budget: float) -> np.ndarray:
     """Rays per half for each pixel (0: its centre ray alone) such that the predicted sum of squared errors
     is at most ``squared_budget`` for the fewest rays, as far as HALF_LADDER's steps allow.  A pixel is
-    refined only where its rays are predicted to do better than its centre ray."""
-    difficulty, centre = model.difficulty(e0), model.centre(e0)
-    weight = np.power(difficulty, 1.0 / (1.0 + ALPHA))
+    refined only where its rays are predicted to do better than its centre ray.
+
+    Everything the model predicts of a pixel is a function of its e0, so pixels are planned in PLAN_BINS
+    groups of nearly equal e0 (log-spaced; the model is linear in e0, so a group's sums are exact), and every
+    pixel of a group gets the group's rays: the bisection then costs nothing next to the rays."""
+    halves = np.zeros(e0.shape, dtype=np.int64)
+    centre_all = model.centre(e0)
+    if float(centre_all.sum()) <= squared_budget:
+        return halves
+    active = np.flatnonzero(model.difficulty(e0) > 0.0)  # (flat pixels, most of most images, never take rays)
+    if active.size == 0:
+        return halves
+    unchanged = float(centre_all.sum() - centre_all[active].sum())
+    group, count, e0_sum = _groups_by_e0(e0[active])
+    e0_mean = e0_sum / count
+    difficulty = model.kappa * e0_sum + model.floor * count  # each group's sums
+    centre = model.centre_scale * e0_sum + model.centre_floor * count
+    weight = np.power(model.difficulty(e0_mean), 1.0 / (1.0 + ALPHA))
+    # Refine a group where (2h)^ALPHA exceeds this: where its rays beat its centre rays (never where a centre
+    # ray is predicted exact).
+    centre_mean = model.centre(e0_mean)
+    better_at = np.divide(model.difficulty(e0_mean), centre_mean, out=np.full(centre_mean.shape, np.inf),
+                          where=centre_mean > 0.0)
 
     def halves_at(scale: float) -> np.ndarray:
         rays = scale * weight
-        step = np.searchsorted(HALF_LADDER, rays / 2.0, side="right") - 1
-        halves = HALF_LADDER[np.maximum(step, 0)]
-        better = difficulty / (2.0 * halves) ** ALPHA < centre
-        return np.where((rays >= 2 * HALF_LADDER[0]) & better, halves, 0)
+        step = HALF_LADDER[np.maximum(np.searchsorted(HALF_LADDER, rays / 2.0, side="right") - 1, 0)]
+        return np.where((rays >= 2 * HALF_LADDER[0]) & ((2.0 * step) ** ALPHA > better_at), step, 0)
 
-    def predicted(halves: np.ndarray) -> float:
-        return float(np.sum(np.where(halves > 0, difficulty / np.maximum(2.0 * halves, 1.0) ** ALPHA, centre)))
+    def predicted(h: np.ndarray) -> float:
+        return unchanged + float(np.sum(np.where(h > 0, difficulty / np.maximum(2.0 * h, 1.0) ** ALPHA, centre)))
 
-    if predicted(np.zeros(e0.shape, dtype=np.int64)) <= squared_budget:
-        return np.zeros(e0.shape, dtype=np.int64)
-    low, high = -30.0, 30.0  # log10 of the scale
-    for _ in range(48):
+    # The scale runs from where the likeliest pixel just takes the fewest rays to where the least likely
+    # one takes the most; the prediction falls in steps between, found by bisection of its logarithm.
+    low = math.log10(2 * HALF_LADDER[0] / float(weight.max()))
+    high = math.log10(2 * HALF_LADDER[-1] / float(weight.min())) + 1.0
+    for _ in range(PLAN_STEPS):
         middle = 0.5 * (low + high)
         if predicted(halves_at(10.0 ** middle)) > squared_budget:
             low = middle
         else:
             high = middle
-    return halves_at(10.0 ** high).astype(np.int64)
+    halves[active] = halves_at(10.0 ** high)[group]
+    return halves
+
+
+def _groups_by_e0(e0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each value's group (PLAN_BINS log-spaced groups between the smallest value above 0 and the largest, and
+    one group of zeros), and each used group's size and sum, the groups numbered 0.. in order."""
+    positive = e0[e0 > 0.0]
+    if positive.size:
+        low, high = math.log(float(positive.min())), math.log(float(positive.max()))
+        width = max(high - low, 1e-12) / PLAN_BINS
+        raw = np.where(e0 > 0.0, 1 + np.minimum((np.log(np.maximum(e0, positive.min())) - low) / width,
+                                                  PLAN_BINS - 1).astype(np.int64), 0)
+    else:
+        raw = np.zeros(e0.shape, dtype=np.int64)
+    used, group = np.unique(raw, return_inverse=True)
+    count = np.bincount(group, minlength=used.size).astype(np.float64)
+    return group, count, np.bincount(group, weights=e0, minlength=used.size)
 
 
 class _Halves:

@@ -17,20 +17,25 @@ The image target works in rounds:
    :func:`centre_error` takes, per pixel, the larger over the two axes of that second difference squared,
    over 12 (mean over the channels), as the centre ray's squared error ``e0``.  For smooth shading it is a
    generous bound: the midpoint rule's error there is the second difference over 24.
-2. **A plan.**  A pixel refined to n jittered rays is expected to keep a squared error of kappa e0 / n^ALPHA.
-   Spending the fewest rays for a predicted sum of squared errors of at most P E² (P pixels) gives n
-   proportional to (kappa e0)^(1 / (1 + ALPHA)) (a Lagrange multiplier, found by bisection); counts are
-   rounded down to a ladder, and a pixel whose n comes out below 4 keeps its centre ray alone.
-3. **Two halves.**  A refined pixel's rays come in two halves, jittered independently; the squared difference
-   of the two halves' clipped means, over 4, is an unbiased estimate of the squared error of their mean.  The
-   centre ray of a refined pixel is not used in its colour.  Which pixels get how many rays depends only on
-   the centre rays and on sums over the whole image, never on a pixel's own halves, so the estimate carries
-   no selection bias (stopping a pixel because its own estimate happened to come out low would).
-4. **Rounds.**  The image estimate is the halves' estimates of the refined pixels plus ``e0`` of the others.
-   After each round kappa is fitted to the halves (the rays so far against what the plan expected), and the
-   plan is redone for the part of the target the estimate still misses.  The first round aims at twice the
-   target's squared error, as kappa is not known yet.  It ends when the estimate is at most E, or when no
-   pixel can take more rays.
+2. **A pilot.**  A random PILOT_FRACTION of all pixels, whatever their e0, gets jittered rays (the plan's
+   for it, at least PILOT_HALF per half).  From them an :class:`ErrorModel` is fitted: a pixel refined to n
+   jittered rays keeps a squared error of (kappa e0 + floor) / n^ALPHA, and a pixel left with its centre
+   ray has e0 plus a floor for what centre rays do not see (a texture finer than a pixel looks smooth to
+   them), counted only where the pilot shows it significantly.
+3. **A plan.**  Spending the fewest rays for a predicted sum of squared errors of PLAN_AIM x P E² (P
+   pixels) gives n proportional to (kappa e0 + floor)^(1 / (1 + ALPHA)) (a Lagrange multiplier, found by
+   bisection over groups of pixels of nearly equal e0); counts are rounded down to a ladder, and a pixel
+   whose rays are not predicted to beat its centre ray keeps it alone.
+4. **Two halves.**  A refined pixel's rays come in two halves, jittered independently; the squared difference
+   of the two halves' clipped means, over 4, is an unbiased estimate of the squared error of their mean (and
+   (centre - their mean)² less it one of the centre ray's, which the pilot uses).  The centre ray of a
+   refined pixel is not used in its colour.  Which pixels get how many rays depends only on the centre rays
+   and on sums over the whole image, never on a pixel's own halves, so the estimate carries no selection
+   bias (stopping a pixel because its own estimate happened to come out low would).
+5. **Rounds.**  The image estimate is the halves' estimates of the refined pixels plus the model's for the
+   others.  While it is above E, kappa and floor are refitted to every refined pixel and the plan is redone
+   for the part of the target still missing.  It ends when the estimate is at most E, or when no pixel can
+   take more rays.
 
 ALPHA = 1.25 is how fast the halves' estimate falls with rays on the bundled scenes.  Stratified rays beat
 1/n (the bench's jittered slopes, -0.72 to -0.80 in RMSE, are 1.44 to 1.6 in squared error), but two

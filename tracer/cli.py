@@ -15,11 +15,23 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+# (Everything the tracer package itself imports (tracer/__init__.py: the reader, compiling, rendering) is
+# imported here as usual: the program has loaded it anyway.  What only some commands use is imported by them.)
 from . import sampling
-from .bulk import one_blas_thread
+from .backend import load_core
+from .bulk import collector_paused, one_blas_thread
+from .compile import compile_scene, fold_tree
 from .errors import RenderCancelled, TracerError, warnings_as_lines
-from .model import MAX_RECURSION_DEPTH, traced_depth
+from .imageio import output_format, png_rows, save_image
+from .model import MAX_RECURSION_DEPTH, ShapeTable, traced_depth
+from .render import check_size, render
 from .reporting import error_message
+from .savings import RaySavings
+from .sdl.parser import load
+from .shapes import REGISTRY
+from .textures import drop_unreadable_textures
+from .tiles import DEFAULT_TILE
+from .trace import RayCounts
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -63,9 +75,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
     r.add_argument("--target-error", type=float, default=None, metavar="E",
-                   help="sample each pixel until its estimated error (standard error of its mean, linear "
-                        "colour; 1/255 is one 8-bit step) is at most E, and report the estimate "
-                        "(replaces --samples, --sampling, --threshold, --block-size and --progressive)")
+                   help="sample until the image's estimated RMSE (linear colour clipped to [0, 1]; 1/255 is "
+                        "one 8-bit step) is at most E, rays going where they lower it most, and report the "
+                        "estimate (replaces --samples, --sampling, --threshold, --block-size and --progressive)")
+    r.add_argument("--per-pixel", action="store_true",
+                   help="with --target-error: every pixel's standard error at most E instead of the image's "
+                        "RMSE (many more rays)")
     r.add_argument("--cutoff", type=float, default=None, metavar="W",
                    help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
                         "(default 1/512; 0 traces them all)")
@@ -124,7 +139,7 @@ SDL_EXTENSIONS = (".sdl", ".dat")
 
 def _scene_format(path: str, role: str) -> str:
     """'sdl' or 'usd' from a file name's extension (a scene to read may have any other extension: SDL)."""
-    from .usd.common import USD_EXTENSIONS
+    from .usd.common import USD_EXTENSIONS  # deferred: the USD package is loaded only for USD files
 
     suffix = os.path.splitext(path)[1].lower()
     if suffix in USD_EXTENSIONS:
@@ -137,9 +152,8 @@ def _scene_format(path: str, role: str) -> str:
 
 def _read_scene(path: str, lenient: bool, role: str = "scene"):
     if _scene_format(path, role) == "usd":
-        from .usd import load_usd
+        from .usd import load_usd  # deferred: (as above)
         return load_usd(path, strict=not lenient)
-    from .sdl.parser import load
     return load(path, strict=not lenient)
 
 
@@ -157,10 +171,10 @@ def _convert(args) -> int:
         print(f"warning: {message}", file=sys.stderr)
     try:
         if target == "usd":
-            from .usd import save_usd
+            from .usd import save_usd  # deferred: (the USD package, as above)
             save_usd(scene, args.destination)
         else:
-            from .sdl.writer import save_sdl
+            from .sdl.writer import save_sdl  # deferred: only convert writes SDL
             save_sdl(scene, args.destination)
     except ValueError as err:  # something SDL (or USD) cannot express
         raise TracerError(f"{args.destination}: {err}") from None
@@ -188,8 +202,6 @@ class _Progress:
 
 def _savings(args):
     """The RaySavings that --all-rays and --cutoff ask for."""
-    from .savings import RaySavings
-
     savings = RaySavings.none() if args.all_rays else RaySavings()
     if args.cutoff is not None:
         if not (math.isfinite(args.cutoff) and 0.0 <= args.cutoff <= 1.0):
@@ -211,15 +223,13 @@ def _replaced_options_given(args) -> list[str]:
 
 
 def _render(args) -> int:
-    from .backend import load_core
-    from .imageio import output_format, png_rows, save_image
-    from .render import check_size, render
-
     image_format = output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
             raise TracerError("--target-error cannot be combined with --scheduler or --frames")
         return _render_job(args)
+    if args.per_pixel and args.target_error is None:
+        print("warning: --per-pixel only changes --target-error, which is not given", file=sys.stderr)
     if args.target_error is not None:
         replaced = _replaced_options_given(args)
         if replaced:
@@ -227,8 +237,6 @@ def _render(args) -> int:
                   file=sys.stderr)
     scene = _load(args)
     if args.lenient:
-        from .textures import drop_unreadable_textures
-
         for message in drop_unreadable_textures(scene):
             print(f"warning: {message}", file=sys.stderr)
     if args.max_depth is not None:
@@ -243,7 +251,8 @@ def _render(args) -> int:
     progress = _Progress(not args.quiet)
     options = dict(block_size=args.block_size, progressive=args.progressive, on_tile=progress,
                    samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
-                   backend=args.backend, threads=args.threads, savings=savings, target_error=args.target_error)
+                   backend=args.backend, threads=args.threads, savings=savings, target_error=args.target_error,
+                   error_per_pixel=args.per_pixel)
     try:
         if image_format == "PNG":  # the rows go into the file as bands of tiles are done: no whole image kept
             check_size(args.width, args.height)
@@ -256,9 +265,10 @@ def _render(args) -> int:
     if result.image is not None:
         save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
     if result.error_estimate is not None and not args.quiet:
-        from .target import MAX_SAMPLES
+        from .target import MAX_SAMPLES  # deferred: only renders to an error target load tracer.target
         e = result.error_estimate
-        print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g}); "
+        goal = "every pixel" if e.kind == "pixel" else "the image's RMSE"
+        print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g} for {goal}); "
               f"{e.samples_mean:.1f} rays per pixel on average, {e.pixels_at_limit} pixels at the "
               f"{MAX_SAMPLES}-ray limit", file=sys.stderr)
     if args.stats:
@@ -273,11 +283,7 @@ def _render_job(args) -> int:
     import dataclasses
     import time
 
-    from . import distributed as dist
-    from .backend import load_core
-    from .imageio import save_image
-    from .render import check_size, render
-    from .trace import RayCounts
+    from . import distributed as dist  # deferred: only cluster and frame renders load it (and Dask)
 
     if args.scheduler is not None:
         dist.parse_address(args.scheduler)
@@ -292,7 +298,6 @@ def _render_job(args) -> int:
         print(f"warning: {message}", file=sys.stderr)
     if args.tile is not None and args.tile < 1:
         raise TracerError(f"--tile must be 1 or more, not {args.tile}")
-    from .tiles import DEFAULT_TILE
     tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
                    tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
@@ -341,10 +346,6 @@ def _render_job(args) -> int:
 
 def describe(scene) -> dict:
     """What ``info`` prints: objects, lights, camera, settings and live effects."""
-    from .bulk import collector_paused
-    from .compile import compile_scene, fold_tree
-    from .model import ShapeTable
-
     def shape_info(shape):
         info = {"shape": shape.kind, "position": [round(x, 6) for x in shape.matrix[:3, 3].tolist()],
                 "groups": list(shape.groups)}
@@ -400,8 +401,6 @@ def _rows_info(rows) -> list[dict]:
     """describe()'s objects for a ShapeTable's columns (tracer.model.ShapeColumns), the same as for its
     Shapes without making them (a big file's shapes stay columns): each row is a shape with no groups and
     no mesh file, at the last column of its affine."""
-    from .shapes import REGISTRY
-
     keywords = [entry.keyword for entry in REGISTRY]
     positions = _round_decimals(rows.affines[:, 3::4], 6).tolist()
     objects = [{"shape": keywords[kind], "position": position, "groups": []}
@@ -478,9 +477,8 @@ def _info(args) -> int:
 def _bench(args) -> int:
     from pathlib import Path
 
+    # deferred: the accuracy bench (and scikit-image, SciPy, matplotlib) is loaded by its command only
     from .accuracy import BenchConfig, measure, plot_targets, write_report
-    from .render import check_size
-    from .sdl.parser import load
 
     check_size(args.width, args.height)
     if min(args.width, args.height) < 7:  # scikit-image's SSIM window
@@ -501,7 +499,7 @@ def _bench(args) -> int:
     if args.scheduler is None:
         summaries = [measure(scene, name, out, config, progress=progress) for _, name, scene in scenes]
     else:
-        from . import distributed as dist
+        from . import distributed as dist  # deferred: (as in _render_job)
 
         dist.parse_address(args.scheduler)
         dist.require_dask()

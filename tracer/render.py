@@ -18,13 +18,13 @@ import numpy as np
 
 from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
-from .errors import RenderCancelled, TracerError
+from .errors import TracerError
 from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
 from .savings import RaySavings
-from .tiles import DEFAULT_TILE, PixelTracer, TilePlan, block_passes, camera_rays_for, trace_tile
+from .tiles import DEFAULT_TILE, PixelTracer, Tile, TilePlan, TileRun, camera_rays_for
 from .trace import RayCounts
 
 #: Width/height limit: a 16k x 16k float image is already 3 GiB.
@@ -88,15 +88,16 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
            threads: Optional[int] = None, savings: Optional[RaySavings] = None,
-           target_error: Optional[float] = None, eight_bit: bool = False,
+           target_error: Optional[float] = None, error_per_pixel: bool = False, eight_bit: bool = False,
            on_rows: Optional[Callable[[np.ndarray], None]] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
     ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
     ``savings``: which rays that cannot change the image are skipped (default: tracer.savings' defaults).
-    ``target_error``: instead of a fixed number of samples, sample each pixel until its estimated error is
-    at most this (see :mod:`tracer.target`; block size, samples and sampling mode are then not used).
+    ``target_error``: instead of a fixed number of samples, sample until the image's estimated RMSE is at
+    most this, or with ``error_per_pixel`` every pixel's standard error (see :mod:`tracer.target`; block
+    size, samples and sampling mode are then not used).
     ``eight_bit``: keep only the 8-bit values an image file gets (3 bytes a pixel instead of 12), each tile
     converted as it is traced; the image is then uint8, the bytes :func:`tracer.imageio.to_8bit` gives for
     the float image, in memory that :func:`tracer.imageio.save_image` can release as it writes.  (Adaptive
@@ -118,18 +119,16 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         result = render(scene, width, height, block_size=block_size, progressive=progressive, tile=tile,
                         on_tile=on_tile, cancel=cancel, backend=backend, samples=samples,
                         sampling_mode=sampling_mode, threshold=threshold, seed=seed, threads=threads,
-                        savings=savings, target_error=target_error, eight_bit=True)
+                        savings=savings, target_error=target_error, error_per_pixel=error_per_pixel,
+                        eight_bit=True)
         for band in bands_8bit(result.image, release=True):
             on_rows(band)
         result.image, result.size = None, (width, height)
         return result
     check_size(width, height)
     if target_error is not None:
-        from .target import check, render_to_error
-        check(target_error)
-        compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
-        result = render_to_error(compiled, width, height, target_error, backend=backend, threads=threads,
-                                 seed=seed, savings=savings, cancel=cancel)
+        result = _render_to_error(scene, width, height, target_error, error_per_pixel, backend, threads, seed,
+                                  savings, cancel)
         if eight_bit:
             result.image = to_8bit(result.image, out=new_8bit_image(height, width))
         return result
@@ -141,23 +140,42 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
     shown = new_8bit_image(height, width) if bytes_while_tracing else np.zeros((height, width, 3), np.float32)
-    film = shown[::-1]
-    refine = None
-    for done, item in enumerate(plan.items, 1):
-        if cancel is not None and cancel():
-            raise RenderCancelled("render cancelled")
-        if plan.is_refinement(item) and refine is None:
-            refine = plan.refine_mask(film)
-        trace_tile(plan, item, film, shade, refine)
+    run = TileRun(plan, shown[::-1], lambda checkpoint: shade)  # (a tile at once: no chunks to check between)
+    for done, item in enumerate(run.run(plan.items, cancel), 1):
         if on_tile is not None:
-            on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
-                               block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
-                               tiles_done=done, tiles_total=len(plan.items), image=shown))
-    refine = None  # (the mask is not kept through the conversion below)
+            on_tile(_update(plan, item, done, shown))
+    run = None  # (its refinement mask is not kept through the conversion below)
     if eight_bit and not bytes_while_tracing:
         shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)
+
+
+def _render_to_error(scene: Union[Scene, CompiledScene], width: int, height: int, target: float, per_pixel: bool,
+                     backend: str, threads: Optional[int], seed: int, savings: Optional[RaySavings],
+                     cancel: Optional[Callable[[], bool]]) -> RenderResult:
+    """render(..., target_error=...): sampled by tracer.target, with the result's ``error_estimate``."""
+    # deferred: sampling to an error target (and the SciPy it uses) is loaded only by the renders that ask
+    # for it (tests/test_cli.py: what a plain render must not load)
+    from .target import check, sample_to_error
+
+    check(target)
+    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+    started = time.perf_counter()
+    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
+    tracer = make_tracer(compiled, backend, threads, savings)
+    film, estimate = sample_to_error(tracer.camera_rays, camera_rays_for(frame, width, height), width, height,
+                                     target, seed, cancel, per_pixel)
+    return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
+                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
+                        error_estimate=estimate)
+
+
+def _update(plan: TilePlan, item: Tile, done: int, image: Optional[np.ndarray]) -> TileUpdate:
+    """The TileUpdate of a finished tile (in image coordinates, row 0 at the top)."""
+    return TileUpdate(x0=item.c0, y0=plan.height - item.r1, x1=item.c1, y1=plan.height - item.r0,
+                      block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
+                      tiles_done=done, tiles_total=len(plan.items), image=image)
 
 
 def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],
@@ -187,18 +205,12 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     for r0 in sorted(rects_from, reverse=True):  # (tile rows are counted from the bottom)
         r1 = min(r0 + plan.tile, height)
         rows = band[:r1 - r0]
-        window = rows[::-1]  # the band as tiles are traced: rows from the bottom, image row r0 first
-        for rect in rects_from[r0]:
-            for item in plan.rect_items(rect):
-                if cancel is not None and cancel():
-                    raise RenderCancelled("render cancelled")
-                trace_tile(plan, item, window, shade, at=(r0, 0))
-                done += 1
-                if on_tile is not None:
-                    on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
-                                       block_size=item.stride, pass_index=item.pass_index,
-                                       pass_count=plan.pass_count, tiles_done=done, tiles_total=len(plan.items),
-                                       image=None))
+        # the band as tiles are traced: rows from the bottom, image row r0 first
+        run = TileRun(plan, rows[::-1], lambda checkpoint: shade, at=(r0, 0))
+        for item in run.run((item for rect in rects_from[r0] for item in plan.rect_items(rect)), cancel):
+            done += 1
+            if on_tile is not None:
+                on_tile(_update(plan, item, done, None))
         on_rows(rows)
     return RenderResult(image=None, rays=tracer.counts, seconds=time.perf_counter() - started,
                         backend=tracer.name, effects=compiled.effects, size=(width, height))

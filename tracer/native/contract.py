@@ -54,8 +54,9 @@ RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
 SKIP_REASONS = _savings.SKIP_REASONS
 SAVINGS_SWITCHES = _savings.SWITCHES
-#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew.
-EDIT_FLAGS = ("meshes", "rebuild")
+#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew; objects
+#: were removed (those listed) and added (at the end).
+EDIT_FLAGS = ("meshes", "rebuild", "objects")
 
 
 def c_name(name: str) -> str:
@@ -94,7 +95,7 @@ class Constant:
 CONSTANTS = (
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
-    Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MEDIA_DEPTH", "tracer.model:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
     Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
              "most octaves of turbulence summed (marble); a larger count is read as this one"),
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",

@@ -144,11 +144,15 @@ class BlockRenderer:
                 raise Cancelled()
 
         tracer = self._tracer()
+        tracer.cancel = cancel  # (also asked while a chunk is traced: a deep ray tree stops within 50 ms)
         shade = deps.module("tiles").PixelTracer(
             self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint, alpha=self.want_alpha,
             first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
         refine = self._refine_mask() if self.plan.is_refinement(item) else None
-        deps.module("tiles").trace_tile(self.plan, item, self._traced, shade, refine)
+        try:
+            deps.module("tiles").trace_tile(self.plan, item, self._traced, shade, refine)
+        except deps.module("errors").RenderCancelled:
+            raise Cancelled() from None
         return item
 
     def pass_items(self, pass_index: int) -> list[Tile]:

@@ -75,6 +75,17 @@ class RenderResult:
         return out
 
 
+def budget_note(rays: RayCounts) -> Optional[str]:
+    """What to tell a user when the ray budget cut rays (tracer.savings: RAY_BUDGET), else None."""
+    if not rays.skipped_budget:
+        return None
+    from .savings import RAY_BUDGET
+
+    return (f"{rays.skipped_budget:,} reflected or transmitted rays were not traced: a camera ray's tree traces "
+            f"at most {RAY_BUDGET:,} (its rays double at every level: reflectivity and transparency that add up "
+            f"to more than 1, or minReflectivity/minTransparency 0 with a deep maxRecursionDepth)")
+
+
 def check_size(width: int, height: int) -> None:
     for name, value in (("width", width), ("height", height)):
         if not 1 <= value <= MAX_DIMENSION:
@@ -136,7 +147,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
     started = time.perf_counter()
-    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
@@ -161,12 +172,14 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
 
 
 def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],
-             savings: Optional[RaySavings]) -> tuple[CompiledScene, object, PixelTracer]:
+             savings: Optional[RaySavings],
+             cancel: Optional[Callable[[], bool]] = None) -> tuple[CompiledScene, object, PixelTracer]:
     """The compiled scene, the backend's tracer and the pixel tracer of a render."""
     width, height = plan.width, plan.height
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
     tracer = make_tracer(compiled, backend, threads, savings)
+    tracer.cancel = cancel  # (asked while a batch is traced too, so that a long ray tree stops at once)
     return compiled, tracer, PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
 
 
@@ -177,7 +190,7 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     time, from the top of the image, every pass of a tile before the next tile, into one band of 8-bit
     rows that goes to ``on_rows`` when its tiles are done."""
     started = time.perf_counter()
-    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     width, height = plan.width, plan.height
     band = np.zeros((min(plan.tile, height), width, 3), dtype=np.uint8)  # row 0 at the top, as files want
     rects_from = {}  # each band's tiles, by their first row

@@ -20,7 +20,7 @@ from typing import BinaryIO, Optional
 import numpy as np
 
 from ..compile import CompiledScene
-from ..errors import TracerError
+from ..errors import RenderCancelled, TracerError
 from ..intersect.hits import HitArrays
 from ..savings import RaySavings, sealed_lights
 from ..trace import RayCounts
@@ -76,6 +76,24 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_destroy.argtypes = [ctypes.c_void_p]
     lib.rt_set_savings.restype = ctypes.c_int
     lib.rt_set_savings.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_int64, _u8p]
+    lib.rt_set_budget.restype = None
+    lib.rt_set_budget.argtypes = [ctypes.c_void_p, ctypes.c_int64]
+    lib.rt_set_cancel.restype = None
+    lib.rt_set_cancel.argtypes = [ctypes.c_void_p, _i32p]
+    lib.rt_interrupt_install.restype = ctypes.c_int
+    lib.rt_interrupt_install.argtypes = [ctypes.c_int64]
+    lib.rt_interrupt_uninstall.restype = None
+    lib.rt_interrupt_uninstall.argtypes = []
+    lib.rt_interrupt_disarm.restype = None
+    lib.rt_interrupt_disarm.argtypes = []
+    lib.rt_interrupt_heard.restype = ctypes.c_int32
+    lib.rt_interrupt_heard.argtypes = []
+    lib.rt_interrupt_clear.restype = None
+    lib.rt_interrupt_clear.argtypes = []
+    lib.rt_interrupt_hold_file.restype = ctypes.c_int32
+    lib.rt_interrupt_hold_file.argtypes = [ctypes.c_char_p]
+    lib.rt_interrupt_release_file.restype = None
+    lib.rt_interrupt_release_file.argtypes = [ctypes.c_int32]
     lib.rt_trace.restype = ctypes.c_int
     lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64]
     lib.rt_first_hits.restype = ctypes.c_int
@@ -274,6 +292,11 @@ def build_mesh_bvh(vertices: np.ndarray, tri_vertex: np.ndarray, leaf_size: int,
     return nodes, order
 
 
+def interrupt_library() -> Optional[ctypes.CDLL]:
+    """The loaded library, for tracer.signals (its rt_interrupt_* functions, interrupt.h), or None."""
+    return _lib
+
+
 def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
     """The FlatScene of a compiled scene, made once per compiled scene and kept on it (a second render of
     it flattens nothing), again only when the mesh constants it reads have changed.  (The tolerances it
@@ -334,6 +357,11 @@ class NativeTracer:
         if _lib.rt_set_savings(self._handle, float(self.savings.cutoff), self.savings.flags(),
                                _ptr(sealed, ctypes.c_uint8)) != 0:
             raise MemoryError("the C core ran out of memory")
+        _lib.rt_set_budget(self._handle, int(self.savings.ray_budget))
+        #: ``cancel() -> bool``, asked every 50 ms while a batch is traced: True stops it (RenderCancelled).
+        self.cancel = None
+        self._stop = np.zeros(1, dtype=np.int32)  # the flag the C core polls at every ray
+        _lib.rt_set_cancel(self._handle, _ptr(self._stop, ctypes.c_int32))
 
     def object_tree(self) -> tuple[bytes, np.ndarray, tuple[int, ...]]:
         """The C core's object hierarchy as built (for tests): its PairNode records as bytes, the bounded
@@ -357,11 +385,38 @@ class NativeTracer:
         o, d = _rays(origins, directions)
         colors = np.empty_like(o)
         counts = np.zeros(len(fields(RayCounts)), dtype=np.int64)
-        if _lib.rt_trace(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                         _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads) != 0:
+        status = self._polling_cancel(lambda: _lib.rt_trace(
+            self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+            _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads))
+        if status == -2:  # stopped: by a signal (whose Python handler runs now) or by self.cancel
+            raise RenderCancelled("render cancelled")
+        if status != 0:
             raise MemoryError("the C core ran out of memory")
         self.counts.add(RayCounts(*(int(c) for c in counts)))
         return colors
+
+    def _polling_cancel(self, call):
+        """``call()`` (a C function that polls self._stop), asking ``self.cancel`` every 50 ms meanwhile:
+        the call runs on a thread of its own (ctypes lets go of the interpreter while C runs) and this one
+        sets the flag when cancel() says so, or when it is interrupted itself."""
+        self._stop[0] = 0
+        if self.cancel is None:
+            return call()
+        import threading  # (here: a command-line render, which has no cancel callback, never loads it)
+
+        outcome = []
+        worker = threading.Thread(target=lambda: outcome.append(call()), name="sdl-tracer-batch", daemon=True)
+        worker.start()
+        try:
+            while worker.is_alive():
+                worker.join(0.05)
+                if worker.is_alive() and self.cancel():
+                    self._stop[0] = 1
+        finally:
+            self._stop[0] = 1  # (a no-op when the batch is done; else it ends it before this frame unwinds)
+            worker.join()
+            self._stop[0] = 0
+        return outcome[0]
 
     def first_hits(self, origins, directions) -> dict[str, np.ndarray]:
         """The nearest hit with t > 0 per ray: t (inf on a miss), unit world normal, shape, object, entering."""
@@ -372,7 +427,7 @@ class NativeTracer:
         if _lib.rt_first_hits(self._handle, n, _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
                               _ptr(out["t"], ctypes.c_double), _ptr(out["normal"], ctypes.c_double),
                               _ptr(out["shape"], ctypes.c_int32), _ptr(out["obj"], ctypes.c_int32),
-                              _ptr(out["entering"], ctypes.c_int8), self.threads) != 0:
+                              _ptr(out["entering"], ctypes.c_int8), self.threads) == -1:
             raise MemoryError("the C core ran out of memory")
         out["entering"] = out["entering"].astype(bool)
         return out
@@ -382,7 +437,7 @@ class NativeTracer:
         o, d = _rays(origins, directions)
         blocked = np.empty(len(o), np.int8)
         if _lib.rt_occluded(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                            float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) != 0:
+                            float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) == -1:
             raise MemoryError("the C core ran out of memory")
         return blocked.astype(bool)
 

@@ -11,7 +11,8 @@ enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
-enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
+enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7,
+       SKIP_BUDGET = 8 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define K_COUNT 9
 /* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
@@ -20,7 +21,7 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 /* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
 #define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
 #define RAY_KIND_COUNT 4
-#define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
+#define N_COUNTS 9  /* rays cast per kind, then skipped per reason */
 
 /* the generic torus' ring radius (tracer.intersect.torus:RING_RADIUS) */
 #define TORUS_RING 1.0
@@ -32,6 +33,8 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define MAX_OCTAVES 32
 /* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
 #define MAX_RECURSION_DEPTH 64
+/* reflected and transmitted rays one camera ray's tree may trace, unless rt_set_budget says otherwise (tracer.savings:RAY_BUDGET) */
+#define RAY_BUDGET 4096
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
 #define TEX_PARAMS 9
 
@@ -173,6 +176,6 @@ typedef struct {
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
 #define RT_SCENE_DESC_FIELD_COUNT 61
-#define RT_CONTRACT_DIGEST "63c73e847c36681b"
+#define RT_CONTRACT_DIGEST "cfd2cfac87d2d9e7"
 
 #endif

@@ -84,6 +84,8 @@ CONSTANTS = (
              "most octaves of turbulence summed (marble); a larger count is read as this one"),
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
              "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
+    Constant("RAY_BUDGET", "tracer.savings:RAY_BUDGET", "int",
+             "reflected and transmitted rays one camera ray's tree may trace, unless rt_set_budget says otherwise"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
              "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
 )

@@ -19,6 +19,7 @@
 #endif
 
 #include "core.h"
+#include "interrupt.h"
 #include "numeric.h"
 #include "shapes.h"
 #include "mesh.h"
@@ -89,7 +90,15 @@ typedef struct {
     double cutoff;        /* a secondary ray of smaller cumulative weight is not traced */
     int64_t savings;      /* SAVE_* bits */
     uint8_t *sealed;      /* objects x lights: a feeler from inside the object to the light is blocked */
+    int64_t ray_budget;   /* most reflected and transmitted rays one camera ray's tree may trace (see shade.h) */
+    const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_set_cancel); may be NULL */
 } Scene;
+
+/* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
+static inline int stop_requested(const Scene *S)
+{
+    return rt_interrupt_heard() != 0 || (S->cancel != NULL && *S->cancel != 0);
+}
 
 #define SHADOW_CACHE 16
 
@@ -107,7 +116,10 @@ typedef struct {
     TreeEntry *tree_stack;
     int64_t counts[N_COUNTS];
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
+    int64_t rays_used;    /* reflected and transmitted rays traced for the current camera ray */
+    int64_t ray_limit;    /* ...which the current ray's descendants may bring up to this (shade.h) */
     int oom;
+    int stopped;          /* stop_requested() was seen: the colours are not to be used */
 } Work;
 
 static int work_init(Work *w, const Scene *S)
@@ -888,6 +900,7 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
         return NULL;
     }
     S->d = *desc;
+    S->ray_budget = RAY_BUDGET;
     /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
      * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
      * says; tracer.model.traced_depth applies the same bound to the NumPy path. */
@@ -1023,6 +1036,19 @@ int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sea
     return 0;
 }
 
+/* The ray budget: at most `budget` reflected and transmitted rays per camera ray (see shade.h). */
+void rt_set_budget(void *scene, int64_t budget)
+{
+    ((Scene *)scene)->ray_budget = budget < 0 ? 0 : budget;
+}
+
+/* A flag the tracer polls at every ray: while it is non-zero, rt_trace stops and returns -2.  NULL: none.
+ * The flag must outlive the scene or be unset first. */
+void rt_set_cancel(void *scene, const int32_t *flag)
+{
+    ((Scene *)scene)->cancel = flag;
+}
+
 /* ------------------------------------------------------------------------------------------------------
  * Batches over threads */
 
@@ -1046,6 +1072,7 @@ typedef struct {
     Job *job;
     int64_t counts[N_COUNTS];
     int failed;
+    int stopped;
 } Worker;
 
 #define CHUNK 16
@@ -1067,9 +1094,15 @@ static void *run_worker(void *arg)
         if (start >= job->n)
             break;
         int64_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
+        if (stop_requested(S)) {
+            w.stopped = 1;
+            break;
+        }
         for (int64_t i = start; i < end; i++) {
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
+                w.rays_used = 0;
+                w.ray_limit = S->ray_budget;
                 job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
@@ -1094,13 +1127,15 @@ static void *run_worker(void *arg)
     }
     memcpy(wk->counts, w.counts, sizeof(wk->counts));
     wk->failed = w.oom;
+    wk->stopped = w.stopped;
     work_free(&w);
     return NULL;
 }
 
 #define MAX_THREADS 256
 
-/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure. */
+/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure, -2 when
+ * it stopped because stop_requested() (its results are then incomplete). */
 static int run_job(Job *job, int64_t threads, int64_t *counts)
 {
     if (threads < 1)
@@ -1118,21 +1153,23 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
         workers[k].job = job;
         memset(workers[k].counts, 0, sizeof(workers[k].counts));
         workers[k].failed = 0;
+        workers[k].stopped = 0;
         started[k] = 0;
     }
     for (int64_t k = 1; k < threads; k++)
         started[k] = pthread_create(&ids[k], NULL, run_worker, &workers[k]) == 0;
     run_worker(&workers[0]);
-    int failed = 0;
+    int failed = 0, stopped = 0;
     for (int64_t k = 0; k < threads; k++) {
         if (k > 0 && started[k])
             pthread_join(ids[k], NULL);
         failed |= workers[k].failed;
+        stopped |= workers[k].stopped;
         if (counts)
             for (int c = 0; c < N_COUNTS; c++)
                 counts[c] += workers[k].counts[c];
     }
-    return failed ? -1 : 0;
+    return failed ? -1 : stopped ? -2 : 0;
 }
 
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,

@@ -70,6 +70,37 @@ static inline void cook_torrance(const double *normal, const double *to_light, c
         out[c] = (specular[c] + (1.0 - specular[c]) * schlick) * common * lit;
 }
 
+/* The ray budget (tracer.trace: Tracer._take_rays is the NumPy side, the same arithmetic): a camera ray's
+ * tree traces at most Scene.ray_budget reflected and transmitted rays, whatever the depth and the weights (two
+ * mirrors of reflectivity 1 facing each other, or glass of reflectivity and transparency 0.95, double the rays
+ * at every level, and the cutoff never stops them).  A ray's descendants may bring w->rays_used up to `limit`
+ * (w->ray_limit when the ray was shaded).  Of two wanted children, the first (the mirror ray) may give its own
+ * descendants a part of what is left after both children's rays in proportion to its weight, but at least a
+ * chain as long as the levels left (`chain`); the second child gets everything left after the first's
+ * subtree.  A wanted ray over the budget is not traced (counted as SKIP_BUDGET).  Returns whether to trace
+ * the ray; if so, it is counted as used and w->ray_limit is set for its descendants. */
+static inline int take_ray(Work *w, int64_t limit, int sibling_wanted, double weight, double sibling_weight,
+                           int64_t chain)
+{
+    int64_t left = limit - w->rays_used;
+    if (left <= 0) {
+        w->counts[SKIP_BUDGET]++;
+        return 0;
+    }
+    int64_t share = left - 1;
+    if (sibling_wanted) {
+        double ratio = weight / (weight + sibling_weight);
+        if (!(ratio >= 0.0 && ratio <= 1.0))  /* (weights of 0 or infinity: an even split) */
+            ratio = 0.5;
+        int64_t by_weight = (int64_t)floor((double)(left - 2) * ratio);
+        int64_t by_depth = left - 2 < chain ? left - 2 : chain;
+        share = by_weight > by_depth ? by_weight : by_depth;
+    }
+    w->rays_used++;
+    w->ray_limit = w->rays_used + (share > 0 ? share : 0);
+    return 1;
+}
+
 static inline __attribute__((always_inline)) void
 shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t level, const Media *media,
            double weight, double *out,
@@ -80,6 +111,10 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     out[0] = D->background[0];
     out[1] = D->background[1];
     out[2] = D->background[2];
+    if (stop_requested(S)) {  /* a signal or a cancel: nothing more is traced, the colours are dropped */
+        w->stopped = 1;
+        return;
+    }
     Hit h;
     int64_t obj;
     if (!scene_first(S, w, o, d, &h, &obj))
@@ -188,10 +223,17 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
         }
         int total_internal = transmits && cos2_squared < 0.0;
         int shared = total_internal && reflects && (S->savings & SAVE_SHARED_TIR);
-        double mirrored[3] = {0.0, 0.0, 0.0};
         if (shared)
             w->counts[SKIP_SHARED_TIR]++;
-        if (reflects && worth_tracing(S, w, weight * (shared ? kr + kt : kr))) {
+        /* Which of the two rays are wanted (the cutoff), decided before either is traced: they share what is
+         * left of the ray budget (take_ray). */
+        double mirror_weight = weight * (shared ? kr + kt : kr);
+        int want_mirror = reflects && worth_tracing(S, w, mirror_weight);
+        int want_through = transmits && !shared && worth_tracing(S, w, weight * kt);
+        int64_t limit = w->ray_limit, chain = D->max_depth - level;
+        double through_weight = weight * kt;
+        double mirrored[3] = {0.0, 0.0, 0.0};
+        if (want_mirror && take_ray(w, limit, want_through, mirror_weight, through_weight, chain)) {
             double r[3], start[3];
             double dn = 2.0 * dot3(d, facing);
             for (int i = 0; i < 3; i++) {
@@ -199,7 +241,8 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                 start[i] = point[i] + offset * facing[i];
             }
             w->counts[RAY_REFLECTION]++;
-            self(S, w, start, r, level + 1, media, weight * (shared ? kr + kt : kr), mirrored);
+            self(S, w, start, r, level + 1, media, mirror_weight, mirrored);
+            w->ray_limit = limit;
         }
         if (reflects)
             for (int i = 0; i < 3; i++)
@@ -210,7 +253,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                 c[0] = mirrored[0];
                 c[1] = mirrored[1];
                 c[2] = mirrored[2];
-            } else if (worth_tracing(S, w, weight * kt)) {
+            } else if (want_through && take_ray(w, limit, 0, through_weight, 0.0, chain)) {
                 double next[3], start[3];
                 if (total_internal) {  /* total internal reflection: stays in the medium it came from */
                     double dn = 2.0 * dot3(d, facing);
@@ -219,7 +262,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                         start[i] = point[i] + offset * facing[i];
                     }
                     w->counts[RAY_REFLECTION]++;
-                    self(S, w, start, next, level + 1, media, weight * kt, c);
+                    self(S, w, start, next, level + 1, media, through_weight, c);
                 } else {
                     double along = ratio * cos1 - sqrt(cos2_squared);
                     for (int i = 0; i < 3; i++) {
@@ -227,8 +270,9 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
                         start[i] = point[i] - offset * facing[i];
                     }
                     w->counts[RAY_REFRACTION]++;
-                    self(S, w, start, next, level + 1, &after, weight * kt, c);
+                    self(S, w, start, next, level + 1, &after, through_weight, c);
                 }
+                w->ray_limit = limit;
             }
             for (int i = 0; i < 3; i++)
                 color[i] += kt * c[i];

@@ -35,7 +35,16 @@ def sdl_mesh(reader, prim) -> Optional[MeshData]:
     if any(not 0 <= v < len(vertices) for f in faces for v in f[0]) or \
             any(not 0 <= i < len(normals) for f in faces for i in f[1]):
         raise SceneError("a face index is out of range")
-    return MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>")
+    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>"))
+
+
+def _checked(reader, prim, mesh: MeshData) -> Optional[MeshData]:
+    """The mesh, unless its numbers cannot be traced (then the reader's problem, and None)."""
+    problem = mesh.coordinate_problem()
+    if problem is None:
+        return mesh
+    reader.problem(prim, problem)
+    return None
 
 
 def usd_mesh(reader, prim) -> Optional[MeshData]:
@@ -75,7 +84,7 @@ def usd_mesh(reader, prim) -> Optional[MeshData]:
         reader.note(prim, f"{skipped} faces with fewer than 3 vertices left out")
     if not faces:
         return None
-    return MeshData(vertices, normals, faces, origin=f"{reader.file}<{prim.GetPath()}>")
+    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{prim.GetPath()}>"))
 
 
 def _normals(reader, prim, mesh, n_points: int, n_faces: int, n_corners: int):

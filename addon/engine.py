@@ -27,9 +27,14 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import blocks, convert, deps, object_cache, passes, raycam
+from . import object_cache
 from .importer import CAM_EXACT, CAM_SHOWN
+from .pure import blocks, convert, passes, raycam
 from .scene_build import SceneBuilder, flat, matrix_np
+from .tracer.camera import CameraFrame
+from .tracer.compile import compile_scene
+from .tracer.errors import TracerError
+from .tracer.model import Camera
 
 ENGINE_ID = "SDL_RAYTRACER"
 #: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled.
@@ -100,8 +105,7 @@ def camera_rays(cam_obj, matrix, params: raycam.CameraParams, winx: int, winy: i
         def rays_for(rows, cols, dy=0.5, dx=0.5):
             return raycam.pixel_rays(params, winx, winy, rows + y0, cols + x0, aspx, aspy, dy, dx)
         return rays_for
-    camera = deps.module("camera")
-    frame = camera.CameraFrame.from_camera(deps.module("model").Camera(*stored), winx / winy)
+    frame = CameraFrame.from_camera(Camera(*stored), winx / winy)
 
     def exact_rays_for(rows, cols, dy=0.5, dx=0.5):
         directions = frame.directions(np.asarray(rows) + y0, np.asarray(cols) + x0, winy, winx, dy=dy, dx=dx)
@@ -122,6 +126,12 @@ def render_settings(scene) -> dict:
     s = scene.sdl_render
     return dict(block_size=s.block_size, progressive=s.progressive, threads=s.threads, samples=s.samples,
                 sampling=s.sampling.lower(), threshold=s.threshold)
+
+
+def blocky_warning(block_size: int) -> str:
+    """What a final render without Progressive Refinement says when it traces blocks, not pixels."""
+    return (f"Progressive Refinement is off with Block Size {block_size}: the image is one ray per "
+            f"{block_size} x {block_size} block (set Block Size 1, or tick Progressive Refinement)")
 
 
 def preview_lighting(tracer_scene) -> None:
@@ -155,7 +165,7 @@ def write_pass(render_pass, pixels: np.ndarray) -> None:
 
 def write_first_hit_passes(layer, names, tracer, compiled, rays_for, params, scene, chunk: int = 1 << 16) -> None:
     """Depth, Normal, Diffuse Color, Position and Mist (those in ``names``) of the ray through each pixel's
-    centre, into the render layer's passes (addon/passes.py says what each holds)."""
+    centre, into the render layer's passes (addon/pure/passes.py says what each holds)."""
     height, width = tracer.height, tracer.width
     matrix = np.asarray(params.matrix, dtype=np.float64)
     eye, forward = matrix[:3, 3], -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
@@ -264,7 +274,7 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 preview_lighting(tracer_scene)
             for message in warnings:
                 self.report({"WARNING"}, message)
-            compiled = deps.module("compile").compile_scene(tracer_scene)
+            compiled = compile_scene(tracer_scene)
             # Kept for the next render only where Blender keeps this engine for it (Persistent Data).
             self._kept = compiled if render.use_persistent_data else None
             if not render.use_persistent_data:
@@ -276,6 +286,9 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             settings = render_settings(scene)
             if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
                 settings.update(block_size=1, progressive=False, samples=1)
+            elif not settings["progressive"] and settings["block_size"] > 1:
+                warnings.append(blocky_warning(settings["block_size"]))
+                self.report({"WARNING"}, warnings[-1])
             if settings["progressive"] and not displayed():
                 # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
                 # the same rays either way, so the image is the same without them.
@@ -331,7 +344,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         except Exception as exc:  # noqa: BLE001 - a render must end with a message, not a traceback
             LAST_RENDER["error"] = str(exc)
             self.report({"ERROR"}, f"SDL Ray Tracer: {exc}")
-            traceback.print_exc()
+            if not isinstance(exc, (TracerError, ValueError)):
+                traceback.print_exc()  # (the scene's own problems are said in one line; a bug shows where)
         finally:
             self.end_result(result)
 
@@ -361,7 +375,7 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             if self._view_dirty or self._view_scene is None:
                 tracer_scene, _ = build_scene(depsgraph, "VIEWPORT", self._geometry)
                 # (the scene compiled before stays alive until this one is made: its BVHs are found again)
-                self._view_scene = deps.module("compile").compile_scene(tracer_scene)
+                self._view_scene = compile_scene(tracer_scene)
                 self._view_dirty = False
                 self._view = None
             if self._view is None or self._view[0] != key:

@@ -13,9 +13,13 @@ from typing import Optional
 
 import numpy as np
 
-from . import convert, deps, raycam
 from .engine import camera_params, render_size, stored_sdl_camera
+from .pure import convert, raycam
 from .scene_build import SceneBuilder, flat
+from .tracer.camera import view_angle
+from .tracer.meshio import write_3vn
+from .tracer.model import Camera
+from .tracer.sdl.writer import save_sdl
 
 _UNWRITABLE = re.compile(r"[\s{}!]")
 _SAFE = re.compile(r"[^A-Za-z0-9._-]")  # what a mesh file's name may hold
@@ -27,7 +31,6 @@ def _to_target(conversion: np.ndarray) -> np.ndarray:
 
 def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
     """The SDL camera for a Blender camera (None for cameras SDL cannot express)."""
-    Camera = deps.module("model").Camera
     data = cam_obj.data
     if data.type != "PERSP":
         return None
@@ -41,7 +44,7 @@ def camera_to_sdl(cam_obj, render, to_target: np.ndarray):
         up = axes[:, 1]
         _, _, ymin, ymax = raycam.viewplane(params, *render_size(render), render.pixel_aspect_x,
                                             render.pixel_aspect_y)
-        angle = convert.shortest32(deps.module("camera").view_angle(1.0, ymax - ymin))  # window at distance 1
+        angle = convert.shortest32(view_angle(1.0, ymax - ymin))  # window at distance 1
     rot = to_target[:3, :3]
     return Camera(tuple(float(v) for v in rot @ eye), tuple(float(v) for v in rot @ look),
                   tuple(float(v) for v in rot @ up), float(angle))
@@ -88,7 +91,7 @@ def _write_named_meshes(scene, names: dict, filepath: str) -> list:
                 used.add(name)
                 target = os.path.join(folder, name)
                 existed = os.path.exists(target)
-                deps.module("meshio").write_3vn(shape.mesh, target)
+                write_3vn(shape.mesh, target)
                 if not existed:
                     made.append(target)
                 by_mesh[id(shape.mesh)] = name
@@ -130,7 +133,7 @@ def export_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None,
     scene.source = None
     made = _write_named_meshes(scene, names, filepath)
     try:
-        deps.module("sdl.writer").save_sdl(scene, filepath)
+        save_sdl(scene, filepath)
     except BaseException:
         _remove(made)
         raise

@@ -6,16 +6,22 @@ inside Blender the engine registers :func:`decode` as the tracer's fallback deco
 
 Values are the file's own, as Pillow gives them: 8-bit samples over 255, no colour-space conversion (a
 float file, such as a 16-bit PNG, is read as Non-Color so that Blender does not linearise it).
+
+Each picture is decoded once per content (:data:`_decoded`): loading and removing a Blender image is a change
+to the file's data, which Blender reports to a Rendered viewport as a scene change, so decoding on every
+rebuild made the viewport start again for ever (Blender 3.4, scenes/textures.sdl).
 """
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
 import bpy
 import numpy as np
 
-from . import deps
+from .tracer import errors
+from .tracer.textures import images as limits
 
 
 def _existing(path: Path):
@@ -28,12 +34,49 @@ def _existing(path: Path):
     return None
 
 
+#: Pictures decoded so far: file content digest -> (height, width, 3) float32, read-only.
+_decoded: dict[bytes, np.ndarray] = {}
+#: path -> ((size, modification time), content digest): a file is read again only after it changed.
+_digests: dict[str, tuple[tuple[int, int], bytes]] = {}
+
+
+def _digest(path: Path) -> bytes:
+    status = path.stat()
+    stamp = (status.st_size, status.st_mtime_ns)
+    key = os.path.normcase(os.path.abspath(path))
+    known = _digests.get(key)
+    if known is None or known[0] != stamp:
+        with open(path, "rb") as handle:
+            known = _digests[key] = (stamp, hashlib.file_digest(handle, "sha256").digest()
+                                     if hasattr(hashlib, "file_digest") else hashlib.sha256(handle.read()).digest())
+    return known[1]
+
+
+@bpy.app.handlers.persistent
+def forget(*_args) -> None:
+    """load_post: drop every decoded picture (the images a new file uses are other ones)."""
+    _decoded.clear()
+    _digests.clear()
+
+
 def decode(path: Path) -> np.ndarray:
-    """(height, width, 3) float32 in [0, 1], row 0 at the bottom (Blender's order too)."""
-    errors, limits = deps.module("errors"), deps.module("textures.images")
+    """(height, width, 3) float32 in [0, 1], row 0 at the bottom (Blender's order too); read-only, and the
+    same array for every file of the same content."""
     path = Path(path)
     if not path.is_file():
         raise errors.TracerError(f"{path}: texture image not found")
+    try:
+        digest = _digest(path)
+    except OSError as err:
+        raise errors.TracerError(f"{path}: cannot read texture image ({err.strerror or err})") from None
+    rgb = _decoded.get(digest)
+    if rgb is None:
+        rgb = _decoded[digest] = _decode_with_blender(path)
+        rgb.setflags(write=False)
+    return rgb
+
+
+def _decode_with_blender(path: Path) -> np.ndarray:
     image = _existing(path)
     if image is not None and image.is_float and image.colorspace_settings.name != "Non-Color":
         image = None  # its pixels are linearised: read the file again rather than change the user's image
@@ -64,8 +107,12 @@ def decode(path: Path) -> np.ndarray:
 
 
 def register() -> None:
-    deps.module("textures.images").set_fallback_decoder(decode)
+    limits.set_fallback_decoder(decode)
+    bpy.app.handlers.load_post.append(forget)
 
 
 def unregister() -> None:
-    deps.module("textures.images").set_fallback_decoder(None)
+    limits.set_fallback_decoder(None)
+    while forget in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(forget)
+    forget()

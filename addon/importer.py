@@ -14,8 +14,15 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from . import convert, deps, meshes, primitives, props
+from . import meshes, props
+from .pure import convert, primitives
 from .scene_build import (OBJ_FILE, OBJ_KIND, OBJ_MATRIX, OBJ_ORDER, OBJ_PARAM, OBJ_SHOWN, SDL_TO_BOOLEAN, flat)
+from .tracer import model, shapes
+from .tracer.camera import CameraFrame, focal_length, framing_camera
+from .tracer.compile import compile_scene
+from .tracer.errors import TracerError
+from .tracer.sdl import parser
+from .tracer.textures import drop_unreadable_textures, texture_problems
 
 #: Custom properties on an imported camera object: eye, look-at point, up (Blender axes) and view angle.
 CAM_EXACT, CAM_SHOWN = "sdl_camera", "sdl_camera_shown"
@@ -29,6 +36,8 @@ class ImportResult:
     camera: Optional[object] = None
     collection: Optional[object] = None
     warnings: list[str] = field(default_factory=list)
+    #: Whether the import set SDL's colour management (see COLOUR_MANAGEMENT).
+    sdl_view: bool = False
 
 
 def read_scene(filepath: str, strict: bool = False):
@@ -36,19 +45,26 @@ def read_scene(filepath: str, strict: bool = False):
     A lenient read skips the statements it cannot read; when that leaves no shape, light or camera and
     there were problems (a binary file, a file in another format), the file is refused as a strict read
     would refuse it, so that importing it changes nothing rather than adding a camera that frames nothing."""
-    scene = deps.module("sdl.parser").load(filepath, strict=strict)
+    scene = parser.load(filepath, strict=strict)
     if scene.warnings and not scene.shapes() and not scene.lights and scene.camera is None:
         extra = len(scene.warnings) - 1
         more = f" (and {extra} more problem{'s' if extra > 1 else ''})" if extra else ""
-        raise deps.module("errors").TracerError(
-            f"nothing in the file could be read as SDL: {scene.warnings[0]}{more}")
+        raise TracerError(f"nothing in the file could be read as SDL: {scene.warnings[0]}{more}")
+    # A texture that cannot be used (a makePixmap naming a missing or unreadable picture) is refused as the
+    # command line refuses it; read leniently, it is taken off the shapes that use it, with a warning.
+    if strict:
+        problems = texture_problems(scene)
+        if problems:
+            raise TracerError(next(iter(problems.values())))
+    else:
+        scene.warnings.extend(drop_unreadable_textures(scene))
     return scene
 
 
 def camera_matrix(camera) -> np.ndarray:
     """The lecture's camera frame (u right, v up, n backwards: tracer.camera) as a Blender camera's world
     matrix; ``camera`` is in Blender's axes."""
-    return deps.module("camera").CameraFrame.from_camera(camera, 1.0).to_world()
+    return CameraFrame.from_camera(camera, 1.0).to_world()
 
 
 class _Created:
@@ -125,24 +141,23 @@ class Importer:
         return mat
 
     def _mesh(self, shape, mesh_part: np.ndarray):
-        kind = shape.kind
-        param = shape.tapered_radius if kind == "taperedCylinder" else 1.0
+        kind, parameters = shape.kind, shape.parameters
         mesh_file = None
-        if kind == "mesh":
+        if shapes.KINDS[kind].file_argument:
             mesh_file = os.path.abspath(shape.mesh.origin or shape.mesh_file or "")
         sheared = not np.array_equal(mesh_part, np.eye(4))
-        key = (kind, param, mesh_file)
+        key = (kind, parameters, mesh_file)
         if not sheared and key in self.mesh_cache:
             return self.mesh_cache[key]
-        gm = primitives.generic_mesh(kind, param, shape.mesh)
+        gm = primitives.generic_mesh(kind, parameters, shape.mesh)
         if sheared:
             gm = gm.transformed(mesh_part[:3, :3])
-        name = primitives.mesh_name(kind, param, mesh_file) + (" (sheared)" if sheared else "")
-        mesh = None if sheared else meshes.find_shared(kind, param, mesh_file, gm.hash())
+        name = primitives.mesh_name(kind, parameters, mesh_file) + (" (sheared)" if sheared else "")
+        mesh = None if sheared else meshes.find_shared(kind, parameters, mesh_file, gm.hash())
         if mesh is None:
             mesh = self.created.add("meshes", meshes.build_mesh(name, gm))
             mesh.materials.append(None)  # one slot, linked to each object's own material
-            meshes.mark_generic(mesh, kind, param, mesh_file, mesh_part)
+            meshes.mark_generic(mesh, kind, parameters, mesh_file, mesh_part)
         if not sheared:
             self.mesh_cache[key] = mesh
         return mesh
@@ -177,8 +192,8 @@ class Importer:
         slot.link = "OBJECT"
         slot.material = material if material is not None else self._material(shape.material)
         obj[OBJ_KIND] = shape.kind
-        if shape.kind == "taperedCylinder":
-            obj[OBJ_PARAM] = float(shape.tapered_radius)
+        if shape.parameters:
+            obj[OBJ_PARAM] = primitives.stored_parameters(shape.parameters)
         if shape.kind == "mesh":
             obj[OBJ_FILE] = mesh.get(meshes.FILE, "")
         obj[OBJ_MATRIX] = [float(v) for v in world.ravel()]
@@ -197,7 +212,6 @@ class Importer:
     def _object(self, node):
         """Blender object for a shape or a CSG tree; a tree's object is its leftmost shape's, carrying one
         Boolean modifier per operation, innermost first."""
-        model = deps.module("model")
         if not isinstance(node, model.CSG):
             return self.shape_object(node)
         left = self._object(node.left)
@@ -228,14 +242,14 @@ class Importer:
         data = self.created.add("cameras", bpy.data.cameras.new("SDL camera"))
         data.sensor_fit = "VERTICAL"
         data.sensor_height = SENSOR_HEIGHT
-        data.lens = deps.module("camera").focal_length(camera.view_angle, SENSOR_HEIGHT)  # sensor fit vertical
+        data.lens = focal_length(camera.view_angle, SENSOR_HEIGHT)  # sensor fit vertical
         data.clip_start = 0.05
         data.clip_end = far
         obj = self.created.add("objects", bpy.data.objects.new("SDL camera", data))
         self.result.collection.objects.link(obj)
         eye, look, up = (tuple(float(v) for v in convert.points_to_blender(p, self.conversion))
                          for p in (camera.eye, camera.look, camera.up))
-        obj.matrix_world = Matrix(camera_matrix(deps.module("model").Camera(eye, look, up, camera.view_angle)).tolist())
+        obj.matrix_world = Matrix(camera_matrix(model.Camera(eye, look, up, camera.view_angle)).tolist())
         obj[CAM_EXACT] = [float(v) for v in (*eye, *look, *up, camera.view_angle)]
         obj["sdl_framed"] = bool(framed)
         self.result.camera = obj
@@ -243,9 +257,10 @@ class Importer:
 
     # -- the whole scene --------------------------------------------------------------------------------
 
-    def run(self, scene, filepath: str, set_camera: bool = True, sdl_colours: bool = True) -> ImportResult:
+    def run(self, scene, filepath: str, set_camera: bool = True, colour_management: str = "AUTO") -> ImportResult:
         ctx = self.context
         bl_scene = ctx.scene
+        sdl_view = colour_management == "SDL" or (colour_management == "AUTO" and len(bl_scene.objects) == 0)
         settings = getattr(bl_scene, "sdl_render", None)
         self._scene_before = (bl_scene.world, bl_scene.camera,
                               settings.max_recursion_depth if settings is not None else None)
@@ -269,8 +284,8 @@ class Importer:
             if camera is None:
                 render = bl_scene.render
                 aspect = (render.resolution_x * render.pixel_aspect_x) / max(1e-9, render.resolution_y * render.pixel_aspect_y)
-                compiled = deps.module("compile").compile_scene(scene)
-                camera, framed = deps.module("camera").framing_camera(compiled, aspect), True
+                compiled = compile_scene(scene)
+                camera, framed = framing_camera(compiled, aspect), True
             cam_obj = self._camera(camera, framed, far)
             if set_camera:
                 bl_scene.camera = cam_obj
@@ -280,8 +295,9 @@ class Importer:
             bl_scene.world = world
             if settings is not None:
                 settings.max_recursion_depth = int(scene.settings.max_recursion_depth)
-            if sdl_colours:
+            if sdl_view:
                 set_view_settings(bl_scene, SDL_VIEW)
+            self.result.sdl_view = sdl_view
             # Hide the cutters in the viewport too, and remember what Blender shows of every transform.
             if ctx.view_layer is not None:
                 ctx.view_layer.update()
@@ -314,6 +330,15 @@ class Importer:
         self.created.remove_all()
 
 
+#: Import > SDL's Colour Management choices: SDL's view (SDL_VIEW) for a file imported into an empty scene
+#: (the scene is the file's), always, or never (a scene of the user's keeps the view it was made for).
+COLOUR_MANAGEMENT = (
+    ("AUTO", "SDL's in an Empty Scene", "Importing into an empty scene, show colours as SDL and the tracer do "
+                                        "(View Transform Raw); a scene with objects keeps its own"),
+    ("SDL", "SDL's", "Show colours as SDL and the tracer do: the scene's View Transform becomes Raw (values shown "
+                     "unchanged; Standard, Filmic and AgX change them)"),
+    ("KEEP", "The Scene's", "Leave the scene's colour management as it is"))
+
 #: The colour management an imported SDL scene gets.  SDL colours are the values a screen shows (the
 #: tracer's PNG holds each traced value times 255, with no transfer curve), and Blender's *Raw* view shows
 #: scene values unchanged, so F12 displays (and saves) what the tracer writes.  *Standard* would apply the
@@ -340,14 +365,15 @@ def default_material(created: Optional[_Created] = None):
         created.add("materials", mat)
     mat["sdl_default"] = True
     mat.use_nodes = True
-    props.set_material(mat, deps.module("model").Material())
+    props.set_material(mat, model.Material())
     return mat
 
 
 def import_sdl(context, filepath: str, conversion: Optional[np.ndarray] = None, strict: bool = False,
-               set_camera: bool = True, sdl_colours: bool = True) -> ImportResult:
+               set_camera: bool = True, colour_management: str = "AUTO") -> ImportResult:
     """Read ``filepath`` and build it in ``context.scene``.  Raises the tracer's SDLError (nothing created)
     if the file cannot be read."""
     scene = read_scene(filepath, strict=strict)
     conversion = convert.axis_matrix() if conversion is None else conversion
-    return Importer(context, conversion).run(scene, filepath, set_camera=set_camera, sdl_colours=sdl_colours)
+    return Importer(context, conversion).run(scene, filepath, set_camera=set_camera,
+                                             colour_management=colour_management)

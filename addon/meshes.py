@@ -7,7 +7,11 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import deps, primitives
+from .pure import primitives
+from .tracer import model, shapes
+from .tracer.compile import remember_digest
+from .tracer.meshio import read_3vn
+from .tracer.sdl.parser import builtin_mesh
 
 #: Custom properties on a mesh that stands for a generic shape.
 KIND, PARAM, FILE, MATRIX, HASH = "sdl_kind", "sdl_param", "sdl_mesh_file", "sdl_mesh_matrix", "sdl_hash"
@@ -55,9 +59,10 @@ def mesh_hash(mesh) -> str:
     return primitives.geometry_hash(co, loops, totals)
 
 
-def mark_generic(mesh, kind: str, param: float, mesh_file: Optional[str], mesh_matrix: np.ndarray) -> None:
+def mark_generic(mesh, kind: str, parameters: tuple[float, ...], mesh_file: Optional[str],
+                 mesh_matrix: np.ndarray) -> None:
     mesh[KIND] = kind
-    mesh[PARAM] = float(param)
+    mesh[PARAM] = primitives.stored_parameters(parameters)
     if mesh_file is not None:
         mesh[FILE] = mesh_file
     mesh[MATRIX] = [float(v) for v in np.asarray(mesh_matrix, dtype=np.float64).ravel()]
@@ -67,9 +72,9 @@ def mark_generic(mesh, kind: str, param: float, mesh_file: Optional[str], mesh_m
 class GenericInfo:
     """What a mesh stands for, if it is an unedited generic shape."""
 
-    def __init__(self, kind: str, param: float, mesh_file: Optional[str], mesh_matrix: np.ndarray):
+    def __init__(self, kind: str, parameters: tuple[float, ...], mesh_file: Optional[str], mesh_matrix: np.ndarray):
         self.kind = kind
-        self.param = param
+        self.parameters = parameters
         self.mesh_file = mesh_file
         self.mesh_matrix = mesh_matrix
 
@@ -83,9 +88,9 @@ def generic_info(mesh, cache: Optional[dict] = None) -> Optional[GenericInfo]:
         return cache[key]
     info = None
     kind = str(mesh[KIND])
-    if kind in deps.module("model").SHAPE_KINDS and mesh.get(HASH) == mesh_hash(mesh):
+    if kind in model.SHAPE_KINDS and mesh.get(HASH) == mesh_hash(mesh):
         matrix = np.array(list(mesh.get(MATRIX, np.eye(4).ravel())), dtype=np.float64).reshape(4, 4)
-        info = GenericInfo(kind, float(mesh.get(PARAM, 1.0)), mesh.get(FILE), matrix)
+        info = GenericInfo(kind, primitives.parameters_of(kind, mesh.get(PARAM)), mesh.get(FILE), matrix)
     if cache is not None:
         cache[key] = info
     return info
@@ -132,11 +137,12 @@ HANDLERS = (("depsgraph_update_post", forget_edited), ("load_post", forget_all),
             ("redo_post", forget_all))
 
 
-def find_shared(kind: str, param: float, mesh_file: Optional[str], digest: str):
+def find_shared(kind: str, parameters: tuple[float, ...], mesh_file: Optional[str], digest: str):
     """An existing unedited mesh for this generic shape (so that imports share mesh data)."""
     identity = np.eye(4).ravel()
     for mesh in bpy.data.meshes:
-        if (mesh.get(KIND) == kind and mesh.get(HASH) == digest and float(mesh.get(PARAM, 1.0)) == float(param)
+        if (mesh.get(KIND) == kind and mesh.get(HASH) == digest
+                and primitives.parameters_of(kind, mesh.get(PARAM)) == tuple(parameters)
                 and mesh.get(FILE) == mesh_file and mesh.library is None and mesh.get(MATRIX) is not None
                 and np.array_equal(list(mesh[MATRIX]), identity) and mesh_hash(mesh) == digest):
             return mesh
@@ -215,7 +221,6 @@ def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
     per material index.  Faces are kept as flat arrays (model.FaceList): a million-polygon mesh as Python
     tuples took seconds to make and to hash.  The parts share the vertex and normal arrays.  Their digest
     (compile.mesh_digest) is taken here, once: whoever keeps them must not change them."""
-    model = deps.module("model")
     tri_verts, tri_loops, tri_polygons, mat_index = _triangles(mesh)
     if len(mat_index) == 0:
         return {}
@@ -234,7 +239,7 @@ def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
         faces = model.FaceList(np.full(len(verts) // 3, 3, dtype=np.int64), verts, norms)
         data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin)
         # Never changed after this (a changed object is converted anew): hashed here, once, not at every compile.
-        out[int(index)] = deps.module("compile").remember_digest(data)
+        out[int(index)] = remember_digest(data)
     return out
 
 
@@ -250,15 +255,15 @@ _exact_files: dict[str, tuple[float, object]] = {}
 def exact_mesh_data(info: GenericInfo, mesh):
     """The float64 mesh behind an unedited generic polyhedron, teapot or ``mesh`` file (None: use Blender's)."""
     kind = info.kind
-    if kind in deps.module("model").POLYHEDRON_KINDS or kind == "teapot":
-        return deps.module("sdl.parser").builtin_mesh(kind)
+    if shapes.KINDS[kind].builtin_mesh:
+        return builtin_mesh(kind)
     if kind == "mesh" and info.mesh_file and os.path.isfile(info.mesh_file):
         mtime = os.path.getmtime(info.mesh_file)
         mtime_read, data = _exact_files.get(info.mesh_file, (None, None))
         if mtime_read != mtime:
             try:
                 # (kept unchanged while the file is: its digest is taken once)
-                data = deps.module("compile").remember_digest(deps.module("meshio").read_3vn(info.mesh_file))
+                data = remember_digest(read_3vn(info.mesh_file))
             except Exception:  # noqa: BLE001 - a changed or broken file: fall back to Blender's copy
                 return None
             _exact_files[info.mesh_file] = (mtime, data)

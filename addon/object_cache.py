@@ -16,7 +16,9 @@ only what it invalidates:
   entries may then name other objects), and so does a build for another scene or view layer.
 
 Entries are keyed by the original object's pointer and checked against its name, type and data pointer.
-Geometry that only exists inside an evaluation (instances made by geometry nodes) is not kept.
+Geometry that only exists inside an evaluation (instances made by geometry nodes) is not kept between
+builds; within one build it is made once per evaluated datablock, so that the instances of one mesh share
+what was made of it (and so one BVH).
 """
 from __future__ import annotations
 
@@ -50,6 +52,7 @@ class ObjectCache:
         self._entries: dict[int, tuple[tuple, dict]] = {}  # object pointer -> (identity, kind -> value)
         self._by_data: dict[int, set[int]] = {}  # data pointer -> pointers of objects using it
         self._seen: set[int] = set()  # objects met since begin_build
+        self._this_build: dict[tuple[int, str], object] = {}  # (evaluated data pointer, kind) -> value
         self._graph = None  # (scene, view layer) of the last build
         self.made: Counter = Counter()
         _LIVE.add(self)
@@ -91,20 +94,27 @@ class ObjectCache:
             self.clear()
             self._graph = graph
         self._seen = set()
+        self._this_build = {}
 
     def end_build(self) -> None:
         """Drop the objects this build did not meet."""
+        self._this_build = {}
         for pointer in [p for p in self._entries if p not in self._seen]:
             self._forget(pointer)
 
     def get(self, obj_eval, kind: str, make: Callable[[], object], own: bool = True):
         """The ``kind`` value made from this evaluated object's geometry: kept from an earlier build while
         its geometry is unchanged, else ``make()``.  ``own`` is False for an instance that geometry nodes
-        made: it has the instancing object as its original, but not its geometry, so it is not kept."""
+        made: it has the instancing object as its original, but not its geometry, so it is kept for this
+        build only, by its evaluated datablock (which all the instances of one geometry share)."""
         original = getattr(obj_eval, "original", None)
         if not own or original is None or original.data is None:
-            self.made[kind] += 1
-            return make()
+            data = getattr(obj_eval, "data", None)
+            key = (data.as_pointer() if data is not None else id(obj_eval), kind)
+            if key not in self._this_build:
+                self.made[kind] += 1
+                self._this_build[key] = make()
+            return self._this_build[key]
         pointer, identity = original.as_pointer(), _identity(original)
         self._seen.add(pointer)
         entry = self._entries.get(pointer)

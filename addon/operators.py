@@ -9,7 +9,12 @@ import numpy as np
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper, orientation_helper
 
-from . import convert, deps
+from . import exporter, importer
+from .importer import COLOUR_MANAGEMENT
+from .pure import convert
+from .tracer import errors, model
+from .tracer.sdl.parser import builtin_mesh
+from .tracer.shapes import KINDS, REGISTRY
 
 #: How many of a file's warnings are shown one by one (the rest are counted).
 SHOWN_WARNINGS = 8
@@ -39,10 +44,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                                      "and report the problems)")
     set_camera: BoolProperty(name="Set Scene Camera", default=True,
                              description="Make the file's camera (or a camera framing the scene) the scene camera")
-    sdl_colours: BoolProperty(name="SDL Colours", default=True,
-                              description="Show colours as SDL and the tracer do: the scene's View Transform "
-                                          "becomes Raw (values shown unchanged; Standard, Filmic and AgX "
-                                          "change them)")
+    colour_management: EnumProperty(name="Colour Management", default="AUTO", items=COLOUR_MANAGEMENT)
 
     def invoke(self, context, event):
         if self.properties.is_property_set("filepath") and hasattr(ImportHelper, "invoke_popup"):
@@ -55,9 +57,6 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         return [self.filepath]
 
     def execute(self, context):
-        from . import importer
-
-        errors = deps.module("errors")
         conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
         parsed = []
         for path in self._paths():  # read every file before creating anything
@@ -71,7 +70,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         for path, scene in parsed:
             imp = importer.Importer(context, conversion)
             try:
-                result = imp.run(scene, path, set_camera=self.set_camera, sdl_colours=self.sdl_colours)
+                result = imp.run(scene, path, set_camera=self.set_camera, colour_management=self.colour_management)
             except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
                 for earlier in reversed(done):  # and the files before it: all of them or nothing
                     earlier.undo()
@@ -82,7 +81,11 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
             done.append(imp)
             _report_warnings(self, result.warnings)
             total += len(result.objects)
+            kept_view = not result.sdl_view and self.colour_management == "AUTO"
         self.report({"INFO"}, f"Imported {total} shapes from {len(parsed)} SDL file(s)")
+        if parsed and kept_view:
+            self.report({"INFO"}, f"The scene keeps its View Transform ({context.scene.view_settings.view_transform}): "
+                                  "choose Colour Management SDL's to see the tracer's colours unchanged")
         return {"FINISHED"}
 
     def draw(self, context):
@@ -90,7 +93,7 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         layout.use_property_split = True
         layout.prop(self, "strict")
         layout.prop(self, "set_camera")
-        layout.prop(self, "sdl_colours")
+        layout.prop(self, "colour_management")
         layout.prop(self, "axis_forward")
         layout.prop(self, "axis_up")
 
@@ -108,8 +111,6 @@ class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
     use_selection: BoolProperty(name="Selected Only", default=False)
 
     def execute(self, context):
-        from . import exporter
-
         conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
         try:
             warnings = exporter.export_sdl(context, self.filepath, conversion, use_selection=self.use_selection)
@@ -124,7 +125,7 @@ class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
 
 
 #: The Add menu's shapes: every registered kind that needs no file (tracer/shapes.py).
-SHAPE_ITEMS = [(e.keyword, e.keyword, f"The generic {e.keyword}") for e in deps.module("shapes").REGISTRY if e.addable]
+SHAPE_ITEMS = [(e.keyword, e.keyword, f"The generic {e.keyword}") for e in REGISTRY if e.addable]
 
 
 class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
@@ -135,17 +136,18 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     kind: EnumProperty(name="Shape", items=SHAPE_ITEMS, default="sphere")
-    small_radius: FloatProperty(name="Top Radius", default=0.5, description="Top radius of a tapered cylinder")
+    # (and a FloatProperty per registered shape parameter: see _PARAMETERS below)
+
+    def draw(self, context):
+        self.layout.prop(self, "kind")
+        for parameter in KINDS[self.kind].parameters:
+            self.layout.prop(self, parameter.name)
 
     def execute(self, context):
-        from . import importer
-
-        model = deps.module("model")
-        shape = model.Shape(self.kind)
-        if self.kind == "taperedCylinder":
-            shape.tapered_radius = self.small_radius
-        if self.kind in model.POLYHEDRON_KINDS or self.kind == "teapot":
-            shape.mesh = deps.module("sdl.parser").builtin_mesh(self.kind)
+        entry = KINDS[self.kind]
+        shape = model.Shape(self.kind, parameters=tuple(getattr(self, p.name) for p in entry.parameters))
+        if entry.builtin_mesh:
+            shape.mesh = builtin_mesh(self.kind)
         matrix = np.eye(4)
         matrix[:3, 3] = tuple(context.scene.cursor.location)
         shape.matrix = matrix
@@ -165,6 +167,13 @@ class OBJECT_OT_sdl_add_shape(bpy.types.Operator):
         obj.select_set(True)
         context.view_layer.objects.active = obj
         return {"FINISHED"}
+
+
+#: The Add operator's property for each registered shape parameter (by its name, shared by the kinds that
+#: have it), labelled as the registry says.
+_PARAMETERS = {p.name: FloatProperty(name=p.label, default=p.add_value, description=p.description)
+               for e in REGISTRY for p in e.parameters}
+OBJECT_OT_sdl_add_shape.__annotations__.update(_PARAMETERS)
 
 
 class VIEW3D_MT_sdl_add(bpy.types.Menu):

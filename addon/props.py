@@ -14,7 +14,9 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        PointerProperty, StringProperty)
 
-from . import convert, deps
+from .pure import convert
+from .tracer.appearance import display_roughness
+from .tracer.model import Material, Settings
 
 COLOR_FIELDS = ("ambient", "diffuse", "specular", "emissive")
 FLOAT_FIELDS = ("specular_exponent", "reflectivity", "transparency", "speed_of_light", "specular_fraction",
@@ -237,7 +239,7 @@ def apply_principled(material, take_edits: bool = True) -> None:
     s = material.sdl
     diffuse = tuple(s.diffuse)
     material.diffuse_color = (*[min(c, 1.0) for c in diffuse], 1.0)
-    roughness = deps.module("appearance").display_roughness(s)
+    roughness = display_roughness(s)
     material.roughness = roughness
     material.metallic = s.reflectivity
     node = _principled(material)
@@ -285,7 +287,6 @@ def _fill_sdl(material, sdl_material) -> None:
 
 def material_to_sdl(material):
     """The tracer Material for a Blender material (None: SDL's default material)."""
-    Material = deps.module("model").Material
     if material is None:
         return Material()
     s = material.sdl
@@ -347,7 +348,6 @@ def set_world(world, settings) -> None:
 
 def world_settings(world, max_recursion_depth: int):
     """Tracer Settings from a world (None: SDL's defaults) and the render settings' recursion depth."""
-    Settings = deps.module("model").Settings
     if world is None:
         return Settings(max_recursion_depth=max_recursion_depth)
     s = world.sdl

@@ -17,12 +17,17 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import os
 from typing import Optional
 
 import bpy
 import numpy as np
 
-from . import convert, deps, meshes, object_cache, props
+from . import meshes, object_cache, props
+from .pure import convert
+from .tracer import model
+from .tracer.shapes import KINDS
+from .tracer.model import FaceList, MeshData
 
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
@@ -68,7 +73,7 @@ class SceneBuilder:
         self.mode = mode
         self.cache = object_cache.ObjectCache() if cache is None else cache
         self.to_target = np.eye(4) if to_target is None else np.asarray(to_target, dtype=np.float64)
-        self.model = deps.module("model")
+        self.model = model
         self.warnings: list[str] = []
         self._generic_cache: dict = {}
         #: id(shape) -> the Blender object's name, for each mesh shape (the exporter names mesh files by it)
@@ -82,9 +87,14 @@ class SceneBuilder:
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
             sdl_material = props.material_to_sdl(material)
-            if sdl_material.texture > 0 and material.sdl.image:
-                image = bpy.path.abspath(material.sdl.image, library=material.library)
-                number = self._pixmap_number(sdl_material.texture, image)
+            if sdl_material.texture > 0:
+                image = bpy.path.abspath(material.sdl.image, library=material.library) if material.sdl.image else ""
+                if os.path.isfile(image):
+                    number = self._pixmap_number(sdl_material.texture, image)
+                else:  # drawn with its own colours, as a lenient read draws it, and said
+                    number = 0
+                    self.warnings.append(f"{material.name}: texture image {image or '(none)'} not found: "
+                                         "drawn without it")
                 sdl_material = dataclasses.replace(sdl_material, texture=number)
             self._materials[key] = sdl_material
         return self._materials[key]
@@ -109,6 +119,8 @@ class SceneBuilder:
         return self.to_target @ world_matrix
 
     def _evaluated(self, obj):
+        if getattr(obj, "is_evaluated", False):  # (an instance's own object: its original may be its instancer)
+            return obj
         try:
             return obj.evaluated_get(self.depsgraph)
         except (RuntimeError, ReferenceError):
@@ -155,7 +167,7 @@ class SceneBuilder:
         if original.name in visiting:
             self.warnings.append(f"{original.name}: Boolean operands form a loop; traced as a mesh")
             return self.mesh_nodes(obj_eval, matrix_world, top_level)
-        info = self.generic(obj_eval, own)
+        info = self.generic(obj_eval, own) if own else None  # (an instance is not its instancer's shape)
         enabled = enabled_modifiers(original, self.mode) if info is not None else []
         if info is None or any(m.type != "BOOLEAN" for m in enabled):
             return self.mesh_nodes(obj_eval, matrix_world, top_level, own)
@@ -181,10 +193,8 @@ class SceneBuilder:
     def leaf_shape(self, original, obj_eval, matrix: np.ndarray, info, own: bool = True):
         kind = info.kind
         shape = self.model.Shape(kind, matrix=self._target(matrix), material=self._slot_material(obj_eval),
-                                 name=original.name)
-        if kind == "taperedCylinder":
-            shape.tapered_radius = info.param
-        if kind in self.model.POLYHEDRON_KINDS or kind in ("teapot", "mesh"):
+                                 parameters=info.parameters, name=original.name)
+        if KINDS[kind].family != "analytic":  # (polyhedra, the teapot, meshes)
             data = self.cache.get(obj_eval, "exact mesh", lambda: meshes.exact_mesh_data(info, original.data), own)
             if data is None:  # a mesh file that is gone: Blender's copy, in the mesh's own frame
                 data = self.cache.get(obj_eval, f"mesh {self.mode}",
@@ -253,31 +263,41 @@ class SceneBuilder:
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
         """The tracer Scene of everything the depsgraph shows (its object instances)."""
         model = self.model
-        objects, lights = [], []
-        entries = []
+        # (sort key, what it made): import order first (so that files round-trip in their own order), then by
+        # name, then as the depsgraph listed them
+        made: list[tuple[tuple, list]] = []
+        lights: list[tuple[tuple, object, np.ndarray]] = []
+        later: list[tuple[tuple, object, np.ndarray]] = []
         self.cache.begin_build(self.depsgraph)
-        for inst in (instances if instances is not None else self.depsgraph.object_instances):
-            obj = inst.instance_object if inst.is_instance else inst.object
+        for count, inst in enumerate(instances if instances is not None else self.depsgraph.object_instances):
+            obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
             original = obj.original
             if skip_hidden_render and original.hide_render:
                 continue
+            if not inst.is_instance and not getattr(inst, "show_self", True):
+                continue  # an instancer that does not show itself (Show Instancer off; particles, vertices...)
             if selected_only and not (inst.is_instance and inst.parent and inst.parent.original.select_get()) \
                     and not original.select_get():
                 continue
-            # An instance whose original is its instancer was made by geometry nodes: not that object's mesh.
-            own = not inst.is_instance or inst.parent is None or \
-                original.as_pointer() != inst.parent.original.as_pointer()
-            entries.append((obj, matrix_np(inst.matrix_world), own))
-        # Import order first (so that files round-trip in their own order), then by name.
-        entries.sort(key=lambda e: (e[0].original.get(OBJ_ORDER, math.inf), e[0].original.name))
-        shape_entries = []
-        for obj, matrix, own in entries:
+            key = (original.get(OBJ_ORDER, math.inf), original.name, count)
+            matrix = matrix_np(inst.matrix_world)
+            # An instance whose original is its instancer was made by geometry nodes: its geometry is not that
+            # object's, and only ``inst.object`` carries it, until the iteration moves on: made now.
+            if inst.is_instance and inst.parent is not None and \
+                    original.as_pointer() == inst.parent.original.as_pointer():
+                if obj.type in GEOMETRY_TYPES:
+                    made.append((key, self.object_node(obj, matrix, own=False)))
+                continue
+            stable = inst.instance_object if inst.is_instance else obj  # (the instanced object itself)
             if obj.type == "LIGHT":
-                lights.append(self.light(obj, matrix))
+                lights.append((key, stable, matrix))
             elif obj.type in GEOMETRY_TYPES:
-                shape_entries.append((obj, matrix, own))
-        for obj, matrix, own in shape_entries:
-            objects.extend(self.object_node(obj, matrix, own=own))
+                later.append((key, stable, matrix))
+        for key, obj, matrix in later:
+            made.append((key, self.object_node(obj, matrix)))
+        made.sort(key=lambda entry: entry[0])
+        objects = [node for _, nodes in made for node in nodes]
+        lights = [self.light(obj, matrix) for _, obj, matrix in sorted(lights, key=lambda entry: entry[0])]
         self.cache.end_build()
         world = scene.world
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
@@ -289,7 +309,6 @@ class SceneBuilder:
 
 def polygon_meshes(mesh) -> dict:
     """The mesh's polygons with corner normals, one tracer MeshData per material index (for export)."""
-    MeshData = deps.module("model").MeshData
     count = len(mesh.polygons)
     if count == 0:
         return {}
@@ -321,7 +340,6 @@ def polygon_meshes(mesh) -> dict:
 def merge_mesh_data(parts, MeshData):
     """One MeshData from parts that share their vertex array (the pieces of one mesh)."""
     vertices = parts[0].vertices
-    FaceList = deps.module("model").FaceList
     if all(isinstance(p.faces, FaceList) and p.normals is parts[0].normals for p in parts):
         # triangle_meshes' parts: one normal array too, so their faces are simply put together
         faces = FaceList(*(np.concatenate([getattr(p.faces, name) for p in parts])

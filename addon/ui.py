@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import bpy
 
+from . import meshes, object_cache, props, scene_build
 from .engine import ENGINE_ID
 
 
@@ -29,6 +30,9 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         col = layout.column()
         col.prop(settings, "block_size")
         col.prop(settings, "progressive")
+        if not settings.progressive and settings.block_size > 1:
+            col.label(text=f"F12 traces one ray per {settings.block_size} x {settings.block_size} block",
+                      icon="ERROR")
         col.prop(settings, "max_recursion_depth")
         col.prop(settings, "threads")
         col = layout.column()
@@ -85,8 +89,6 @@ class SDL_PT_light(_PropertiesPanel, bpy.types.Panel):
         return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
 
     def draw(self, context):
-        from . import props
-
         layout = self.layout
         layout.use_property_split = True
         light = context.light
@@ -124,8 +126,6 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
         return obj is not None and obj.type == "MESH"
 
     def draw(self, context):
-        from . import meshes, scene_build
-
         obj = context.object
         info = meshes.cached_generic_info(obj.data)  # hashes the mesh only after it changed
         layout = self.layout
@@ -133,7 +133,7 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
             text = "Edited generic shape: traced as a mesh" if "sdl_kind" in obj.data else "Traced as a mesh"
             layout.label(text=text, icon="MESH_DATA")
             return
-        label = info.kind + (f" {info.param:g}" if info.kind == "taperedCylinder" else "")
+        label = " ".join([info.kind, *(f"{v:g}" for v in info.parameters)])
         # as the final render decides (scene_build.SceneBuilder.object_node)
         others = [m for m in scene_build.enabled_modifiers(obj) if m.type != "BOOLEAN"]
         if others:
@@ -151,8 +151,6 @@ CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_light, SDL_PT_world, SDL_PT_ob
 
 def _cache_handlers() -> tuple:
     """The handlers that keep the add-on's caches in step with Blender's data (panels' and engine's)."""
-    from . import meshes, object_cache
-
     return meshes.HANDLERS + object_cache.HANDLERS
 
 
@@ -164,8 +162,6 @@ def register() -> None:
 
 
 def unregister() -> None:
-    from . import meshes, object_cache
-
     for name, handler in _cache_handlers():
         handlers = getattr(bpy.app.handlers, name)
         while handler in handlers:

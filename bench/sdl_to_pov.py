@@ -29,6 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import tracer  # noqa: E402
+from tracer import shapes  # noqa: E402
 from tracer.camera import framing_camera  # noqa: E402
 from tracer.compile import compile_scene  # noqa: E402
 from tracer.model import CSG, Material, Scene, Shape  # noqa: E402
@@ -142,7 +143,7 @@ def _primitive(shape: Shape) -> str:
     elif kind == "plane":
         body = "plane { <0, 0, 1>, 0"  # inside is z < 0, as SDL's half-space
     elif kind in ("taperedCylinder", "cylinder", "cone"):
-        s = shape.small_radius
+        s = shapes.KINDS[kind].traced(shape.parameters)[0]
         body = ("cylinder { <0, 0, 0>, <0, 0, 1>, 1" if s == 1.0 else
                 f"cone {{ <0, 0, 0>, 1, <0, 0, 1>, {_num(s)}")
     elif kind == "torus":

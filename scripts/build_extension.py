@@ -2,7 +2,8 @@
 
 A zip is a Blender extension (blender_manifest.toml at its root, for Blender 4.2+) whose add-on package is
 ``addon/`` with the ``tracer`` package vendored inside it as ``tracer/`` (its Python files and the C core's
-sources; no caches).  The add-on finds the vendored copy through addon/deps.py.
+sources; no caches).  The add-on imports it as ``.tracer`` (see addon/__init__.py; in the checkout
+``addon/tracer`` is a link to ``../tracer``, left out here).
 
 * ``--platform linux-x64`` / ``windows-x64``: the C core prebuilt by CMake (CMakeLists.txt) goes in as
   ``tracer/native/_core.so`` / ``_core.dll`` and the manifest's ``platforms`` names that platform only.
@@ -73,8 +74,9 @@ def members() -> list[tuple[Path, str]]:
     """(source file, name inside the add-on package) for everything the zip holds, but the manifest."""
     out = []
     for path in sorted((ROOT / "addon").rglob("*.py")):
-        if "__pycache__" not in path.parts:
-            out.append((path, path.relative_to(ROOT / "addon").as_posix()))
+        rel = path.relative_to(ROOT / "addon")
+        if "__pycache__" not in rel.parts and rel.parts[0] != "tracer":  # (the checkout's link to ../tracer)
+            out.append((path, rel.as_posix()))
     for path in sorted((ROOT / "tracer").rglob("*")):
         rel = path.relative_to(ROOT / "tracer")
         if path.is_file() and path.suffix in TRACER_SUFFIXES and not TRACER_EXCLUDE_DIRS & set(rel.parts):

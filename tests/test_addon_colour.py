@@ -30,7 +30,9 @@ def _check(proc, out: Path) -> None:
     assert proc.returncode == 0 and lines, proc.stdout[-4000:] + proc.stderr[-4000:]
     result = json.loads(lines[-1][len("RESULT "):])
     assert result["native_before"] in ("Filmic", "AgX") and result["native_after"] == result["native_before"]
-    assert result["kept_without_sdl_colours"] == result["native_before"]
+    # An import into a scene with objects keeps its view unless asked; KEEP keeps an empty scene's too.
+    assert result["kept_by_default"] == result["native_before"] and result["asked_for"] == "Raw"
+    assert result["kept_when_asked"] == result["empty_before"] != "Raw"
     for name in ("lecture", "textures"):
         expected_path = out / f"{name}-tracer.png"
         subprocess.run([sys.executable, "-m", "tracer", "render", str(ROOT / "scenes" / f"{name}.sdl"), "-o",

@@ -13,7 +13,8 @@ from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
 import tracer
-from addon import blocks, engine, object_cache, raycam
+from addon import engine, object_cache
+from addon.pure import blocks, raycam
 from addon.scene_build import matrix_np
 from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
 
@@ -143,10 +144,13 @@ def test_blocks_coarse_to_fine_every_pixel_once(monkeypatch):
     assert stats["passes"] == [8, 4, 2, 1] and stats["tiles_done"] == stats["tiles_total"]
     assert stats["rays"]["camera"] == 96 * 72
     np.testing.assert_array_equal(refined, unseen)  # the same rays through every pixel
+    assert not engine.LAST_RENDER["warnings"]
     settings.progressive = False
     coarse = render_rgba("SDL_RAYTRACER")
     assert engine.LAST_RENDER["rays"]["camera"] == 12 * 9  # one ray per 8 x 8 block
     assert np.all(coarse[:8, :8] == coarse[0, 0])
+    # (not what a user who unticked Progressive Refinement expects of a final render: said)
+    assert engine.LAST_RENDER["warnings"] == [engine.blocky_warning(8)]
 
 
 def test_samples_and_modes():

@@ -24,10 +24,10 @@ def export(path, **kwargs):
 
 
 def _structure(obj):
-    """A scene object as nested tuples: ('csg', op, left, right) or ('shape', kind, taper)."""
+    """A scene object as nested tuples: ('csg', op, left, right) or ('shape', kind, parameters)."""
     if isinstance(obj, tracer.CSG):
         return ("csg", obj.op, _structure(obj.left), _structure(obj.right))
-    return ("shape", obj.kind, obj.small_radius if obj.kind == "taperedCylinder" else None)
+    return ("shape", obj.kind, obj.parameters)
 
 
 def assert_same_scene(a, b, atol=1e-6):

@@ -14,7 +14,8 @@ from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
 import tracer
-from addon import convert, importer, meshes, props
+from addon import importer, meshes, props
+from addon.pure import convert
 from blender_scripts.addon_env import (SCENE_FILES, SCENES, effective_matrix, fresh, import_sdl, shape_objects,
                                        to_blender, world)
 

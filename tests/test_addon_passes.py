@@ -1,4 +1,4 @@
-"""Render passes of the ray through each pixel's centre (addon/passes.py): Depth, Normal, Diffuse Color
+"""Render passes of the ray through each pixel's centre (addon/pure/passes.py): Depth, Normal, Diffuse Color
 (Albedo), Position and Mist, offered to the compositor where the view layer enables them and right for the
 first hit; Normal and Albedo feed the compositor's Denoise node.  Each pass is read back through the
 compositor (Render Layers output -> Composite -> a 32-bit EXR)."""
@@ -8,7 +8,8 @@ import bpy
 import numpy as np
 from bpy_extras.object_utils import world_to_camera_view
 
-from addon import engine, passes
+from addon import engine
+from addon.pure import passes
 from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
 
 WIDTH, HEIGHT = 96, 72

@@ -63,8 +63,9 @@ def test_register_unregister_twice_leaves_nothing_behind():
     assert len(registered["properties"]) == 3 and registered["engine"]
     assert registered["menus"] == {menu: 1 for menu in MENUS}
     assert "RENDER_PT_format" in registered["compat"]  # Blender's own panels show for the engine
-    # the SDL Shape panel's cache (meshes.HANDLERS), the engine's (object_cache.HANDLERS), Base Color edits
-    assert registered["handlers"] == 8
+    # the SDL Shape panel's cache (meshes.HANDLERS), the engine's (object_cache.HANDLERS), Base Color edits,
+    # the decoded pictures' (images.forget)
+    assert registered["handlers"] == 9
     for _ in range(2):
         addon.unregister()
         gone = _state()
@@ -95,7 +96,7 @@ def test_manifest():
 def test_extension_zip_contents(tmp_path):
     zip_path = build_extension.build(tmp_path / "ext.zip")
     names = set(zipfile.ZipFile(zip_path).namelist())
-    assert {"blender_manifest.toml", "__init__.py", "engine.py", "deps.py"} <= names
+    assert {"blender_manifest.toml", "__init__.py", "engine.py", "pure/convert.py"} <= names
     assert {"tracer/__init__.py", "tracer/native/core.c", "tracer/native/build.py",
             "tracer/geometry/teapot.py"} <= names
     assert not [n for n in names if n.endswith((".so", ".pyc")) or "__pycache__" in n or n.startswith("tracer/usd")]

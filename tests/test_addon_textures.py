@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -91,3 +92,69 @@ def test_without_pillow_or_decoder_the_error_names_pillow(monkeypatch):
     monkeypatch.setattr(tracer_images, "_fallback_decoder", None)  # (restored afterwards)
     with pytest.raises(TracerError, match="needs Pillow"):
         tracer_images.load_image(ROOT / "scenes" / "images" / "bricks.png")
+
+
+def test_a_rendered_viewport_of_textures_settles_without_pillow(monkeypatch):
+    """The viewport rebuilds its scene after every change Blender reports.  Decoding a picture through a
+    temporary Blender image is such a change (a datablock added and removed), so a rebuild that decoded again
+    started the viewport again, for ever (Blender 3.4's GUI, scenes/textures.sdl).  Each picture is decoded
+    once per content: after the first rebuild nothing is reported, and the image stays finished."""
+    from blender_scripts.addon_env import fresh, import_sdl, set_resolution
+    from test_addon_updates import _Viewport
+    from addon import engine
+
+    monkeypatch.setitem(sys.modules, "PIL", None)  # as in Blender's own Python: the add-on's decoder reads
+    images.forget()
+    fresh()
+    import_sdl(SCENE)
+    set_resolution(64, 48)
+    monkeypatch.setattr(engine, "VIEWPORT_SLICE", 10.0)
+    restarts = []
+    with _Viewport() as view:
+        for _ in range(3):
+            picture = view.show()
+            view._view_dirty = False
+            bpy.context.evaluated_depsgraph_get()  # what Blender does before the next redraw: report changes
+            restarts.append(view._view_dirty)
+    assert restarts[1:] == [False, False], restarts
+    assert picture.std() > 0.05  # traced with its textures
+    path = ROOT / "scenes" / "images" / "bricks.png"
+    assert images.decode(path) is images.decode(path)
+
+
+def test_a_missing_picture_is_refused_by_strict_import_and_warned_by_lenient(tmp_path, capfd):
+    """``makePixmap`` naming a file that is not there: Strict refuses the file (as the command line does),
+    Lenient imports it without that texture and says so (as ``--lenient`` does).  A picture gone after the
+    import: F12 draws the shape without it, says so, and prints no traceback."""
+    from blender_scripts.addon_env import fresh, set_resolution
+    from addon import engine
+
+    sdl = tmp_path / "missing.sdl"
+    sdl.write_text("makePixmap 1 nothere.png\nlight 3 3 3 1 1 1\ntexture 1 sphere\n")
+    fresh()
+    with pytest.raises(RuntimeError, match=r"makePixmap 1: .*nothere\.png: texture image not found"):
+        bpy.ops.import_scene.sdl(filepath=str(sdl), strict=True)
+    assert not bpy.data.objects
+    proc = subprocess.run([sys.executable, "-m", "tracer", "render", str(sdl), "-o", str(tmp_path / "x.png"), "-q"],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 2 and "nothere.png: texture image not found" in proc.stderr
+
+    capfd.readouterr()
+    assert bpy.ops.import_scene.sdl(filepath=str(sdl), strict=False) == {"FINISHED"}
+    assert "nothere.png: texture image not found: drawn without that texture" in capfd.readouterr().out
+    assert bpy.data.objects["sphere"].active_material.sdl.texture == 0
+
+    fresh()
+    shutil.copy(ROOT / "scenes" / "images" / "bricks.png", tmp_path / "gone.png")
+    sdl.write_text("makePixmap 1 gone.png\nlight 3 3 3 1 1 1\ntexture 1 sphere\n")
+    assert bpy.ops.import_scene.sdl(filepath=str(sdl), strict=True) == {"FINISHED"}
+    (tmp_path / "gone.png").unlink()
+    scene = bpy.context.scene
+    scene.render.engine = engine.ENGINE_ID
+    set_resolution(32, 24)
+    capfd.readouterr()
+    bpy.ops.render.render()
+    out, err = capfd.readouterr()
+    assert "error" not in engine.LAST_RENDER, engine.LAST_RENDER
+    assert any("gone.png not found: drawn without it" in w for w in engine.LAST_RENDER["warnings"])
+    assert "Traceback" not in out + err

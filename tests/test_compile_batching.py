@@ -26,7 +26,7 @@ def test_batched_inverses_and_bounds_equal_the_per_shape_ones():
     objects = []
     for i in range(300):
         s = shape(kinds[i % len(kinds)], _random_matrix(rng))
-        s.tapered_radius = float(rng.uniform(0, 2))
+        s.parameters = (float(rng.uniform(0, 2)),) * len(s.parameters)
         objects.append(s)
     ico = tracer.parse_sdl("icosahedron").shapes()[0]
     ico.matrix = _random_matrix(rng)

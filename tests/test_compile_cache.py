@@ -95,7 +95,7 @@ def _changes():
 
     def taper(s):
         s.objects[0].kind = "taperedCylinder"
-        s.objects[0].tapered_radius = 0.3
+        s.objects[0].parameters = (0.3,)
 
     return [matrix_in_place, material, new_object, reorder, csg_operation, csg_operand, light, settings, camera,
             mesh_vertices_in_place, taper]

@@ -62,7 +62,7 @@ def test_the_table_compiles_to_the_lists_numbers(shapes_made):
     shapes_made["count"] = 0
     b = compile_scene(tabled)
     assert shapes_made["count"] == 0 and tabled.objects.columns is not None
-    for name in ("inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes", "kind", "top",
+    for name in ("inverses", "inverse_error", "inverse_norms", "generic_size", "spheres", "boxes", "kind", "parameters",
                  "material_ids"):
         assert np.array_equal(getattr(a.table, name), getattr(b.table, name)), name
     assert a.effects == b.effects
@@ -121,7 +121,7 @@ def test_tables_of_other_content_have_other_keys():
 def test_unused_materials_of_a_table_do_not_make_effects():
     _, tabled = scenes("light 1 1 1 1 1 1\nsphere\n")
     c = tabled.objects.columns
-    table = ShapeTable(c.kinds, c.affines, [1], [Material(reflectivity=0.9), c.materials[0]], c.tapered_radii,
+    table = ShapeTable(c.kinds, c.affines, [1], [Material(reflectivity=0.9), c.materials[0]], c.parameters,
                        c.lines, c.columns, c.file)
     tabled.objects = table
     compiled = compile_scene(tabled)

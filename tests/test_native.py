@@ -24,7 +24,7 @@ from PIL import Image
 import tracer
 from helpers import Camera, Light, rotation, scaling, scene_of, shape, translation
 from test_hard_cases import _sphere_on_plane
-from tracer import native
+from tracer import native, shapes
 from tracer.backend import make_tracer
 from tracer.compile import compile_scene
 from tracer.errors import FallbackWarning, TracerError
@@ -133,8 +133,8 @@ def _random_matrix(rng):
             @ scaling(*rng.uniform(0.4, 1.8, 3)))
 
 
-#: Every closed-form kind of the shape registry but the tapered cylinder (which needs its parameter).
-ANALYTIC = [k for k in ANALYTIC_KINDS if k != "taperedCylinder"]
+#: Every closed-form kind of the shape registry (those with parameters are given random ones).
+ANALYTIC = list(ANALYTIC_KINDS)
 POLYHEDRA = ["tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyball", "diamond"]
 
 
@@ -153,14 +153,13 @@ def _mesh_shape(mesh: MeshData, matrix=None, **material) -> Shape:
 # ------------------------------------------------------------------------------------------------ hit lists
 
 @requires_core
-@pytest.mark.parametrize("kind", ANALYTIC + ["taperedCylinder"] + POLYHEDRA)
+@pytest.mark.parametrize("kind", ANALYTIC + POLYHEDRA)
 def test_hits_of_each_shape_kind(kind):
     rng = np.random.default_rng(abs(hash(kind)) % 2**32)
     for trial in range(4):
         matrix = _random_matrix(rng)
         s = shape(kind, matrix)
-        if kind == "taperedCylinder":
-            s.tapered_radius = float(rng.uniform(0.1, 1.5))
+        s.parameters = tuple(float(rng.uniform(0.1, 1.5)) for _ in shapes.KINDS[kind].parameters)
         if kind in POLYHEDRA:
             s = tracer.parse_sdl(kind).shapes()[0]
             s.matrix = matrix
@@ -530,7 +529,7 @@ def test_object_hierarchy_ties_and_axis_parallel_rays():
 
 # ------------------------------------------------------------------------------------------------ textures
 
-TEXTURED_KINDS = ANALYTIC + ["taperedCylinder", "icosahedron", "teapot", "mesh"]
+TEXTURED_KINDS = ANALYTIC + ["icosahedron", "teapot", "mesh"]
 # name: (texture number, parameters); makePixmap 1 is a small picture of distinct texels (the picture fixture).
 TEXTURES = {"checkerboard": (-1, (0.3,)), "wood": (-2, ()), "marble": (-3, (3.0, 5.0, 4.0)),
             "image": (1, ()), "tiled image": (1, (2.0, 3.0))}
@@ -559,8 +558,7 @@ def _textured_shape(kind, matrix, texture, parameters=(), **material) -> Shape:
         s = _mesh_shape(read_3vn(PAWN), matrix)
     else:
         s = shape(kind, matrix)
-    if kind == "taperedCylinder":
-        s.tapered_radius = 0.4
+    s.parameters = (0.4,) * len(s.parameters)
     s.material = Material(texture=texture, parameters=tuple(parameters), **material)
     return s
 

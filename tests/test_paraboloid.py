@@ -123,7 +123,8 @@ def test_tessellation_is_closed_outward_and_on_the_surface():
 
 def test_blender_adds_exports_and_draws_it_from_the_registry(tmp_path):
     bpy = pytest.importorskip("bpy")
-    from addon import convert, exporter, operators
+    from addon import exporter, operators
+    from addon.pure import convert
     from blender_scripts.addon_env import fresh, shape_objects
 
     assert "paraboloid" in [item[0] for item in operators.SHAPE_ITEMS]  # in the Add menu

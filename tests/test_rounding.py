@@ -24,7 +24,7 @@ from hypothesis import given, settings, strategies as st
 from helpers import scaling, scene_of, shape, translation
 from tracer import native, numerics
 from tracer.compile import compile_scene
-from tracer.trace import first_hits
+from tracer.trace import first_hits, occluded
 
 mpmath.mp.dps = 50
 BANDS = [1e-8, 1e-10, 1e-12, 1e-14, 1e-16]
@@ -40,7 +40,7 @@ def _hits(kind, origin, direction, backend, matrix=None):
     """(t, entering, unit normal) of every crossing of the whole line with one shape."""
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = TAPER
+        solid.parameters = (TAPER,)
     compiled = compile_scene(scene_of(solid))
     o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
     if backend == "c":
@@ -299,7 +299,7 @@ def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, 
     matrix = _affine(seed, 10.0 ** log_condition, size)
     solid = shape(kind, matrix)
     if kind == "taperedCylinder":
-        solid.tapered_radius = 0.5
+        solid.parameters = (0.5,)
     compiled = compile_scene(scene_of(solid))
     core = native.NativeTracer(compiled) if native.load_error is None else None
     rng = np.random.default_rng(seed)
@@ -332,3 +332,68 @@ def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, 
             c = core.first_hits(start, w)
             found = np.isfinite(c["t"])
             assert not np.any(found & (c["entering"] == spawned_inward)), f"{kind}: C core, side {side:+}"
+
+
+# ------------------------------------------------------------------------------------------------ lights on surfaces
+
+CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder"]
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(kind=st.sampled_from(CONVEX), seed=st.integers(0, 2 ** 31),
+       log_condition=st.floats(0, 8), log_size=st.floats(-8, 8))
+def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, log_size):
+    # A light exactly on a convex solid's surface (a point of it found by a ray), seen from points on the
+    # outer side of the tangent plane there: each feeler's segment touches the solid only at the light, so
+    # no feeler is blocked, on either backend (the far end of the feeler is protected as its start is,
+    # compile.blocks_between).
+    size = 10.0 ** log_size
+    matrix = _affine(seed, 10.0 ** log_condition, size)
+    solid = shape(kind, matrix)
+    if kind == "taperedCylinder":
+        solid.parameters = (0.5,)
+    compiled = compile_scene(scene_of(solid))
+    rng = np.random.default_rng(seed)
+    targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))] @ matrix[:3, :3].T + matrix[:3, 3]
+    away = rng.normal(size=(8, 3))
+    eyes = targets + 4.0 * size * 10.0 ** log_condition * away / np.linalg.norm(away, axis=1, keepdims=True)
+    hit = first_hits(compiled, eyes, targets - eyes)
+    rows = np.nonzero(hit.hit)[0]
+    if rows.size == 0:
+        return
+    lights = eyes[rows] + hit.t[rows, None] * (targets - eyes)[rows]
+    normal = hit.normal[rows]
+    core = native.NativeTracer(compiled) if native.load_error is None else None
+    for light, n in zip(lights, normal):
+        w = rng.normal(size=(32, 3))
+        w = np.where((w @ n < 0)[:, None], -w, w) + 0.2 * n * np.linalg.norm(w, axis=1, keepdims=True)
+        w *= size * 10.0 ** log_condition * rng.uniform(0.5, 3, (32, 1)) / np.linalg.norm(w, axis=1, keepdims=True)
+        starts = light + w
+        assert not occluded(compiled, starts, light - starts).any(), f"{kind}: the light's host shadows it"
+        if core is not None:
+            assert not core.occluded(starts, light - starts).any(), f"{kind}: C core, the host shadows its light"
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_feeler_is_blocked_before_a_light_on_a_surface_but_not_by_that_surface(backend):
+    # The unit sphere, a light on it at (0, 0, 1): from (0, 0, 3) the feeler ends on the sphere (not blocked);
+    # from (0, 0, -3) it passes through the sphere first (blocked); the light 1e-12 inside the sphere is
+    # blocked from above, and a light at (0, 0, 1 + 1e-15) from below.
+    compiled = compile_scene(scene_of(shape("sphere")))
+    ask = (native.NativeTracer(compiled).occluded if backend == "c"
+           else lambda o, d: occluded(compiled, np.asarray(o, float), np.asarray(d, float)))
+    light = np.array([0.0, 0.0, 1.0])
+    starts = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -3.0], [2.0, 0.5, 1.5], [0.3, -0.2, -2.0]])
+    assert ask(starts, light - starts).tolist() == [False, True, False, True]
+    inside = np.array([0.0, 0.0, 1.0 - 1e-6])
+    assert ask(starts[:1], inside - starts[:1]).tolist() == [True]
+
+
+def test_lengths_do_not_overflow():
+    v = np.array([[3e300, 4e300, 0.0], [3e-300, 0.0, 4e-300], [1.0, 2.0, 2.0], [0.0, 0.0, 0.0], [1e308, 1e308, 1e308]])
+    assert numerics.norm3(v).tolist() == pytest.approx([5e300, 5e-300, 3.0, 0.0, math.sqrt(3) * 1e308], rel=1e-15)
+    plain = np.random.default_rng(3).normal(size=(1000, 3)) * 10.0 ** np.random.default_rng(4).uniform(-100, 100, (1000, 1))
+    assert (numerics.norm3(plain) == np.sqrt(numerics.dot3(plain, plain))).all()  # no bit changes where not needed
+    directions, reach = numerics.feeler_to(np.zeros((2, 3)), np.array([[1e300, -3e299, 2.0], [1.0, 2.0, 3.0]]))
+    assert reach[1] == 1.0 and directions[1].tolist() == [1.0, 2.0, 3.0]
+    assert (directions[0] * reach[0]).tolist() == [1e300, -3e299, 2.0] and np.abs(directions[0]).max() <= 1.0

@@ -32,11 +32,11 @@ def test_there_are_scenes_for_every_feature():
 
 
 def test_scenes_use_every_sdl_keyword():
-    from tracer.sdl.parser import KEYWORDS
+    from tracer.sdl.parser import EXTENSION_KEYWORDS, KEYWORDS
     from tracer.shapes import REGISTRY
 
     # (the SDL extensions' keywords are not the book's: their own tests render them)
-    words = {e.keyword for e in REGISTRY if e.extension}
+    words = {e.keyword for e in REGISTRY if e.extension} | EXTENSION_KEYWORDS
     for path in SCENES:
         text = "\n".join(line.split("!")[0] for line in path.read_text().splitlines())  # without comments
         words |= set(re.findall(r"[A-Za-z][A-Za-z0-9]*", text))

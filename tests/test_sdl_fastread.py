@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracer import transforms
+from tracer import shapes, transforms
+from tracer.native import contract
 from tracer.errors import SDLError
 from tracer.model import CSG, Camera, Light, Material, Scene, Settings, Shape, ShapeTable
 from tracer.shapes import REGISTRY
-from tracer.sdl import fastread, parser
+from tracer.sdl import fastread, parser, statements
 from tracer.sdl.parser import KEYWORDS, load, parse_sdl
 from tracer.sdl.writer import write_sdl
 
@@ -67,7 +68,7 @@ def assert_same_scene(fast: Scene, slow: Scene) -> None:
         assert a.matrix.dtype == b.matrix.dtype and a.matrix.shape == b.matrix.shape == (4, 4)
         assert a.matrix.tobytes() == b.matrix.tobytes(), (index, a.matrix, b.matrix)
         assert material_bits(a.material) == material_bits(b.material), index
-        assert bits(a.tapered_radius) == bits(b.tapered_radius)
+        assert [bits(x) for x in a.parameters] == [bits(x) for x in b.parameters]
         if a.kind == "mesh":  # (read from its file by each read)
             assert a.mesh.origin == b.mesh.origin and np.array_equal(a.mesh.vertices, b.mesh.vertices)
         else:  # a built-in polyhedron's is the one cached MeshData
@@ -143,7 +144,7 @@ def test_the_shapes_stay_columns_until_asked_for():
     assert columns is not None  # nothing made yet
     assert columns.kinds.tolist() == [REGISTRY_CODES[k] for k in ("sphere", "cube", "taperedCylinder")]
     assert columns.material_ids.tolist() == [0, 1, 1] and len(columns.materials) == 2
-    assert columns.tapered_radii.tolist() == [1.0, 1.0, 0.5]
+    assert columns.parameters[:, 0].tolist() == [0.0, 0.0, 0.5]  # (only the tapered cylinder reads one)
     assert columns.affines[2].tolist() == [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 2.0, 0.0, 0.0, 1.0, 3.0]
     assert (columns.lines.tolist(), columns.columns.tolist()) == ([2, 2, 2], [1, 22, 43])
     assert columns.names == {0: "ball"} and columns.file == "scene.sdl"
@@ -258,7 +259,7 @@ def test_texts_of_the_writer():
         kind = SHAPE_WORDS[index % len(SHAPE_WORDS)]
         material = Material(diffuse=tuple(rng.uniform(0, 1, 3)), reflectivity=float(rng.uniform(0, 1)),
                             parameters=tuple(rng.uniform(0, 1, index % 4)), texture=-(index % 3))
-        objects.append(Shape(kind, matrix, material, tapered_radius=0.5 if kind == "taperedCylinder" else 1.0,
+        objects.append(Shape(kind, matrix, material, parameters=(0.5,) if kind == "taperedCylinder" else (),
                              mesh=parser.builtin_mesh(kind) if kind in parser.POLYHEDRON_KINDS + ("teapot",)
                              else None, name=f"object {index}" if index % 2 else None))
     scene = Scene(objects=objects, lights=[Light((1.0, 2.0, 3.0), (1.0, 1.0, 1.0))],
@@ -422,10 +423,10 @@ def test_a_def_is_declined_where_it_stands():
 
 
 def test_every_keyword_of_the_python_reader_is_read_or_declined():
-    """A keyword added to the parser reaches the C reader only through fastread's vocabulary: until then it
-    is declined, so the Python reader keeps reading it."""
+    """A keyword reaches the C reader only through its statement's action (tracer/sdl/statements.py): until
+    it has one it is declined, so the Python reader keeps reading it."""
     assert fastread.available()
-    vocabulary = fastread._vocabulary()
+    vocabulary = statements.vocabulary()
     assert set(vocabulary) | fastread.DECLINED == KEYWORDS
     assert not set(vocabulary) & fastread.DECLINED
     for keyword in KEYWORDS - set(vocabulary):
@@ -582,3 +583,23 @@ def test_a_lone_surrogate_is_declined_without_an_exception():
 def test_the_decline_offset_counts_characters_after_a_comment_beyond_ascii():
     text = "sphere ! \U0001F600\u2603\u00e9\ncube def a { sphere }"
     assert fastread.scan(text) == fastread.Declined("word", text.index("def"))
+
+
+def test_one_statement_table_drives_both_readers():
+    """tracer/sdl/statements.py is the one list of statements: the Python reader's usage texts and handlers,
+    the C reader's vocabulary and its table of actions (generated into contract.h) all come from it."""
+    assert set(parser.USAGE) == set(statements.BY_KEYWORD) == KEYWORDS
+    reader = parser._Reader("", None, None, True)
+    for s in statements.STATEMENTS:
+        assert reader.handlers[s.keyword].__name__ == s.handler
+        assert parser.USAGE[s.keyword] == s.usage
+    header = contract.HEADER.read_text()
+    assert "#define RT_SDL_ACTIONS(X) " + " ".join(f"X({k}, {a})" for k, a in enumerate(statements.ACTIONS)) in header
+    source = (contract.HEADER.parent / "sdl_read.h").read_text()
+    for action in statements.ACTIONS:  # each a function of the C reader
+        assert f"static int {action}(SdlReader *r, int32_t argument, int32_t count)" in source
+    # one shape action for every kind, told how many parameters follow the keyword (the registry's)
+    vocabulary = statements.vocabulary()
+    for code, entry in enumerate(shapes.REGISTRY):
+        if not entry.file_argument:
+            assert vocabulary[entry.keyword] == (statements.ACTIONS.index("sdl_shape"), code, len(entry.parameters))

@@ -192,8 +192,7 @@ def test_analytic_shapes(fake_builtins):
     kinds = [s.kind for s in scene.objects]
     assert kinds == ["sphere", "cube", "square", "plane", "taperedCylinder", "cylinder", "cone", "torus"]
     tapered, cylinder, cone = scene.objects[4:7]
-    assert tapered.tapered_radius == 0.25 and tapered.small_radius == 0.25
-    assert cylinder.small_radius == 1.0 and cone.small_radius == 0.0
+    assert tapered.parameters == (0.25,) and cylinder.parameters == cone.parameters == ()
     assert all(s.mesh is None for s in scene.objects)
 
 
@@ -710,7 +709,7 @@ def _outcome(text: str, strict: bool):
                 objects.append((node.op, node.groups, node.source))
                 todo += [node.right, node.left]
             else:
-                objects.append((node.kind, node.matrix.tolist(), node.material, node.tapered_radius, node.groups,
+                objects.append((node.kind, node.matrix.tolist(), node.material, node.parameters, node.groups,
                                 node.source, node.name))
     return objects, scene.lights, scene.camera, scene.settings, scene.warnings
 

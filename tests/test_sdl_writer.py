@@ -34,7 +34,7 @@ def assert_same_objects(a, b, tol=1e-12):
             assert x.op == y.op
             pairs += [(x.left, y.left), (x.right, y.right)]
             continue
-        assert x.kind == y.kind and x.material == y.material and x.small_radius == y.small_radius
+        assert x.kind == y.kind and x.material == y.material and x.parameters == y.parameters
         assert x.mesh_file == y.mesh_file
         assert np.max(np.abs(x.matrix - y.matrix)) <= tol
 

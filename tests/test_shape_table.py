@@ -54,7 +54,7 @@ def test_reads_as_the_python_readers_list():
     for mine, theirs in zip(table, shapes):
         assert mine.kind == theirs.kind and mine.matrix.tobytes() == theirs.matrix.tobytes()
         assert mine.material == theirs.material and mine.source == theirs.source and mine.name == theirs.name
-        assert mine.tapered_radius == theirs.tapered_radius and mine.mesh is theirs.mesh
+        assert mine.parameters == theirs.parameters and mine.mesh is theirs.mesh
         assert mine.matrix.flags.owndata  # a matrix of its own, as the reader gives
     assert table[0].name == "first ball" and table[0].source == SourceLocation("s.sdl", 4, 17)
     assert table[3].mesh is not None and table[4].mesh is not None  # octahedron, teapot: built-in meshes
@@ -149,7 +149,7 @@ def test_made_table_copies_and_pickles_as_its_list():
 
 def test_bad_columns_are_refused():
     ok = dict(kinds=[0], affines=np.eye(4)[:3].reshape(1, 12), material_ids=[0], materials=[parsed().objects[0].material],
-              tapered_radii=[1.0], lines=[1], columns=[1])
+              parameters=[1.0], lines=[1], columns=[1])
     ShapeTable(**ok)
     with pytest.raises(ValueError, match="kind"):
         ShapeTable(**(ok | {"kinds": [999]}))
@@ -217,13 +217,13 @@ def test_the_table_holds_arrays_nobody_can_change():
     arrays over (they and the arrays they are views of become read-only); a writable buffer is copied."""
     c = table_of().columns
     owner = np.array(c.affines).reshape(-1, 3, 4).copy()
-    table = ShapeTable(c.kinds, owner.reshape(-1, 12), c.material_ids, c.materials, c.tapered_radii, c.lines,
+    table = ShapeTable(c.kinds, owner.reshape(-1, 12), c.material_ids, c.materials, c.parameters, c.lines,
                        c.columns)
     assert np.shares_memory(table.columns.affines, owner)  # (no copy)
     with pytest.raises(ValueError):
         owner[0, 0, 3] = 5.0
     buffer = bytearray(np.array(c.affines).tobytes())
     table = ShapeTable(c.kinds, np.frombuffer(buffer).reshape(-1, 12), c.material_ids, c.materials,
-                       c.tapered_radii, c.lines, c.columns)
+                       c.parameters, c.lines, c.columns)
     buffer[:8] = np.float64(7.0).tobytes()
     assert np.array_equal(table.columns.affines, c.affines)

@@ -103,8 +103,8 @@ def test_plan_cuts_tiles_on_every_stride():
 
 
 def test_the_addon_traces_the_same_pixels_as_the_command_line(compiled):
-    """addon/blocks.py schedules with tracer.tiles: jittered samples give the command line's bytes."""
-    from addon import blocks  # (imports bpy, pinned in requirements-dev.txt)
+    """addon/pure/blocks.py schedules with tracer.tiles: jittered samples give the command line's bytes."""
+    from addon.pure import blocks
     frame = CameraFrame.from_camera(compiled.scene.camera, WIDTH / HEIGHT)
     renderer = blocks.BlockRenderer(compiled, tiles.camera_rays_for(frame, WIDTH, HEIGHT), WIDTH, HEIGHT,
                                     block_size=4, progressive=True, tile=16, samples=4, seed=7, chunk=100)

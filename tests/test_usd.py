@@ -57,7 +57,7 @@ def assert_same_scene(a: Scene, b: Scene, tol: float = 0.0, groups: bool = True)
             assert x.op == y.op
             pairs += [(x.left, y.left), (x.right, y.right)]
             continue
-        assert (x.kind, x.small_radius, x.material) == (y.kind, y.small_radius, y.material)
+        assert (x.kind, x.parameters, x.material) == (y.kind, y.parameters, y.material)
         error = float(np.max(np.abs(x.matrix - y.matrix)))
         assert error <= tol * max(1.0, float(np.max(np.abs(x.matrix)))), (x.kind, error)
         assert (x.mesh is None) == (y.mesh is None)
@@ -160,7 +160,7 @@ def random_objects(draw, depth=0):
     shape = Shape(kind, random_matrix(draw), draw(random_materials()),
                   groups=tuple(draw(st.lists(st.sampled_from(["jack", "arm", "x.y"]), max_size=3))))
     if kind == "taperedCylinder":
-        shape.tapered_radius = draw(st.floats(0, 3))
+        shape.parameters = (draw(st.floats(0, 3)),)
     if kind == "mesh":
         shape.mesh = TRIANGLES
     if kind == "octahedron":
@@ -592,7 +592,7 @@ def test_foreign_plane_and_tapered_cylinder(tmp_path):
     stage.GetRootLayer().Export(str(path))
     scene = load_usd(path)
     wall, cone = scene.shapes()
-    assert wall.kind == "square" and cone.kind == "taperedCylinder" and cone.tapered_radius == 0.5
+    assert wall.kind == "square" and cone.kind == "taperedCylinder" and cone.parameters == (0.5,)
     assert ray_hits(scene, (1.9, 5, 2.9), (0, -1, 0)) == [(5, True, "square"), (5, False, "square")]  # a sheet
     assert ray_hits(scene, (2.1, 5, 0), (0, -1, 0)) == [] and ray_hits(scene, (0, 5, 3.1), (0, -1, 0)) == []
     # the frustum: z from 18 (radius 2) to 22 (radius 1); at z = 20 the radius is 1.5

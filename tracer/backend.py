@@ -14,7 +14,7 @@ from typing import Optional
 
 from .compile import CompiledScene, boolean_depth
 from .errors import FallbackWarning, TracerError
-from .model import CSG, Scene, ShapeTable
+
 from .savings import RaySavings
 from .trace import Tracer
 
@@ -27,16 +27,14 @@ BACKENDS = ("auto", "c", "numpy")
 MAX_CSG_DEPTH = 2000
 
 
-def check_boolean_depth(scene: Scene) -> None:
-    """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep."""
-    if isinstance(scene.objects, ShapeTable) and scene.objects.columns is not None:
-        return  # (a table's rows are shapes: looking would make them into Shape objects for nothing)
-    for obj in scene.objects:
-        if not isinstance(obj, CSG):
-            continue
-        depth = boolean_depth(obj)
+def check_boolean_depth(compiled: CompiledScene) -> None:
+    """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep.  (Read from
+    the compiled booleans: a scene of 10^5 plain shapes is not walked again before every render.)"""
+    for k in sorted(compiled.objects.booleans):
+        depth = boolean_depth(compiled.objects.booleans[k])
         if depth > MAX_CSG_DEPTH:
-            where = f"{obj.source}: " if obj.source is not None else ""
+            obj = compiled.scene.objects[k]
+            where = f"{obj.source}: " if getattr(obj, "source", None) is not None else ""
             raise TracerError(f"{where}{obj.op}: booleans nested {depth} deep; the tracer follows at most "
                               f"{MAX_CSG_DEPTH}")
 
@@ -59,7 +57,7 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
         raise TracerError(f"threads must be 1 or more, not {threads}")
     if backend not in BACKENDS:
         raise TracerError(f"unknown backend {backend!r} (use one of {', '.join(BACKENDS)})")
-    check_boolean_depth(compiled.scene)
+    check_boolean_depth(compiled)
     if backend in ("auto", "c"):
         try:
             from .native import NativeTracer

@@ -381,12 +381,35 @@ def describe(scene) -> dict:
         objects = [obj_info(o) for o in scene.objects] if rows is None else _rows_info(rows)
     return {
         "objects": objects,
-        "lights": [{"position": list(l.position), "color": list(l.color)} for l in scene.lights],
+        "lights": [_light_info(light) for light in scene.lights],
         "camera": None if camera is None else {"eye": list(camera.eye), "look": list(camera.look),
                                                "up": list(camera.up), "viewAngle": camera.view_angle},
         "effects": sorted(compiled.effects),
         "warnings": list(scene.warnings),
     }
+
+
+#: The Light fields ``info`` shows for each kind beyond SDL's point light (tracer.model.Light).
+_LIGHT_FIELDS = {"sphere": ("radius", "samples"), "spot": ("direction", "spot_size", "spot_blend", "radius", "samples"),
+                 "sun": ("direction", "angle", "samples"), "area": ("direction", "axis", "shape", "size", "samples")}
+
+
+def _light_info(light) -> dict:
+    """A light as ``info`` lists it: SDL's point light as before (position, colour), with its name when it has
+    one; the other kinds with their kind and fields."""
+    out = {"position": list(light.position), "color": list(light.color)}
+    if light.name is not None:
+        out["name"] = light.name
+    if light.kind != "point":
+        out["kind"] = light.kind
+        for name in _LIGHT_FIELDS[light.kind]:
+            value = getattr(light, name)
+            out[name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
+def _numbers_text(values) -> str:
+    return ", ".join(f"{x:g}" for x in values)
 
 
 def _rows_info(rows) -> list[dict]:
@@ -456,8 +479,11 @@ def _info(args) -> int:
         print("\n".join(chunk))  # (a print() per line took a third of the time for 10^5 objects)
     print(f"lights: {len(info['lights'])}")
     for light in info["lights"]:
-        print(f"  at ({', '.join(f'{x:g}' for x in light['position'])}) colour "
-              f"({', '.join(f'{x:g}' for x in light['color'])})")
+        kind = light.get("kind", "point")
+        where = (f"towards ({_numbers_text(light['direction'])})" if kind == "sun"
+                 else f"at ({_numbers_text(light['position'])})")
+        print(f"  {'' if kind == 'point' else kind + ' '}{where} colour ({_numbers_text(light['color'])})"
+              + (f" {light['name']!r}" if "name" in light else ""))
     cam = info["camera"]
     print("camera: " + ("default (frames the scene)" if cam is None else
                         f"eye {tuple(cam['eye'])} look {tuple(cam['look'])} angle {cam['viewAngle']:g}"))

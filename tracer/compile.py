@@ -26,9 +26,10 @@ from .errors import SceneError, TracerError
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
-from .intersect.torus import intersect_torus
-from .model import (CSG, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene, SceneObject,
-                    Shape, ShapeColumns, ShapeTable, TORUS_TUBE_RADIUS, matrices_of_affines as _matrices_of_affines)
+from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
+                    SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
+                    parameter_rows)
+from .lights import LightTable
 from .transforms import transform_points
 
 
@@ -46,6 +47,18 @@ def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np
 
 #: Closed analytic shapes whose normals must agree with their entering flags (ShapeKind.normals_agree).
 SOLID_ANALYTIC_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.family == "analytic" and e.normals_agree)
+
+
+def blocks_between(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+    """(N,) bool: a hit lies between t_min and t_max with its whole error interval (a shadow feeler's blocker).
+
+    The same rule at both ends: a feeler leaving a surface never finds that surface at its start, and one
+    ending on a light that sits on a surface (a lamp on a wall, a light in the floor's plane) is not blocked
+    by that surface at its end, however the hit's time rounds."""
+    if hits.slots == 0:
+        return np.zeros(hits.count, dtype=bool)
+    inside = (hits.t - hits.error > t_min[:, None]) & (hits.t + hits.error < t_max[:, None])
+    return inside.any(axis=1)
 
 
 def first_after(hits: HitArrays, t_min: np.ndarray, t_max: np.ndarray) -> HitArrays:
@@ -80,25 +93,31 @@ def _checked_inverse(shape: Shape) -> np.ndarray:
 #: The eight corners of the generic cube, for the bounding spheres of the closed-form shapes.
 #: (Shared by every primitive, so read-only.)
 _CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-_DISC_BOX = np.array([[x, y] for x in (-1, 1) for y in (-1, 1)], dtype=float)
 #: The corners of each registered kind's generic box.
 _BOX_CORNERS = {e.keyword: np.asarray(e.box[0]) + _CORNERS * np.asarray(e.box[1])
                 for e in shapes.REGISTRY if e.box is not None}
-for _constant in (_CORNERS, _DISC_BOX, *_BOX_CORNERS.values()):
+for _constant in (_CORNERS, *_BOX_CORNERS.values()):
     _constant.setflags(write=False)
 
 
 def _analytic_generic_points(shape: Shape) -> Optional[np.ndarray]:
-    """Points whose hull holds a closed-form shape's generic solid (8 of them), or None for the plane,
-    polyhedra and meshes."""
+    """Points whose hull holds a closed-form shape's generic solid (its box's corners, or what its kind's
+    bounds give for its parameters), or None for the plane, polyhedra and meshes."""
     kind = shape.kind
     if kind in _BOX_CORNERS:
         return _BOX_CORNERS[kind]
-    if kind in ("taperedCylinder", "cylinder", "cone"):
-        top = max(shape.small_radius, 0.0)
-        # Corners of the squares that bound the two discs: the frustum lies inside their hull.
-        return np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX * top, np.ones(4)]])
+    entry = shapes.KINDS[kind]
+    if entry.bounds is not None:
+        return entry.function("bounds")(_traced_rows([entry.traced(shape.parameters)]))[0]
     return None
+
+
+def _traced_rows(values: Sequence[tuple[float, ...]]) -> np.ndarray:
+    """(N, shapes.MAX_PARAMETERS) rows of values that kinds' intersections take, 0 after each row's own."""
+    rows = np.zeros((len(values), shapes.MAX_PARAMETERS))
+    for i, row in enumerate(values):
+        rows[i, :len(row)] = row
+    return rows
 
 
 def _sphere_around(world: np.ndarray):
@@ -176,7 +195,7 @@ class Primitive:
         if shape.kind in POLYHEDRON_KINDS:
             from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
-        elif shape.kind in ("teapot", "mesh"):
+        elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
             cache = {} if mesh_cache is None else mesh_cache
             key = id(shape.mesh)
@@ -190,7 +209,8 @@ class Primitive:
         entry = shapes.KINDS[self.kind]
         self.thin = entry.thin
         self.bounded = entry.bounded
-        self._intersect = entry.function("intersect") if entry.intersect else None
+        self._entry = entry
+        self._intersect = entry.function("intersect")
         self._normals_agree = entry.normals_agree
         self.tolerances = tolerances
 
@@ -245,10 +265,9 @@ class Primitive:
 
     @cached_property
     def generic_size(self) -> float:
-        """The generic shape's extent (its hit points' coordinates are of this size)."""
-        if self.kind == "torus":
-            return 1.0 + TORUS_TUBE_RADIUS
-        pts = self._generic_points() if self.kind not in ("sphere", "cube", "square", "plane") else None
+        """The generic shape's extent (its hit points' coordinates are of this size): the largest coordinate of
+        the points its bounds are made from, 1 for the plane."""
+        pts = self._generic_points()
         return float(np.max(np.abs(pts))) if pts is not None and pts.size else 1.0
 
     @property
@@ -284,20 +303,15 @@ class Primitive:
         return None if pts is None else transform_points(self.matrix, pts)
 
     def generic_hits(self, o: np.ndarray, d: np.ndarray) -> HitArrays:
-        if self._intersect is not None:
-            return self._intersect(o, d)
-        kind = self.kind
-        if kind == "square":
-            return analytic.intersect_square(o, d, self.tolerances.square_edge)
-        if kind == "plane":
-            return analytic.intersect_plane(o, d)
-        if kind in ("taperedCylinder", "cylinder", "cone"):
-            return analytic.intersect_tapered_cylinder(o, d, self.shape.small_radius)
-        if kind == "torus":
-            return intersect_torus(o, d, self.tolerances)
+        """Every crossing of the generic lines: the kind's registered intersection, given what its family
+        takes (tracer/shapes.py, ShapeKind)."""
         if self._planes is not None:
-            return analytic.intersect_convex_polyhedron(o, d, *self._planes)
-        return self._mesh.all_hits(o, d)
+            return self._intersect(o, d, *self._planes)
+        if self._mesh is not None:
+            return self._intersect(o, d, self._mesh)
+        entry = self._entry
+        budget = (self.tolerances,) if entry.budget else ()
+        return self._intersect(o, d, *entry.traced(self.shape.parameters), *budget)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
         """All hits along the whole world lines, world normals, ``shape`` = this primitive's index."""
@@ -345,9 +359,10 @@ class Primitive:
         return out
 
     def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
-        """Whether anything of this shape lies on each ray between t_min and t_max (shadow feelers)."""
+        """Whether anything of this shape lies on each ray between t_min and t_max, with its whole error
+        interval (shadow feelers, see blocks_between; a mesh's hits are taken as exact there)."""
         if self._mesh is None:
-            return np.isfinite(self.first_hit(origins, directions, t_min, t_max).t[:, 0])
+            return blocks_between(self.intersect(origins, directions), t_min, t_max)
         blocked = np.zeros(origins.shape[0], dtype=bool)
         idx = np.nonzero(self.may_hit(origins, directions))[0]
         if idx.size:
@@ -404,7 +419,7 @@ class CSGNode:
         return first_after(self.intersect(origins, directions), t_min, t_max)
 
     def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
-        return np.isfinite(self.first_hit(origins, directions, t_min, t_max).t[:, 0])
+        return blocks_between(self.intersect(origins, directions), t_min, t_max)
 
 
 Node = Union[Primitive, CSGNode]
@@ -469,6 +484,9 @@ class MaterialTable:
     speed_of_light: np.ndarray = field(init=False)
     #: The texture number (0: none).
     texture: np.ndarray = field(init=False)
+    #: The Material.fresnel mode's index in FRESNEL_MODES, and the tint (a metal's F0).
+    fresnel: np.ndarray = field(init=False)
+    fresnel_tint: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         # A few thousand materials at a time (they stay in the cache while each of their fields is read:
@@ -478,6 +496,8 @@ class MaterialTable:
         if isinstance(self.materials, MaterialRows):  # (columns already: a million materials read as rows)
             for name in _COLOR_FIELDS + _NUMBER_FIELDS + ("texture",):
                 setattr(self, name, self.materials.column(name))
+            self.fresnel = np.zeros(len(self.materials), dtype=np.int32)  # (rows keep SDL's materials only)
+            self.fresnel_tint = np.ones((len(self.materials), 3))
             return
         n = len(self.materials)
         for name in _COLOR_FIELDS:
@@ -497,6 +517,40 @@ class MaterialTable:
                     column[rows] = np.fromiter(chain.from_iterable(values), float, 3 * len(values)).reshape(-1, 3)
                 else:
                     column[rows] = np.fromiter(values, column.dtype, len(values))
+        self._fresnel_columns()
+
+    def _fresnel_columns(self) -> None:
+        """Material.fresnel and fresnel_tint, which only materials made for Blender scenes change from their
+        defaults (looked at one by one only where some material does)."""
+        n = len(self.materials)
+        self.fresnel = np.zeros(n, dtype=np.int32)
+        self.fresnel_tint = np.ones((n, 3))
+        modes = list(map(attrgetter("fresnel"), self.materials))
+        tints = list(map(attrgetter("fresnel_tint"), self.materials))
+        default = Material()  # (its values are the very objects every material has that keeps them)
+        if all(map(operator.is_, modes, repeat(default.fresnel))) and all(
+                map(operator.is_, tints, repeat(default.fresnel_tint))):
+            return
+        self.fresnel[:] = [FRESNEL_MODES.index(mode) for mode in modes]
+        self.fresnel_tint[:] = tints
+
+    def put(self, material: Material, row: Optional[int] = None) -> int:
+        """Write ``material`` into ``row`` (None: a new row at the end, every array then a new one, longer by
+        one); returns the row (tracer.edit)."""
+        if not isinstance(self.materials, list):
+            self.materials = list(self.materials)
+        if row is None:
+            row = len(self.materials)
+            self.materials.append(material)
+            for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture", "fresnel", "fresnel_tint"):
+                column = getattr(self, name)
+                setattr(self, name, np.concatenate([column, np.zeros((1,) + column.shape[1:], column.dtype)]))
+        else:
+            self.materials[row] = material
+        for name in (*_COLOR_FIELDS, *_NUMBER_FIELDS, "texture", "fresnel_tint"):
+            getattr(self, name)[row] = getattr(material, name)
+        self.fresnel[row] = FRESNEL_MODES.index(material.fresnel)
+        return row
 
 
 #: Materials read at a time by MaterialTable (their objects stay in the cache while each field is read).
@@ -512,6 +566,8 @@ class CompiledScene:
     light_positions: np.ndarray  # (L, 3)
     light_colors: np.ndarray  # (L, 3)
     effects: frozenset[str]
+    #: Every light's numbers (tracer.lights.LightTable; its position and color are the two above).
+    lights: Optional["LightTable"] = None
     textures: Optional[object] = None  # tracer.textures.TextureSet when the scene uses textures
     tolerances: numerics.Tolerances = field(default_factory=lambda: numerics.TOLERANCES)
     #: All primitives' numbers as arrays (what ``primitives`` are views of)
@@ -532,22 +588,25 @@ class PrimitiveTable:
     centres and radii (radius inf and centre 0 for unbounded shapes; ``centers`` and ``radii`` are views of
     it); ``boxes`` (N, 6), world boxes (lo, hi) of the points the spheres are made from (the generic box's
     corners, a mesh's vertices; not padded, meaningless for unbounded shapes); ``material_ids`` (N,);
-    ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``top`` (N,), a tapered cylinder's small
-    radius (0 for other kinds); ``meshes``: the TriangleMesh of each mesh by the id of its MeshData.  The
-    matrices themselves are the shapes' own (not kept twice)."""
+    ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``parameters`` (N,
+    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: a tapered cylinder's
+    top radius, 1 for a cylinder...; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
+    its MeshData.  The matrices themselves are the shapes' own (not kept twice)."""
 
-    def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, tapered_radii: np.ndarray,
+    def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, parameters: np.ndarray,
                  matrices: Optional[np.ndarray], material_ids: np.ndarray):
         """``shapes``: a list of Shapes, or a _RowShapes that makes them from a ShapeTable's rows when asked
-        (the table is then compiled without making any); ``kind`` (N,) their kind codes; ``tapered_radii``
-        (N,) their Shape.tapered_radius; ``matrices``: (N, 4, 4) stacked (see _stacked_matrices) or a
-        table's (N, 12) affines, None when some matrix is not a float64 4x4."""
+        (the table is then compiled without making any); ``kind`` (N,) their kind codes; ``parameters``
+        (N, shapes.MAX_PARAMETERS) their Shape.parameters (ShapeTable.parameters); ``matrices``: (N, 4, 4)
+        stacked (see _stacked_matrices) or a table's (N, 12) affines, None when some matrix is not a float64
+        4x4."""
         n = len(shapes)
         self.shapes = shapes
         self.tolerances = numerics.TOLERANCES
         self.material_ids = material_ids
         self.kind = np.asarray(kind, dtype=np.int16)
         self.meshes: dict[int, object] = {}
+        self._mesh_owners: dict[int, MeshData] = {}
         if matrices is None:  # (a matrix that is not a float64 4x4: _checked_inverse says which, or copes)
             matrices = _stack_checked(shapes)
         self._matrices = matrices
@@ -559,27 +618,94 @@ class PrimitiveTable:
         self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
         self.boxes = np.zeros((n, 6))
         for rows in row_chunks(n):  # (each chunk's matrices made once, for all that is computed from them)
-            matrix = self.matrix_rows(rows)
-            inverse = _batched_inverses(matrix)
-            if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
-                inverse = self._checked_inverses(rows)
-            self.inverses[rows] = inverse
-            self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
-            # (the sums in Primitive's order: rows of three, left to right; spelt out, as NumPy's
-            # reductions over axes of three take several times longer)
-            linear, translation = np.abs(inverse[:, :3, :3]), np.abs(inverse[:, :3, 3])
-            sums = linear[:, :, 0] + linear[:, :, 1] + linear[:, :, 2]
-            self.inverse_norms[rows, 0] = np.maximum(np.maximum(sums[:, 0], sums[:, 1]), sums[:, 2])
-            self.inverse_norms[rows, 1] = np.maximum(np.maximum(translation[:, 0], translation[:, 1]),
-                                                     translation[:, 2])
-            self._bound_generic_boxes(rows, matrix)
+            self._fill_rows(rows, self.matrix_rows(rows))
         for mesh, _ in self.mesh_groups():
             self._build_mesh(mesh)
-        # a tapered cylinder's small radius (Shape.small_radius), 0 for the other kinds
-        self.top = np.where(self.kind == _KIND_INDEX["taperedCylinder"], tapered_radii, 0.0)
-        self.top[self.kind == _KIND_INDEX["cylinder"]] = 1.0
+        self.parameters = _traced_parameters(self.kind, parameters)
         self._fill_sizes_and_bounds()
         self._matrices = None  # (the shapes' or the table's own: not kept twice)
+
+    def _fill_rows(self, rows, matrix: np.ndarray) -> None:
+        """Inverses, their rounding and norms, and the bounds of the kinds with a fixed generic box, of
+        ``rows`` (a slice or an index array) whose matrices are ``matrix``: each row's numbers depend on
+        its own matrix alone, computed the same whichever rows come with it."""
+        inverse = _batched_inverses(matrix)
+        if inverse is None:  # some matrix fails the checks: find the first, in order, for its message
+            inverse = self._checked_inverses(rows)
+        self.inverses[rows] = inverse
+        self.inverse_error[rows] = numerics.inverse_rounding(inverse, matrix)
+        # (the sums in Primitive's order: rows of three, left to right; spelt out, as NumPy's
+        # reductions over axes of three take several times longer)
+        linear, translation = np.abs(inverse[:, :3, :3]), np.abs(inverse[:, :3, 3])
+        sums = linear[:, :, 0] + linear[:, :, 1] + linear[:, :, 2]
+        self.inverse_norms[rows, 0] = np.maximum(np.maximum(sums[:, 0], sums[:, 1]), sums[:, 2])
+        self.inverse_norms[rows, 1] = np.maximum(np.maximum(translation[:, 0], translation[:, 1]),
+                                                 translation[:, 2])
+        self._bound_generic_boxes(rows, matrix)
+
+    def refill(self, rows: np.ndarray, shapes: Sequence[Shape]) -> None:
+        """Put these Shapes (matrices checked) in ``rows`` (sorted indices) and compute every number of those
+        rows from them: kind, taper, mesh, inverse, bounds; the numbers a compile of the shapes from scratch
+        gives, bit for bit.  (Material ids are the caller's.)"""
+        index = rows.tolist()
+        old_meshes = [self.shapes[i].mesh for i in index]
+        for i, shape in zip(index, shapes):
+            self.shapes[i] = shape
+        old_kinds = self.kind[rows].copy()
+        self.kind[rows] = [_KIND_INDEX[s.kind] for s in shapes]
+        if "kind_counts" in self.__dict__:
+            np.subtract.at(self.kind_counts, old_kinds, 1)
+            np.add.at(self.kind_counts, self.kind[rows], 1)
+        self.parameters[rows] = _traced_parameters(self.kind[rows], parameter_rows([s.parameters for s in shapes]))
+        mesh_codes = list(_MESH_CODES)
+        if np.isin(old_kinds, mesh_codes).any() or np.isin(self.kind[rows], mesh_codes).any():
+            self.__dict__.pop("_mesh_groups", None)
+            if any(a is not b.mesh for a, b in zip(old_meshes, shapes)):
+                self._prune_meshes()
+            for shape in shapes:
+                if shape.kind in MESH_KINDS:
+                    self._build_mesh(shape.mesh)
+        # (the defaults a compile starts every row from: what an unbounded kind keeps)
+        self.generic_size[rows], self.spheres[rows], self.boxes[rows] = 1.0, (0.0, 0.0, 0.0, np.inf), 0.0
+        for part in row_chunks(len(rows)):
+            self._fill_rows(rows[part], self.matrix_rows(rows[part]))
+        self._fill_sizes_and_bounds(rows)
+
+    def resize(self, keep: np.ndarray, added: list[Shape], added_material_ids: np.ndarray) -> None:
+        """Keep the rows where ``keep`` is true (in order) and append rows for the ``added`` shapes (matrices
+        checked) with these material ids, computed as refill computes them.  Every array is a new one."""
+        kept = np.flatnonzero(keep)
+        delete_positions(self.shapes, np.flatnonzero(~keep).tolist())
+        self.shapes.extend(added)
+        extra = len(added)
+
+        def grown(array: np.ndarray, fill=0) -> np.ndarray:
+            out = np.empty((len(kept) + extra,) + array.shape[1:], dtype=array.dtype)
+            out[:len(kept)] = array[kept]
+            out[len(kept):] = fill
+            return out
+
+        self.material_ids = np.concatenate([self.material_ids[kept], np.asarray(added_material_ids, np.int32)])
+        self.kind = grown(self.kind)
+        self.parameters = grown(self.parameters, 0.0)
+        self.inverses, self.inverse_error, self.inverse_norms = (grown(self.inverses), grown(self.inverse_error),
+                                                                 grown(self.inverse_norms))
+        self.generic_size = grown(self.generic_size, 1.0)
+        self.spheres = grown(self.spheres)
+        self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
+        self.boxes = grown(self.boxes)
+        self.__dict__.pop("kind_counts", None)
+        self.__dict__.pop("_mesh_groups", None)
+        self._prune_meshes()
+        if extra:
+            self.refill(np.arange(len(kept), len(kept) + extra), self.shapes[len(kept):])
+
+    def _prune_meshes(self) -> None:
+        """Forget the built meshes no row holds any longer (kept, an id freed could name another mesh later)."""
+        used = {id(mesh) for mesh, _ in self.mesh_groups()}
+        for gone in [k for k in self.meshes if k not in used]:
+            del self.meshes[gone]
+            self._mesh_owners.pop(gone, None)
 
     def __len__(self) -> int:
         return len(self.shapes)
@@ -587,6 +713,10 @@ class PrimitiveTable:
     def matrix_rows(self, rows) -> np.ndarray:
         """The (k, 4, 4) matrices of these rows (a slice or an index array)."""
         m = self._matrices
+        if m is None:  # (compiled: the shapes' own, as tracer.edit refills rows from them)
+            shapes = self.shapes
+            return np.stack([np.asarray(shapes[i].matrix, dtype=np.float64)
+                             for i in np.arange(len(self))[rows].tolist()]).reshape(-1, 4, 4)
         return m[rows] if m.ndim == 3 else _matrices_of_affines(m[rows])
 
     def _checked_inverses(self, rows: slice) -> np.ndarray:
@@ -610,6 +740,10 @@ class PrimitiveTable:
         if not self.kind_counts[codes].any():  # (no pass over a million rows for a kind that has none)
             return np.zeros(0, dtype=np.int64)
         return np.flatnonzero(np.isin(self.kind, codes))
+
+    def kinds_present(self) -> set[str]:
+        """The SDL kinds of the rows."""
+        return {_KEYWORDS[code] for code in np.flatnonzero(self.kind_counts).tolist()}
 
     @cached_property
     def kind_counts(self) -> np.ndarray:
@@ -645,29 +779,37 @@ class PrimitiveTable:
     def _build_mesh(self, mesh: MeshData) -> None:
         if id(mesh) not in self.meshes:
             self.meshes[id(mesh)] = shared_triangle_mesh(mesh)
+            self._mesh_owners[id(mesh)] = mesh  # (its id names it for as long as the entry is kept)
 
-    def _fill_sizes_and_bounds(self) -> None:
+    def _fill_sizes_and_bounds(self, subset: Optional[np.ndarray] = None) -> None:
         """generic_size and the bounding spheres of the kinds without a fixed generic box (those are done a
-        chunk at a time with the inverses): per chunk of tapered cylinders, and per mesh (or polyhedron
-        vertex set) with its instances."""
-        rows = self.rows(_TAPERED_KINDS)
-        if rows.size:
-            top = np.maximum(self.top[rows], 0.0)
-            self.generic_size[rows] = np.maximum(top, 1.0)
+        chunk at a time with the inverses): per chunk of a kind whose bounds depend on its parameters, and
+        per mesh (or polyhedron vertex set) with its instances.  Of every row, or of the rows in ``subset``
+        (sorted indices)."""
+        for kinds, bounds in _PARAMETER_BOUNDS:
+            rows = self.rows(kinds)
+            if subset is not None:
+                rows = np.intersect1d(rows, subset)
             for part in row_chunks(rows.size):
-                points = np.broadcast_to(_TAPERED_POINTS, (len(top[part]), 8, 3)).copy()
-                points[:, 4:, :2] *= top[part, None, None]
+                points = bounds(self.parameters[rows[part]])
+                self.generic_size[rows[part]] = np.abs(points).reshape(len(points), -1).max(axis=1)
                 self._bound(rows[part], points)
         groups: dict = {}
-        for mesh, rows in self._groups(POLYHEDRON_KINDS) + self.mesh_groups():
+        if subset is None:
+            vertex_rows = self._groups(POLYHEDRON_KINDS) + self.mesh_groups()
+        else:  # (the subset's rows that hold vertices, a group per mesh object)
+            vertex_rows = {}
+            for i in subset[_HAS_VERTICES[self.kind[subset]]].tolist():
+                mesh = self.mesh_of(i)
+                vertex_rows.setdefault(id(mesh), (mesh, []))[1].append(i)
+            vertex_rows = [(mesh, np.array(members, dtype=np.int64)) for mesh, members in vertex_rows.values()]
+        for mesh, rows in vertex_rows:
             vertices = np.asarray(mesh.vertices, dtype=np.float64)
             # (polyhedra read elsewhere may each have a MeshData of their own: the same vertices, grouped by
             # their bytes)
             key = id(mesh) if len(rows) and self.kind[rows[0]] in _MESH_CODES else vertices.tobytes()
             groups.setdefault(key, (vertices, []))[1].append(rows)
-        #: (vertices, rows) of each mesh and each polyhedron vertex set, with the rows of its instances
-        self.vertex_groups = [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]
-        for vertices, rows in self.vertex_groups:
+        for vertices, rows in [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
             # (a mesh without vertices has no surface: its bounds are a point at its origin)
             points = vertices.reshape(-1, 3) if vertices.size else np.zeros((1, 3))
@@ -675,7 +817,7 @@ class PrimitiveTable:
             for start in range(0, len(rows), per_chunk):
                 self._bound(rows[start:start + per_chunk], points)
 
-    def _bound_generic_boxes(self, rows: slice, matrix: np.ndarray) -> None:
+    def _bound_generic_boxes(self, rows, matrix: np.ndarray) -> None:
         """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
         box (``matrix``: the chunk's matrices).  Each world bound is the sum of the extreme terms, in the
         order of the product (matrix row . corner, then the translation): the extreme of that sum over the
@@ -694,7 +836,10 @@ class PrimitiveTable:
         low, high = np.minimum(at_lo, at_hi), np.maximum(at_lo, at_hi)
         lo = low[:, :, 0] + low[:, :, 1] + low[:, :, 2] + translation
         hi = high[:, :, 0] + high[:, :, 1] + high[:, :, 2] + translation
-        where = np.arange(rows.start, rows.stop) if every else rows.start + local
+        if isinstance(rows, slice):
+            where = np.arange(rows.start, rows.stop) if every else rows.start + local
+        else:
+            where = rows if every else rows[local]
         self.generic_size[where] = _BOX_SIZE[codes]
         self._keep_bounds(where, lo, hi)
 
@@ -722,7 +867,25 @@ class PrimitiveTable:
 _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
 _KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
 _MESH_CODES = frozenset(_KIND_INDEX[k] for k in MESH_KINDS)
-_TAPERED_KINDS = ("taperedCylinder", "cylinder", "cone")
+#: Per kind code: whether its bounds come from vertices (a mesh's, a polyhedron's).
+_HAS_VERTICES = np.array([e.family != "analytic" for e in shapes.REGISTRY])
+#: Per kind code, which parameter slots are the kind's own and the values of the others (ShapeKind.traced).
+_OWN_PARAMETER = np.array([[k < len(e.parameters) for k in range(shapes.MAX_PARAMETERS)] for e in shapes.REGISTRY])
+_FIXED_PARAMETER = np.array([[e.fixed[k] if k < len(e.fixed) else 0.0 for k in range(shapes.MAX_PARAMETERS)]
+                             for e in shapes.REGISTRY])
+
+
+def _traced_parameters(codes: np.ndarray, parameters: np.ndarray) -> np.ndarray:
+    """The values the kinds (codes (N,)) of rows of Shape.parameters ((N, shapes.MAX_PARAMETERS)) give their
+    intersections (ShapeKind.traced): each kind's own parameters where it reads them, its fixed values where
+    it has those, 0 after."""
+    return np.where(_OWN_PARAMETER[codes], parameters, _FIXED_PARAMETER[codes])
+
+
+#: (keywords, bounds function) of the kinds whose generic bounds depend on their parameters, by function.
+_PARAMETER_BOUNDS = [(tuple(e.keyword for e in shapes.REGISTRY if e.bounds == name),
+                      next(e for e in shapes.REGISTRY if e.bounds == name).function("bounds"))
+                     for name in dict.fromkeys(e.bounds for e in shapes.REGISTRY if e.bounds)]
 #: Per kind code: whether the kind has a fixed generic box, the box's low and high corners, and the generic
 #: size (Primitive.generic_size) of such a kind.
 _HAS_BOX = np.array([e.keyword in _BOX_CORNERS for e in shapes.REGISTRY])
@@ -730,11 +893,8 @@ _BOX_LO = np.array([_BOX_CORNERS[e.keyword].min(axis=0) if e.keyword in _BOX_COR
                     for e in shapes.REGISTRY])
 _BOX_HI = np.array([_BOX_CORNERS[e.keyword].max(axis=0) if e.keyword in _BOX_CORNERS else np.zeros(3)
                     for e in shapes.REGISTRY])
-_BOX_SIZE = np.array([(1.0 + TORUS_TUBE_RADIUS if e.keyword == "torus" else float(np.max(np.abs(_BOX_CORNERS[e.keyword]))))
-                      if e.keyword in _BOX_CORNERS else 1.0 for e in shapes.REGISTRY])
-#: The generic points of a tapered cylinder of top radius 1: the squares round its two discs (the frustum
-#: lies in their hull; the top's x and y are scaled by the top radius).
-_TAPERED_POINTS = np.concatenate([np.c_[_DISC_BOX, np.zeros(4)], np.c_[_DISC_BOX, np.ones(4)]])
+_BOX_SIZE = np.array([float(np.max(np.abs(_BOX_CORNERS[e.keyword]))) if e.keyword in _BOX_CORNERS else 1.0
+                      for e in shapes.REGISTRY])
 #: Rows per batch of the table's stacked computations: their temporaries stay a few MB at any size.
 _CHUNK = 1 << 15
 
@@ -742,6 +902,17 @@ _CHUNK = 1 << 15
 def row_chunks(n: int):
     """Slices of range(n), _CHUNK long."""
     return (slice(start, min(n, start + _CHUNK)) for start in range(0, n, _CHUNK))
+
+
+def delete_positions(items: list, positions: Sequence[int]) -> None:
+    """Delete these positions (ascending) from a list in place: a few deletions move the tail a few times, with
+    no Python loop over the whole list; many make the list anew."""
+    if len(positions) > 64:
+        gone = set(positions)
+        items[:] = [item for i, item in enumerate(items) if i not in gone]
+        return
+    for p in reversed(positions):
+        del items[p]
 
 
 def _position(index, length: int) -> int:
@@ -822,32 +993,77 @@ def live_effects(scene: Scene) -> frozenset[str]:
     """Which effects this scene can show at all; the tracer computes nothing for the others."""
     shapes = scene.shapes()
     materials = list({id(s.material): s.material for s in shapes}.values())
+    uv_textured = any(s.material.texture > 0 and s.mesh is not None and s.mesh.corner_uvs is not None
+                      for s in shapes)
     return _effects(scene, {s.kind for s in shapes}, MaterialTable(materials) if materials else None,
-                    any(isinstance(o, CSG) for o in scene.objects))
+                    any(isinstance(o, CSG) for o in scene.objects), uv_textured=uv_textured)
 
 
-def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool) -> frozenset[str]:
-    """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes)."""
+def uv_textured_of(table: "PrimitiveTable", texture: np.ndarray) -> bool:
+    """Whether an image texture lies on a mesh with texture coordinates (``texture``: per material id): the
+    live effect mesh-uv."""
+    return any(mesh.corner_uvs is not None and (texture[table.material_ids[rows]] > 0).any()
+               for mesh, rows in table.mesh_groups())
+
+
+#: What a material can call for (material_traits' columns).
+TRAITS = ("lit", "reflects", "transmits", "textured", "cook-torrance", "fresnel-reflects", "fresnel-transmits")
+
+
+def material_traits(table: MaterialTable, settings, rows=slice(None)) -> np.ndarray:
+    """Per material (of every row, or of ``rows``), which TRAITS it has, (M, 7) bool: lit (a diffuse or specular
+    colour), reflects and transmits (above the settings' thresholds), textured, a Cook–Torrance share, and
+    reflects or transmits with a Fresnel mode."""
+    r, t = table.reflectivity[rows], table.transparency[rows]
+    reflects, transmits = (r >= settings.min_reflectivity) & (r > 0), (t >= settings.min_transparency) & (t > 0)
+    fresnel = table.fresnel[rows] != 0
+    return np.stack([(table.diffuse[rows] > 0).any(axis=1) | (table.specular[rows] > 0).any(axis=1),
+                     reflects, transmits, table.texture[rows] != 0, table.specular_fraction[rows] > 0,
+                     fresnel & reflects, fresnel & transmits], axis=1)
+
+
+def _effects(scene: Scene, kinds: set[str], table: Optional[MaterialTable], any_boolean: bool,
+             used: Optional[np.ndarray] = None, uv_textured: bool = False) -> frozenset[str]:
+    """live_effects from the kinds of the scene's shapes and a table of their materials (None: no shapes;
+    ``used``: which of its rows count, default all); ``uv_textured``: an image texture lies on a mesh with
+    texture coordinates."""
+    traits = np.zeros((0, len(TRAITS)), dtype=bool) if table is None else material_traits(table, scene.settings)
+    return effects_of_traits(scene, kinds, (traits if used is None else traits[used]).any(axis=0), any_boolean,
+                             uv_textured)
+
+
+def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_boolean: bool,
+                      uv_textured: bool = False) -> frozenset[str]:
+    """The live effects of a scene whose shapes are of ``kinds`` and whose materials have, together, the
+    TRAITS where ``present`` (a bool per trait) is true; ``uv_textured``: an image texture lies on a mesh
+    with texture coordinates (uv_textured_of)."""
     settings = scene.settings
+    has = dict(zip(TRAITS, np.asarray(present, dtype=bool).tolist()))
     effects = {f"shape:{kind}" for kind in kinds}
-    if table is None:
-        table = MaterialTable([])
-    lit = bool((table.diffuse > 0).any() or (table.specular > 0).any())
-    if scene.lights and lit:
+    if scene.lights and has["lit"]:
         effects.add("lighting")
         effects.add("shadows")
+        if any(light.kind != "point" for light in scene.lights):
+            effects.add("physical-lights")
+        if any(light.soft for light in scene.lights):
+            effects.add("soft-shadows")
     deep = settings.max_recursion_depth > 0
-    r, t = table.reflectivity, table.transparency
-    if deep and ((r >= settings.min_reflectivity) & (r > 0)).any():
+    if deep and has["reflects"]:
         effects.add("reflection")
-    if deep and ((t >= settings.min_transparency) & (t > 0)).any():
+    if deep and has["transmits"]:
         effects.add("refraction")
     if any_boolean:
         effects.add("csg")
-    if (table.texture != 0).any():
+    if has["textured"]:
         effects.add("textures")
-    if "lighting" in effects and (table.specular_fraction > 0).any():
+        if uv_textured:
+            effects.add("mesh-uv")
+    if "lighting" in effects and has["cook-torrance"]:
         effects.add("cook-torrance")
+    if "shadows" in effects and settings.smooth_terminator and kinds & set(MESH_KINDS):
+        effects.add("smooth-terminator")
+    if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
+        effects.add("fresnel")
     return frozenset(effects)
 
 
@@ -902,6 +1118,10 @@ def _hash_mesh(mesh: MeshData) -> bytes:
     else:
         h.update(b"list")
         h.update(repr([(tuple(map(int, v)), tuple(map(int, n))) for v, n in faces]).encode())
+    if mesh.corner_uvs is not None:  # (the texture coordinates are part of the built mesh)
+        uvs = np.ascontiguousarray(mesh.corner_uvs, dtype=np.float64)
+        h.update(b"uvs" + repr(uvs.shape).encode())
+        h.update(uvs.reshape(-1))
     return h.digest()
 
 
@@ -948,11 +1168,11 @@ class _Columns:
     matrices: Optional[np.ndarray]  # (N, 4, 4) (see _stacked_matrices), or a table's (N, 12) affines
     kinds: tuple[str, ...] = ()
     materials: tuple[Material, ...] = ()
-    tapered_radii: tuple[float, ...] = ()
+    parameters: tuple[tuple[float, ...], ...] = ()
     table: Optional[ShapeColumns] = None
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, list[Material], np.ndarray]:
-        """(kind codes, material ids, the materials by id, tapered radii) of the shapes."""
+        """(kind codes, material ids, the materials by id, parameter rows) of the shapes."""
         table = self.table
         if table is not None:
             ids, materials = table.material_ids, table.materials
@@ -961,11 +1181,11 @@ class _Columns:
                 ids = (np.cumsum(used) - 1)[ids].astype(np.int32)
                 materials = (materials.used(used) if isinstance(materials, MaterialRows) else
                              [m for m, kept in zip(materials, used.tolist()) if kept])
-            return table.kinds, ids, materials, table.tapered_radii
+            return table.kinds, ids, materials, table.parameters
         n = len(self.kinds)
         material_ids, materials = _material_ids(self.materials)
         return (np.fromiter(map(_KIND_INDEX.__getitem__, self.kinds), dtype=np.int16, count=n), material_ids,
-                materials, np.fromiter(self.tapered_radii, dtype=np.float64, count=n))
+                materials, parameter_rows(self.parameters))
 
 
 class _RowShapes(Sequence):
@@ -991,7 +1211,7 @@ class _RowShapes(Sequence):
     def mesh_of(self, index: int) -> Optional[MeshData]:
         """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
         kind = _KEYWORDS[self.columns.kinds[index]]
-        if kind in POLYHEDRON_KINDS or kind == "teapot":
+        if shapes.KINDS[kind].builtin_mesh:
             from .geometry import builtin_mesh
             return builtin_mesh(kind)
         return None
@@ -1039,8 +1259,8 @@ def _content(scene: Scene) -> tuple[tuple, _Columns]:
     meshes = dict(zip(map(id, mesh_list), mesh_list))
     meshes.pop(id(None), None)
     columns = _Columns(nodes, shapes, bool(structure), stack,
-                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "tapered_radius")))
-    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.tapered_radii,
+                       *(tuple(map(attrgetter(name), shapes)) for name in ("kind", "material", "parameters")))
+    key = (_ids_digest(nodes), tuple(structure), columns.kinds, columns.materials, columns.parameters,
            _ids_digest(mesh_list), tuple((k, mesh_digest(m)) for k, m in meshes.items()),
            matrices.digest()) + _scene_wide_key(scene)
     return key, columns
@@ -1060,7 +1280,7 @@ def _table_content(scene: Scene, table: ShapeColumns) -> tuple[tuple, _Columns]:
 
 def _builtin_mesh_rows(table: ShapeColumns) -> list[int]:
     """One row of each kind present in the table that holds a built-in mesh (polyhedra, the teapot)."""
-    codes = [_KIND_INDEX[k] for k in POLYHEDRON_KINDS + ("teapot",)]
+    codes = [code for code, e in enumerate(shapes.REGISTRY) if e.builtin_mesh]
     present = np.isin(table.kinds, codes)
     if not present.any():
         return []
@@ -1146,20 +1366,20 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     if columns is None:
         columns = _content(scene)[1]
     shapes = columns.shapes
-    kind, material_ids, materials, tapered_radii = columns.arrays()
-    table = PrimitiveTable(shapes, kind, tapered_radii, columns.matrices, material_ids)
+    kind, material_ids, materials, parameters = columns.arrays()
+    table = PrimitiveTable(shapes, kind, parameters, columns.matrices, material_ids)
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
     material_table = MaterialTable(materials or [Material()])
     kinds = {_KEYWORDS[code] for code in np.unique(kind).tolist()}
-    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean)
+    effects = _effects(scene, kinds, material_table if len(shapes) else None, columns.any_boolean,
+                       uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
         from .textures import TextureSet
         textures = TextureSet(scene, primitives)
-    lights = scene.lights
+    lights = LightTable.of(scene.lights)
     return CompiledScene(
         scene=scene, objects=objects, primitives=primitives, materials=material_table,
-        light_positions=np.array([l.position for l in lights], dtype=float).reshape(-1, 3),
-        light_colors=np.array([l.color for l in lights], dtype=float).reshape(-1, 3),
+        light_positions=lights.position, light_colors=lights.color, lights=lights,
         effects=effects, textures=textures, tolerances=table.tolerances, table=table)

@@ -39,6 +39,7 @@ import numpy as np
 from .errors import TracerError
 from .model import Scene, ShapeTable
 from .savings import RaySavings
+from .threads import default_threads
 from .trace import RayCounts
 
 INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
@@ -261,15 +262,7 @@ def _worker_core_threads() -> int:
         tasks_at_once = get_worker().state.nthreads
     except (ImportError, ValueError, AttributeError):
         tasks_at_once = 1
-    return max(1, _machine_threads() // max(1, tasks_at_once))
-
-
-def _machine_threads() -> int:
-    try:
-        from .native import default_threads
-    except ImportError:  # no C core in this installation: the count does not matter
-        return 1
-    return default_threads()
+    return max(1, default_threads() // max(1, tasks_at_once))
 
 
 def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
@@ -425,7 +418,7 @@ def local_threads(address: str) -> Optional[int]:
     workers = parse_address(address)
     if workers is None:
         return None
-    return max(1, _machine_threads() // workers)
+    return max(1, default_threads() // workers)
 
 
 @dataclass

@@ -91,6 +91,56 @@ def glass_pane(thickness: float = 1e-5) -> Scene:
                                    max_recursion_depth=4, min_transparency=0.05, min_reflectivity=0.05))
 
 
+#: The floor of the scenes below: the generic plane turned so that it is exactly y = 0 (its matrix is exact).
+_FLOOR = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=float)
+#: Matt materials (no specular highlight): with a light in a surface's plane the highlight of Blinn's model
+#: is there or not by the sign of a rounding residue, in the plain twin (the light 1e-7 off) as well.
+_MATT = {"specular": (0.0, 0.0, 0.0)}
+
+
+def _room_shapes() -> list[Shape]:
+    """A floor, a cube turned 30 degrees and a sphere: the hosts of the lights on surfaces."""
+    from .transforms import rotation, scaling, translation
+
+    floor = Shape("plane", _FLOOR, Material(diffuse=(0.6, 0.6, 0.6), **_MATT))
+    cube = Shape("cube", translation(-1.2, 0.55, -0.6) @ rotation(30, 0, 1, 0) @ scaling(0.5, 0.5, 0.5),
+                 Material(diffuse=(0.9, 0.25, 0.2), **_MATT))
+    sphere = Shape("sphere", translation(1.1, 0.75, -0.4) @ scaling(0.7, 0.7, 0.7), Material(diffuse=(0.2, 0.4, 0.9), **_MATT))
+    return [floor, cube, sphere]
+
+
+def light_on_surface(host: str, off: float = 0.0) -> Scene:
+    """The room lit by a dim light from above and a bright one exactly on a surface (``host``: "cube" on a
+    face, "sphere" on a point, "floor" in the plane), or ``off`` units outside it along the normal there
+    (the plain twin: in exact arithmetic the same picture)."""
+    floor, cube, sphere = _room_shapes()
+    if host == "cube":  # a point of the face turned toward the camera, generic z = 1
+        on, normal = _point(cube.matrix, (0.3, -0.2, 1.0)), cube.matrix[:3, :3] @ (0.0, 0.0, 1.0)
+    elif host == "sphere":
+        direction = np.array([0.45, 0.35, 0.82]) / np.linalg.norm([0.45, 0.35, 0.82])
+        on, normal = _point(sphere.matrix, direction), direction
+    else:
+        on, normal = (-2.5, 0.0, 1.5), np.array([0.0, 1.0, 0.0])
+    normal = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    position = tuple((np.asarray(on) + off * normal).tolist())
+    return Scene(objects=[floor, cube, sphere], lights=[Light((3, 6, 5), (0.3, 0.3, 0.3)), Light(position, (0.8, 0.8, 0.8))],
+                 camera=Camera((0.4, 2.4, 5.5), (0, 0.4, -0.4), (0, 1, 0), 45),
+                 settings=Settings(global_ambient=(0.1, 0.1, 0.1), background=(0.1, 0.1, 0.15)))
+
+
+#: The light of a plain twin is this far off the surface its extreme case's light sits on.
+LIGHT_OFF = 1e-7
+
+
+def far_light(distance: float) -> Scene:
+    """The room lit from one direction by a light ``distance`` away (beyond 1.3e154 |L - P|^2 overflows)."""
+    floor, cube, sphere = _room_shapes()
+    toward = np.array([0.5, 0.8, 0.4]) / np.linalg.norm([0.5, 0.8, 0.4])
+    return Scene(objects=[floor, cube, sphere], lights=[Light(tuple((distance * toward).tolist()), (0.9, 0.9, 0.9))],
+                 camera=Camera((0.4, 2.4, 5.5), (0, 0.4, -0.4), (0, 1, 0), 45),
+                 settings=Settings(global_ambient=(0.1, 0.1, 0.1), background=(0.1, 0.1, 0.15)))
+
+
 def bundled(name: str) -> Scene:
     from . import load
 
@@ -111,6 +161,16 @@ CASES: dict[str, Callable[[], tuple[Scene, Scene]]] = {
     "glass: scaled by 1e-8": lambda: (bundled("glass"), scaled(bundled("glass"), 1e-8)),
     "glass: moved by +1e7": lambda: (bundled("glass"), moved(bundled("glass"), (1e7, 1e7, 1e7))),
     "1e-5 glass pane: moved by 1e5": lambda: (glass_pane(), moved(glass_pane(), (1e5, 1e5, 1e5))),
+    "light on a cube face": lambda: (light_on_surface("cube", LIGHT_OFF), light_on_surface("cube")),
+    "light on a cube face: moved by +1e5": lambda: (light_on_surface("cube", LIGHT_OFF),
+                                                    moved(light_on_surface("cube"), (1e5, 1e5, 1e5))),
+    "light on a sphere": lambda: (light_on_surface("sphere", LIGHT_OFF), light_on_surface("sphere")),
+    "light on a sphere: moved by +1e5": lambda: (light_on_surface("sphere", LIGHT_OFF),
+                                                 moved(light_on_surface("sphere"), (1e5, 1e5, 1e5))),
+    "light in the floor plane": lambda: (light_on_surface("floor", LIGHT_OFF), light_on_surface("floor")),
+    "light in the floor plane: moved by +1e5": lambda: (light_on_surface("floor", LIGHT_OFF),
+                                                        moved(light_on_surface("floor"), (1e5, 1e5, 1e5))),
+    "light at 1e300": lambda: (far_light(1e12), far_light(1e300)),
 }
 
 

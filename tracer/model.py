@@ -7,6 +7,7 @@ coordinates (column vectors: ``world = matrix @ generic``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from itertools import repeat
 from pathlib import Path
 from collections.abc import MutableSequence, Sequence
 from typing import Optional, Union
@@ -64,13 +65,31 @@ class Material:
     surface_roughness: float = 1.0
     texture: int = 0
     parameters: tuple[float, ...] = ()
+    #: How the mirror and transmitted rays are weighted (an extension; see docs/tracer.md, "Materials for
+    #: Blender scenes"): ``"constant"`` (SDL: reflectivity and transparency as given), ``"metal"`` (the mirror
+    #: ray weighted by reflectivity times Schlick's Fresnel from ``fresnel_tint``, coloured) or
+    #: ``"dielectric"`` (reflectivity and transparency split by the exact Fresnel reflectance of the interface,
+    #: from the speeds of light on its two sides).
+    fresnel: str = "constant"
+    #: ``"metal"``: the reflectance at normal incidence, per channel (Schlick's F0).
+    fresnel_tint: Color = (1.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        if self.fresnel not in FRESNEL_MODES:
+            raise SceneError(f"unknown fresnel mode {self.fresnel!r} (expected one of {', '.join(FRESNEL_MODES)})")
+
+
+#: Material.fresnel's values, in the order of their codes in the material tables.
+FRESNEL_MODES = ("constant", "metal", "dielectric")
+#: Material fields that are not kept in MaterialRows (the C reader declines the statements that set them).
+_NOT_IN_ROWS = ("texture", "parameters", "fresnel", "fresnel_tint")
 
 
 def _material_slots() -> dict[str, tuple[int, int]]:
     """(first slot, width) in a MaterialRows row of each Material field but the texture and parameters."""
     slots, at = {}, 0
     for f in fields(Material):
-        if f.name not in ("texture", "parameters"):
+        if f.name not in _NOT_IN_ROWS:
             width = 3 if isinstance(f.default, tuple) else 1
             slots[f.name], at = (at, width), at + width
     return slots
@@ -83,7 +102,8 @@ class MaterialRows(Sequence):
     when first asked for, then the same object); compiling reads the columns (:meth:`column`).
 
     A row holds the fields in Material's order: a colour takes three slots, a number one, the texture one,
-    then the count of parameters and :attr:`MAX_PARAMETERS` slots for them (unused ones 0)."""
+    then the count of parameters and :attr:`MAX_PARAMETERS` slots for them (unused ones 0).  The extensions
+    ``fresnel`` and ``fresnel_tint`` are not kept: a row's Material has their defaults."""
 
     MAX_PARAMETERS = 10
     #: (first slot, width) of each colour and number field
@@ -235,13 +255,18 @@ class FaceList(Sequence):
 
     __hash__ = None
 
-    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """MeshData.triangles() for these faces, without a Python loop over them."""
+    def triangle_corners(self) -> np.ndarray:
+        """(T, 3) the corners (indices into ``vertex_index``: face after face) of the fan triangles of
+        :meth:`triangles`, in its order."""
         fans = np.maximum(self.sizes - 2, 0)
         face = np.repeat(np.arange(len(self.sizes)), fans)
         k = np.arange(len(face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. size - 2 in each face
         start = self.offsets[:-1][face]
-        corners = np.stack([start, start + k, start + k + 1], axis=1)
+        return np.stack([start, start + k, start + k + 1], axis=1)
+
+    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """MeshData.triangles() for these faces, without a Python loop over them."""
+        corners = self.triangle_corners()
         tri_v = self.vertex_index[corners].astype(np.int64)
         tri_n = (np.full(tri_v.shape, -1, dtype=np.int64) if self.normal_index is None
                  else self.normal_index[corners].astype(np.int64))
@@ -268,6 +293,28 @@ class MeshData:
     faces: Union[list[tuple[tuple[int, ...], tuple[int, ...]]], FaceList]
     #: Where the data came from (a file path, or e.g. "built-in:icosahedron").
     origin: str = ""
+    #: Texture coordinates per face corner, (C, 2) float64, or None: the corners of face 0, then of face 1,
+    #: ... (C = the sum of the faces' sizes; Blender's loop UVs).  An image texture on a mesh that has them is
+    #: looked up at the (u, v) interpolated at the hit, instead of the shape's own mapping.
+    corner_uvs: Optional[np.ndarray] = None
+
+    def triangle_corners(self) -> np.ndarray:
+        """(T, 3) int64: for each triangle of :meth:`triangles`, its corners' places among all the faces'
+        corners (face after face: the rows of ``corner_uvs``)."""
+        if isinstance(self.faces, FaceList):
+            return self.faces.triangle_corners()
+        out: list[tuple[int, int, int]] = []
+        start = 0
+        for verts, _ in self.faces:
+            out += [(start, start + k, start + k + 1) for k in range(1, len(verts) - 1)]
+            start += len(verts)
+        return np.asarray(out, dtype=np.int64).reshape(-1, 3)
+
+    def corner_count(self) -> int:
+        """How many face corners there are (the rows ``corner_uvs`` must have)."""
+        if isinstance(self.faces, FaceList):
+            return len(self.faces.vertex_index)
+        return sum(len(verts) for verts, _ in self.faces)
 
     def coordinate_problem(self) -> Optional[str]:
         """Why the mesh's numbers cannot be traced (see MAX_MESH_COORDINATE), or None."""
@@ -301,14 +348,15 @@ class Shape:
     """One generic shape placed in the world.
 
     ``kind`` is the SDL keyword (``cylinder`` and ``cone`` stay themselves so that they are written back
-    as they were read; :attr:`small_radius` gives their taper).  ``mesh`` is filled for polyhedra, the
+    as they were read).  ``parameters`` are the numbers its keyword takes (tracer.shapes: the kind's
+    Parameters, in SDL order; its defaults when none are given).  ``mesh`` is filled for polyhedra, the
     teapot and meshes; ``mesh_file`` keeps the file name a ``mesh`` statement gave.
     """
 
     kind: str
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     material: Material = field(default_factory=Material)
-    tapered_radius: float = 1.0  # only for taperedCylinder
+    parameters: tuple[float, ...] = ()
     mesh: Optional[MeshData] = None
     mesh_file: Optional[str] = None
     #: Names of the def macros this shape was made inside, outermost first (for grouping in Blender).
@@ -318,8 +366,11 @@ class Shape:
     name: Optional[str] = None
 
     def __post_init__(self) -> None:
-        if self.kind not in SHAPE_KINDS:
+        arity = _ARITY.get(self.kind)
+        if arity is None:
             raise SceneError(f"unknown shape kind {self.kind!r}")
+        if type(self.parameters) is not tuple or len(self.parameters) != arity:
+            self.parameters = _parameters_of(self.kind, self.parameters)
         matrix = np.array(self.matrix, dtype=np.float64)  # a copy of its own
         # (16 numbers are reshaped and copied again: a reshaped view would keep a second array per shape.)
         self.matrix = matrix if matrix.shape == (4, 4) else matrix.reshape(4, 4).copy()
@@ -330,20 +381,30 @@ class Shape:
         if not isinstance(other, Shape):
             return NotImplemented
         return (self.kind == other.kind and np.array_equal(self.matrix, other.matrix)
-                and self.material == other.material and self.tapered_radius == other.tapered_radius
+                and self.material == other.material and self.parameters == other.parameters
                 and _same_mesh(self.mesh, other.mesh) and self.mesh_file == other.mesh_file
                 and self.groups == other.groups and self.source == other.source and self.name == other.name)
 
     __hash__ = None  # (mutable)
 
     @property
-    def small_radius(self) -> float:
-        """Radius of the top (z = 1) of a tapered cylinder; 1 for a cylinder, 0 for a cone."""
-        return {"cylinder": 1.0, "cone": 0.0}.get(self.kind, self.tapered_radius)
-
-    @property
     def inverse(self) -> np.ndarray:
         return np.linalg.inv(self.matrix)
+
+
+#: How many parameters each kind's keyword takes.
+_ARITY = {e.keyword: len(e.parameters) for e in shapes.REGISTRY}
+
+
+def _parameters_of(kind: str, given) -> tuple[float, ...]:
+    """A shape's parameters as floats: the kind's defaults for none, else exactly as many as it takes."""
+    entry = shapes.KINDS[kind]
+    values = tuple(float(v) for v in given) if given is not None else ()
+    if not values:
+        return entry.defaults
+    if len(values) != len(entry.parameters):
+        raise SceneError(f"{kind} takes {len(entry.parameters)} parameter(s), not {len(values)}")
+    return values
 
 
 def _same_mesh(a: Optional[MeshData], b: Optional[MeshData]) -> bool:
@@ -353,7 +414,9 @@ def _same_mesh(a: Optional[MeshData], b: Optional[MeshData]) -> bool:
     if a is None or b is None:
         return False
     return (np.array_equal(a.vertices, b.vertices) and np.array_equal(a.normals, b.normals)
-            and (a.faces == b.faces if isinstance(a.faces, FaceList) else b.faces == a.faces))
+            and (a.faces == b.faces if isinstance(a.faces, FaceList) else b.faces == a.faces)
+            and (a.corner_uvs is None) == (b.corner_uvs is None)
+            and (a.corner_uvs is None or np.array_equal(a.corner_uvs, b.corner_uvs)))
 
 
 #: The SDL keyword of each shape kind code (tracer.shapes.REGISTRY's order; ShapeTable.kinds).
@@ -368,7 +431,7 @@ class ShapeColumns:
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
     materials: Sequence[Material]  # a tuple, or a MaterialRows
-    tapered_radii: np.ndarray  # (N,) float64
+    parameters: np.ndarray  # (N, shapes.MAX_PARAMETERS) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
     file: Optional[str] = None
@@ -387,7 +450,7 @@ class ShapeColumns:
         if kind in POLYHEDRON_KINDS or kind == "teapot":
             from .geometry import builtin_mesh
             mesh = builtin_mesh(kind)
-        return Shape(kind, matrix, self.materials[self.material_ids[i]], float(self.tapered_radii[i]), mesh,
+        return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]), mesh,
                      None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
                      None if self.names is None else self.names.get(i))
 
@@ -399,23 +462,38 @@ class ShapeColumns:
         used = set(np.unique(self.kinds).tolist())
         meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
         names = self.names or {}
+        with_parameters = any(_ARITY[_KEYWORD_OF_CODE[code]] for code in used)
         out: list[Shape] = []
         with collector_paused():
             for start in range(0, len(self), _ROWS_AT_ONCE):
                 rows = slice(start, start + _ROWS_AT_ONCE)
                 matrices = matrices_of_affines(self.affines[rows])
-                for i, (kind, matrix, material, taper, line, column) in enumerate(zip(
-                        map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()), matrices,
-                        map(self.materials.__getitem__, self.material_ids[rows].tolist()),
-                        self.tapered_radii[rows].tolist(), self.lines[rows].tolist(),
-                        self.columns[rows].tolist()), start):
-                    out.append(Shape(kind, matrix, material, taper, meshes.get(kind), None, (),
+                kinds = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()))
+                values = (map(tuple, map(list.__getitem__, self.parameters[rows].tolist(),
+                                         (slice(_ARITY[k]) for k in kinds))) if with_parameters else repeat(()))
+                for i, (kind, matrix, material, parameters, line, column) in enumerate(zip(
+                        kinds, matrices, map(self.materials.__getitem__, self.material_ids[rows].tolist()),
+                        values, self.lines[rows].tolist(), self.columns[rows].tolist()), start):
+                    out.append(Shape(kind, matrix, material, parameters, meshes.get(kind), None, (),
                                      SourceLocation(self.file, line, column), names.get(i)))
         return out
+
+    @staticmethod
+    def _parameters(kind: str, row: np.ndarray) -> tuple[float, ...]:
+        return tuple(row[:_ARITY[kind]].tolist())
 
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
 _ROWS_AT_ONCE = 1 << 15
+
+
+def parameter_rows(parameters: Sequence[tuple[float, ...]]) -> np.ndarray:
+    """(N, tracer.shapes.MAX_PARAMETERS) float64 rows of these shapes' parameters, 0 after each one's own."""
+    rows = np.zeros((len(parameters), shapes.MAX_PARAMETERS))
+    for i, values in enumerate(parameters):
+        if values:  # (most kinds take none)
+            rows[i, :len(values)] = values
+    return rows
 
 
 def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
@@ -459,7 +537,8 @@ class ShapeTable(MutableSequence):
     ``kinds`` (N,) int16, each shape's kind as its index in tracer.shapes.REGISTRY; ``affines`` (N, 12)
     float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1);
     ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects, or a MaterialRows);
-    ``tapered_radii`` (N,) float64 (Shape.tapered_radius); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
+    ``parameters`` (N, tracer.shapes.MAX_PARAMETERS) float64, each row's Shape.parameters and then anything
+    (a single column may be given as (N,)); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
     shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
     polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
     the arrays over: nobody may change them afterwards (compile_scene knows a table by its identity).  They,
@@ -471,7 +550,7 @@ class ShapeTable(MutableSequence):
     (:attr:`columns` is then None).  :meth:`shape_at` makes one Shape without making the rest.  Pickled and
     copied as the arrays while nothing has been made (scenes travel to Dask workers)."""
 
-    def __init__(self, kinds, affines, material_ids, materials, tapered_radii, lines, columns,
+    def __init__(self, kinds, affines, material_ids, materials, parameters, lines, columns,
                  file=None, names=None):
         kinds = np.asarray(kinds)
         n = len(kinds)
@@ -484,7 +563,7 @@ class ShapeTable(MutableSequence):
             raise ValueError("ShapeTable: a material id is not an index into materials")
         self._columns: Optional[ShapeColumns] = ShapeColumns(
             kinds, _read_only(affines, np.float64, (n, 12), "affines"), material_ids, materials,
-            _read_only(tapered_radii, np.float64, (n,), "tapered_radii"),
+            _read_only(parameters, np.float64, (n, shapes.MAX_PARAMETERS), "parameters"),
             _read_only(lines, np.int32, (n,), "lines"), _read_only(columns, np.int32, (n,), "columns"),
             file, None if names is None else dict(names))
         self._shapes: Optional[list[SceneObject]] = None
@@ -513,7 +592,7 @@ class ShapeTable(MutableSequence):
         return cls(np.array([_KIND_CODE[s.kind] for s in shapes], dtype=np.int16).reshape(n),
                    np.array([np.asarray(s.matrix, dtype=np.float64)[:3].reshape(12) for s in shapes]).reshape(n, 12),
                    np.array([material_index[id(s.material)] for s in shapes], dtype=np.int32).reshape(n), materials,
-                   np.array([s.tapered_radius for s in shapes], dtype=np.float64).reshape(n),
+                   parameter_rows([s.parameters for s in shapes]),
                    np.array([s.source.line for s in shapes], dtype=np.int32).reshape(n),
                    np.array([s.source.column for s in shapes], dtype=np.int32).reshape(n),
                    files.pop() if files else None,
@@ -623,7 +702,7 @@ class ShapeTable(MutableSequence):
         c = self._columns
         if c is None:
             return ShapeTable._of_list, (self._shapes,)
-        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.tapered_radii, c.lines,
+        return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.parameters, c.lines,
                             c.columns, c.file, c.names)
 
 
@@ -662,12 +741,60 @@ def iter_shapes(obj: SceneObject):
             yield node
 
 
+#: Light.kind's values: SDL's point light (no falloff, as in the book) and the physical lights (see
+#: docs/tracer.md, "Lights").
+LIGHT_KINDS = ("point", "sphere", "spot", "sun", "area")
+#: Light.shape's values, for area lights.
+AREA_SHAPES = ("rectangle", "ellipse")
+
+
 @dataclass(frozen=True)
 class Light:
-    """A point light (no attenuation with distance, as in the book)."""
+    """A light.  ``kind`` ``"point"`` is SDL's (no attenuation with distance, as in the book); the others are
+    physical lights for Blender scenes, which fall off with distance and may cast soft shadows.  Units and
+    meaning of every field: docs/tracer.md, "Lights".  Angles are in degrees, as everywhere in SDL."""
 
-    position: Vec3
+    position: Vec3  # point, sphere, spot: where it is; area: its centre; sun: unused
     color: Color
+    kind: str = "point"
+    #: Kept through SDL (a ``! name:`` comment before the statement), USD and Blender.
+    name: Optional[str] = None
+    #: spot, area: the way it shines (an area light emits on this side only); sun: the way its light travels.
+    direction: Vec3 = (0.0, 0.0, -1.0)
+    #: sphere, spot: the radius of the emitting sphere (0: a point, hard shadows).
+    radius: float = 0.0
+    #: sun: its angular diameter in degrees (0: hard shadows).
+    angle: float = 0.0
+    #: spot: the full angle of its cone in degrees (Blender's spot_size), and the share of it that is a
+    #: smooth edge, 0..1 (Blender's spot_blend).
+    spot_size: float = 45.0
+    spot_blend: float = 0.0
+    #: area: "rectangle" (a square is one) or "ellipse" (a disk is one), of side lengths (diameters) ``size``,
+    #: the first along ``axis`` (made perpendicular to ``direction``), the second along direction x axis.
+    shape: str = "rectangle"
+    size: tuple[float, float] = (1.0, 1.0)
+    axis: Vec3 = (1.0, 0.0, 0.0)
+    #: Shadow rays per shading point, stratified over the light (soft shadows): for a sphere or spot of some
+    #: radius, a sun of some angle, and every area light.
+    samples: int = 1
+
+    def __post_init__(self) -> None:
+        if self.kind not in LIGHT_KINDS:
+            raise SceneError(f"unknown light kind {self.kind!r} (expected one of {', '.join(LIGHT_KINDS)})")
+        if self.shape not in AREA_SHAPES:
+            raise SceneError(f"unknown area light shape {self.shape!r} (expected one of {', '.join(AREA_SHAPES)})")
+        if not (isinstance(self.samples, int) and 1 <= self.samples <= MAX_LIGHT_SAMPLES):
+            raise SceneError(f"light samples must be a whole number 1..{MAX_LIGHT_SAMPLES}, not {self.samples!r}")
+
+    @property
+    def soft(self) -> bool:
+        """Whether its shadows are soft (it has an extent: shadow rays go to several points of it)."""
+        return (self.kind == "area" or (self.kind in ("sphere", "spot") and self.radius > 0.0)
+                or (self.kind == "sun" and self.angle > 0.0))
+
+
+#: The most shadow rays per shading point one light may ask for.
+MAX_LIGHT_SAMPLES = 1024
 
 
 @dataclass(frozen=True)
@@ -700,6 +827,9 @@ class Settings:
     min_reflectivity: float = 0.5
     min_transparency: float = 0.5
     max_recursion_depth: int = 3
+    #: Shadow rays of smooth-shaded meshes start from the smooth surface their normals describe, not the
+    #: flat triangle (no stair-stepped shadow terminator on low-poly meshes; an extension, off for SDL files).
+    smooth_terminator: bool = False
 
 
 @dataclass

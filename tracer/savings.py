@@ -28,11 +28,13 @@ Each skipped ray is counted per reason (``RayCounts.skipped()``, ``--stats``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
 from . import shapes
 from .compile import CompiledScene, fold_tree
+from .lights import POINT, SPHERE, SPOT
 
 #: Why a ray was not traced, in the order of RayCounts' skipped_* fields and the C core's counters.
 SKIP_REASONS = ("cutoff", "inside_shadow", "shared_tir", "dark_material", "budget")
@@ -46,6 +48,8 @@ RAY_BUDGET = 4096
 #: Shapes that bound a solid (every ray into one comes out again): not the square (a sheet) nor meshes
 #: (which may be open).  The plane is the half-space below it.  (ShapeKind.closed)
 CLOSED_KINDS = frozenset(e.keyword for e in shapes.REGISTRY if e.closed)
+#: Per kind code (the index in the shape registry): whether the kind is closed.
+_CLOSED_CODES = np.array([e.keyword in CLOSED_KINDS for e in shapes.REGISTRY])
 #: A direction for the point-in-solid test that no bundled shape's faces are parallel to.
 _PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
 
@@ -95,27 +99,48 @@ def _contains(node, point: np.ndarray) -> bool | None:
     return bool(hits.entering[0, before[-1]])
 
 
-def sealed_lights(compiled: CompiledScene) -> np.ndarray:
+def sealed_lights(compiled: CompiledScene, objects: Optional[np.ndarray] = None) -> np.ndarray:
     """(objects, lights) bool: a feeler from inside the object towards the light is certainly blocked
     (the object is a closed solid and the light outside it).  Only objects with some transparent material
-    are examined: rays get inside solids through them."""
+    are examined: rays get inside solids through them.  Of every top-level object, or of the positions
+    ``objects`` (in that order: tracer.edit's rows of the objects an edit changed)."""
     n_lights = len(compiled.light_positions)
-    objects = compiled.objects
-    sealed = np.zeros((len(objects), n_lights), dtype=bool)
+    compiled_objects = compiled.objects
+    chosen = np.arange(len(compiled_objects)) if objects is None else np.asarray(objects, dtype=np.int64)
+    sealed = np.zeros((len(chosen), n_lights), dtype=bool)
     transparent = compiled.materials.transparency > 0
     # The plain shapes sifted all at once (a scene of 100,000 opaque spheres has none to examine), the
     # booleans one by one.
     table = compiled.table
-    index = objects.primitive_index
+    index = compiled_objects.primitive_index[chosen]
     plain = np.flatnonzero(index >= 0)
     rows = index[plain]
-    closed = np.zeros(len(table), dtype=bool)
-    closed[table.rows(CLOSED_KINDS)] = True
-    candidates = plain[transparent[table.material_ids[rows]] & closed[rows]].tolist()
-    for k, obj in objects.booleans.items():
+    closed = _CLOSED_CODES[table.kind[rows]]
+    candidates = plain[transparent[table.material_ids[rows]] & closed].tolist()
+    booleans = compiled_objects.booleans
+    for j in np.flatnonzero(index < 0).tolist():
+        obj = booleans[int(chosen[j])]
         if any(transparent[p.material_id] for p in obj.leaves()) and _closed(obj):
-            candidates.append(k)
-    for k in sorted(candidates):
-        for light in range(n_lights):
-            sealed[k, light] = _contains(objects[k], compiled.light_positions[light]) is False
+            candidates.append(j)
+    # Only lights that are one point can be said to be outside (a sun, an area light or a sphere of some
+    # radius sends feelers to points that may lie inside).
+    points = [light for light in range(n_lights) if compiled.lights.kind[light] in (POINT, SPHERE, SPOT)
+              and (compiled.lights.kind[light] == POINT or compiled.lights.param[light, 0] == 0.0)]
+    for j in sorted(candidates):
+        obj = compiled_objects[int(chosen[j])]
+        for light in points:
+            sealed[j, light] = _contains(obj, compiled.light_positions[light]) is False
     return sealed
+
+
+def sealed_table(compiled: CompiledScene) -> np.ndarray:
+    """sealed_lights of a compiled scene, computed once and kept on it (tracer.edit keeps it up to date, as a
+    new array after each edit that changes it: a kept copy elsewhere is then seen to be stale)."""
+    kept = compiled.__dict__.get(_SEALED_ATTRIBUTE)
+    if kept is None:
+        kept = compiled.__dict__[_SEALED_ATTRIBUTE] = sealed_lights(compiled)
+    return kept
+
+
+#: Where sealed_table keeps its table on the compiled scene.
+_SEALED_ATTRIBUTE = "_sealed_lights"

@@ -15,7 +15,7 @@ random sub-pixel offsets depend on (seed, pixel) alone (:func:`tracer.sampling.p
 schedule gives identical bytes.
 
 Used by :func:`tracer.render.render` (the command line), ``tracer.distributed`` (a Dask cluster) and the
-Blender add-on (``addon/blocks.py``).  Films are stored bottom row first, as the lecture counts rows.
+Blender add-on (``addon/pure/blocks.py``).  Films are stored bottom row first, as the lecture counts rows.
 """
 from __future__ import annotations
 

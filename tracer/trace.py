@@ -13,9 +13,9 @@ import numpy as np
 
 from .compile import CompiledScene
 from .errors import RenderCancelled
-from . import numerics
+from . import fresnel, lights, numerics, terminator
 from .model import traced_depth
-from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_lights
+from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_table
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: How many nested transparent objects a ray remembers being inside.
@@ -89,18 +89,34 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
 
 
 def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
-             t_max: float = 1.0) -> np.ndarray:
-    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max?"""
+             t_max: np.ndarray | float = 1.0) -> np.ndarray:
+    """Shadow feelers: is any object on each segment origin + t * direction, 0 < t < t_max, with its whole
+    error interval (compile.blocks_between)?"""
     n = origins.shape[0]
+    t_max = np.broadcast_to(np.asarray(t_max, dtype=float), (n,))
     blocked = np.zeros(n, dtype=bool)
     for obj in scene.objects:
         open_rays = np.nonzero(~blocked)[0]
         if open_rays.size == 0:
             break
         m = open_rays.size
-        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays],
-                                          np.zeros(m), np.full(m, t_max))
+        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays], np.zeros(m), t_max[open_rays])
     return blocked
+
+
+@dataclass
+class Shading:
+    """The shaded points of a batch, as the lights see them: position, normal facing the ray, unit vector to
+    the eye, material, diffuse colour (textured), where shadow feelers start, and the object each ray was
+    inside (-1: none; tracer.savings)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    to_eye: np.ndarray
+    mat: np.ndarray
+    diffuse: np.ndarray
+    feeler_start: np.ndarray
+    inside_of: np.ndarray
 
 
 @dataclass
@@ -149,7 +165,9 @@ class Media:
 
 
 def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
+    # (summed left to right, as the C core sums: where a sign decides, a light in the surface's plane or a
+    # grazing ray, einsum's order could decide it otherwise)
+    return numerics.dot3(a, b)
 
 
 def reflect(direction: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -207,7 +225,7 @@ class Tracer:
         self.background = np.asarray(scene.settings.background, dtype=float)
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
         self.dark = dark_materials(scene)
-        self.sealed = sealed_lights(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
+        self.sealed = sealed_table(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
         #: ``cancel() -> bool``, asked now and then while a batch is traced: True stops it (RenderCancelled).
         self.cancel = None
         self._next_cancel_check = 0.0
@@ -250,12 +268,16 @@ class Tracer:
         offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
-            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx])
+            texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx], hits.uv[idx])
             ambient, diffuse = ambient * texture, diffuse * texture
         local = mats.emissive[mat] + self.ambient_light * ambient
         if "lighting" in self.effects:
             inside_of = np.where(hits.entering[idx], -1, hits.obj[idx])  # the object the ray was inside
-            local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of)
+            base = point  # where feelers start, before the rounding offset
+            if "smooth-terminator" in self.effects:
+                base = terminator.lifted_points(self.scene, hits.shape[idx], hits.part[idx], hits.uv[idx],
+                                                hits.entering[idx], point)
+            local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of, base)
         color[idx] = local
         if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
             reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
@@ -278,14 +300,18 @@ class Tracer:
             skip = skip | inside
         return skip
 
-    def _direct_light(self, point, normal, direction, mat, diffuse, offset, inside_of) -> np.ndarray:
-        mats = self.scene.materials
+    def _direct_light(self, point, normal, direction, mat, diffuse, offset, inside_of, base) -> np.ndarray:
         total = np.zeros_like(point)
         to_eye = -direction / np.linalg.norm(direction, axis=1, keepdims=True)
-        feeler_start = point + offset * normal
+        feeler_start = base + offset * normal
+        kinds = self.scene.lights.kind
+        shading = Shading(point, normal, to_eye, mat, diffuse, feeler_start, inside_of)
         for light, (light_pos, light_color) in enumerate(zip(self.scene.light_positions, self.scene.light_colors)):
+            if kinds[light] != lights.POINT:
+                self._physical_light(light, shading, total)
+                continue
             to_light = light_pos - point
-            s = to_light / np.linalg.norm(to_light, axis=1, keepdims=True)
+            s = to_light / numerics.norm3(to_light)[:, None]  # (a light at 1e300: |s|^2 overflows)
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
@@ -295,25 +321,135 @@ class Tracer:
                 lit[rows[skip]] = False
                 rows = rows[~skip]
                 self.counts.shadow += rows.size
-                lit[rows] &= ~occluded(self.scene, feeler_start[rows], light_pos - feeler_start[rows])
+                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos)
+                lit[rows] &= ~occluded(self.scene, feeler_start[rows], to_light, reach)
             rows = np.nonzero(lit)[0]
             if rows.size == 0:
                 continue
-            m = mat[rows]
-            contribution = lambert[rows, None] * diffuse[rows]
-            half = s[rows] + to_eye[rows]
-            half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-300)
-            h_dot_m = _dot(half, normal[rows])
-            with np.errstate(under="ignore"):
-                phong = np.where(h_dot_m > 0.0, np.power(np.maximum(h_dot_m, 0.0), mats.specular_exponent[m]), 0.0)
-            specular = phong[:, None] * mats.specular[m]
-            if "cook-torrance" in self.effects:
-                fraction = mats.specular_fraction[m][:, None]
-                rough = cook_torrance(normal[rows], s[rows], to_eye[rows], mats.specular[m],
-                                      mats.surface_roughness[m])
-                specular = (1.0 - fraction) * specular + fraction * rough
-            total[rows] += (contribution + specular) * light_color
+            total[rows] += self._response(lambert[rows], s[rows], normal[rows], to_eye[rows], mat[rows],
+                                          diffuse[rows]) * light_color
         return total
+
+    def _response(self, lambert, s, normal, to_eye, m, diffuse) -> np.ndarray:
+        """What a surface sends to the eye per unit light colour from unit direction ``s`` (rows lit by it,
+        ``lambert`` = s . normal > 0): Lambert's diffuse term and Blinn's highlight (mixed with Cook-Torrance's
+        where it is live)."""
+        mats = self.scene.materials
+        contribution = lambert[:, None] * diffuse
+        half = s + to_eye
+        half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-300)
+        h_dot_m = _dot(half, normal)
+        with np.errstate(under="ignore"):
+            phong = np.where(h_dot_m > 0.0, np.power(np.maximum(h_dot_m, 0.0), mats.specular_exponent[m]), 0.0)
+        specular = phong[:, None] * mats.specular[m]
+        if "cook-torrance" in self.effects:
+            fraction = mats.specular_fraction[m][:, None]
+            rough = cook_torrance(normal, s, to_eye, mats.specular[m], mats.surface_roughness[m])
+            specular = (1.0 - fraction) * specular + fraction * rough
+        return contribution + specular
+
+    # -- the physical lights (tracer.lights; docs/tracer.md, "Lights") -------------------------------------
+
+    def _physical_light(self, light: int, at: "Shading", total: np.ndarray) -> None:
+        """Add light number ``light`` (a sphere, spot, sun or area light) to ``total`` at the shaded points."""
+        table = self.scene.lights
+        kind = table.kind[light]
+        if kind == lights.AREA:
+            return self._area_light(light, at, total)
+        if kind == lights.SUN:
+            s = np.broadcast_to(-table.frame[light, :3], at.point.shape)
+            scale = np.ones(len(at.point))
+        else:
+            to_light = table.position[light] - at.point
+            distance2 = numerics.dot3(to_light, to_light)
+            s = to_light / np.sqrt(distance2)[:, None]
+            scale = 1.0 / distance2
+        lambert = numerics.dot3(s, at.normal)
+        lit = lambert > 0.0
+        if kind == lights.SPOT:
+            _, cos_half, blend_width, _ = table.param[light]
+            factor = lights.spot_factor(-numerics.dot3(s, table.frame[light, :3]), cos_half, blend_width)
+            lit &= factor > 0.0
+            scale = factor / distance2
+        rows = np.nonzero(lit)[0]
+        visible = np.ones(rows.size)
+        if "shadows" in self.effects and rows.size:
+            skip = self._skip_shadow(at.mat[rows], at.inside_of[rows], light)
+            rows = rows[~skip]
+            visible = self._visible_share(light, at.point[rows], s[rows], at.feeler_start[rows])
+        keep = visible > 0.0
+        rows, visible = rows[keep], visible[keep]
+        if rows.size == 0:
+            return
+        response = self._response(lambert[rows], s[rows], at.normal[rows], at.to_eye[rows], at.mat[rows],
+                                  at.diffuse[rows])
+        total[rows] += (response * table.color[light]) * (scale[rows] * visible)[:, None]
+
+    def _visible_share(self, light: int, point, s, feeler_start) -> np.ndarray:
+        """The share of a sphere, spot or sun light's shadow rays from each point that reach it (soft shadows:
+        its samples over the disk facing the point, or over the sun's cone)."""
+        table = self.scene.lights
+        kind, n = table.kind[light], int(table.samples[light])
+        sun = kind == lights.SUN
+        extent = table.param[light, 0]  # the radius; the sun's 1 - cos(angle / 2)
+        reach = np.inf  # (the sun's feelers never end)
+        if extent == 0.0:  # a point, or a sun of no angle: one feeler
+            self.counts.shadow += len(point)
+            towards = s
+            if not sun:
+                towards, reach = numerics.feeler_to(feeler_start, table.position[light])
+            return np.where(occluded(self.scene, feeler_start, towards, reach), 0.0, 1.0)
+        xi1, xi2 = lights.sample_shifts(point, light)
+        t1, t2 = lights.basis(s)
+        unblocked = np.zeros(len(point))
+        for k in range(n):
+            u, v = lights.lattice(k, n, xi1, xi2)
+            if sun:
+                towards = lights.cone_direction(u, v, s, t1, t2, extent)
+            else:
+                target = table.position[light] + lights.disk_point(u, v, t1 * extent, t2 * extent)
+                towards, reach = numerics.feeler_to(feeler_start, target)
+            self.counts.shadow += len(point)
+            unblocked += ~occluded(self.scene, feeler_start, towards, reach)
+        return unblocked / n
+
+    def _area_light(self, light: int, at: "Shading", total: np.ndarray) -> None:
+        """An area light: the sum over its stratified sample points, each a small light of its share of the
+        area, facing along the light's direction (Lambert's cosine at both ends, 1/r^2)."""
+        table = self.scene.lights
+        n = int(table.samples[light])
+        direction, u_side, v_side = table.frame[light, :3], table.frame[light, 3:6], table.frame[light, 6:9]
+        area, ellipse = table.param[light, 0], table.param[light, 1] != 0.0
+        rows = np.arange(len(at.point))
+        if "shadows" in self.effects:
+            rows = rows[~self._skip_shadow(at.mat, at.inside_of, light)]
+        point = at.point[rows]
+        xi1, xi2 = lights.sample_shifts(point, light)
+        share = area / n
+        for k in range(n):
+            u, v = lights.lattice(k, n, xi1, xi2)
+            if ellipse:
+                offset = lights.disk_point(u, v, np.broadcast_to(u_side, point.shape),
+                                           np.broadcast_to(v_side, point.shape))
+            else:
+                offset = (2.0 * u - 1.0)[:, None] * u_side + (2.0 * v - 1.0)[:, None] * v_side
+            sample = table.position[light] + offset
+            to_light = sample - point
+            distance2 = numerics.dot3(to_light, to_light)
+            s = to_light / np.sqrt(distance2)[:, None]
+            lambert = numerics.dot3(s, at.normal[rows])
+            cos_light = -numerics.dot3(s, direction)
+            lit = np.nonzero((lambert > 0.0) & (cos_light > 0.0))[0]
+            if "shadows" in self.effects and lit.size:
+                self.counts.shadow += lit.size
+                start = at.feeler_start[rows[lit]]
+                towards, reach = numerics.feeler_to(start, sample[lit])
+                lit = lit[~occluded(self.scene, start, towards, reach)]
+            if lit.size == 0:
+                continue
+            r = rows[lit]
+            response = self._response(lambert[lit], s[lit], at.normal[r], at.to_eye[r], at.mat[r], at.diffuse[r])
+            total[r] += (response * table.color[light]) * (cos_light[lit] * share / distance2[lit])[:, None]
 
     def _check_cancel(self) -> None:
         """RenderCancelled if ``self.cancel`` says stop (asked at most every 50 ms: it may be slow)."""
@@ -364,6 +500,13 @@ class Tracer:
         kr, kt = mats.reflectivity[mat], mats.transparency[mat]
         reflects = ("reflection" in self.effects) & (kr >= settings.min_reflectivity) & (kr > 0.0)
         transmits = ("refraction" in self.effects) & (kt >= settings.min_transparency) & (kt > 0.0)
+        # The weights of the mirror ray (per channel) and of the transmitted ray: the coefficients, or, for
+        # the Fresnel modes of Blender scenes, the coefficients times the reflectance at this angle.
+        kr_color, kr_max = kr[:, None], kr
+        if "fresnel" in self.effects:
+            kr_color, kt = self._fresnel_weights(direction, normal, mat, media, entering, obj, kr, kt,
+                                                 reflects | transmits)
+            kr_max = kr_color.max(axis=1)
         reflected, transmitted = np.zeros_like(point), np.zeros_like(point)
         # Snell's law first: under total internal reflection the transmitted ray is the mirror ray.
         rows = np.nonzero(transmits)[0]
@@ -382,7 +525,7 @@ class Tracer:
         self.counts.skipped_shared_tir += int(shared.sum())
         # Which rays are wanted (the cutoff), decided before any is traced: they share the ray budget.
         # The mirror ray is weighted by both coefficients where it also stands for the internal reflection.
-        mirror_weight = weight * np.where(shared, kr + kt, kr)
+        mirror_weight = weight * np.where(shared, kr_max + kt, kr_max)
         through_weight = weight * kt
         want_mirror = self._worth_tracing(reflects, mirror_weight)
         want_through = self._worth_tracing(transmits & ~shared, through_weight)
@@ -407,7 +550,33 @@ class Tracer:
             transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
                                                   level, media.subset(bounce), through_weight[bounce],
                                                   roots[bounce], bounce_limit)
-        return kr[:, None] * reflected, kt[:, None] * transmitted
+        return kr_color * reflected, kt[:, None] * transmitted
+
+    def _fresnel_weights(self, direction, normal, mat, media, entering, obj, kr, kt, rows_wanted):
+        """The mirror ray's weight per channel (N, 3) and the transmitted ray's (N,) where Material.fresnel
+        asks for them (tracer.fresnel): a metal's Schlick reflectance from its tint, a dielectric's exact
+        reflectance F splitting reflectivity (times F) and transparency (times 1 - F)."""
+        mats = self.scene.materials
+        kr_color = np.repeat(kr[:, None], 3, axis=1)
+        kt = kt.copy()
+        mode = mats.fresnel[mat]
+        rows = np.nonzero(rows_wanted & (mode != fresnel.CONSTANT))[0]
+        if rows.size == 0:
+            return kr_color, kt
+        d = direction[rows]
+        unit = d / np.sqrt(numerics.dot3(d, d))[:, None]
+        cos1 = -numerics.dot3(unit, normal[rows])
+        metal = mode[rows] == fresnel.METAL
+        metal_rows = rows[metal]
+        kr_color[metal_rows] = kr[metal_rows, None] * fresnel.schlick(cos1[metal], mats.fresnel_tint[mat[metal_rows]])
+        glass = rows[~metal]
+        if glass.size:
+            around = media.subset(glass)
+            c2 = np.where(entering[glass], mats.speed_of_light[mat[glass]], around.left(obj[glass]).current_speed())
+            reflectance = fresnel.dielectric(cos1[~metal], c2 / around.current_speed())
+            kr_color[glass] = (kr[glass] * reflectance)[:, None]
+            kt[glass] = kt[glass] * (1.0 - reflectance)
+        return kr_color, kt
 
     def _reflected(self, point, normal, direction, offset, level, media, weight, roots, limit) -> np.ndarray:
         r = reflect(direction, normal)

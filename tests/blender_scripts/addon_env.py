@@ -13,7 +13,8 @@ import bpy  # noqa: F401  (must fail loudly when missing)
 import numpy as np
 
 import addon
-from addon import convert, scene_build
+from addon import scene_build
+from addon.pure import convert
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ROOT / "scenes"

@@ -6,8 +6,8 @@
 For each of lecture.sdl and textures.sdl: imported into an empty file with the importer's defaults, F12 at
 64 x 48 (or WIDTH x HEIGHT) with the scene's view settings as the importer left them, the Render Result saved as an 8-bit PNG
 (saving applies the view transform, as the Image Editor's display does) to OUT/NAME-blender.png.  Also: a
-scene made in Blender keeps Blender's colour management, and an import with ``sdl_colours=False`` leaves
-it alone.  Prints ``RESULT {json}``; the test compares the PNGs with the tracer's.
+scene made in Blender keeps Blender's colour management: an import into it leaves it alone, unless asked
+for (``colour_management="SDL"``); ``"KEEP"`` leaves it alone whatever the scene.  Prints ``RESULT {json}``; the test compares the PNGs with the tracer's.
 """
 import json
 import os
@@ -33,9 +33,16 @@ try:
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 64, 48, 100
     bpy.ops.render.render()
     result["native_before"], result["native_after"] = native, scene.view_settings.view_transform
-    assert bpy.ops.import_scene.sdl(filepath=os.path.join(root, "scenes", "lecture.sdl"),
-                                    sdl_colours=False) == {"FINISHED"}
-    result["kept_without_sdl_colours"] = scene.view_settings.view_transform
+    lecture = os.path.join(root, "scenes", "lecture.sdl")
+    assert bpy.ops.import_scene.sdl(filepath=lecture) == {"FINISHED"}  # into the startup scene's objects
+    result["kept_by_default"] = scene.view_settings.view_transform
+    assert bpy.ops.import_scene.sdl(filepath=lecture, colour_management="SDL") == {"FINISHED"}
+    result["asked_for"] = scene.view_settings.view_transform
+    bpy.ops.wm.read_homefile(use_empty=True)
+    addon.register()
+    result["empty_before"] = bpy.context.scene.view_settings.view_transform
+    assert bpy.ops.import_scene.sdl(filepath=lecture, colour_management="KEEP") == {"FINISHED"}
+    result["kept_when_asked"] = bpy.context.scene.view_settings.view_transform
     for name in ("lecture", "textures"):
         bpy.ops.wm.read_homefile(use_empty=True)
         addon.register()

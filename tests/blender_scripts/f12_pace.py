@@ -22,7 +22,8 @@ sys.path[:0] = [root, root + "/tests"]
 import numpy as np  # noqa: E402
 
 import addon  # noqa: E402
-from addon import deps, engine  # noqa: E402
+import tracer  # noqa: E402
+from addon import engine  # noqa: E402
 from blender_scripts.addon_env import fresh, import_sdl, set_resolution  # noqa: E402
 
 fresh()
@@ -31,7 +32,6 @@ try:
     scene = bpy.context.scene
     scene.render.engine = engine.ENGINE_ID
     set_resolution(width, height)
-    tracer = deps.module()
     tracer_times, f12_times = [], []
     for _ in range(2):
         started = time.perf_counter()

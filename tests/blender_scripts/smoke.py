@@ -10,6 +10,7 @@ export -> re-read gives the same matrices and materials; object names (spaces, n
 import; a small SDL_RAYTRACER render equal to the tracer's
 own; prints ``RESULT {json}``.
 """
+import importlib
 import json
 import os
 import sys
@@ -41,10 +42,9 @@ else:
 
 import numpy as np  # noqa: E402
 
-deps = sys.modules[package + ".deps"]
 engine = sys.modules[package + ".engine"]
-tracer = deps.module()
-convert = sys.modules[package + ".convert"]
+tracer = importlib.import_module(package + ".tracer")  # the add-on's own (in the checkout: the top-level one)
+convert = sys.modules[package + ".pure.convert"]
 axes = convert.axis_matrix()
 
 
@@ -104,5 +104,5 @@ difference = float(np.abs(pixels - expected).max())
 assert difference < 1e-3, difference
 stats = dict(engine.LAST_RENDER)
 assert "error" not in stats, stats
-print("RESULT " + json.dumps({"blender": bpy.app.version_string, "tracer": deps.TRACER, "scenes": checked,
+print("RESULT " + json.dumps({"blender": bpy.app.version_string, "tracer": tracer.__name__, "scenes": checked,
                               "max_difference": difference, "rays": stats["rays"], "seconds": stats["seconds"]}))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..numerics import TOLERANCES
+from ..numerics import TOLERANCES, Tolerances
 from .hits import HitArrays
 from .quadratic import solve_quadratic
 
@@ -121,10 +121,10 @@ def _one_hit(t, hit, entering, normal, part=0) -> HitArrays:
     return out
 
 
-def intersect_square(origin: np.ndarray, direction: np.ndarray, edge: float = TOLERANCES.square_edge) -> HitArrays:
-    """``edge``: crossings this close (relative) outside the rim still count, so that edges do not leak."""
+def intersect_square(origin: np.ndarray, direction: np.ndarray, tol: Tolerances = TOLERANCES) -> HitArrays:
+    """Crossings ``tol.square_edge`` (relative) outside the rim still count, so that edges do not leak."""
     t, crosses, p = _z_plane_crossing(origin, direction)
-    limit = 1.0 + edge
+    limit = 1.0 + tol.square_edge
     hit = crosses & (np.abs(p[:, 0]) <= limit) & (np.abs(p[:, 1]) <= limit)
     out = _one_hit(t, hit, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(hit[:, None], p[:, :2], 0.0)
@@ -251,3 +251,18 @@ def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
     outside_parallel = ((den == 0.0) & (num < 0.0)).any(axis=1)
     hit = ~outside_parallel & np.isfinite(t_in) & np.isfinite(t_out) & (t_in <= t_out)
     return _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)
+
+
+#: The corners of the squares round a tapered cylinder's base (z = 0) and top (z = 1) discs, for a top radius
+#: of 1 (tapered_cylinder_bounds scales the top's x and y).
+_DISC_CORNERS = np.array([[x, y, z] for z in (0.0, 1.0) for x, y in ((-1, -1), (-1, 1), (1, -1), (1, 1))],
+                         dtype=np.float64)
+
+
+def tapered_cylinder_bounds(values: np.ndarray) -> np.ndarray:
+    """(N, 8, 3) generic points whose hull holds each tapered cylinder of (N, P) parameter rows (the top
+    radius first; a negative one drawn as 0): the corners of the squares round its two discs."""
+    top = np.maximum(values[:, 0], 0.0)
+    points = np.broadcast_to(_DISC_CORNERS, (len(top), 8, 3)).copy()
+    points[:, 4:, :2] *= top[:, None, None]
+    return points

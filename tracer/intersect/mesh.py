@@ -77,6 +77,7 @@ class MeshArrays:
     vertices: np.ndarray
     normals: np.ndarray
     extent: float
+    tri_uv: "np.ndarray | None" = None
 
 
 class TriangleMesh:
@@ -101,7 +102,8 @@ class TriangleMesh:
     Memory (vertex-indexed, nothing per triangle but indices): ``vertices`` (V, 3) and ``normals`` (N, 3)
     float64 are the MeshData's own arrays; ``tri_vertex`` and ``tri_normal`` (T, 3) int32 are views of its
     FaceList when every face is a triangle (one array when the normal indices equal the vertex indices);
-    ``tri_order`` (T,) int32; ``nodes`` (M,) :data:`NODE`.
+    ``tri_order`` (T,) int32; ``nodes`` (M,) :data:`NODE`; ``tri_uv`` (T, 6) float64, the (u, v) of each
+    triangle's corners from MeshData.corner_uvs, or None.
 
     BVH: binned surface-area heuristic (``bins`` buckets along the longest axis of the centroids),
     split until a node holds at most ``leaf_size`` triangles.  Node 0 is the root, each inner node's
@@ -122,6 +124,7 @@ class TriangleMesh:
         self.vertices, self.normals = vertices, normals
         self.tri_vertex, self.tri_normal = tri_v, tri_n
         self.triangle_count = len(tri_v)
+        self.tri_uv = _triangle_uvs(mesh)
 
         # The mesh's size (of the vertices the triangles use) gives absolute scales for box padding and hit
         # deduplication.
@@ -178,12 +181,21 @@ class TriangleMesh:
         """The tables another tracer needs to walk this mesh exactly as the queries below do."""
         return MeshArrays(nodes=self.nodes, tri_order=self.tri_order, tri_vertex=self.tri_vertex,
                           tri_normal=self.tri_normal, vertices=self.vertices, normals=self.normals,
-                          extent=self.extent)
+                          extent=self.extent, tri_uv=self.tri_uv)
 
     def kept_arrays(self) -> list[np.ndarray]:
         """Every array this mesh keeps alive (some are the MeshData's own): what it costs in memory."""
         arrays = [self.nodes, self.tri_order, self.tri_vertex, self.vertices, self.normals]
-        return arrays + ([] if self.tri_normal is None else [self.tri_normal])
+        return arrays + [a for a in (self.tri_normal, self.tri_uv) if a is not None]
+
+    def texture_uv(self, tri: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The texture coordinates (u, v) at barycentrics (b1, b2) of triangles ``tri`` (the mesh has
+        ``tri_uv``): its corners' interpolated (texture.h's mesh_uv)."""
+        corner = self.tri_uv[tri]
+        w0 = 1.0 - b1 - b2
+        u = (w0 * corner[:, 0] + b1 * corner[:, 2]) + b2 * corner[:, 4]
+        v = (w0 * corner[:, 1] + b1 * corner[:, 3]) + b2 * corner[:, 5]
+        return u, v
 
     # ------------------------------------------------------------------ per-triangle values
 
@@ -425,6 +437,21 @@ class TriangleMesh:
             smooth = smooth / length[:, None]
         return np.where(usable[:, None], smooth, geometric)
 
+    def smooth_lift(self, tri: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far (generic, (n, 3)) the points at barycentrics (b1, b2) of triangles ``tri`` move onto the
+        smooth surface the vertex normals describe, and which triangles have normals (a zero move for the
+        others).  The point g goes to each corner's tangent plane where it lies below it, q_i = g - min(0,
+        (g - p_i) . n_i) n_i, and the moves are mixed with the barycentrics (docs/tracer.md, "Smooth shadow
+        terminator"; mesh.h's mesh_smooth_lift)."""
+        corners, has = self._unit_corner_normals(tri)
+        p0, p1, p2 = self._corners(tri)
+        w0 = (1.0 - b1 - b2)[:, None]
+        w1, w2 = b1[:, None], b2[:, None]
+        g = (w0 * p0 + w1 * p1) + w2 * p2
+        q = [g - np.minimum(dot3(g - p, n), 0.0)[:, None] * n for p, n in zip((p0, p1, p2), corners)]
+        lift = ((w0 * q[0] + w1 * q[1]) + w2 * q[2]) - g
+        return np.where(has[:, None], lift, 0.0), has
+
     def _touching(self, slot_a: np.ndarray, slot_b: np.ndarray) -> np.ndarray:
         """Do the triangles in leaf slots ``slot_a`` and ``slot_b`` share a vertex (by index or position)?"""
         a, b = self.tri_vertex[self.tri_order[slot_a]], self.tri_vertex[self.tri_order[slot_b]]
@@ -566,6 +593,19 @@ def _indexed_triangles(mesh: MeshData) -> tuple[np.ndarray, "np.ndarray | None"]
     return tri_v, (tri_v if np.array_equal(tri_n, tri_v) else _as_int32(tri_n))
 
 
+def _triangle_uvs(mesh: MeshData) -> "np.ndarray | None":
+    """(T, 6) the corner_uvs of each triangle's corners (u0 v0 u1 v1 u2 v2), or None without corner_uvs."""
+    if mesh.corner_uvs is None:
+        return None
+    uvs = np.asarray(mesh.corner_uvs, dtype=np.float64)
+    if uvs.ndim != 2 or uvs.shape[1] != 2 or len(uvs) != mesh.corner_count():
+        raise SceneError(f"mesh {mesh.origin!r}: corner_uvs has shape {uvs.shape}, not ({mesh.corner_count()}, 2)"
+                         " (one (u, v) per face corner)")
+    if not np.isfinite(uvs).all():
+        raise SceneError(f"mesh {mesh.origin!r}: corner_uvs holds a number that is not finite")
+    return np.ascontiguousarray(uvs[mesh.triangle_corners()].reshape(-1, 6))
+
+
 def _rows_of_three(values) -> np.ndarray:
     """(n, 3) C-contiguous float64: the array itself when it is one already (the MeshData's vertices)."""
     values = np.ascontiguousarray(values, dtype=np.float64)
@@ -664,3 +704,9 @@ def _dedupe_window(slot, t, tol_scale, touching):
     """How far apart hits i and i+1 (of a sorted list) may be and still be one place: (len - 1,)."""
     scale = np.maximum(np.abs(t[1:]), np.abs(t[:-1])) + tol_scale[1:]
     return np.where(touching(slot[1:], slot[:-1]), DEDUPE_RELATIVE_ADJACENT, DEDUPE_RELATIVE) * scale
+
+
+def intersect_mesh(origins: np.ndarray, directions: np.ndarray, mesh: TriangleMesh) -> HitArrays:
+    """Every crossing of the whole generic lines with ``mesh`` (the mesh kinds' registered intersection,
+    tracer/shapes.py: TriangleMesh.all_hits)."""
+    return mesh.all_hits(origins, directions)

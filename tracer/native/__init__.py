@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import weakref
 from dataclasses import fields
 from typing import BinaryIO, Optional
 
@@ -22,7 +23,8 @@ import numpy as np
 from ..compile import CompiledScene
 from ..errors import RenderCancelled, TracerError
 from ..intersect.hits import HitArrays
-from ..savings import RaySavings, sealed_lights
+from ..savings import RaySavings, sealed_table
+from ..threads import default_threads
 from ..trace import RayCounts
 from . import contract, flatten
 from . import build as _builder
@@ -74,12 +76,11 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_object_tree.argtypes = [ctypes.c_void_p, ctypes.c_void_p, _i64p, _i64p]
     lib.rt_destroy.restype = None
     lib.rt_destroy.argtypes = [ctypes.c_void_p]
-    lib.rt_set_savings.restype = ctypes.c_int
-    lib.rt_set_savings.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_int64, _u8p]
-    lib.rt_set_budget.restype = None
-    lib.rt_set_budget.argtypes = [ctypes.c_void_p, ctypes.c_int64]
-    lib.rt_set_cancel.restype = None
-    lib.rt_set_cancel.argtypes = [ctypes.c_void_p, _i32p]
+    lib.rt_edit.restype = ctypes.c_int
+    lib.rt_edit.argtypes = [ctypes.c_void_p, ctypes.POINTER(flatten.SceneDesc), _i64p, ctypes.c_int64, ctypes.c_int64,
+                            ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
+    lib.rt_set_sealed.restype = ctypes.c_int
+    lib.rt_set_sealed.argtypes = [ctypes.c_void_p, _u8p, ctypes.c_int64]
     lib.rt_interrupt_install.restype = ctypes.c_int
     lib.rt_interrupt_install.argtypes = [ctypes.c_int64]
     lib.rt_interrupt_uninstall.restype = None
@@ -95,7 +96,8 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_interrupt_release_file.restype = None
     lib.rt_interrupt_release_file.argtypes = [ctypes.c_int32]
     lib.rt_trace.restype = ctypes.c_int
-    lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64]
+    lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64, ctypes.c_double,
+                             ctypes.c_int64, ctypes.c_int64, _i32p]
     lib.rt_first_hits.restype = ctypes.c_int
     lib.rt_first_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _dp, _i32p, _i32p, _i8p,
                                   ctypes.c_int64]
@@ -105,7 +107,7 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.rt_object_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_int64, _dp, _i8p, _dp,
                                    _i32p, _i32p, _dp, _i8p]
     lib.rt_texture_colors.restype = ctypes.c_int
-    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp]
+    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp, _dp]
     lib.rt_scan_numbers.restype = ctypes.c_int64
     lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
     lib.rt_scan3_state_size.restype = ctypes.c_int64
@@ -161,20 +163,6 @@ def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
     if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
         return "the C core's SceneDesc size differs from flatten.py's"
     return None
-
-
-def default_threads() -> int:
-    """$SDL_TRACER_THREADS if set, else every core this process may run on."""
-    env = os.environ.get("SDL_TRACER_THREADS")
-    if env:
-        try:
-            return max(1, int(env))
-        except ValueError:
-            pass
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def _rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
@@ -312,6 +300,62 @@ def _flat_scene(compiled: CompiledScene) -> flatten.FlatScene:
     return flat
 
 
+class CoreScene:
+    """The C core's scene made from a FlatScene: its checked description, mesh views, object hierarchy and
+    sealed-lights table.  Made once per flat scene (when first traced) and kept on it (``flat.core``),
+    shared by every NativeTracer of it, edited in place (:meth:`edit`), released with the flat scene."""
+
+    def __init__(self, flat: flatten.FlatScene, threads: int):
+        message = ctypes.create_string_buffer(256)
+        # (the object hierarchy is built on the tracer's threads; it is the same tree on any number)
+        handle = _lib.rt_create_threaded(ctypes.byref(flat.desc), threads, message, len(message))
+        if not handle:
+            reason = message.value.decode(errors="replace") or "no reason given"
+            raise TracerError(f"the C core refused the scene description: {reason}")
+        self.handle = handle
+        self._release = weakref.finalize(self, _lib.rt_destroy, handle)
+        self._sealed_sent: Optional[np.ndarray] = None
+
+    @classmethod
+    def of(cls, compiled: CompiledScene, threads: int) -> "CoreScene":
+        flat = _flat_scene(compiled)
+        core = getattr(flat, "core", None)
+        if core is None:
+            core = flat.core = cls(flat, threads)
+        return core
+
+    def send_sealed(self, sealed: Optional[np.ndarray]) -> None:
+        """Give the C core this sealed-lights table (objects x lights; None: none), unless it has it already."""
+        if sealed is self._sealed_sent:
+            return
+        if sealed is None:
+            done = _lib.rt_set_sealed(self.handle, None, 0)
+        else:
+            flat = np.ascontiguousarray(sealed, dtype=np.uint8).reshape(-1)
+            done = _lib.rt_set_sealed(self.handle, _ptr(flat if flat.size else np.zeros(1, np.uint8), ctypes.c_uint8),
+                                      flat.size)
+        if done != 0:
+            raise MemoryError("the C core ran out of memory (or the sealed table has the wrong size)")
+        self._sealed_sent = sealed
+
+    def edit(self, flat: flatten.FlatScene, objects: Optional[np.ndarray], meshes: bool, rebuild: bool,
+             threads: int) -> None:
+        """The C core takes ``flat``'s description as it is now (see rt_edit): the hierarchy refitted to the
+        boxes of ``objects`` (None: every object), or built anew with ``rebuild`` (or where the objects'
+        boundedness or number changed); ``meshes``: the mesh tables may have changed."""
+        flags = (contract.EDIT_BITS["meshes"] if meshes else 0) | (contract.EDIT_BITS["rebuild"] if rebuild else 0)
+        listed = np.ascontiguousarray(np.zeros(1, np.int64) if objects is None else objects, dtype=np.int64)
+        message = ctypes.create_string_buffer(256)
+        if _lib.rt_edit(self.handle, ctypes.byref(flat.desc), _ptr(listed, ctypes.c_int64),
+                        -1 if objects is None else len(listed), flags, threads, message, len(message)) != 0:
+            self._release()  # (a scene refused half way is never traced)
+            flat.core = None
+            reason = message.value.decode(errors="replace") or "no reason given"
+            raise TracerError(f"the C core refused the edited scene: {reason}")
+        if self._sealed_sent is not None and self._sealed_sent.shape != (flat.desc.n_objects, flat.desc.n_lights):
+            self._sealed_sent = None  # (rt_edit dropped it)
+
+
 try:
     _lib = _load()
 except (BuildError, OSError) as err:
@@ -341,27 +385,14 @@ class NativeTracer:
         self.counts = RayCounts()
         self.threads = threads or default_threads()
         self._flat = _flat_scene(compiled)  # owns the arrays the C side points into
-        message = ctypes.create_string_buffer(256)
-        # (the object hierarchy is built on the tracer's threads; it is the same tree on any number)
-        self._handle = _lib.rt_create_threaded(ctypes.byref(self._flat.desc), self.threads, message, len(message))
-        if not self._handle:
-            reason = message.value.decode(errors="replace") or "no reason given"
-            raise TracerError(f"the C core refused the scene description: {reason}")
+        self._core = CoreScene.of(compiled, self.threads)
+        self._handle = self._core.handle
         self.savings = RaySavings() if savings is None else savings
-        effects = compiled.effects
-        sealed = (sealed_lights(compiled) if self.savings.inside_shadows and "shadows" in effects
-                  else np.zeros((len(compiled.objects), len(compiled.light_positions)), dtype=bool))
-        sealed = np.ascontiguousarray(sealed, dtype=np.uint8).reshape(-1)
-        if sealed.size == 0:
-            sealed = np.zeros(1, dtype=np.uint8)
-        if _lib.rt_set_savings(self._handle, float(self.savings.cutoff), self.savings.flags(),
-                               _ptr(sealed, ctypes.c_uint8)) != 0:
-            raise MemoryError("the C core ran out of memory")
-        _lib.rt_set_budget(self._handle, int(self.savings.ray_budget))
+        if self.savings.inside_shadows and "shadows" in compiled.effects:
+            self._core.send_sealed(sealed_table(compiled))
         #: ``cancel() -> bool``, asked every 50 ms while a batch is traced: True stops it (RenderCancelled).
         self.cancel = None
         self._stop = np.zeros(1, dtype=np.int32)  # the flag the C core polls at every ray
-        _lib.rt_set_cancel(self._handle, _ptr(self._stop, ctypes.c_int32))
 
     def object_tree(self) -> tuple[bytes, np.ndarray, tuple[int, ...]]:
         """The C core's object hierarchy as built (for tests): its PairNode records as bytes, the bounded
@@ -374,12 +405,8 @@ class NativeTracer:
         return pairs.raw[:int(count * root[4])], items[:int(root[3])], tuple(root[:4].tolist())
 
     def close(self) -> None:
-        handle, self._handle = getattr(self, "_handle", None), None
-        if handle and _lib is not None:
-            _lib.rt_destroy(handle)
-
-    def __del__(self) -> None:
-        self.close()
+        """Let go of the scene (the C core's scene itself lives as long as the compiled scene's FlatScene)."""
+        self._handle = self._core = None
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         o, d = _rays(origins, directions)
@@ -387,7 +414,8 @@ class NativeTracer:
         counts = np.zeros(len(fields(RayCounts)), dtype=np.int64)
         status = self._polling_cancel(lambda: _lib.rt_trace(
             self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-            _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads))
+            _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads, float(self.savings.cutoff),
+            self.savings.flags(), int(self.savings.ray_budget), _ptr(self._stop, ctypes.c_int32)))
         if status == -2:  # stopped: by a signal (whose Python handler runs now) or by self.cancel
             raise RenderCancelled("render cancelled")
         if status != 0:
@@ -441,17 +469,19 @@ class NativeTracer:
             raise MemoryError("the C core ran out of memory")
         return blocked.astype(bool)
 
-    def texture_colors(self, shape, points, parts) -> np.ndarray:
-        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts``, as
-        ``compiled.textures.colors`` (1 where untextured)."""
+    def texture_colors(self, shape, points, parts, uv=None) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape`` hit on ``parts`` (at barycentrics
+        ``uv`` (N, 2) on meshes, or None), as ``compiled.textures.colors`` (1 where untextured)."""
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         s = np.ascontiguousarray(np.asarray(shape, dtype=np.int32).reshape(-1))
         q = np.ascontiguousarray(np.asarray(parts, dtype=np.int32).reshape(-1))
-        if not len(p) == len(s) == len(q):
-            raise ValueError("shape, points and parts must have the same length")
+        b = None if uv is None else np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+        if not len(p) == len(s) == len(q) or (b is not None and len(b) != len(p)):
+            raise ValueError("shape, points, parts and uv must have the same length")
         out = np.empty_like(p)
+        bary = None if b is None else _ptr(b, ctypes.c_double)
         if _lib.rt_texture_colors(self._handle, len(p), _ptr(s, ctypes.c_int32), _ptr(p, ctypes.c_double),
-                                  _ptr(q, ctypes.c_int32), _ptr(out, ctypes.c_double)) != 0:
+                                  _ptr(q, ctypes.c_int32), bary, _ptr(out, ctypes.c_double)) != 0:
             raise IndexError("primitive index out of range")
         return out
 

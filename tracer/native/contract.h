@@ -9,17 +9,46 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
        K_MESH = 7, K_PARABOLOID = 8 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
-       FX_TEXTURES = 32 };
+       FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
+       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
+enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
+enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7,
        SKIP_BUDGET = 8 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
+enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define K_COUNT 9
-/* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */
-#define RT_SHAPE_HITS(X) X(K_SPHERE, hits_sphere) X(K_CUBE, hits_cube) X(K_PARABOLOID, hits_paraboloid)
-#define RT_SHAPE_UV(X) X(K_TAPERED, wall_and_discs_uv) X(K_PARABOLOID, wall_and_discs_uv)
+/* Every kind's generic hits, as a call in analytic_hits' names (tracer/shapes.py: c_intersect with its
+ * parameters, face planes and error budget; meshes are traced by the BVH instead). */
+#define RT_SHAPE_HITS(X) \
+    X(K_SPHERE, hits_sphere(o, d, out)) \
+    X(K_CUBE, hits_cube(o, d, out)) \
+    X(K_SQUARE, hits_square(o, d, D->tol_square_edge, out)) \
+    X(K_PLANE, hits_plane(o, d, out, inside)) \
+    X(K_TAPERED, hits_tapered(o, d, param[0], out)) \
+    X(K_TORUS, hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out)) \
+    X(K_POLYHEDRON, hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out)) \
+    X(K_PARABOLOID, hits_paraboloid(o, d, out))
+/* Every kind's texture mapping (ShapeKind.c_uv). */
+#define RT_SHAPE_UV(X) \
+    X(K_SPHERE, sphere_uv) \
+    X(K_CUBE, cube_uv) \
+    X(K_SQUARE, square_uv) \
+    X(K_PLANE, plane_uv) \
+    X(K_TAPERED, wall_and_discs_uv) \
+    X(K_TORUS, torus_uv) \
+    X(K_POLYHEDRON, direction_uv) \
+    X(K_MESH, direction_uv) \
+    X(K_PARABOLOID, wall_and_discs_uv)
 /* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
 #define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
+/* Kinds made of triangles, traced by their BVH (the mesh family). */
+#define RT_IS_MESH(kind) ((kind) == K_MESH)
+/* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index
+ * (tracer/sdl/statements.py names each statement's). */
+#define RT_SDL_ACTIONS(X) X(0, sdl_light) X(1, sdl_global_ambient) X(2, sdl_background) X(3, sdl_min_reflectivity) X(4, sdl_min_transparency) X(5, sdl_max_recursion_depth) X(6, sdl_camera) X(7, sdl_color_material) X(8, sdl_float_material) X(9, sdl_texture) X(10, sdl_parameters) X(11, sdl_default_materials) X(12, sdl_translate) X(13, sdl_scale) X(14, sdl_rotate) X(15, sdl_push) X(16, sdl_pop) X(17, sdl_identity) X(18, sdl_shape)
+#define RT_SDL_ACTION_COUNT 19
 #define RAY_KIND_COUNT 4
 #define N_COUNTS 9  /* rays cast per kind, then skipped per reason */
 
@@ -33,10 +62,16 @@ enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 #define MAX_OCTAVES 32
 /* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
 #define MAX_RECURSION_DEPTH 64
-/* reflected and transmitted rays one camera ray's tree may trace, unless rt_set_budget says otherwise (tracer.savings:RAY_BUDGET) */
+/* reflected and transmitted rays one camera ray's tree may trace, unless rt_trace is given another (tracer.savings:RAY_BUDGET) */
 #define RAY_BUDGET 4096
+/* parameter slots per primitive in prim_param (the most any kind's intersection takes) (tracer.shapes:MAX_PARAMETERS) */
+#define PRIM_PARAMS 1
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
 #define TEX_PARAMS 9
+/* the shadow-sample lattice's step along v (tracer.lights:GOLDEN) */
+#define LIGHT_GOLDEN 0.6180339887498949
+/* 2 pi, as tracer.lights writes it (tracer.lights:TWO_PI) */
+#define LIGHT_TWO_PI 6.283185307179586
 
 typedef struct {
     /* primitives */
@@ -44,7 +79,7 @@ typedef struct {
     const int32_t *prim_kind;                /* K_* per primitive */
     const double *prim_inverse;              /* 16 per primitive */
     const double *prim_sphere;               /* 4: bounding-sphere centre, radius (inf: unbounded) */
-    const double *prim_param;                /* 1: tapered cylinder's small radius */
+    const double *prim_param;                /* PRIM_PARAMS: the values its kind's intersection takes (ShapeKind.traced), 0 after */
     const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
     const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
@@ -61,6 +96,7 @@ typedef struct {
     const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
     const double *const *mesh_vertices;      /* per mesh: 3 per vertex */
     const double *const *mesh_normals;       /* per mesh: 3 per normal (made unit where used) */
+    const double *const *mesh_tri_uv;        /* per mesh: 6 per triangle, its corners' (u, v) (MeshData.corner_uvs), or NULL */
     /* CSG */
     int64_t n_csg;
     const int32_t *csg_op;                   /* OP_* per node */
@@ -83,10 +119,16 @@ typedef struct {
     const double *mat_speed;
     const double *mat_specular_fraction;
     const double *mat_roughness;
-    /* lights */
+    const int32_t *mat_fresnel;              /* FRESNEL_* each */
+    const double *mat_fresnel_tint;          /* 3 each: a metal's reflectance at normal incidence */
+    /* lights (tracer.lights.LightTable) */
     int64_t n_lights;
     const double *light_pos;                 /* 3 each */
     const double *light_color;
+    const int32_t *light_kind;               /* LIGHT_* each */
+    const int32_t *light_samples;            /* shadow rays per shaded point */
+    const double *light_frame;               /* 9 each: unit direction, an area light's half sides U and V */
+    const double *light_param;               /* 4 each: LightTable.param */
     /* settings */
     double background[3];
     double global_ambient[3];
@@ -133,6 +175,7 @@ typedef struct {
     X(mesh_tri_normal) \
     X(mesh_vertices) \
     X(mesh_normals) \
+    X(mesh_tri_uv) \
     X(n_csg) \
     X(csg_op) \
     X(csg_left) \
@@ -152,9 +195,15 @@ typedef struct {
     X(mat_speed) \
     X(mat_specular_fraction) \
     X(mat_roughness) \
+    X(mat_fresnel) \
+    X(mat_fresnel_tint) \
     X(n_lights) \
     X(light_pos) \
     X(light_color) \
+    X(light_kind) \
+    X(light_samples) \
+    X(light_frame) \
+    X(light_param) \
     X(background) \
     X(global_ambient) \
     X(min_reflectivity) \
@@ -175,7 +224,7 @@ typedef struct {
     X(tol_torus_newton_steps) \
     X(tol_torus_pair_shortcut) \
     X(tol_square_edge)
-#define RT_SCENE_DESC_FIELD_COUNT 61
-#define RT_CONTRACT_DIGEST "cfd2cfac87d2d9e7"
+#define RT_SCENE_DESC_FIELD_COUNT 68
+#define RT_CONTRACT_DIGEST "65c4950a40837b39"
 
 #endif

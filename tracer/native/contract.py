@@ -24,8 +24,10 @@ from typing import Optional
 
 import numpy as np
 
+from .. import model as _model
 from .. import savings as _savings
 from .. import shapes as _shapes
+from ..sdl import statements as _statements
 
 HEADER = Path(__file__).resolve().parent / "contract.h"
 
@@ -35,13 +37,21 @@ HEADER = Path(__file__).resolve().parent / "contract.h"
 SHAPE_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = _shapes.c_kinds()
 CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
-EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures")
+EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
+           # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
+           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv")
+#: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
+LIGHT_KINDS = _model.LIGHT_KINDS
+#: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).
+FRESNEL_MODES = _model.FRESNEL_MODES
 #: Ray kinds in the order of the C core's counters (tracer.trace.RAY_KINDS is the NumPy side).
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: After the ray kinds, the counters of rays not cast, per reason (SKIP_*); and the bits of
 #: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
 SKIP_REASONS = _savings.SKIP_REASONS
 SAVINGS_SWITCHES = _savings.SWITCHES
+#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew.
+EDIT_FLAGS = ("meshes", "rebuild")
 
 
 def c_name(name: str) -> str:
@@ -54,6 +64,7 @@ KIND = {c_name(kind): code for code, (kind, _) in enumerate(SHAPE_KINDS)}
 KIND_CODES = {sdl: code for code, (_, sdl_kinds) in enumerate(SHAPE_KINDS) for sdl in sdl_kinds}
 OP_CODES = {op: code for code, op in enumerate(CSG_OPS)}
 EFFECT_BITS = {name: 1 << bit for bit, name in enumerate(EFFECTS)}
+EDIT_BITS = {name: 1 << bit for bit, name in enumerate(EDIT_FLAGS)}
 
 # ------------------------------------------------------------------------------------------------ constants
 
@@ -85,9 +96,13 @@ CONSTANTS = (
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
              "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
     Constant("RAY_BUDGET", "tracer.savings:RAY_BUDGET", "int",
-             "reflected and transmitted rays one camera ray's tree may trace, unless rt_set_budget says otherwise"),
+             "reflected and transmitted rays one camera ray's tree may trace, unless rt_trace is given another"),
+    Constant("PRIM_PARAMS", "tracer.shapes:MAX_PARAMETERS", "int",
+             "parameter slots per primitive in prim_param (the most any kind's intersection takes)"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
              "parameter slots per material in mat_tex_param (the longest defaults: marble)"),
+    Constant("LIGHT_GOLDEN", "tracer.lights:GOLDEN", "double", "the shadow-sample lattice's step along v"),
+    Constant("LIGHT_TWO_PI", "tracer.lights:TWO_PI", "double", "2 pi, as tracer.lights writes it"),
 )
 
 
@@ -161,7 +176,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_kind", "*i32", "K_* per primitive"),
     F("prim_inverse", "*f64", "16 per primitive"),
     F("prim_sphere", "*f64", "4: bounding-sphere centre, radius (inf: unbounded)"),
-    F("prim_param", "*f64", "1: tapered cylinder's small radius"),
+    F("prim_param", "*f64", "PRIM_PARAMS: the values its kind's intersection takes (ShapeKind.traced), 0 after"),
     F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
     F("prim_rounding", "*f64", "4: rounding / generic size, generic size, |inverse| and |translation| (numerics)"),
@@ -178,6 +193,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mesh_tri_normal", "**i32", "per mesh: 3 normal indices per triangle (< 0: none), or NULL"),
     F("mesh_vertices", "**f64", "per mesh: 3 per vertex"),
     F("mesh_normals", "**f64", "per mesh: 3 per normal (made unit where used)"),
+    F("mesh_tri_uv", "**f64", "per mesh: 6 per triangle, its corners' (u, v) (MeshData.corner_uvs), or NULL"),
     F("n_csg", "i64", section="CSG"),
     F("csg_op", "*i32", "OP_* per node"),
     F("csg_left", "*i64"),
@@ -197,9 +213,15 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mat_speed", "*f64"),
     F("mat_specular_fraction", "*f64"),
     F("mat_roughness", "*f64"),
-    F("n_lights", "i64", section="lights"),
+    F("mat_fresnel", "*i32", "FRESNEL_* each"),
+    F("mat_fresnel_tint", "*f64", "3 each: a metal's reflectance at normal incidence"),
+    F("n_lights", "i64", section="lights (tracer.lights.LightTable)"),
     F("light_pos", "*f64", "3 each"),
     F("light_color", "*f64"),
+    F("light_kind", "*i32", "LIGHT_* each"),
+    F("light_samples", "*i32", "shadow rays per shaded point"),
+    F("light_frame", "*f64", "9 each: unit direction, an area light's half sides U and V"),
+    F("light_param", "*f64", "4 each: LightTable.param"),
     F("background", "f64", length=3, section="settings"),
     F("global_ambient", "f64", length=3),
     F("min_reflectivity", "f64"),
@@ -259,28 +281,59 @@ def _double(value: float) -> str:
     return text if any(c in text for c in ".en") else text + ".0"
 
 
-def _shape_dispatch() -> list[str]:
-    """The C core's per-kind tables from the shape registry: X-macros over the kinds whose intersection and
-    texture mapping are registered C functions, and which kinds' normals agree with their entering flags."""
-    def per_c_kind(field: str) -> list[tuple[str, str]]:
-        out = []
-        for c_kind, keywords in SHAPE_KINDS:
-            names = {getattr(_shapes.KINDS[k], field) for k in keywords}
-            assert len(names) == 1, f"the SDL kinds of K_{c_kind} disagree on {field}"
-            name = names.pop()
-            if name:
-                out.append((c_kind, name))
-        return out
+def _per_c_kind(read) -> list[tuple[str, object]]:
+    """(C kind, what ``read(entry)`` says) for every C kind, which all its SDL kinds must agree on."""
+    out = []
+    for c_kind, keywords in SHAPE_KINDS:
+        values = {read(_shapes.KINDS[k]) for k in keywords}
+        assert len(values) == 1, f"the SDL kinds of K_{c_kind} disagree on {read.__name__}"
+        out.append((c_kind, values.pop()))
+    return out
 
-    def x_macro(name: str, pairs) -> str:
-        return f"#define {name}(X)" + "".join(f" X(K_{k}, {f})" for k, f in pairs)
+
+def _c_hits_call(entry: _shapes.ShapeKind) -> str:
+    """The C call of a kind's intersection (ShapeKind's protocol), in the names core.c's analytic_hits has in
+    scope: o, d, out, inside, D (the SceneDesc), param (the primitive's prim_param row) and aux (its
+    prim_aux row)."""
+    if entry.family == "polyhedron":
+        values = ["D->planes + 4 * aux[0]", "aux[1]"]
+    else:
+        values = [f"param[{k}]" for k in range(len(entry.traced(entry.defaults)))]
+    for name in entry.budget:
+        field(f"tol_{name}")  # (a KeyError names a budget SceneDesc does not carry)
+        values.append(f"D->tol_{name}")
+    tail = ["out"] + ([] if entry.bounded else ["inside"])
+    return f"{entry.c_intersect}({', '.join(['o', 'd'] + values + tail)})"
+
+
+def _shape_dispatch() -> list[str]:
+    """The C core's per-kind tables from the shape registry: X-macros over every kind's intersection call and
+    texture mapping, which kinds' normals agree with their entering flags, which are meshes."""
+    def call(entry):
+        if entry.family == "mesh":  # (prim_hits and prim_first walk its BVH with their own buffers)
+            assert entry.c_intersect == "mesh_all", f"{entry.keyword}: a mesh is traced by mesh_all"
+            return None
+        return _c_hits_call(entry)
+
+    def uv(entry):
+        return entry.c_uv
+
+    def x_macro(name: str, pairs) -> list[str]:
+        lines = [f"#define {name}(X) \\"] + [f"    X(K_{k}, {f}) \\" for k, f in pairs]
+        lines[-1] = lines[-1][:-2]
+        return lines
 
     agree = [k for k, words in SHAPE_KINDS if all(_shapes.KINDS[w].normals_agree for w in words)]
-    return ["/* Kinds whose generic hits and texture mapping are registered C functions (tracer/shapes.py). */",
-            x_macro("RT_SHAPE_HITS", per_c_kind("c_intersect")),
-            x_macro("RT_SHAPE_UV", per_c_kind("c_uv")),
+    meshes = [k for k, words in SHAPE_KINDS if _shapes.KINDS[words[0]].family == "mesh"]
+    return ["/* Every kind's generic hits, as a call in analytic_hits' names (tracer/shapes.py: c_intersect with its",
+            " * parameters, face planes and error budget; meshes are traced by the BVH instead). */",
+            *x_macro("RT_SHAPE_HITS", [(k, c) for k, c in _per_c_kind(call) if c]),
+            "/* Every kind's texture mapping (ShapeKind.c_uv). */",
+            *x_macro("RT_SHAPE_UV", _per_c_kind(uv)),
             "/* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */",
-            "#define RT_NORMALS_AGREE(kind) (" + " || ".join(f"(kind) == K_{k}" for k in agree) + ")"]
+            "#define RT_NORMALS_AGREE(kind) (" + " || ".join(f"(kind) == K_{k}" for k in agree) + ")",
+            "/* Kinds made of triangles, traced by their BVH (the mesh family). */",
+            "#define RT_IS_MESH(kind) (" + " || ".join(f"(kind) == K_{k}" for k in meshes) + ")"]
 
 
 def header_text() -> str:
@@ -292,10 +345,17 @@ def header_text() -> str:
     out.append(_enum("OP", CSG_OPS, range(len(CSG_OPS))))
     out.append(_enum("FX", EFFECTS, [EFFECT_BITS[e] for e in EFFECTS]))
     out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
+    out.append(_enum("LIGHT", LIGHT_KINDS, range(len(LIGHT_KINDS))))
+    out.append(_enum("FRESNEL", FRESNEL_MODES, range(len(FRESNEL_MODES))))
     out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
     out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))
+    out.append(_enum("EDIT", EDIT_FLAGS, [1 << k for k in range(len(EDIT_FLAGS))]))
     out.append(f"#define K_COUNT {len(SHAPE_KINDS)}")
     out += _shape_dispatch()
+    out += ["/* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index",
+            " * (tracer/sdl/statements.py names each statement's). */",
+            "#define RT_SDL_ACTIONS(X) " + " ".join(f"X({k}, {a})" for k, a in enumerate(_statements.ACTIONS)),
+            f"#define RT_SDL_ACTION_COUNT {len(_statements.ACTIONS)}"]
     out.append(f"#define RAY_KIND_COUNT {len(RAY_KINDS)}")
     out.append(f"#define N_COUNTS {len(RAY_KINDS) + len(SKIP_REASONS)}  /* rays cast per kind, then skipped per reason */")
     out.append("")

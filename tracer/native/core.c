@@ -86,19 +86,14 @@ typedef struct {
     int64_t n_unbounded;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
-    /* tracer.savings: which useless rays are skipped (rt_set_savings) */
-    double cutoff;        /* a secondary ray of smaller cumulative weight is not traced */
-    int64_t savings;      /* SAVE_* bits */
-    uint8_t *sealed;      /* objects x lights: a feeler from inside the object to the light is blocked */
-    int64_t ray_budget;   /* most reflected and transmitted rays one camera ray's tree may trace (see shade.h) */
-    const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_set_cancel); may be NULL */
+    int64_t n_mesh_views;
+    /* tracer.savings: objects x lights, a feeler from inside the object to the light is blocked (rt_set_sealed;
+     * NULL: none known).  Which savings a trace uses is the trace's own (rt_trace's cutoff and flags). */
+    uint8_t *sealed;
+    /* for refitting the hierarchy (made when first needed, dropped when it is built again): per object, its
+     * leaf as 2 * pair + child (-1: unbounded, or in a root leaf), and per pair its parent as 2 * pair + child */
+    int64_t *leaf_of, *parent_of;
 } Scene;
-
-/* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
-static inline int stop_requested(const Scene *S)
-{
-    return rt_interrupt_heard() != 0 || (S->cancel != NULL && *S->cancel != 0);
-}
 
 #define SHADOW_CACHE 16
 
@@ -116,11 +111,21 @@ typedef struct {
     TreeEntry *tree_stack;
     int64_t counts[N_COUNTS];
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
+    double cutoff;        /* tracer.savings: a secondary ray of smaller cumulative weight is not traced */
+    int64_t savings;      /* SAVE_* bits: the other savings this trace makes */
+    int64_t ray_budget;   /* most reflected and transmitted rays one camera ray's tree may trace (see shade.h) */
     int64_t rays_used;    /* reflected and transmitted rays traced for the current camera ray */
     int64_t ray_limit;    /* ...which the current ray's descendants may bring up to this (shade.h) */
+    const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_trace's flag); may be NULL */
     int oom;
     int stopped;          /* stop_requested() was seen: the colours are not to be used */
 } Work;
+
+/* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
+static inline int stop_requested(const Work *w)
+{
+    return rt_interrupt_heard() != 0 || (w->cancel != NULL && *w->cancel != 0);
+}
 
 static int work_init(Work *w, const Scene *S)
 {
@@ -210,35 +215,20 @@ static inline int prim_may_hit(const double *sphere, const double *o, const doub
     return dot3(perp, perp) <= sphere[3] * sphere[3];
 }
 
-/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out). */
+/* Whole-line hits of a closed-form shape or polyhedron in generic coordinates (room for 8 in out): each kind's
+ * registered C function, called as contract.h's RT_SHAPE_HITS spells it in these names. */
 static int analytic_hits(const Scene *S, int64_t p, const double *o, const double *d, Hit *out, int *inside)
 {
     const SceneDesc *D = &S->d;
+    const double *param = D->prim_param + PRIM_PARAMS * p;
+    const int64_t *aux = D->prim_aux + 2 * p;
+    (void)param;
+    (void)aux;
     *inside = 0;
     switch (D->prim_kind[p]) {
-#define REGISTERED_HITS(kind, hits) case kind: return hits(o, d, out);
-    RT_SHAPE_HITS(REGISTERED_HITS)  /* the kinds tracer/shapes.py names a C function for */
+#define REGISTERED_HITS(kind, call) case kind: return call;
+    RT_SHAPE_HITS(REGISTERED_HITS)
 #undef REGISTERED_HITS
-    case K_SQUARE: {
-        /* a thin sheet: each crossing becomes an enter/exit pair at the same time */
-        int n = hits_z_plane(o, d, out, 1, D->tol_square_edge);
-        if (n) {
-            out[1] = out[0];
-            out[0].entering = 1;
-            out[1].entering = 0;
-        }
-        return 2 * n;
-    }
-    case K_PLANE:
-        *inside = plane_inside_at_start(o, d);
-        return hits_z_plane(o, d, out, 0, D->tol_square_edge);
-    case K_TAPERED: return hits_tapered(o, d, D->prim_param[p], out);
-    case K_TORUS:
-        return hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out);
-    case K_POLYHEDRON: {
-        const int64_t *aux = D->prim_aux + 2 * p;
-        return hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out);
-    }
     }
     return 0;
 }
@@ -275,7 +265,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     double og[3], dg[3];
     double shift = prim_generic_ray(inv, o, d, og, dg);
     int64_t n;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         const MeshView *m = &S->meshes[D->prim_aux[2 * p]];
         n = mesh_all(m, og, dg, w->mesh_stack, &w->raw, &out->h, &out->cap);
         if (n < 0) {
@@ -303,23 +293,24 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     return 1;
 }
 
-/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit); with `want_error` its bound on
- * t's rounding too (a shadow feeler needs only the yes or no). */
+/* The first hit of primitive p with t_min < t < t_max (Primitive.first_hit) and its bound on t's rounding;
+ * for a `feeler` (Primitive.occludes) only whether there is one whose whole error interval lies between
+ * t_min and t_max (compile.blocks_between: the feeler's end is protected as its start is). */
 static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
-                      double t_max, Hit *out, int want_error)
+                      double t_max, Hit *out, int feeler)
 {
     const SceneDesc *D = &S->d;
     if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
         return 0;
     const double *inv = D->prim_inverse + 16 * p, *rounding = D->prim_rounding + 4 * p;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         double og[3], dg[3];
         affine_point(inv, o, og);
         affine_vector(inv, d, dg);
         if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, out))
             return 0;
         out->shape = (int32_t)p;
-        if (want_error) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
+        if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
             error_frame(o, og, dg, rounding, &frame);
             out->err = time_error(&frame, point_error(&frame, out->t), dg, out->n);
@@ -343,11 +334,12 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (solid_analytic(D->prim_kind[p]))
             agree_with_crossing(&buf[i], dg);
         double error = point_error(&frame, t);
-        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n)) {
+        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n) &&
+            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, buf[i].n))) {
             *out = buf[i];
             out->t = t;
             out->shape = (int32_t)p;
-            if (want_error)  /* (plus the shape's own root error, where it has one: the torus) */
+            if (!feeler)  /* (plus the shape's own root error, where it has one: the torus) */
                 out->err = buf[i].err + time_error(&frame, error, dg, buf[i].n);
             return 1;
         }
@@ -360,7 +352,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
                          double t_max)
 {
     const SceneDesc *D = &S->d;
-    if (D->prim_kind[p] == K_MESH) {
+    if (RT_IS_MESH(D->prim_kind[p])) {
         if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
             return 0;
         const double *inv = D->prim_inverse + 16 * p;
@@ -370,7 +362,7 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
         return mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack);
     }
     Hit h;
-    return prim_first(S, w, p, o, d, t_min, t_max, &h, 0);
+    return prim_first(S, w, p, o, d, t_min, t_max, &h, 1);
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -397,7 +389,7 @@ static int object_first(const Scene *S, Work *w, int64_t ref, const double *o, c
                         double t_max, Hit *out)
 {
     if (ref >= 0)
-        return prim_first(S, w, ref, o, d, t_min, t_max, out, 1);
+        return prim_first(S, w, ref, o, d, t_min, t_max, out, 0);
     HitList *top = &w->lists[w->n_lists - 1];
     if (!object_hits(S, w, ref, o, d, 0, top))
         return 0;
@@ -415,8 +407,13 @@ static int object_occludes(const Scene *S, Work *w, int64_t ref, const double *o
 {
     if (ref >= 0)
         return prim_occludes(S, w, ref, o, d, t_min, t_max);
-    Hit h;
-    return object_first(S, w, ref, o, d, t_min, t_max, &h);
+    HitList *top = &w->lists[w->n_lists - 1];
+    if (!object_hits(S, w, ref, o, d, 0, top))
+        return 0;
+    for (int64_t i = 0; i < top->n; i++)  /* compile.blocks_between */
+        if (top->h[i].t - top->h[i].err > t_min && top->h[i].t + top->h[i].err < t_max)
+            return 1;
+    return 0;
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -650,7 +647,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, NAME);                    \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, 0, NAME);           \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -677,8 +674,26 @@ SHADE_PAIR(11101, 1, 1, 1, 0, 1)
 SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
+/* The effects of Blender scenes, traced by shade_general alone. */
+#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL | FX_SMOOTH_TERMINATOR)
+
+/* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
+ * FX_GENERAL pay for that choice per ray, the others never come here. */
+static void shade_general(const Scene *S, Work *w, const double *o, const double *d, int64_t level,
+                          const Media *media, double weight, double *out)
+{
+    int64_t fx = S->d.effects;
+    int l = (fx & FX_LIGHTING) != 0;
+    shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
+               l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
+               (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0,
+               (fx & FX_SMOOTH_TERMINATOR) != 0, shade_general);
+}
+
 static ShadeFn pick_shade(int64_t effects)
 {
+    if (effects & FX_GENERAL)
+        return shade_general;
     int l = (effects & FX_LIGHTING) != 0;
     int s = l && (effects & FX_SHADOWS) != 0, ct = l && (effects & FX_COOK_TORRANCE) != 0;
     int rl = (effects & FX_REFLECTION) != 0, rr = (effects & FX_REFRACTION) != 0;
@@ -746,11 +761,47 @@ static int pair_tree(Scene *S)
     return 1;
 }
 
+/* An object's box as the slab test sees it: an axis whose bounds are in the wrong order is the slab between
+ * them, one with a NaN bound is no constraint at all; and its centre (0 where not finite). */
+static void clean_box(const double *box, double *clean, double *centre)
+{
+    for (int k = 0; k < 3; k++) {
+        double lo = box[k], hi = box[3 + k];
+        if (lo != lo || hi != hi) {
+            lo = -INFINITY;
+            hi = INFINITY;
+        } else if (lo > hi) {
+            double x = lo; lo = hi; hi = x;
+        }
+        clean[k] = lo;
+        clean[3 + k] = hi;
+        double c = 0.5 * (lo + hi);
+        centre[k] = isfinite(c) ? c : 0.0;
+    }
+}
+
+/* Drops the hierarchy (and what refits keep about it). */
+static void drop_tree(Scene *S)
+{
+    free(S->nodes);
+    free(S->pairs);
+    free(S->items);
+    free(S->unbounded);
+    free(S->leaf_of);
+    free(S->parent_of);
+    S->nodes = NULL;
+    S->pairs = NULL;
+    S->items = S->unbounded = S->leaf_of = S->parent_of = NULL;
+    S->n_nodes = S->n_pairs = S->n_unbounded = 0;
+    S->root_first = S->root_count = 0;
+}
+
 /* The object hierarchy over the bounded objects (bvh_build.h) on up to `threads` threads, as PairNodes;
  * the unbounded objects listed apart.  0 when memory runs out. */
 static int build_tree(Scene *S, int64_t threads)
 {
     const SceneDesc *D = &S->d;
+    drop_tree(S);
     int64_t nb = 0;
     for (int64_t i = 0; i < D->n_objects; i++)
         nb += D->object_bounded[i] != 0;
@@ -760,9 +811,8 @@ static int build_tree(Scene *S, int64_t threads)
     S->unbounded = (int64_t *)malloc((size_t)(S->n_unbounded + 1) * sizeof(int64_t));
     S->items = (int64_t *)malloc((size_t)(nb + 1) * sizeof(int64_t));
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
-    /* The boxes as the slab test sees them: an axis whose bounds are in the wrong order is the slab
-     * between them, one with a NaN bound is no constraint at all.  Like centre[], by position in items[]
-     * (the partition moves them with their items): the passes over a node then read memory in order. */
+    /* The boxes as the slab test sees them (clean_box), like centre[] by position in items[] (the partition
+     * moves them with their items): the passes over a node then read memory in order. */
     double *boxes = (double *)malloc((size_t)(6 * nb + 1) * sizeof(double));
     if (!S->unbounded || !S->items || !centre || !boxes) {
         free(centre);
@@ -772,21 +822,7 @@ static int build_tree(Scene *S, int64_t threads)
     int64_t u = 0, b = 0;
     for (int64_t i = 0; i < D->n_objects; i++) {
         if (D->object_bounded[i]) {
-            const double *box = D->object_box + 6 * i;
-            double *clean = boxes + 6 * b;
-            for (int k = 0; k < 3; k++) {
-                double lo = box[k], hi = box[3 + k];
-                if (lo != lo || hi != hi) {
-                    lo = -INFINITY;
-                    hi = INFINITY;
-                } else if (lo > hi) {
-                    double x = lo; lo = hi; hi = x;
-                }
-                clean[k] = lo;
-                clean[3 + k] = hi;
-                double c = 0.5 * (lo + hi);
-                centre[3 * b + k] = isfinite(c) ? c : 0.0;
-            }
+            clean_box(D->object_box + 6 * i, boxes + 6 * b, centre + 3 * b);
             S->items[b++] = i;
         } else {
             S->unbounded[u++] = i;
@@ -803,6 +839,97 @@ static int build_tree(Scene *S, int64_t threads)
     if (nb > 0 && !S->nodes)
         return 0;
     return pair_tree(S);
+}
+
+/* Where each bounded object's leaf is and each pair's parent (Scene.leaf_of, parent_of), for refits.
+ * 0 when memory runs out. */
+static int tree_links(Scene *S)
+{
+    if (S->leaf_of)
+        return 1;
+    int64_t n = S->d.n_objects;
+    S->leaf_of = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    S->parent_of = (int64_t *)malloc((size_t)(S->n_pairs + 1) * sizeof(int64_t));
+    if (!S->leaf_of || !S->parent_of) {
+        free(S->leaf_of);
+        free(S->parent_of);
+        S->leaf_of = S->parent_of = NULL;
+        return 0;
+    }
+    for (int64_t i = 0; i < n; i++)
+        S->leaf_of[i] = -1;
+    if (S->n_pairs)
+        S->parent_of[0] = -1;
+    for (int64_t p = 0; p < S->n_pairs; p++)
+        for (int c = 0; c < 2; c++) {
+            const PairNode *pair = &S->pairs[p];
+            if (pair->count[c] == 0) {
+                S->parent_of[pair->child[c]] = 2 * p + c;
+                continue;
+            }
+            for (int64_t k = pair->child[c]; k < (int64_t)pair->child[c] + pair->count[c]; k++)
+                S->leaf_of[S->items[k]] = 2 * p + c;
+        }
+    return 1;
+}
+
+/* The box of child c of pair p, from its objects (a leaf) or its own pair's two children. */
+static void child_box(const Scene *S, int64_t p, int c, double *lo, double *hi)
+{
+    const PairNode *pair = &S->pairs[p];
+    box_empty(lo, hi);
+    if (pair->count[c] == 0) {
+        const PairNode *below = &S->pairs[pair->child[c]];
+        for (int k = 0; k < 2; k++) {
+            double blo[3] = {below->b[0][0][k], below->b[1][0][k], below->b[2][0][k]};
+            double bhi[3] = {below->b[0][1][k], below->b[1][1][k], below->b[2][1][k]};
+            box_grow(lo, hi, blo, bhi);
+        }
+        return;
+    }
+    for (int64_t k = pair->child[c]; k < (int64_t)pair->child[c] + pair->count[c]; k++) {
+        double box[6], centre[3];
+        clean_box(S->d.object_box + 6 * S->items[k], box, centre);
+        box_grow(lo, hi, box, box + 3);
+    }
+}
+
+static void set_child_box(Scene *S, int64_t p, int c)
+{
+    double lo[3], hi[3];
+    child_box(S, p, c, lo, hi);
+    for (int i = 0; i < 3; i++) {
+        S->pairs[p].b[i][0][c] = lo[i];
+        S->pairs[p].b[i][1][c] = hi[i];
+    }
+}
+
+/* Refit: the hierarchy keeps its shape and takes the objects' boxes as they are now (D->object_box), so
+ * that every box still holds its objects.  `objects` (n of them) are the objects whose boxes changed: each
+ * leaf holding one, and the pairs above it up to the root, are fitted again; with n < 0 (or many objects)
+ * every pair is, bottom up.  Which objects are bounded must not have changed (rt_edit rebuilds then).
+ * 0 when memory runs out.  (Kept apart from the build so that either can be reimplemented alone.) */
+static int refit_tree(Scene *S, const int64_t *objects, int64_t n)
+{
+    if (S->n_pairs == 0)  /* no boxes: the root leaf's objects are all tested */
+        return 1;
+    if (n < 0 || n > S->n_pairs / 8) {
+        /* children are numbered after their parents: the pairs in reverse order go bottom up */
+        for (int64_t p = S->n_pairs - 1; p >= 0; p--)
+            for (int c = 0; c < 2; c++)
+                set_child_box(S, p, c);
+        return 1;
+    }
+    if (!tree_links(S))
+        return 0;
+    for (int64_t k = 0; k < n; k++) {
+        int64_t link = S->leaf_of[objects[k]];
+        while (link >= 0) {
+            set_child_box(S, link / 2, (int)(link % 2));
+            link = S->parent_of[link / 2];
+        }
+    }
+    return 1;
 }
 
 static int64_t csg_depth_of(const SceneDesc *D, int64_t ref, int64_t guard)
@@ -872,35 +999,81 @@ void rt_destroy(void *handle)
     Scene *S = (Scene *)handle;
     if (!S)
         return;
+    drop_tree(S);
     free(S->meshes);
-    free(S->nodes);
-    free(S->pairs);
-    free(S->items);
-    free(S->unbounded);
     free(S->sealed);
     free(S);
 }
 
-/* Writes what rt_create refused into the caller's buffer (when it gave one) and fails. */
+/* Writes what was refused into the caller's buffer (when it gave one) and fails. */
 #define REFUSE(...)                                              \
     do {                                                         \
         if (error && capacity > 0)                               \
             snprintf(error, (size_t)capacity, __VA_ARGS__);      \
-        goto fail;                                               \
+        return 0;                                                \
     } while (0)
 
-void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity)
+/* How deep object_ok follows booleans (MAX_CSG_DEPTH of tracer.backend, and some). */
+#define MAX_CSG_CHECK 4096
+
+/* Primitive p's kind, material and mesh in range; 0 (and the reason in `error`) if not. */
+static int prim_ok(const SceneDesc *D, int64_t p, char *error, int64_t capacity)
 {
-    if (error && capacity > 0)
-        error[0] = '\0';
-    Scene *S = (Scene *)calloc(1, sizeof(Scene));
-    if (!S) {
-        if (error && capacity > 0)
-            snprintf(error, (size_t)capacity, "out of memory");
-        return NULL;
+    int kind = D->prim_kind[p];
+    if (kind < 0 || kind >= K_COUNT)
+        REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
+    if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
+        REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
+               (long long)D->n_materials);
+    if (RT_IS_MESH(kind) && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
+        REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
+               (long long)D->n_meshes);
+    return 1;
+}
+
+/* CSG node c's operation and children in range; 0 (and the reason in `error`) if not. */
+static int csg_ok(const SceneDesc *D, int64_t c, char *error, int64_t capacity)
+{
+    if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
+        !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
+        REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
+               (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
+    return 1;
+}
+
+/* Object i's reference, and every primitive and CSG node under it, in range (an edit's objects). */
+static int object_ok(const SceneDesc *D, int64_t i, char *error, int64_t capacity)
+{
+    if (!ref_ok(D, D->object_ref[i]))
+        REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
+    int64_t ref = D->object_ref[i], visited = 0;
+    int64_t stack[2 * MAX_CSG_CHECK + 2], top = 0;
+    stack[top++] = ref;
+    while (top) {
+        ref = stack[--top];
+        if (ref >= 0) {
+            if (!prim_ok(D, ref, error, capacity))
+                return 0;
+            continue;
+        }
+        if (++visited > D->n_csg || top + 2 > 2 * MAX_CSG_CHECK + 2)
+            REFUSE("object %lld: its booleans are not a tree of at most %d levels", (long long)i, MAX_CSG_CHECK);
+        if (!csg_ok(D, -ref - 1, error, capacity))
+            return 0;
+        stack[top++] = D->csg_right[-ref - 1];
+        stack[top++] = D->csg_left[-ref - 1];
     }
+    return 1;
+}
+
+/* Takes the description and checks every index the tracer will follow, so that a bad description fails here,
+ * not in a worker; the CSG depth.  With `objects` (n >= 0 of them: an edit that changed only those objects'
+ * rows), only what they refer to is checked again, and the CSG depth is kept.  0 (and the reason in `error`)
+ * when refused. */
+static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, int64_t n, char *error,
+                     int64_t capacity)
+{
     S->d = *desc;
-    S->ray_budget = RAY_BUDGET;
     /* The shading recursion uses about 1 KB of stack per level (gcc -fstack-usage: at most 976 bytes per
      * shade_* variant), so bounding the depth bounds the stack a worker thread needs, whatever the scene
      * says; tracer.model.traced_depth applies the same bound to the NumPy path. */
@@ -909,18 +1082,6 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
     if (S->d.max_depth < 0)
         S->d.max_depth = 0;
     const SceneDesc *D = &S->d;
-    /* Check every index the tracer will follow, so a bad description fails here, not in a worker. */
-    for (int64_t p = 0; p < D->n_prims; p++) {
-        int kind = D->prim_kind[p];
-        if (kind < 0 || kind >= K_COUNT)
-            REFUSE("primitive %lld has unknown shape kind %d", (long long)p, kind);
-        if (D->prim_material[p] < 0 || D->prim_material[p] >= D->n_materials)
-            REFUSE("primitive %lld has material %d of %lld", (long long)p, (int)D->prim_material[p],
-                   (long long)D->n_materials);
-        if (kind == K_MESH && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
-            REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
-                   (long long)D->n_meshes);
-    }
     if (D->effects & FX_TEXTURES) {
         for (int64_t m = 0; m < D->n_materials; m++) {
             int32_t texture = D->mat_texture[m];
@@ -934,23 +1095,58 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
                 REFUSE("image %lld is empty (%lld x %lld)", (long long)i, (long long)D->image_info[2 * i],
                        (long long)D->image_info[2 * i + 1]);
     }
+    for (int64_t m = 0; m < D->n_materials; m++)
+        if (D->mat_fresnel[m] < FRESNEL_CONSTANT || D->mat_fresnel[m] > FRESNEL_DIELECTRIC)
+            REFUSE("material %lld has fresnel mode %d", (long long)m, (int)D->mat_fresnel[m]);
+    /* (lights are read only where something is lit: then a physical one needs its shading variant) */
+    for (int64_t l = 0; l < D->n_lights; l++)
+        if (D->light_kind[l] < 0 || D->light_kind[l] > LIGHT_AREA || D->light_samples[l] < 1 ||
+            (D->light_kind[l] != LIGHT_POINT && (D->effects & FX_LIGHTING) && !(D->effects & FX_PHYSICAL_LIGHTS)))
+            REFUSE("light %lld has kind %d and %d samples", (long long)l, (int)D->light_kind[l],
+                   (int)D->light_samples[l]);
+    if (objects && n >= 0) {
+        for (int64_t k = 0; k < n; k++) {
+            if (objects[k] < 0 || objects[k] >= D->n_objects)
+                REFUSE("edited object %lld of %lld", (long long)objects[k], (long long)D->n_objects);
+            if (!object_ok(D, objects[k], error, capacity))
+                return 0;
+        }
+        return 1;
+    }
+    for (int64_t p = 0; p < D->n_prims; p++)
+        if (!prim_ok(D, p, error, capacity))
+            return 0;
     for (int64_t c = 0; c < D->n_csg; c++)
-        if (D->csg_op[c] < OP_UNION || D->csg_op[c] > OP_DIFFERENCE || !ref_ok(D, D->csg_left[c]) ||
-            !ref_ok(D, D->csg_right[c]) || D->csg_left[c] == -c - 1 || D->csg_right[c] == -c - 1)
-            REFUSE("CSG node %lld is inconsistent (operation %d, children %lld and %lld)", (long long)c,
-                   (int)D->csg_op[c], (long long)D->csg_left[c], (long long)D->csg_right[c]);
+        if (!csg_ok(D, c, error, capacity))
+            return 0;
     for (int64_t i = 0; i < D->n_objects; i++)
         if (!ref_ok(D, D->object_ref[i]))
             REFUSE("object %lld refers to nothing (%lld)", (long long)i, (long long)D->object_ref[i]);
+    S->csg_depth = 0;
     for (int64_t i = 0; i < D->n_objects; i++) {
         int64_t depth = csg_depth_of(D, D->object_ref[i], 0);
         if (depth > S->csg_depth)
             S->csg_depth = depth;
     }
+    return 1;
+}
+
+/* The meshes' views of the description's arrays, each checked (a mesh whose arrays and counts are those of
+ * the view it had before keeps that view's check).  0 (and the reason in `error`) when refused. */
+static int take_meshes(Scene *S, char *error, int64_t capacity)
+{
+    const SceneDesc *D = &S->d;
+    MeshView *old = S->meshes;
+    int64_t n_old = S->n_mesh_views;
     S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
-    if (!S->meshes)
+    S->n_mesh_views = D->n_meshes;
+    S->mesh_depth = 0;
+    if (!S->meshes) {
+        free(old);
         REFUSE("out of memory");
-    for (int64_t k = 0; k < D->n_meshes; k++) {
+    }
+    int ok = 1;
+    for (int64_t k = 0; k < D->n_meshes && ok; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         MeshView *m = &S->meshes[k];
         m->nodes = (const MeshNode *)D->mesh_nodes[k];
@@ -963,30 +1159,121 @@ void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, in
         m->tri_normal = D->mesh_tri_normal[k];
         m->vertices = D->mesh_vertices[k];
         m->normals = D->mesh_normals[k];
+        m->tri_uv = D->mesh_tri_uv[k];
         m->rounding_factor = D->mesh_constants[0];
         m->barycentric_max = D->mesh_constants[1];
         m->parallel_eps = D->mesh_constants[2];
         m->dedupe = D->mesh_constants[3];
         m->dedupe_adjacent = D->mesh_constants[4];
         m->extent = D->mesh_extent[k];
-        if (m->n_nodes < 0 || m->n_tris < 0 || m->n_vertices < 0 || m->n_normals < 0 ||
-            ((m->n_nodes || m->n_tris) && (!m->nodes || !m->order || !m->tri_vertex || !m->vertices)) ||
-            (m->tri_normal && !m->normals))
-            REFUSE("mesh %lld: missing arrays or negative counts", (long long)k);
-        if (!mesh_check_indices(m))
-            REFUSE("mesh %lld: an index is out of range", (long long)k);
-        m->depth = mesh_check_depth(m);
-        if (m->depth < 0)
-            REFUSE("mesh %lld: inconsistent hierarchy (or out of memory)", (long long)k);
+        const MeshView *seen = NULL;
+        for (int64_t j = 0; j < n_old && !seen; j++)
+            if (old[j].nodes == m->nodes && old[j].n_nodes == m->n_nodes && old[j].n_tris == m->n_tris &&
+                old[j].n_vertices == m->n_vertices && old[j].n_normals == m->n_normals && old[j].order == m->order &&
+                old[j].tri_vertex == m->tri_vertex && old[j].tri_normal == m->tri_normal &&
+                old[j].vertices == m->vertices && old[j].normals == m->normals)
+                seen = &old[j];
+        if (seen) {
+            m->depth = seen->depth;
+        } else {
+            if (m->n_nodes < 0 || m->n_tris < 0 || m->n_vertices < 0 || m->n_normals < 0 ||
+                ((m->n_nodes || m->n_tris) && (!m->nodes || !m->order || !m->tri_vertex || !m->vertices)) ||
+                (m->tri_normal && !m->normals)) {
+                if (error && capacity > 0)
+                    snprintf(error, (size_t)capacity, "mesh %lld: missing arrays or negative counts", (long long)k);
+                ok = 0;
+                break;
+            }
+            if (!mesh_check_indices(m)) {
+                if (error && capacity > 0)
+                    snprintf(error, (size_t)capacity, "mesh %lld: an index is out of range", (long long)k);
+                ok = 0;
+                break;
+            }
+            m->depth = mesh_check_depth(m);
+            if (m->depth < 0) {
+                if (error && capacity > 0)
+                    snprintf(error, (size_t)capacity, "mesh %lld: inconsistent hierarchy (or out of memory)",
+                             (long long)k);
+                ok = 0;
+                break;
+            }
+        }
         if (m->depth > S->mesh_depth)
             S->mesh_depth = m->depth;
     }
-    if (!build_tree(S, threads))
-        REFUSE("out of memory (or more than 2^31 bounded objects) building the object hierarchy");
+    free(old);
+    return ok;
+}
+
+void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity)
+{
+    if (error && capacity > 0)
+        error[0] = '\0';
+    Scene *S = (Scene *)calloc(1, sizeof(Scene));
+    if (!S) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
+        return NULL;
+    }
+    if (!take_desc(S, desc, NULL, -1, error, capacity) || !take_meshes(S, error, capacity))
+        goto fail;
+    if (!build_tree(S, threads)) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity,
+                     "out of memory (or more than 2^31 bounded objects) building the object hierarchy");
+        goto fail;
+    }
     return S;
 fail:
     rt_destroy(S);
     return NULL;
+}
+
+/* An edit of the scene in place (tracer.edit): `desc` describes the scene as it is now (its arrays edited,
+ * or new ones), and is checked and taken as rt_create takes it.  flags: EDIT_MESHES when the meshes may have
+ * changed (each mesh not seen before is checked), EDIT_REBUILD to build the object hierarchy anew (on
+ * `threads` threads); else the hierarchy is refitted to the boxes of `objects` (n of them; n < 0: every
+ * object's), or rebuilt where an object's boundedness or the number of objects changed.  Keeps the sealed
+ * table only while the numbers of objects and lights stay.  0 on success; -1 (with the reason in `error`) when
+ * the description is refused or memory runs out: the scene must then be destroyed, not traced. */
+int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads,
+            char *error, int64_t capacity)
+{
+    Scene *S = (Scene *)scene;
+    if (error && capacity > 0)
+        error[0] = '\0';
+    int64_t n_objects = S->d.n_objects, n_lights = S->d.n_lights;
+    int rebuild = (flags & EDIT_REBUILD) || desc->n_objects != n_objects || S->n_pairs == 0;
+    if (!rebuild && n != 0) {
+        /* an object that became bounded or unbounded is in the wrong list: only a build puts it right */
+        if (!tree_links(S)) {
+            if (error && capacity > 0)
+                snprintf(error, (size_t)capacity, "out of memory");
+            return -1;
+        }
+        for (int64_t k = 0; k < (n < 0 ? n_objects : n) && !rebuild; k++) {
+            int64_t i = n < 0 ? k : objects[k];
+            rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0) != (desc->object_bounded[i] != 0);
+        }
+    }
+    /* an edit in place (no object added or removed, the meshes as they were) checks its own objects again */
+    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD)) && desc->n_objects == n_objects &&
+                   desc->n_csg == S->d.n_csg && desc->n_prims == S->d.n_prims && n >= 0;
+    if (!take_desc(S, desc, in_place ? objects : NULL, in_place ? n : -1, error, capacity))
+        return -1;
+    if ((flags & EDIT_MESHES) && !take_meshes(S, error, capacity))
+        return -1;
+    if (S->d.n_objects != n_objects || S->d.n_lights != n_lights) {
+        free(S->sealed);
+        S->sealed = NULL;
+    }
+    if (rebuild ? !build_tree(S, threads) : !refit_tree(S, objects, n)) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory fitting the object hierarchy");
+        return -1;
+    }
+    return 0;
 }
 #undef REFUSE
 
@@ -1018,35 +1305,25 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity)
     return rt_create_threaded(desc, 1, error, capacity);
 }
 
-/* Which useless rays to skip (see tracer.savings); `sealed` has n_objects x n_lights entries, copied.
- * 0 on success, -1 out of memory. */
-int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed)
+/* tracer.savings.sealed_lights of the scene: `sealed` has `count` = n_objects x n_lights entries, copied
+ * (NULL: none known, no feeler is skipped for being inside).  0 on success, -1 for a wrong count or out of
+ * memory. */
+int rt_set_sealed(void *scene, const uint8_t *sealed, int64_t count)
 {
     Scene *S = (Scene *)scene;
-    size_t n = (size_t)(S->d.n_objects * S->d.n_lights);
-    uint8_t *copy = (uint8_t *)malloc(n ? n : 1);
-    if (!copy)
-        return -1;
-    if (n)
-        memcpy(copy, sealed, n);
+    uint8_t *copy = NULL;
+    if (sealed) {
+        if (count != S->d.n_objects * S->d.n_lights)
+            return -1;
+        copy = (uint8_t *)malloc(count ? (size_t)count : 1);
+        if (!copy)
+            return -1;
+        if (count)
+            memcpy(copy, sealed, (size_t)count);
+    }
     free(S->sealed);
     S->sealed = copy;
-    S->cutoff = cutoff;
-    S->savings = flags;
     return 0;
-}
-
-/* The ray budget: at most `budget` reflected and transmitted rays per camera ray (see shade.h). */
-void rt_set_budget(void *scene, int64_t budget)
-{
-    ((Scene *)scene)->ray_budget = budget < 0 ? 0 : budget;
-}
-
-/* A flag the tracer polls at every ray: while it is non-zero, rt_trace stops and returns -2.  NULL: none.
- * The flag must outlive the scene or be unset first. */
-void rt_set_cancel(void *scene, const int32_t *flag)
-{
-    ((Scene *)scene)->cancel = flag;
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -1065,6 +1342,10 @@ typedef struct {
     int8_t *flags;
     double t_max;
     ShadeFn shade;
+    double cutoff;        /* JOB_TRACE: the savings it makes (Work.cutoff, Work.savings) */
+    int64_t savings;
+    int64_t ray_budget;   /* JOB_TRACE: Work.ray_budget */
+    const volatile int32_t *cancel;  /* Work.cancel */
     _Atomic int64_t next;
 } Job;
 
@@ -1087,6 +1368,10 @@ static void *run_worker(void *arg)
         wk->failed = 1;
         return NULL;
     }
+    w.cutoff = job->cutoff;
+    w.savings = job->savings;
+    w.ray_budget = job->ray_budget;
+    w.cancel = job->cancel;
     Media air;
     memset(&air, 0, sizeof(air));
     for (;;) {
@@ -1094,7 +1379,7 @@ static void *run_worker(void *arg)
         if (start >= job->n)
             break;
         int64_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
-        if (stop_requested(S)) {
+        if (stop_requested(&w)) {
             w.stopped = 1;
             break;
         }
@@ -1102,7 +1387,7 @@ static void *run_worker(void *arg)
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
                 w.rays_used = 0;
-                w.ray_limit = S->ray_budget;
+                w.ray_limit = w.ray_budget;
                 job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
@@ -1172,8 +1457,12 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
     return failed ? -1 : stopped ? -2 : 0;
 }
 
+/* Shades n camera rays.  `ray_budget`: the most reflected and transmitted rays each one's tree traces (see
+ * shade.h); `cancel`: a flag polled at every ray (NULL: none) which, set, stops the batch: -2 is returned
+ * (as when a signal is heard, interrupt.h) and the colours are not to be used. */
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
-             int64_t *counts, int64_t threads)
+             int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget,
+             const int32_t *cancel)
 {
     const Scene *S = (const Scene *)scene;
     Job job;
@@ -1185,6 +1474,10 @@ int rt_trace(void *scene, int64_t n, const double *origins, const double *direct
     job.d = directions;
     job.colors = colors;
     job.shade = pick_shade(S->d.effects);
+    job.cutoff = cutoff;
+    job.savings = savings;
+    job.ray_budget = ray_budget < 0 ? 0 : ray_budget;
+    job.cancel = cancel;
     counts[RAY_CAMERA] += n;
     return run_job(&job, threads, counts);
 }
@@ -1257,7 +1550,7 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
  * untextured); for the tests, which compare it with the NumPy reference point by point.  -1 on a bad
  * primitive index. */
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out)
+                      const double *bary, double *out)
 {
     const Scene *S = (const Scene *)scene;
     for (int64_t i = 0; i < n; i++)
@@ -1265,7 +1558,7 @@ int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double
             return -1;
     for (int64_t i = 0; i < n; i++) {
         if (S->d.effects & FX_TEXTURES)
-            texture_color(S, shape[i], points + 3 * i, part[i], out + 3 * i);
+            texture_color(S, shape[i], points + 3 * i, part[i], bary ? bary + 2 * i : NULL, out + 3 * i);
         else
             out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = 1.0;
     }

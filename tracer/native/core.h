@@ -43,9 +43,12 @@ void *rt_create(const SceneDesc *desc, char *error, int64_t capacity);
 void *rt_create_threaded(const SceneDesc *desc, int64_t threads, char *error, int64_t capacity);
 int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *root);
 void rt_destroy(void *scene);
-int rt_set_savings(void *scene, double cutoff, int64_t flags, const uint8_t *sealed);
+int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads,
+            char *error, int64_t capacity);
+int rt_set_sealed(void *scene, const uint8_t *sealed, int64_t count);
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
-             int64_t *counts, int64_t threads);
+             int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget,
+             const int32_t *cancel);
 int rt_first_hits(void *scene, int64_t n, const double *origins, const double *directions, double *t,
                   double *normal, int32_t *shape, int32_t *object, int8_t *entering, int64_t threads);
 int rt_occluded(void *scene, int64_t n, const double *origins, const double *directions, double t_max,
@@ -54,6 +57,6 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
                        int32_t *part, double *uv, int8_t *inside_at_start);
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part,
-                      double *out);
+                      const double *bary, double *out);
 
 #endif

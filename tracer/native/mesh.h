@@ -37,6 +37,7 @@ typedef struct {
     const int32_t *tri_vertex;  /* 3 per triangle */
     const int32_t *tri_normal;  /* 3 per triangle (below 0: the triangle has no normals), or NULL */
     const double *vertices, *normals;
+    const double *tri_uv;       /* 6 per triangle: its corners' texture coordinates, or NULL */
     int64_t n_tris, n_vertices, n_normals;
     double extent;
     int64_t depth;  /* longest root-to-leaf path, in nodes */
@@ -174,6 +175,33 @@ static inline int mesh_corner_normals(const MeshView *m, int64_t tri, double c[3
             c[j][k] = length > 0.0 ? m->normals[3 * (int64_t)index[j] + k] / length : 0.0;
     }
     return has;
+}
+
+/* TriangleMesh.smooth_lift: how far the point at barycentrics (b1, b2) of triangle tri moves onto the smooth
+ * surface of its vertex normals (generic); returns 0 (and no move) for a triangle without normals. */
+static inline int mesh_smooth_lift(const MeshView *m, int64_t tri, double b1, double b2, double *lift)
+{
+    double c[3][3];
+    int has = mesh_corner_normals(m, tri, c);
+    lift[0] = lift[1] = lift[2] = 0.0;
+    if (!has)
+        return 0;
+    const double *p[3];
+    mesh_corners(m, tri, &p[0], &p[1], &p[2]);
+    double w[3] = {1.0 - b1 - b2, b1, b2}, g[3], mixed[3];
+    for (int k = 0; k < 3; k++)
+        g[k] = (w[0] * p[0][k] + w[1] * p[1][k]) + w[2] * p[2][k];
+    for (int j = 0; j < 3; j++) {
+        double to[3] = {g[0] - p[j][0], g[1] - p[j][1], g[2] - p[j][2]};
+        double below = nan_min(dot3(to, c[j]), 0.0);
+        for (int k = 0; k < 3; k++) {
+            double q = g[k] - below * c[j][k];
+            mixed[k] = j == 0 ? w[0] * q : mixed[k] + w[j] * q;
+        }
+    }
+    for (int k = 0; k < 3; k++)
+        lift[k] = mixed[k] - g[k];
+    return 1;
 }
 
 /* The winding normal E1 x E2 of triangle tri into w; returns whether the unit corner normals, summed,

@@ -42,6 +42,39 @@ static inline double max_abs3(const double *a)
     return m;
 }
 
+/* tracer.numerics.norm3: |v| without overflow or underflow.  Where |v|^2 leaves [2^-900, 2^900], v is
+ * scaled by the power of two nearest its largest component first (exact, so no bit changes where the plain
+ * form would have been right). */
+static inline double norm3(const double *v)
+{
+    double squared = dot3(v, v);
+    if (squared >= 0x1p-900 && squared <= 0x1p900)
+        return sqrt(squared);
+    double largest = max_abs3(v);
+    if (largest == 0.0)
+        return 0.0;
+    int exponent;
+    frexp(isfinite(largest) ? largest : 1.0, &exponent);
+    double s[3] = {ldexp(v[0], -exponent), ldexp(v[1], -exponent), ldexp(v[2], -exponent)};
+    return ldexp(sqrt(dot3(s, s)), exponent);
+}
+
+/* tracer.numerics.feeler_to: the direction from `start` to `target` and the t at which it arrives (1, or a
+ * power of two where the feeler is longer than FEELER_REACH = 2^64 and is scaled by it: no overflow). */
+static inline double feeler_to(const double *start, const double *target, double *d)
+{
+    for (int i = 0; i < 3; i++)
+        d[i] = target[i] - start[i];
+    double largest = max_abs3(d);
+    if (!(largest > 0x1p64) || !isfinite(largest))
+        return 1.0;
+    int exponent;
+    frexp(largest, &exponent);
+    for (int i = 0; i < 3; i++)
+        d[i] = ldexp(d[i], -exponent);
+    return ldexp(1.0, exponent);
+}
+
 /* p' = M p for an affine row-major 4x4 */
 static inline void affine_point(const double *m, const double *p, double *out)
 {
@@ -61,6 +94,19 @@ static inline void normal_to_world(const double *inv, const double *n, double *o
 {
     for (int j = 0; j < 3; j++)
         out[j] = n[0] * inv[j] + n[1] * inv[4 + j] + n[2] * inv[8 + j];
+}
+
+/* tracer.terminator.world_vectors: the generic vector v in world coordinates, x with inverse x = v (the
+ * 3 x 3 part of the primitive's inverse, row-major in 16), by cofactors. */
+static inline void generic_to_world_vector(const double *a, const double *v, double *out)
+{
+    double c00 = a[5] * a[10] - a[6] * a[9], c01 = a[6] * a[8] - a[4] * a[10], c02 = a[4] * a[9] - a[5] * a[8];
+    double c10 = a[2] * a[9] - a[1] * a[10], c11 = a[0] * a[10] - a[2] * a[8], c12 = a[1] * a[8] - a[0] * a[9];
+    double c20 = a[1] * a[6] - a[2] * a[5], c21 = a[2] * a[4] - a[0] * a[6], c22 = a[0] * a[5] - a[1] * a[4];
+    double det = a[0] * c00 + a[1] * c01 + a[2] * c02;
+    out[0] = (c00 * v[0] + c10 * v[1] + c20 * v[2]) / det;
+    out[1] = (c01 * v[0] + c11 * v[1] + c21 * v[2]) / det;
+    out[2] = (c02 * v[0] + c12 * v[1] + c22 * v[2]) / det;
 }
 
 /* tracer.numerics.generic_time_error for the hits of one generic ray, its per-ray parts computed once.

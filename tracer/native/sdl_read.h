@@ -2,7 +2,7 @@
  * (tracer/sdl/fastread.py is its Python side, tracer/sdl/parser.py the reference it must equal).
  *
  * It either reads the whole text into columns (one row per shape: kind, the top three rows of its matrix,
- * material, taper, line and column of its keyword; plus lights, cameras, settings and name comments), or it
+ * material, parameters, line and column of its keyword; plus lights, cameras, settings and name comments), or it
  * declines: it stops at the first thing outside its subset (a def, a brace, a boolean, a mesh, an unknown
  * word, a word where a number belongs, a statement cut short by the end of the text, a pop without a push,
  * a transform that is not clearly invertible, a value the Python reader would refuse or clamp) and says why
@@ -23,10 +23,13 @@
  *   "+ 0.0" terms included;
  * - materials: one row per distinct value of the fields (compared with ==, so -0.0 equals 0.0 and the first
  *   value seen is kept), as the Python reader's dict of Materials;
- * - ``! name: text`` comments name the next shape keyword (a later one before it wins).
+ * - ``! name: text`` comments name the next shape keyword (a later one before it wins); one before a
+ *   ``light`` names the light, which is left to the Python reader.
  *
- * The keywords come from the caller (its vocabulary: word, action, argument), so the tables of material
- * keywords and shape kinds are the Python reader's own; the actions are named in sdl_action_names.
+ * The keywords come from the caller (its vocabulary: word, action, argument, count of numbers), so the tables
+ * of material keywords and shape kinds (with how many parameters each reads) are the Python reader's own;
+ * the actions are the functions below, in the order of contract.h's RT_SDL_ACTIONS, which is generated from
+ * tracer/sdl/statements.py (each statement names its action there).
  * Memory is O(text size); there is no recursion. */
 #ifndef RT_SDL_READ_H
 #define RT_SDL_READ_H
@@ -36,28 +39,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-enum {
-    SDL_LIGHT, SDL_GLOBAL_AMBIENT, SDL_BACKGROUND, SDL_MIN_REFLECTIVITY, SDL_MIN_TRANSPARENCY,
-    SDL_MAX_RECURSION_DEPTH, SDL_CAMERA, SDL_COLOR_MATERIAL, SDL_FLOAT_MATERIAL, SDL_TEXTURE, SDL_PARAMETERS,
-    SDL_DEFAULT_MATERIALS, SDL_TRANSLATE, SDL_SCALE, SDL_ROTATE, SDL_PUSH, SDL_POP, SDL_IDENTITY, SDL_SHAPE,
-    SDL_TAPERED_SHAPE, SDL_ACTIONS
-};
-
-/* In the enum's order: the Python side finds each action's code by its name here. */
-static const char sdl_action_names[] =
-    "light globalAmbient background minReflectivity minTransparency maxRecursionDepth camera colorMaterial "
-    "floatMaterial texture parameters defaultMaterials translate scale rotate push pop identityAffine shape "
-    "taperedShape";
-
 /* Why a text was declined (0: read). */
 enum {
     SDL_READ = 0, SDL_DECLINE_WORD, SDL_DECLINE_BRACE, SDL_DECLINE_NUMBER, SDL_DECLINE_END, SDL_DECLINE_VALUE,
     SDL_DECLINE_POP, SDL_DECLINE_AXIS, SDL_DECLINE_TRANSFORM, SDL_DECLINE_SIZE, SDL_DECLINE_MEMORY,
-    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII
+    SDL_DECLINE_VOCABULARY, SDL_DECLINE_ANGLE, SDL_DECLINE_ASCII, SDL_DECLINE_NAMED_LIGHT
 };
 
 static const char sdl_decline_names[] =
-    "read word brace number end value pop axis transform size memory vocabulary angle ascii";
+    "read word brace number end value pop axis transform size memory vocabulary angle ascii namedLight";
 
 /* A material row: the Material's fields in its order (four colours, six numbers), then the texture, the
  * count of parameters and the parameters (unused ones 0). */
@@ -80,7 +70,7 @@ typedef struct {
     int16_t *kinds;          /* shapes */
     double *affines;         /* shapes x 12 */
     int32_t *material_ids;   /* shapes */
-    double *tapered_radii;   /* shapes */
+    double *parameters;      /* shapes x PRIM_PARAMS: the numbers after each shape's keyword, 0 after them */
     int32_t *lines, *columns;
     double *material_rows;   /* materials x SDL_MATERIAL_WIDTH */
     double *light_rows;      /* lights x 6 */
@@ -132,6 +122,7 @@ typedef struct {
     int32_t length[SDL_VOCABULARY_SLOTS];
     int32_t action[SDL_VOCABULARY_SLOTS];  /* -1: empty */
     int32_t argument[SDL_VOCABULARY_SLOTS];
+    int32_t count[SDL_VOCABULARY_SLOTS];   /* numbers a shape keyword reads (its parameters) */
 } SdlVocabulary;
 
 static uint32_t sdl_hash_word(const char *word, int64_t length)
@@ -142,7 +133,7 @@ static uint32_t sdl_hash_word(const char *word, int64_t length)
     return h;
 }
 
-/* words: the words, each ended by a NUL; codes: (action, argument) for each.  0 if they do not fit. */
+/* words: the words, each ended by a NUL; codes: (action, argument, count) for each.  0 if they do not fit. */
 static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_length, const int32_t *codes,
                           int64_t count)
 {
@@ -153,7 +144,8 @@ static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_len
     int64_t at = 0;
     for (int64_t n = 0; n < count; n++) {
         const char *end = at < words_length ? memchr(words + at, '\0', (size_t)(words_length - at)) : NULL;
-        if (end == NULL || codes[2 * n] < 0 || codes[2 * n] >= SDL_ACTIONS)
+        const int32_t *code = codes + 3 * n;
+        if (end == NULL || code[0] < 0 || code[0] >= RT_SDL_ACTION_COUNT || code[2] < 0 || code[2] > PRIM_PARAMS)
             return 0;
         int64_t length = end - (words + at);
         uint32_t slot = sdl_hash_word(words + at, length) & (SDL_VOCABULARY_SLOTS - 1);
@@ -161,8 +153,9 @@ static int sdl_vocabulary(SdlVocabulary *v, const char *words, int64_t words_len
             slot = (slot + 1) & (SDL_VOCABULARY_SLOTS - 1);
         v->word[slot] = words + at;
         v->length[slot] = (int32_t)length;
-        v->action[slot] = codes[2 * n];
-        v->argument[slot] = codes[2 * n + 1];
+        v->action[slot] = code[0];
+        v->argument[slot] = code[1];
+        v->count[slot] = code[2];
         at += length + 1;
     }
     return 1;
@@ -300,10 +293,10 @@ static int sdl_numbers(SdlLexer *lx, int count, double *out)
 
 /* ---- transforms: transforms.py's operations, in its order ---- */
 
-static const double sdl_identity[12] = {1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0};
+static const double sdl_identity_affine[12] = {1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0};
 
 /* m times translation(dx, dy, dz) (transforms.affine_translate) */
-static void sdl_translate(double *m, double dx, double dy, double dz)
+static void sdl_translate_by(double *m, double dx, double dy, double dz)
 {
     for (int r = 0; r < 3; r++) {
         double *row = m + 4 * r;
@@ -312,7 +305,7 @@ static void sdl_translate(double *m, double dx, double dy, double dz)
 }
 
 /* m times scaling(sx, sy, sz) (transforms.affine_scale) */
-static void sdl_scale(double *m, double sx, double sy, double sz)
+static void sdl_scale_by(double *m, double sx, double sy, double sz)
 {
     for (int r = 0; r < 3; r++) {
         double *row = m + 4 * r;
@@ -471,8 +464,8 @@ static int sdl_whole(double value)
     return value == floor(value);  /* (values are finite here) */
 }
 
-static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int32_t material, double taper,
-                         int64_t line, int64_t column)
+static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int32_t material,
+                         const double *parameters, int64_t line, int64_t column)
 {
     int64_t n = res->shapes;
     if (n == res->shape_capacity) {  /* the shape columns grow together */
@@ -480,7 +473,7 @@ static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int
         if (!sdl_resize((void **)&res->kinds, capacity, sizeof(int16_t)) ||
             !sdl_resize((void **)&res->affines, capacity, 12 * sizeof(double)) ||
             !sdl_resize((void **)&res->material_ids, capacity, sizeof(int32_t)) ||
-            !sdl_resize((void **)&res->tapered_radii, capacity, sizeof(double)) ||
+            !sdl_resize((void **)&res->parameters, capacity, PRIM_PARAMS * sizeof(double)) ||
             !sdl_resize((void **)&res->lines, capacity, sizeof(int32_t)) ||
             !sdl_resize((void **)&res->columns, capacity, sizeof(int32_t)))
             return 0;
@@ -489,7 +482,7 @@ static int sdl_add_shape(SdlResult *res, int16_t kind, const double *affine, int
     res->kinds[n] = kind;
     memcpy(res->affines + 12 * n, affine, 12 * sizeof(double));
     res->material_ids[n] = material;
-    res->tapered_radii[n] = taper;
+    memcpy(res->parameters + PRIM_PARAMS * n, parameters, PRIM_PARAMS * sizeof(double));
     res->lines[n] = (int32_t)line;
     res->columns[n] = (int32_t)column;
     res->shapes = n + 1;
@@ -512,21 +505,302 @@ static int sdl_libm_free(double angle)
     return fmod(angle, 90.0) == 0.0 && fabs(angle) <= 1e6;
 }
 
-/* Reads text into res (zeroed by the caller); returns SDL_READ or why it declined.  With shared_libm 0
- * (the caller's math library may not be this library's: Python's cos and sin could differ in the last
- * bit), rotations by angles other than sdl_libm_free ones are declined. */
+/* What the actions read and change while a text is read. */
+typedef struct {
+    SdlResult *res;
+    SdlLexer *lx;
+    const double *defaults;    /* the default material row */
+    int shared_libm;           /* see sdl_read */
+    double material[SDL_MATERIAL_WIDTH];
+    int32_t material_id;       /* of `material`, once a shape needed it; -1: not looked up since it changed */
+    int checked;               /* whether the top transform was found clearly invertible */
+    int64_t start;             /* where the statement's keyword starts */
+} SdlReader;
+
+/* An action's status once it has read past its keyword: where the text is declined is where reading stopped
+ * (the first byte beyond ASCII; the keyword itself at the end of the text). */
+static int sdl_stopped(SdlReader *r, int status)
+{
+    if (status == SDL_DECLINE_ASCII)
+        r->res->decline_offset = r->lx->non_ascii;
+    else if (status != SDL_READ && status != SDL_DECLINE_END)
+        r->res->decline_offset = r->lx->pos;
+    return status;
+}
+
+/* `count` numbers into out, and whether the text goes on (sdl_stopped). */
+static int sdl_read_numbers(SdlReader *r, int count, double *out)
+{
+    return sdl_stopped(r, sdl_numbers(r->lx, count, out));
+}
+
+static double *sdl_top(SdlReader *r)
+{
+    return r->res->stack + 12 * (r->res->depth - 1);
+}
+
+/* ---- the actions (tracer/sdl/statements.py names each statement's; a status each) ---- */
+
+static int sdl_light(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    if (r->lx->name_length > 0)  /* a name comment names the light: Light.name, left to the Python reader */
+        return SDL_DECLINE_NAMED_LIGHT;
+    double v[6];
+    int status = sdl_read_numbers(r, 6, v);
+    if (status == SDL_READ && !sdl_add_row(&r->res->light_rows, &r->res->lights, &r->res->light_capacity, v, 6))
+        return sdl_stopped(r, SDL_DECLINE_MEMORY);
+    return status;
+}
+
+/* A setting of `count` numbers at `out`, marked set by `bit`. */
+static int sdl_setting(SdlReader *r, int count, double *out, int64_t bit)
+{
+    int status = sdl_read_numbers(r, count, out);
+    if (status == SDL_READ)
+        r->res->settings_set |= bit;
+    return status;
+}
+
+static int sdl_global_ambient(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    return sdl_setting(r, 3, r->res->global_ambient, SDL_SET_GLOBAL_AMBIENT);
+}
+
+static int sdl_background(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    return sdl_setting(r, 3, r->res->background, SDL_SET_BACKGROUND);
+}
+
+static int sdl_min_reflectivity(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    return sdl_setting(r, 1, &r->res->min_reflectivity, SDL_SET_MIN_REFLECTIVITY);
+}
+
+static int sdl_min_transparency(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    return sdl_setting(r, 1, &r->res->min_transparency, SDL_SET_MIN_TRANSPARENCY);
+}
+
+/* beyond the limit the Python reader warns and clamps; not whole or negative is an error */
+static int sdl_max_recursion_depth(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v;
+    int status = sdl_read_numbers(r, 1, &v);
+    if (status != SDL_READ)
+        return status;
+    if (!sdl_whole(v) || v < 0.0 || v > SDL_MAX_DEPTH)
+        return sdl_stopped(r, SDL_DECLINE_VALUE);
+    r->res->max_recursion_depth = (int64_t)v;
+    r->res->settings_set |= SDL_SET_MAX_RECURSION_DEPTH;
+    return SDL_READ;
+}
+
+/* checked by the caller, as parser._camera checks it */
+static int sdl_camera(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v[10];
+    int status = sdl_read_numbers(r, 10, v);
+    if (status == SDL_READ && !sdl_add_row(&r->res->camera_rows, &r->res->cameras, &r->res->camera_capacity, v, 10))
+        return sdl_stopped(r, SDL_DECLINE_MEMORY);
+    return status;
+}
+
+/* `width` numbers into the material's slot `argument` (a field of its row before the texture) */
+static int sdl_material_field(SdlReader *r, int32_t argument, int width)
+{
+    if (argument < 0 || argument + width > SDL_MATERIAL_TEXTURE)
+        return SDL_DECLINE_VOCABULARY;
+    int status = sdl_read_numbers(r, width, r->material + argument);
+    if (status == SDL_READ)
+        r->material_id = -1;
+    return status;
+}
+
+static int sdl_color_material(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)count;
+    return sdl_material_field(r, argument, 3);
+}
+
+static int sdl_float_material(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)count;
+    return sdl_material_field(r, argument, 1);
+}
+
+static int sdl_texture(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v;
+    int status = sdl_read_numbers(r, 1, &v);
+    if (status != SDL_READ)
+        return status;
+    if (!sdl_whole(v) || v < -2147483648.0 || v > 2147483647.0)
+        return sdl_stopped(r, SDL_DECLINE_VALUE);
+    r->material[SDL_MATERIAL_TEXTURE] = v + 0.0;  /* int(-0.0) is 0 */
+    r->material_id = -1;
+    return SDL_READ;
+}
+
+static int sdl_parameters(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v;
+    int status = sdl_read_numbers(r, 1, &v);
+    if (status != SDL_READ)
+        return status;
+    if (!sdl_whole(v) || v < 0.0 || v > SDL_MAX_PARAMETERS)
+        return sdl_stopped(r, SDL_DECLINE_VALUE);
+    double values[SDL_MAX_PARAMETERS] = {0.0};
+    if ((status = sdl_read_numbers(r, (int)v, values)) == SDL_READ) {
+        r->material[SDL_MATERIAL_COUNT] = (int)v;
+        memcpy(r->material + SDL_MATERIAL_PARAMETERS, values, sizeof values);
+        r->material_id = -1;
+    }
+    return status;
+}
+
+static int sdl_default_materials(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    memcpy(r->material, r->defaults, sizeof r->material);
+    r->material_id = -1;
+    return SDL_READ;
+}
+
+static int sdl_translate(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v[3];
+    int status = sdl_read_numbers(r, 3, v);
+    if (status == SDL_READ) {
+        sdl_translate_by(sdl_top(r), v[0], v[1], v[2]);
+        r->checked = 0;
+    }
+    return status;
+}
+
+static int sdl_scale(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v[3];
+    int status = sdl_read_numbers(r, 3, v);
+    if (status == SDL_READ) {
+        sdl_scale_by(sdl_top(r), v[0], v[1], v[2]);
+        r->checked = 0;
+    }
+    return status;
+}
+
+/* With shared_libm 0, angles other than sdl_libm_free ones are declined. */
+static int sdl_rotate(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    double v[4], m[9];
+    int status = sdl_read_numbers(r, 4, v);
+    if (status != SDL_READ)
+        return status;
+    if (!r->shared_libm && !sdl_libm_free(v[0]))
+        return sdl_stopped(r, SDL_DECLINE_ANGLE);
+    if (!sdl_rotation(v[0], v[1], v[2], v[3], m))
+        return sdl_stopped(r, SDL_DECLINE_AXIS);
+    sdl_times(sdl_top(r), m);
+    r->checked = 0;
+    return SDL_READ;
+}
+
+static int sdl_push(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    SdlResult *res = r->res;
+    if (!sdl_reserve((void **)&res->stack, &res->stack_capacity, res->depth + 1, 12 * sizeof(double)))
+        return SDL_DECLINE_MEMORY;
+    memcpy(res->stack + 12 * res->depth, res->stack + 12 * (res->depth - 1), 12 * sizeof(double));
+    res->depth++;
+    return SDL_READ;
+}
+
+static int sdl_pop(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    if (r->res->depth == 1)
+        return SDL_DECLINE_POP;
+    r->res->depth--;
+    r->checked = 0;
+    return SDL_READ;
+}
+
+static int sdl_identity(SdlReader *r, int32_t argument, int32_t count)
+{
+    (void)argument, (void)count;
+    memcpy(sdl_top(r), sdl_identity_affine, sizeof sdl_identity_affine);
+    r->checked = 0;
+    return SDL_READ;
+}
+
+/* A shape of kind code `argument` reading `count` parameters: a row of the shape columns, with the name a
+ * comment gave it. */
+static int sdl_shape(SdlReader *r, int32_t argument, int32_t count)
+{
+    SdlResult *res = r->res;
+    SdlLexer *lx = r->lx;
+    int64_t line = lx->line, column = r->start - lx->line_start + 1;
+    int64_t name_start = lx->name_start, name_length = lx->name_length;
+    lx->name_length = 0;  /* a name comment names the first shape keyword after it */
+    double parameters[PRIM_PARAMS] = {0.0};
+    int status = sdl_read_numbers(r, count, parameters);
+    if (status != SDL_READ)
+        return status;
+    double *top = sdl_top(r);
+    if (!r->checked && !sdl_clearly_invertible(top))
+        return SDL_DECLINE_TRANSFORM;
+    r->checked = 1;
+    if (line > INT32_MAX || column > INT32_MAX || argument < 0 || argument > INT16_MAX)
+        return SDL_DECLINE_SIZE;
+    if (r->material_id < 0 && (r->material_id = sdl_material_id(res, r->material)) < 0)
+        return SDL_DECLINE_MEMORY;
+    if (name_length > 0) {
+        int64_t row[3] = {res->shapes, name_start, name_length};
+        if (!sdl_reserve((void **)&res->name_rows, &res->name_capacity, res->names + 1, sizeof row))
+            return SDL_DECLINE_MEMORY;
+        memcpy(res->name_rows + 3 * res->names++, row, sizeof row);
+    }
+    if (!sdl_add_shape(res, (int16_t)argument, top, r->material_id, parameters, line, column))
+        return SDL_DECLINE_MEMORY;
+    return SDL_READ;
+}
+
+/* The action of code `action` (tracer/sdl/statements.py's ACTIONS, contract.h's RT_SDL_ACTIONS). */
+static inline int sdl_act(SdlReader *r, int32_t action, int32_t argument, int32_t count)
+{
+    switch (action) {
+#define SDL_ACTION_CASE(code, function) case code: return function(r, argument, count);
+    RT_SDL_ACTIONS(SDL_ACTION_CASE)
+#undef SDL_ACTION_CASE
+    }
+    return SDL_DECLINE_VOCABULARY;
+}
+
+/* Reads text into res (zeroed by the caller); returns SDL_READ or why it declined, with res->decline_offset
+ * where: the keyword that cannot be read, or where its statement stopped being readable.  With shared_libm 0
+ * (the caller's math library may not be this library's: Python's cos and sin could differ in the last bit),
+ * rotations by angles other than sdl_libm_free ones are declined. */
 static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabulary, const double *defaults,
                     int shared_libm)
 {
-    double material[SDL_MATERIAL_WIDTH];
-    memcpy(material, defaults, sizeof material);
-    int32_t material_id = -1;  /* of `material`, once a shape needed it */
+    SdlReader r = {res, lx, defaults, shared_libm, {0.0}, -1, 0, 0};
+    memcpy(r.material, defaults, sizeof r.material);
     if (!sdl_reserve((void **)&res->stack, &res->stack_capacity, 1, 12 * sizeof(double)))
         return SDL_DECLINE_MEMORY;
-    memcpy(res->stack, sdl_identity, sizeof sdl_identity);
+    memcpy(res->stack, sdl_identity_affine, sizeof sdl_identity_affine);
     res->depth = 1;
-    int checked = 0;  /* whether the top transform was found clearly invertible */
-    double v[10];
     for (;;) {
         int64_t start, end;
         int got = sdl_next(lx, &start, &end);
@@ -539,170 +813,13 @@ static int sdl_read(SdlResult *res, SdlLexer *lx, const SdlVocabulary *vocabular
         res->decline_offset = lx->pos;
         if (got < 0)
             return SDL_DECLINE_BRACE;
-        res->decline_offset = start;
+        res->decline_offset = r.start = start;
         int slot = sdl_lookup(vocabulary, lx->text + start, end - start);
         if (slot < 0)
             return SDL_DECLINE_WORD;
-        int argument = vocabulary->argument[slot];
-        double *top = res->stack + 12 * (res->depth - 1);
-        int status = SDL_READ;
-        switch (vocabulary->action[slot]) {
-        case SDL_LIGHT:
-            if ((status = sdl_numbers(lx, 6, v)) == SDL_READ &&
-                !sdl_add_row(&res->light_rows, &res->lights, &res->light_capacity, v, 6))
-                status = SDL_DECLINE_MEMORY;
-            break;
-        case SDL_GLOBAL_AMBIENT:
-            if ((status = sdl_numbers(lx, 3, res->global_ambient)) == SDL_READ)
-                res->settings_set |= SDL_SET_GLOBAL_AMBIENT;
-            break;
-        case SDL_BACKGROUND:
-            if ((status = sdl_numbers(lx, 3, res->background)) == SDL_READ)
-                res->settings_set |= SDL_SET_BACKGROUND;
-            break;
-        case SDL_MIN_REFLECTIVITY:
-            if ((status = sdl_numbers(lx, 1, &res->min_reflectivity)) == SDL_READ)
-                res->settings_set |= SDL_SET_MIN_REFLECTIVITY;
-            break;
-        case SDL_MIN_TRANSPARENCY:
-            if ((status = sdl_numbers(lx, 1, &res->min_transparency)) == SDL_READ)
-                res->settings_set |= SDL_SET_MIN_TRANSPARENCY;
-            break;
-        case SDL_MAX_RECURSION_DEPTH:
-            /* beyond the limit the Python reader warns and clamps; not whole or negative is an error */
-            if ((status = sdl_numbers(lx, 1, v)) == SDL_READ) {
-                if (!sdl_whole(v[0]) || v[0] < 0.0 || v[0] > SDL_MAX_DEPTH)
-                    status = SDL_DECLINE_VALUE;
-                else {
-                    res->max_recursion_depth = (int64_t)v[0];
-                    res->settings_set |= SDL_SET_MAX_RECURSION_DEPTH;
-                }
-            }
-            break;
-        case SDL_CAMERA:  /* checked by the caller, as parser._camera checks it */
-            if ((status = sdl_numbers(lx, 10, v)) == SDL_READ &&
-                !sdl_add_row(&res->camera_rows, &res->cameras, &res->camera_capacity, v, 10))
-                status = SDL_DECLINE_MEMORY;
-            break;
-        case SDL_COLOR_MATERIAL:
-            if (argument < 0 || argument + 3 > SDL_MATERIAL_TEXTURE)
-                return SDL_DECLINE_VOCABULARY;
-            if ((status = sdl_numbers(lx, 3, material + argument)) == SDL_READ)
-                material_id = -1;
-            break;
-        case SDL_FLOAT_MATERIAL:
-            if (argument < 0 || argument >= SDL_MATERIAL_TEXTURE)
-                return SDL_DECLINE_VOCABULARY;
-            if ((status = sdl_numbers(lx, 1, material + argument)) == SDL_READ)
-                material_id = -1;
-            break;
-        case SDL_TEXTURE:
-            if ((status = sdl_numbers(lx, 1, v)) == SDL_READ) {
-                if (!sdl_whole(v[0]) || v[0] < -2147483648.0 || v[0] > 2147483647.0)
-                    status = SDL_DECLINE_VALUE;
-                else {
-                    material[SDL_MATERIAL_TEXTURE] = v[0] + 0.0;  /* int(-0.0) is 0 */
-                    material_id = -1;
-                }
-            }
-            break;
-        case SDL_PARAMETERS:
-            if ((status = sdl_numbers(lx, 1, v)) != SDL_READ)
-                break;
-            if (!sdl_whole(v[0]) || v[0] < 0.0 || v[0] > SDL_MAX_PARAMETERS) {
-                status = SDL_DECLINE_VALUE;
-                break;
-            }
-            {
-                int count = (int)v[0];
-                double values[SDL_MAX_PARAMETERS] = {0.0};
-                if ((status = sdl_numbers(lx, count, values)) == SDL_READ) {
-                    material[SDL_MATERIAL_COUNT] = count;
-                    memcpy(material + SDL_MATERIAL_PARAMETERS, values, sizeof values);
-                    material_id = -1;
-                }
-            }
-            break;
-        case SDL_DEFAULT_MATERIALS:
-            memcpy(material, defaults, sizeof material);
-            material_id = -1;
-            break;
-        case SDL_TRANSLATE:
-            if ((status = sdl_numbers(lx, 3, v)) == SDL_READ) {
-                sdl_translate(top, v[0], v[1], v[2]);
-                checked = 0;
-            }
-            break;
-        case SDL_SCALE:
-            if ((status = sdl_numbers(lx, 3, v)) == SDL_READ) {
-                sdl_scale(top, v[0], v[1], v[2]);
-                checked = 0;
-            }
-            break;
-        case SDL_ROTATE:
-            if ((status = sdl_numbers(lx, 4, v)) == SDL_READ) {
-                double r[9];
-                if (!shared_libm && !sdl_libm_free(v[0]))
-                    status = SDL_DECLINE_ANGLE;
-                else if (!sdl_rotation(v[0], v[1], v[2], v[3], r))
-                    status = SDL_DECLINE_AXIS;
-                else {
-                    sdl_times(top, r);
-                    checked = 0;
-                }
-            }
-            break;
-        case SDL_PUSH:
-            if (!sdl_reserve((void **)&res->stack, &res->stack_capacity, res->depth + 1, 12 * sizeof(double)))
-                return SDL_DECLINE_MEMORY;
-            memcpy(res->stack + 12 * res->depth, res->stack + 12 * (res->depth - 1), 12 * sizeof(double));
-            res->depth++;
-            break;
-        case SDL_POP:
-            if (res->depth == 1)
-                return SDL_DECLINE_POP;
-            res->depth--;
-            checked = 0;
-            break;
-        case SDL_IDENTITY:
-            memcpy(top, sdl_identity, sizeof sdl_identity);
-            checked = 0;
-            break;
-        case SDL_SHAPE:
-        case SDL_TAPERED_SHAPE: {
-            int64_t line = lx->line, column = start - lx->line_start + 1;
-            int64_t name_start = lx->name_start, name_length = lx->name_length;
-            lx->name_length = 0;  /* a name comment names the first shape keyword after it */
-            double taper = 1.0;
-            if (vocabulary->action[slot] == SDL_TAPERED_SHAPE && (status = sdl_numbers(lx, 1, &taper)) != SDL_READ)
-                break;
-            if (!checked && !sdl_clearly_invertible(top))
-                return SDL_DECLINE_TRANSFORM;
-            checked = 1;
-            if (line > INT32_MAX || column > INT32_MAX || argument < 0 || argument > INT16_MAX)
-                return SDL_DECLINE_SIZE;
-            if (material_id < 0 && (material_id = sdl_material_id(res, material)) < 0)
-                return SDL_DECLINE_MEMORY;
-            if (name_length > 0) {
-                int64_t row[3] = {res->shapes, name_start, name_length};
-                if (!sdl_reserve((void **)&res->name_rows, &res->name_capacity, res->names + 1, sizeof row))
-                    return SDL_DECLINE_MEMORY;
-                memcpy(res->name_rows + 3 * res->names++, row, sizeof row);
-            }
-            if (!sdl_add_shape(res, (int16_t)argument, top, material_id, taper, line, column))
-                return SDL_DECLINE_MEMORY;
-            break;
-        }
-        default:
-            return SDL_DECLINE_VOCABULARY;
-        }
-        if (status != SDL_READ) {
-            if (status == SDL_DECLINE_ASCII)
-                res->decline_offset = lx->non_ascii;
-            else if (status != SDL_DECLINE_END)
-                res->decline_offset = lx->pos;
+        int status = sdl_act(&r, vocabulary->action[slot], vocabulary->argument[slot], vocabulary->count[slot]);
+        if (status != SDL_READ)
             return status;
-        }
     }
 }
 
@@ -714,7 +831,7 @@ void rt_sdl_free(SdlResult *res)
     free(res->kinds);
     free(res->affines);
     free(res->material_ids);
-    free(res->tapered_radii);
+    free(res->parameters);
     free(res->lines);
     free(res->columns);
     free(res->material_rows);
@@ -758,11 +875,6 @@ SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int6
         res->decline_offset = offset;
     }
     return res;
-}
-
-const char *rt_sdl_action_names(void)
-{
-    return sdl_action_names;
 }
 
 const char *rt_sdl_decline_names(void)

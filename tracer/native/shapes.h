@@ -111,6 +111,26 @@ static inline int plane_inside_at_start(const double *o, const double *d)
     return d[2] > 0.0 || (d[2] == 0.0 && o[2] < 0.0);
 }
 
+/* The square (analytic.intersect_square): a thin sheet, so each crossing becomes an enter/exit pair at the
+ * same time (the NumPy path pairs them in sheet_to_pairs).  Room for 2 hits. */
+static int hits_square(const double *o, const double *d, double edge, Hit *out)
+{
+    int n = hits_z_plane(o, d, out, 1, edge);
+    if (n) {
+        out[1] = out[0];
+        out[0].entering = 1;
+        out[1].entering = 0;
+    }
+    return 2 * n;
+}
+
+/* The plane z = 0 (analytic.intersect_plane), with whether the line starts inside the half-space below. */
+static int hits_plane(const double *o, const double *d, Hit *out, int *inside)
+{
+    *inside = plane_inside_at_start(o, d);
+    return hits_z_plane(o, d, out, 0, 0.0);
+}
+
 static inline void tapered_normal(const double *p, double k, double *n)
 {
     double radius = 1.0 + k * p[2];

@@ -145,7 +145,73 @@ static void tex_marble(const int64_t *perm, const double *grad, const double *q,
 /* atan2 mapped to [0, 1), the seam at angle 0 (+x) */
 static inline double angle01(double y, double x) { return np_mod(atan2(y, x) / TWO_PI_VALUE, 1.0); }
 
-/* surface_uv for one generic point on a primitive of kind `kind`, hit on `part`. */
+/* Each kind's (u, v) at a generic point hit on `part`, and whether each wraps: the C form of the mappings in
+ * tracer/textures/mapping.py, which tracer/shapes.py names for each kind (contract.h's RT_SHAPE_UV). */
+
+static void sphere_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)part;
+    *u = angle01(y, x);
+    *v = 0.5 + asin(clip(z, -1.0, 1.0)) / M_PI_VALUE;
+    *wrap_u = 1;
+    *wrap_v = 0;
+}
+
+static void square_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)z;
+    (void)part;
+    *u = (x + 1.0) / 2.0;
+    *v = (y + 1.0) / 2.0;
+    *wrap_u = *wrap_v = 0;
+}
+
+static void plane_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)z;
+    (void)part;
+    *u = np_mod((x + 1.0) / 2.0, 1.0);
+    *v = np_mod((y + 1.0) / 2.0, 1.0);
+    *wrap_u = *wrap_v = 1;
+}
+
+/* part = 2 * axis + (1 on the + side); each face upright and unmirrored from outside */
+static void cube_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    switch (part) {
+    case 0: *u = (z + 1) / 2; *v = (y + 1) / 2; break;
+    case 1: *u = (1 - z) / 2; *v = (y + 1) / 2; break;
+    case 2: *u = (x + 1) / 2; *v = (z + 1) / 2; break;
+    case 3: *u = (x + 1) / 2; *v = (1 - z) / 2; break;
+    case 4: *u = (1 - x) / 2; *v = (y + 1) / 2; break;
+    case 5: *u = (x + 1) / 2; *v = (y + 1) / 2; break;
+    default: *u = 0.0; *v = 0.0; break;
+    }
+    *wrap_u = *wrap_v = 0;
+}
+
+static void torus_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
+{
+    (void)part;
+    *u = angle01(y, x);
+    *v = angle01(z, hypot(x, y) - 1.0);
+    *wrap_u = *wrap_v = 1;
+}
+
+/* polyhedra, meshes: the direction from the generic centre, as on a globe */
+static void direction_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u,
+                         int *wrap_v)
+{
+    (void)part;
+    double r = sqrt(x * x + y * y + z * z);  /* np.linalg.norm sums left to right */
+    if (!(r >= 1e-300))  /* np.maximum: NaN stays NaN */
+        r = r != r ? r : 1e-300;
+    *u = angle01(y, x);
+    *v = 0.5 + asin(clip(z / r, -1.0, 1.0)) / M_PI_VALUE;
+    *wrap_u = 1;
+    *wrap_v = 0;
+}
+
 /* mapping.wall_and_discs_uv: a wall about z (part 0) by angle and height, its discs as squares; u wraps on
  * all parts.  The tapered cylinders' mapping, and any registered shape's that names it. */
 static void wall_and_discs_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u,
@@ -162,56 +228,17 @@ static void wall_and_discs_uv(double x, double y, double z, int32_t part, double
     *wrap_v = 0;
 }
 
+/* surface_uv for one generic point on a primitive of kind `kind`, hit on `part`. */
 static void surface_uv(int kind, const double *p, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
 {
     double x = p[0], y = p[1], z = p[2];
     switch (kind) {
 #define REGISTERED_UV(shape_kind, mapping) case shape_kind: mapping(x, y, z, part, u, v, wrap_u, wrap_v); return;
-    RT_SHAPE_UV(REGISTERED_UV)  /* the kinds tracer/shapes.py names a C mapping for */
+    RT_SHAPE_UV(REGISTERED_UV)  /* every kind's mapping, as tracer/shapes.py names it */
 #undef REGISTERED_UV
-    case K_SPHERE:
-        *u = angle01(y, x);
-        *v = 0.5 + asin(clip(z, -1.0, 1.0)) / M_PI_VALUE;
-        *wrap_u = 1;
-        *wrap_v = 0;
-        return;
-    case K_SQUARE:
-        *u = (x + 1.0) / 2.0;
-        *v = (y + 1.0) / 2.0;
+    default:  /* (no such kind: rt_create refuses it) */
+        *u = *v = 0.0;
         *wrap_u = *wrap_v = 0;
-        return;
-    case K_PLANE:
-        *u = np_mod((x + 1.0) / 2.0, 1.0);
-        *v = np_mod((y + 1.0) / 2.0, 1.0);
-        *wrap_u = *wrap_v = 1;
-        return;
-    case K_CUBE:  /* part = 2 * axis + (1 on the + side); each face upright and unmirrored from outside */
-        switch (part) {
-        case 0: *u = (z + 1) / 2; *v = (y + 1) / 2; break;
-        case 1: *u = (1 - z) / 2; *v = (y + 1) / 2; break;
-        case 2: *u = (x + 1) / 2; *v = (z + 1) / 2; break;
-        case 3: *u = (x + 1) / 2; *v = (1 - z) / 2; break;
-        case 4: *u = (1 - x) / 2; *v = (y + 1) / 2; break;
-        case 5: *u = (x + 1) / 2; *v = (y + 1) / 2; break;
-        default: *u = 0.0; *v = 0.0; break;
-        }
-        *wrap_u = *wrap_v = 0;
-        return;
-    case K_TORUS:
-        *u = angle01(y, x);
-        *v = angle01(z, hypot(x, y) - 1.0);
-        *wrap_u = *wrap_v = 1;
-        return;
-    default: {  /* polyhedra, meshes: the direction from the generic centre, as on a globe */
-        double r = sqrt(x * x + y * y + z * z);  /* np.linalg.norm sums left to right */
-        if (!(r >= 1e-300))  /* np.maximum: NaN stays NaN */
-            r = r != r ? r : 1e-300;
-        *u = angle01(y, x);
-        *v = 0.5 + asin(clip(z / r, -1.0, 1.0)) / M_PI_VALUE;
-        *wrap_u = 1;
-        *wrap_v = 0;
-        return;
-    }
     }
 }
 
@@ -257,10 +284,28 @@ static void sample_bilinear(const uint8_t *image, int64_t width, int64_t height,
 }
 
 /* ------------------------------------------------------------------------------------------------------
- * TextureSet.colors for one hit: the colour at world `point` on primitive `shape` (hit on `part`);
- * 1 where the primitive's material has no texture. */
+ * TextureSet.colors for one hit: the colour at world `point` on primitive `shape` (hit on `part`, at
+ * barycentrics `bary` on a mesh, or NULL); 1 where the primitive's material has no texture. */
 
-static void texture_color(const Scene *S, int64_t shape, const double *point, int32_t part, double *out)
+/* TriangleMesh.texture_uv: a hit's texture coordinates on a mesh that has them (`bary`: its barycentrics);
+ * 0 where the mesh has none (or the triangle is not one of it). */
+static inline int mesh_uv(const Scene *S, int64_t shape, int32_t part, const double *bary, double *u, double *v)
+{
+    const SceneDesc *D = &S->d;
+    if (!bary || !(D->effects & FX_MESH_UV) || D->prim_kind[shape] != K_MESH)
+        return 0;
+    const MeshView *m = &S->meshes[D->prim_aux[2 * shape]];
+    if (!m->tri_uv || part < 0 || part >= m->n_tris)
+        return 0;
+    const double *c = m->tri_uv + 6 * (int64_t)part;
+    double b1 = bary[0], b2 = bary[1], w0 = 1.0 - b1 - b2;
+    *u = (w0 * c[0] + b1 * c[2]) + b2 * c[4];
+    *v = (w0 * c[1] + b1 * c[3]) + b2 * c[5];
+    return 1;
+}
+
+static void texture_color(const Scene *S, int64_t shape, const double *point, int32_t part, const double *bary,
+                          double *out)
 {
     const SceneDesc *D = &S->d;
     int64_t mat = D->prim_material[shape];
@@ -284,7 +329,10 @@ static void texture_color(const Scene *S, int64_t shape, const double *point, in
     }
     double u, v;
     int wrap_u, wrap_v;
-    surface_uv(D->prim_kind[shape], generic, part, &u, &v, &wrap_u, &wrap_v);
+    if (mesh_uv(S, shape, part, bary, &u, &v))  /* a mesh's own texture coordinates repeat both ways */
+        wrap_u = wrap_v = 1;
+    else
+        surface_uv(D->prim_kind[shape], generic, part, &u, &v, &wrap_u, &wrap_v);
     double repeat_u = q[0], repeat_v = q[1];
     if (!(repeat_u == 1.0 && repeat_v == 1.0)) {  /* tiled: both directions wrap */
         u = u * repeat_u;

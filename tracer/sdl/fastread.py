@@ -8,13 +8,12 @@ clearly invertible) it stops and :func:`read` answers None, and :func:`tracer.sd
 the text with the Python reader as before.  So every message stays the Python reader's, strict or lenient.
 
 What it reads equals what the Python reader makes of the same text, bit for bit: the same shapes (kind,
-matrix, material by value, taper, place, name), lights, camera and settings (tests/test_sdl_fastread.py
+matrix, material by value, parameters, place, name), lights, camera and settings (tests/test_sdl_fastread.py
 compares the two).  The shapes come as columns, which the scene holds without making a Shape per row.
 
-The keyword tables are the parser's: each keyword the C side knows is given to it with an action (named
-by the C side's ``sdl_action_names``) and an argument (a material field's slot, a shape's kind), so a
-material keyword or shape kind added to the parser's tables reaches the C side without a change there; a
-keyword the parser learns otherwise is declined until :func:`_vocabulary` gives it an action.
+Which keywords it reads, and how (its action, with an argument such as a material field's slot or a
+shape's kind and parameter count), is tracer/sdl/statements.py's table, the one the Python reader's handlers
+come from too: a statement without an action there is declined, and so read by the Python reader.
 """
 from __future__ import annotations
 
@@ -28,6 +27,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .. import shapes as shape_registry
+from . import statements
 from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
@@ -38,7 +38,7 @@ SHARED_LIBM = sys.platform != "win32"
 _SURROGATE = re.compile(r"[\ud800-\udfff]")
 
 #: Keywords the C reader leaves to the Python reader: it declines the text at the first of them.
-DECLINED = frozenset(("def", "use", "mesh", "makePixmap", "union", "intersection", "difference"))
+DECLINED = statements.DECLINED
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ class _Result(ctypes.Structure):
                 ("cameras", ctypes.c_int64), ("names", ctypes.c_int64),
                 ("kinds", ctypes.POINTER(ctypes.c_int16)), ("affines", ctypes.POINTER(ctypes.c_double)),
                 ("material_ids", ctypes.POINTER(ctypes.c_int32)),
-                ("tapered_radii", ctypes.POINTER(ctypes.c_double)),
+                ("parameters", ctypes.POINTER(ctypes.c_double)),
                 ("lines", ctypes.POINTER(ctypes.c_int32)), ("columns", ctypes.POINTER(ctypes.c_int32)),
                 ("material_rows", ctypes.POINTER(ctypes.c_double)),
                 ("light_rows", ctypes.POINTER(ctypes.c_double)), ("camera_rows", ctypes.POINTER(ctypes.c_double)),
@@ -84,7 +84,7 @@ class _Setup:
 
     lib: ctypes.CDLL
     words: bytes
-    codes: np.ndarray  # (action, argument) per word, int32
+    codes: np.ndarray  # (action, argument, count) per word, int32
     defaults: np.ndarray  # the default material's row
     reasons: tuple[str, ...]
 
@@ -102,37 +102,17 @@ def _setup() -> Optional[_Setup]:
                                 ctypes.c_int64]
     lib.rt_sdl_free.restype = None
     lib.rt_sdl_free.argtypes = [ctypes.POINTER(_Result)]
-    for name in ("rt_sdl_action_names", "rt_sdl_decline_names"):
-        getattr(lib, name).restype = ctypes.c_char_p
-        getattr(lib, name).argtypes = []
+    lib.rt_sdl_decline_names.restype = ctypes.c_char_p
+    lib.rt_sdl_decline_names.argtypes = []
     lib.rt_sdl_material_width.restype = ctypes.c_int64
     lib.rt_sdl_material_width.argtypes = []
     from . import parser
     _check_material_rows(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
-    actions = {name: code for code, name in enumerate(lib.rt_sdl_action_names().decode().split())}
-    vocabulary = _vocabulary()
+    vocabulary = statements.vocabulary()  # (the library speaks its actions' codes: the contract's digest)
     words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
-    codes = np.array([(actions[action], argument) for action, argument in vocabulary.values()], dtype=np.int32)
+    codes = np.array(list(vocabulary.values()), dtype=np.int32).reshape(-1, 3)
     defaults = MaterialRows.row_of(Material())
     return _Setup(lib, words, codes, defaults, tuple(lib.rt_sdl_decline_names().decode().split()))
-
-
-def _vocabulary() -> dict[str, tuple[str, int]]:
-    """Each keyword the C reader reads: its action (a name in sdl_read.h's sdl_action_names) and argument."""
-    from . import parser
-    words = {keyword: (keyword, 0) for keyword in (
-        "light", "globalAmbient", "background", "minReflectivity", "minTransparency", "maxRecursionDepth",
-        "camera", "texture", "parameters", "defaultMaterials", "translate", "scale", "rotate", "push", "pop",
-        "identityAffine")}
-    for keyword, name in parser.COLOR_MATERIAL.items():
-        words[keyword] = ("colorMaterial", MaterialRows.SLOTS[name][0])
-    for keyword, name in parser.FLOAT_MATERIAL.items():
-        words[keyword] = ("floatMaterial", MaterialRows.SLOTS[name][0])
-    kind_codes = {entry.keyword: code for code, entry in enumerate(shape_registry.REGISTRY)}
-    for kind in parser.ANALYTIC_KINDS + parser.POLYHEDRON_KINDS + ("teapot",):
-        # (the parser's _read_shape reads a number after taperedCylinder alone)
-        words[kind] = ("taperedShape" if kind == "taperedCylinder" else "shape", kind_codes[kind])
-    return words
 
 
 def available() -> bool:
@@ -148,7 +128,7 @@ class Columns:
     affines: np.ndarray  # (N, 12) float64
     material_ids: np.ndarray  # (N,) int32
     materials: MaterialRows
-    tapered_radii: np.ndarray  # (N,) float64
+    parameters: np.ndarray  # (N, tracer.shapes.MAX_PARAMETERS) float64
     lines: np.ndarray  # (N,) int32
     columns: np.ndarray  # (N,) int32
     names: Optional[dict[int, str]]
@@ -275,7 +255,8 @@ def _columns(res: _Result, utf8: _Utf8) -> Columns:
     if res.settings_set & _SET_MAX_DEPTH:
         settings["max_recursion_depth"] = int(res.max_recursion_depth)
     return Columns(_array(res.kinds, (n,), np.int16), _array(res.affines, (n, 12), np.float64),
-                   _array(res.material_ids, (n,), np.int32), materials, _array(res.tapered_radii, (n,), np.float64),
+                   _array(res.material_ids, (n,), np.int32), materials,
+                   _array(res.parameters, (n, shape_registry.MAX_PARAMETERS), np.float64),
                    _array(res.lines, (n,), np.int32), _array(res.columns, (n,), np.int32), names, lights, cameras,
                    settings)
 
@@ -291,7 +272,7 @@ def read(text: str, file: Optional[str] = None) -> Optional[Scene]:
         for numbers in columns.cameras:  # one the Python reader would refuse: its message is the parser's
             if camera_problem(numbers[0:3], numbers[3:6], numbers[6:9], numbers[9]) is not None:
                 return None
-    shapes = ShapeTable(columns.kinds, columns.affines, columns.material_ids, columns.materials, columns.tapered_radii,
+    shapes = ShapeTable(columns.kinds, columns.affines, columns.material_ids, columns.materials, columns.parameters,
                         columns.lines, columns.columns, file, columns.names)
     scene = Scene(objects=shapes, lights=columns.lights)
     if columns.cameras:

@@ -32,27 +32,24 @@ from typing import Callable, Iterator, Optional, Sequence, Union
 
 import numpy as np
 
-from .. import transforms
+from .. import shapes, transforms
 from ..bulk import collector_paused
 from ..errors import SDLError
 from ..geometry import builtin_mesh  # (its home; imported under this name by the add-on and tests)
 from ..meshio import read_3vn
-from ..model import (ANALYTIC_KINDS, CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
+from ..model import (ANALYTIC_KINDS, CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
                      Material, MeshData, Scene, SceneObject, Shape, SourceLocation, TEXTURE_NUMBERS)
 from ..userfiles import read_text
 from .lexer import Tokens, to_float, to_floats
+from .lights import LIGHT_USAGE, argument_count, light_of
+from .statements import COLOR_MATERIAL, FLOAT_MATERIAL, STATEMENTS  # noqa: F401 - (the writer reads them here)
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 # ---------------------------------------------------------------------------------------------------------
-# Keyword tables (the writer uses them too, so that both sides agree on spelling).
+# Keyword tables (tracer/sdl/statements.py has every statement; the writer uses them too, so that both sides
+# agree on spelling).
 
-#: Material keywords taking r g b, and the Material field each sets.
-COLOR_MATERIAL = {"ambient": "ambient", "diffuse": "diffuse", "specular": "specular", "emissive": "emissive"}
-#: Material keywords taking one number, and the Material field each sets.
-FLOAT_MATERIAL = {"specularExponent": "specular_exponent", "reflectivity": "reflectivity",
-                  "transparency": "transparency", "speedOfLight": "speed_of_light",
-                  "specularFraction": "specular_fraction", "surfaceRoughness": "surface_roughness"}
 #: The most numbers ``parameters`` may give (as in the book's material record).
 MAX_PARAMETERS = 10
 #: Image numbers ``makePixmap`` accepts.
@@ -60,19 +57,12 @@ PIXMAP_RANGE = range(16)
 CSG_OPS = CSG.OPS
 
 #: Every keyword with the arguments it takes, for messages ("expected 'translate dx dy dz'").
-USAGE: dict[str, str] = {
-    "light": "x y z r g b", "globalAmbient": "r g b", "background": "r g b", "minReflectivity": "f",
-    "minTransparency": "f", "maxRecursionDepth": "n", "makePixmap": "i file",
-    "camera": "ex ey ez lx ly lz ux uy uz viewAngle",
-    **{k: "r g b" for k in COLOR_MATERIAL}, **{k: "f" for k in FLOAT_MATERIAL},
-    "texture": "t", "parameters": "n p1 ... pn", "defaultMaterials": "",
-    "translate": "dx dy dz", "scale": "sx sy sz", "rotate": "angle ux uy uz",
-    "push": "", "pop": "", "identityAffine": "",
-    **{k: "" for k in ANALYTIC_KINDS + POLYHEDRON_KINDS}, "taperedCylinder": "s", "teapot": "", "mesh": "file",
-    **{k: "object object" for k in CSG_OPS},
-    "def": "name { tokens }", "use": "name",
-}
+USAGE: dict[str, str] = {s.keyword: s.usage for s in STATEMENTS}
 KEYWORDS = frozenset(USAGE)
+#: The keywords of the extensions for Blender scenes (not the book's; their own tests use them).
+EXTENSION_KEYWORDS = frozenset(s.keyword for s in STATEMENTS if s.extension and s.keyword not in SHAPE_KINDS)
+#: The statements that add a light (a name comment names them as it names shapes).
+LIGHT_KEYWORDS = ("light", *LIGHT_USAGE)
 
 #: A guard against macros that do not recurse but still multiply (each using the previous one twice, thirty
 #: deep, is a billion tokens): no real scene splices anywhere near this many tokens.
@@ -247,7 +237,8 @@ class _Macro:
 
 #: Statements a name comment does not reach past: it names a shape read directly after it, not one in a macro.
 _NAME_STOPS = frozenset(("def", "use", "{", "}"))
-_SHAPE_KEYWORDS = frozenset(SHAPE_KINDS)  # a set: looked up for every token between a name and its shape
+#: What a name comment names (a set: looked up for every token between a name and its shape or light).
+_NAMED_KEYWORDS = frozenset(SHAPE_KINDS + LIGHT_KEYWORDS)
 
 
 class _ShapeNames:
@@ -273,7 +264,7 @@ class _ShapeNames:
             # Looked for only up to the next comment: past it, that comment's name wins anyway.
             for index in range(number - first, end - first):
                 token = tokens[index]
-                if token in _SHAPE_KEYWORDS:
+                if token in _NAMED_KEYWORDS:
                     self.names[first + index] = name
                     break
                 if token in _NAME_STOPS:
@@ -312,25 +303,7 @@ class _Reader:
         self.macro_locations: dict[int, SourceLocation] = {}  # shapes in macro bodies: one per body token
         self.reported: set[str] = set()
         self.handlers: dict[str, Callable[[str, int, tuple[str, ...]], None]] = {
-            "light": self._light, "globalAmbient": self._global_ambient, "background": self._background,
-            "minReflectivity": self._min_reflectivity, "minTransparency": self._min_transparency,
-            "maxRecursionDepth": self._max_recursion_depth, "makePixmap": self._make_pixmap,
-            "camera": self._camera,
-            "texture": self._texture, "parameters": self._parameters,
-            "defaultMaterials": self._default_materials,
-            "translate": self._translate, "scale": self._scale, "rotate": self._rotate,
-            "push": self._push, "pop": self._pop, "identityAffine": self._identity,
-            "def": self._def, "use": self._use,
-        }
-        for keyword in COLOR_MATERIAL:
-            self.handlers[keyword] = self._color_material
-        for keyword in FLOAT_MATERIAL:
-            self.handlers[keyword] = self._float_material
-        for keyword in ANALYTIC_KINDS + POLYHEDRON_KINDS + ("teapot", "mesh"):
-            self.handlers[keyword] = self._shape
-        for keyword in CSG_OPS:
-            self.handlers[keyword] = self._boolean
-        assert set(self.handlers) == KEYWORDS
+            s.keyword: getattr(self, s.handler) for s in STATEMENTS}
 
     def _new_block(self, tokens: list[str], first: int) -> None:
         self.shape_names.add_block(tokens, first, self.tokens.name_comments)
@@ -445,7 +418,20 @@ class _Reader:
 
     def _light(self, keyword: str, at: int, groups) -> None:
         x, y, z, r, g, b = self._numbers(keyword, at, 6)
-        self.scene.lights.append(Light((x, y, z), (r, g, b)))
+        self.scene.lights.append(Light((x, y, z), (r, g, b), name=self.shape_names.names.get(at)))
+
+    def _physical_light(self, keyword: str, at: int, groups) -> None:
+        light = light_of(keyword, self._numbers(keyword, at, argument_count(keyword)),
+                         self.shape_names.names.get(at))
+        if isinstance(light, str):
+            return self._report(self._error(at, f"{keyword}: {light}", expected=self._usage(keyword)))
+        self.scene.lights.append(light)
+
+    def _smooth_terminator(self, keyword: str, at: int, groups) -> None:
+        value, number = self._number_token(keyword, at)
+        if value not in (0.0, 1.0):
+            return self._report(self._error(number, "smoothTerminator must be 0 or 1"))
+        self.scene.settings.smooth_terminator = value == 1.0
 
     def _global_ambient(self, keyword: str, at: int, groups) -> None:
         self.scene.settings.global_ambient = self._numbers(keyword, at, 3)
@@ -508,6 +494,15 @@ class _Reader:
 
     def _float_material(self, keyword: str, at: int, groups) -> None:
         self._set_material(FLOAT_MATERIAL[keyword], self._numbers(keyword, at, 1)[0])
+
+    def _fresnel(self, keyword: str, at: int, groups) -> None:
+        mode, number = self._name(keyword, at, "a fresnel mode")
+        if mode not in FRESNEL_MODES:
+            return self._report(self._error(number, "unknown fresnel mode", expected=" or ".join(FRESNEL_MODES)))
+        self._set_material("fresnel", mode)
+
+    def _fresnel_tint(self, keyword: str, at: int, groups) -> None:
+        self._set_material("fresnel_tint", self._numbers(keyword, at, 3))
 
     def _texture(self, keyword: str, at: int, groups) -> None:
         value, number = self._number_token(keyword, at)
@@ -614,10 +609,9 @@ class _Reader:
         self._place(shape)
 
     def _read_shape(self, kind: str, at: int, groups) -> Optional[Shape]:
-        tapered_radius, mesh_file = 1.0, None
-        if kind == "taperedCylinder":
-            tapered_radius = self._number_token(kind, at)[0]
-        elif kind == "mesh":
+        entry = shapes.KINDS[kind]
+        parameters, mesh_file = tuple(self._number_token(kind, at)[0] for _ in entry.parameters), None
+        if entry.file_argument:
             mesh_file, mesh_at = self._name(kind, at, "a mesh file name")
         transform = self.stack[-1]
         if transform is not self.invertible:  # (shapes in a row often share their transform)
@@ -629,15 +623,15 @@ class _Reader:
                 return None
             self.invertible = transform
         mesh = None
-        if kind == "mesh":
+        if entry.file_argument:
             mesh = self._mesh_file(mesh_file, mesh_at)
             if mesh is None:
                 return None
-        elif kind in POLYHEDRON_KINDS or kind == "teapot":
+        elif entry.builtin_mesh:
             mesh = builtin_mesh(kind)
         # (The 16 entries, not a matrix: Shape makes its own matrix of what it is given anyway.)
         return Shape(_SHAPE_KIND[kind], transforms.affine_entries(transform), self._current_material(),
-                     tapered_radius, mesh, mesh_file, groups, self._shape_location(at),
+                     parameters, mesh, mesh_file, groups, self._shape_location(at),
                      self.shape_names.names.get(at))
 
     def _shape_location(self, at: int) -> SourceLocation:

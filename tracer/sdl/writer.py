@@ -20,10 +20,11 @@ from typing import Iterator, Optional, Union
 
 import numpy as np
 
-from .. import transforms
+from .. import shapes, transforms
 from ..errors import WriteError
 from ..meshio import write_3vn, write_text_atomic
 from ..model import CSG, Material, MeshData, Scene, SceneObject, Shape
+from .lights import statement_of
 from .parser import COLOR_MATERIAL, FLOAT_MATERIAL, KEYWORDS, is_singular
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -237,10 +238,14 @@ def _material_statement(material: Material, name: str) -> str:
         return f"texture {_whole(value, 'texture')}"
     if name == "parameters":
         return " ".join(["parameters", str(len(value))] + [fmt(p) for p in value])
+    if name == "fresnel":
+        return f"fresnel {value}"
+    if name == "fresnel_tint":
+        return f"fresnelTint {_fmt_all(value)}"
     raise AssertionError(f"material field {name} has no SDL keyword")
 
 
-_MATERIAL_FIELDS = list(_COLOR_FIELDS) + list(_FLOAT_FIELDS) + ["texture", "parameters"]
+_MATERIAL_FIELDS = list(_COLOR_FIELDS) + list(_FLOAT_FIELDS) + ["texture", "parameters", "fresnel", "fresnel_tint"]
 
 
 def material_statements(current: Material, wanted: Material) -> list[str]:
@@ -260,14 +265,13 @@ def material_statements(current: Material, wanted: Material) -> list[str]:
 # The scene
 
 def _shape_keyword(shape: Shape, mesh_names: dict[int, str]) -> str:
-    if shape.kind == "taperedCylinder":
-        return f"taperedCylinder {fmt(shape.tapered_radius)}"
-    if shape.kind == "mesh":
+    """The keyword and what follows it: its parameters in SDL order, or a mesh's file."""
+    if shapes.KINDS[shape.kind].file_argument:
         name = mesh_names.get(id(shape), shape.mesh_file)
         if name is None:
             raise WriteError("a mesh shape has no file name; save_sdl writes its mesh beside the scene")
-        return f"mesh {_name(name, 'mesh file')}"
-    return shape.kind  # the analytic shapes, the polyhedra and the teapot are keywords
+        return f"{shape.kind} {_name(name, 'mesh file')}"
+    return " ".join([shape.kind, *map(fmt, shape.parameters)])
 
 
 def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str]) -> str:
@@ -278,7 +282,12 @@ def _scene_text(scene: Scene, mesh_names: dict[int, str], pixmaps: dict[int, str
              f"minReflectivity {fmt(s.min_reflectivity)}",
              f"minTransparency {fmt(s.min_transparency)}",
              f"maxRecursionDepth {_whole(s.max_recursion_depth, 'maxRecursionDepth')}"]
-    lines += [f"light {_fmt_all(light.position)} {_fmt_all(light.color)}" for light in scene.lights]
+    if s.smooth_terminator:
+        lines.append("smoothTerminator 1")
+    for light in scene.lights:
+        if light.name and _one_line(light.name):
+            lines.append(f"! name: {_one_line(light.name)}")
+        lines.append(statement_of(light, _fmt_all))
     if scene.camera is not None:
         c = scene.camera
         lines.append(f"camera {_fmt_all(c.eye)}  {_fmt_all(c.look)}  {_fmt_all(c.up)}  {fmt(c.view_angle)}")
@@ -348,7 +357,7 @@ def save_sdl(scene: Scene, path: PathLike) -> None:
     mesh_names: dict[int, str] = {}
     new_meshes: dict[int, tuple[MeshData, Path]] = {}  # by id(mesh): one file per distinct mesh
     for shape in scene.shapes():
-        if shape.kind != "mesh":
+        if not shapes.KINDS[shape.kind].file_argument:
             continue
         if shape.mesh_file is None:
             if shape.mesh is None:

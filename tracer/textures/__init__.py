@@ -27,6 +27,18 @@ def drop_unreadable_textures(scene) -> list[str]:
     from dataclasses import replace
 
     shapes = scene.shapes()
+    problems = texture_problems(scene, shapes)
+    for shape in shapes:
+        if shape.material.texture in problems:
+            shape.material = replace(shape.material, texture=0)
+    return [f"{message}: drawn without that texture" for message in dict.fromkeys(problems.values())]
+
+
+def texture_problems(scene, shapes=None) -> dict[int, str]:
+    """Why each texture the scene's shapes use cannot be used (texture number -> one message naming the file:
+    a missing makePixmap, a picture that cannot be read, an unknown solid texture); empty when all can.  Every
+    picture is read to find out."""
+    shapes = scene.shapes() if shapes is None else shapes
     problems: dict[int, str] = {}
     for number in sorted({s.material.texture for s in shapes}):
         problem = _texture_problem(scene, shapes, number)
@@ -37,10 +49,7 @@ def drop_unreadable_textures(scene) -> list[str]:
                 problem = str(err)
         if problem:
             problems[number] = problem
-    for shape in shapes:
-        if shape.material.texture in problems:
-            shape.material = replace(shape.material, texture=0)
-    return [f"{message}: drawn without that texture" for message in dict.fromkeys(problems.values())]
+    return problems
 
 
 def _where_used(scene, shapes, number: int) -> str:
@@ -91,8 +100,19 @@ class TextureSet:
                     loaded[path] = _load_for(scene, shapes, number)
                 self.images[number] = loaded[path]
 
-    def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray) -> np.ndarray:
-        """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` (1 where untextured)."""
+    @classmethod
+    def of_images(cls, primitives, images: dict[int, np.ndarray]) -> "TextureSet":
+        """A TextureSet of these primitives with the pictures already loaded (by texture number): tracer.edit's,
+        which loads only a picture it has not loaded before."""
+        self = cls.__new__(cls)
+        self.primitives, self.images = primitives, dict(images)
+        return self
+
+    def colors(self, shape_index: np.ndarray, points: np.ndarray, parts: np.ndarray,
+               uv: np.ndarray | None = None) -> np.ndarray:
+        """Texture colours (N, 3) at world ``points`` on primitives ``shape_index`` hit on ``parts`` (1 where
+        untextured); ``uv``: the hits' barycentrics on meshes (a mesh with texture coordinates is looked up
+        at them), or None."""
         out = np.ones_like(points)
         for index in np.unique(shape_index):
             prim = self.primitives[index]
@@ -104,7 +124,11 @@ class TextureSet:
             if material.texture < 0:
                 out[rows] = SOLID_TEXTURES[material.texture](generic, material.parameters)
             else:
-                u, v, wrap_u, wrap_v = surface_uv(prim.kind, generic, parts[rows])
+                mesh = prim.triangle_mesh
+                if uv is not None and mesh is not None and mesh.tri_uv is not None:  # its own coordinates repeat
+                    (u, v), wrap_u, wrap_v = mesh.texture_uv(parts[rows], uv[rows, 0], uv[rows, 1]), True, True
+                else:
+                    u, v, wrap_u, wrap_v = surface_uv(prim.kind, generic, parts[rows])
                 repeat_u, repeat_v = image_repeats(material.parameters)
                 if (repeat_u, repeat_v) != (1.0, 1.0):
                     u, v, wrap_u, wrap_v = u * repeat_u, v * repeat_v, True, True

@@ -48,29 +48,49 @@ def wall_and_discs_uv(points: np.ndarray, parts: np.ndarray):
     return (np.where(wall, _angle01(y, x), u_disc), np.where(wall, np.clip(z, 0.0, 1.0), v_disc), True, False)
 
 
-def surface_uv(kind: str, points: np.ndarray, parts: np.ndarray):
-    """(u, v, wrap_u, wrap_v) for (N, 3) generic points on a shape of ``kind``; parts as the intersector gives."""
-    entry = shapes.KINDS.get(kind)
-    if entry is not None and entry.uv is not None:
-        return entry.function("uv")(points, parts)
+def sphere_uv(points: np.ndarray, parts: np.ndarray):
+    """Longitude about z, latitude from the south pole; u wraps."""
     x, y, z = points[:, 0], points[:, 1], points[:, 2]
-    if kind == "sphere":
-        return _angle01(y, x), 0.5 + np.arcsin(np.clip(z, -1.0, 1.0)) / np.pi, True, False
-    if kind == "square":
-        u, v = _square(x, y)
-        return u, v, False, False
-    if kind == "plane":
-        return np.mod((x + 1.0) / 2.0, 1.0), np.mod((y + 1.0) / 2.0, 1.0), True, True
-    if kind == "cube":
-        u = np.zeros_like(x)
-        v = np.zeros_like(x)
-        for face, uv in _CUBE_FACES.items():
-            rows = parts == face
-            if rows.any():
-                u[rows], v[rows] = (c[rows] for c in uv(points))
-        return u, v, False, False
-    if kind == "torus":
-        return _angle01(y, x), _angle01(z, np.hypot(x, y) - 1.0), True, True
-    # Everything else: the direction from the generic centre, as on a globe.
+    return _angle01(y, x), 0.5 + np.arcsin(np.clip(z, -1.0, 1.0)) / np.pi, True, False
+
+
+def square_uv(points: np.ndarray, parts: np.ndarray):
+    """x and y over [-1, 1]."""
+    u, v = _square(points[:, 0], points[:, 1])
+    return u, v, False, False
+
+
+def plane_uv(points: np.ndarray, parts: np.ndarray):
+    """x and y, one image every 2 units; both wrap."""
+    x, y = points[:, 0], points[:, 1]
+    return np.mod((x + 1.0) / 2.0, 1.0), np.mod((y + 1.0) / 2.0, 1.0), True, True
+
+
+def cube_uv(points: np.ndarray, parts: np.ndarray):
+    """Each face (part) its own square, upright and unmirrored seen from outside."""
+    u = np.zeros_like(points[:, 0])
+    v = np.zeros_like(points[:, 0])
+    for face, uv in _CUBE_FACES.items():
+        rows = parts == face
+        if rows.any():
+            u[rows], v[rows] = (c[rows] for c in uv(points))
+    return u, v, False, False
+
+
+def torus_uv(points: np.ndarray, parts: np.ndarray):
+    """The angle about z and the angle around the tube (0 on the outer equator); both wrap."""
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    return _angle01(y, x), _angle01(z, np.hypot(x, y) - 1.0), True, True
+
+
+def direction_uv(points: np.ndarray, parts: np.ndarray):
+    """The direction from the generic centre, as on a globe (polyhedra, meshes); u wraps."""
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
     r = np.maximum(np.linalg.norm(points, axis=1), 1e-300)
     return _angle01(y, x), 0.5 + np.arcsin(np.clip(z / r, -1.0, 1.0)) / np.pi, True, False
+
+
+def surface_uv(kind: str, points: np.ndarray, parts: np.ndarray):
+    """(u, v, wrap_u, wrap_v) for (N, 3) generic points on a shape of ``kind``; parts as the intersector gives
+    (the kind's registered mapping, tracer/shapes.py)."""
+    return shapes.KINDS[kind].function("uv")(points, parts)

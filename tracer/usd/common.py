@@ -24,8 +24,7 @@ CAMERA = ROOT + "/Camera"
 #: Namespaced attributes.  Colours are ``color3d`` and numbers ``double`` so that every value round-trips
 #: exactly (the schema attributes are mostly float).
 NS = "sdl:"
-A_SHAPE = "sdl:shape"  # the SDL keyword
-A_SMALL_RADIUS = "sdl:smallRadius"  # taperedCylinder s
+A_SHAPE = "sdl:shape"  # the SDL keyword (a tessellated kind's parameters: ShapeKind.parameters' usd_attribute)
 A_MESH_FILE = "sdl:meshFile"  # mesh statement's file, relative to the USD file's folder
 A_MESH_POINTS = "sdl:meshPoints"  # double3[]: the mesh's vertices, exactly
 A_MESH_NORMALS = "sdl:meshNormals"  # double3[]: the mesh's normal list, exactly

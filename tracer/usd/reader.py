@@ -23,7 +23,7 @@ import numpy as np
 from .. import shapes
 from ..camera import focal_length, view_angle
 from ..errors import TracerError
-from ..model import (CSG, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light, Material, Scene,
+from ..model import (CSG, MAX_RECURSION_DEPTH, SHAPE_KINDS, Camera, Light, Material, Scene,
                      SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
@@ -35,7 +35,7 @@ from .preview import material_from_preview
 PathLike = Union[str, "os.PathLike[str]"]
 
 #: Kinds written as their tessellation (USD has no implicit prim for them) and read back as the exact shape.
-_TESSELLATED = frozenset(e.keyword for e in shapes.REGISTRY if e.tessellate is not None)
+_TESSELLATED = frozenset(e.keyword for e in shapes.REGISTRY if e.family == "analytic" and e.usd_prim is None)
 
 #: A distant light becomes a point light this many scene radii away, against its direction.
 DISTANT_LIGHT_DISTANCE = 1.0e5
@@ -281,11 +281,9 @@ class _Reader:
             return None
         if shape is None:
             return None
-        if kind == "taperedCylinder" and shape.kind == "mesh":
-            shape = Shape("taperedCylinder", shape.matrix,
-                          tapered_radius=float(self.get(prim, C.A_SMALL_RADIUS, 1.0)))
-        elif kind in _TESSELLATED and shape.kind == "mesh":
-            shape = Shape(kind, shape.matrix)
+        if kind in _TESSELLATED and shape.kind == "mesh":
+            shape = Shape(kind, shape.matrix, parameters=tuple(float(self.get(prim, p.usd_attribute, p.default))
+                                                               for p in shapes.KINDS[kind].parameters))
         elif kind is not None and kind != shape.kind:
             self.note(prim, f"sdl:shape {kind!r} does not match its USD type: read as {shape.kind}")
         exact = self.get(prim, C.A_MATRIX)
@@ -331,7 +329,7 @@ class _Reader:
                 return Shape("cylinder", matrix)
             if ratio == 0.0:
                 return Shape("cone", matrix)
-            return Shape(kind, matrix, tapered_radius=ratio)
+            return Shape(kind, matrix, parameters=(ratio,))
         return Shape(kind, matrix)
 
     def _plane(self, prim, world: np.ndarray, kind: Optional[str]) -> Shape:
@@ -345,12 +343,14 @@ class _Reader:
     # -- meshes -----------------------------------------------------------------------------------------
 
     def _mesh(self, prim, world: np.ndarray, kind: Optional[str]) -> Optional[Shape]:
-        if kind in POLYHEDRON_KINDS or kind == "teapot":
-            from ..sdl.parser import builtin_mesh
+        entry = shapes.KINDS.get(kind)
+        if entry is not None and entry.builtin_mesh:
+            from ..geometry import builtin_mesh
             return Shape(kind, world, mesh=builtin_mesh(kind))
-        if kind in _TESSELLATED or kind == "taperedCylinder":
+        if kind in _TESSELLATED:
             return Shape("mesh", world)  # the caller makes the exact shape
-        if kind == "mesh" and self.get(prim, C.A_MESH_POINTS) is not None:
+        reads_file = entry is not None and entry.file_argument
+        if reads_file and self.get(prim, C.A_MESH_POINTS) is not None:
             data = sdl_mesh(self, prim)
         else:
             data = usd_mesh(self, prim)
@@ -358,7 +358,7 @@ class _Reader:
             return None
         shape = Shape("mesh", world, mesh=data)
         mesh_file = self.get(prim, C.A_MESH_FILE)
-        if kind == "mesh" and mesh_file:
+        if reads_file and mesh_file:
             shape.mesh_file = str(mesh_file)
         return shape
 

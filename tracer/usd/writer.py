@@ -18,8 +18,7 @@ from .. import shapes
 from ..atomic import replacing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
-from ..geometry.tessellate import tapered_cylinder_mesh
-from ..model import (CSG, POLYHEDRON_KINDS, Camera, Light, Material, MeshData, Scene, SceneObject, Shape)
+from ..model import CSG, Camera, Light, Material, MeshData, Scene, SceneObject, Shape
 from ..transforms import translation
 from . import common as C
 from .preview import preview_inputs
@@ -213,12 +212,10 @@ class _Writer:
         return placed
 
     def _schema(self, obj: SceneObject):
-        """The UsdGeom schema of an object's prim: an implicit prim where USD has one, else a Mesh."""
-        UsdGeom = self.UsdGeom
+        """The UsdGeom schema of an object's prim: the implicit prim its kind names, else a Mesh."""
         if isinstance(obj, CSG):
-            return UsdGeom.Xform
-        return {"sphere": UsdGeom.Sphere, "cube": UsdGeom.Cube, "cylinder": UsdGeom.Cylinder,
-                "cone": UsdGeom.Cone, "plane": UsdGeom.Plane}.get(obj.kind, UsdGeom.Mesh)
+            return self.UsdGeom.Xform
+        return getattr(self.UsdGeom, shapes.KINDS[obj.kind].usd_prim or "Mesh")
 
     def _define_all(self, prims: list) -> None:
         """Define each (path, schema, API schemas or None) prim, parents first, in one change block (one
@@ -238,38 +235,18 @@ class _Writer:
     def _shape(self, shape: Shape, path: str):
         UsdGeom, stage = self.UsdGeom, self.stage
         kind = shape.kind
-        exact_matrix = None
+        entry = shapes.KINDS[kind]
         gprim = self._schema(shape).Define(stage, path)
-        if kind == "sphere":
-            gprim.CreateRadiusAttr(1.0)
-            matrix = shape.matrix
-        elif kind == "cube":
-            gprim.CreateSizeAttr(2.0)
-            matrix = shape.matrix
-        elif kind in ("cylinder", "cone"):
-            gprim.CreateRadiusAttr(1.0)
-            gprim.CreateHeightAttr(1.0)
-            gprim.CreateAxisAttr(UsdGeom.Tokens.z)
-            matrix = shape.matrix @ CENTRED
-            exact_matrix = shape.matrix  # M @ CENTRED @ CENTRED⁻¹ may be off by an ulp
-        elif kind == "plane":
-            half = self._plane_half_size(shape.matrix)
-            gprim.CreateWidthAttr(2.0 * half)
-            gprim.CreateLengthAttr(2.0 * half)
-            gprim.CreateAxisAttr(UsdGeom.Tokens.z)
-            gprim.CreateDoubleSidedAttr(True)
-            matrix = shape.matrix
-        else:
-            self._mesh(gprim, self._generic_mesh(shape))
-            matrix = shape.matrix
+        # (what each schema needs; the matrix to place it by, and our exact one where that may differ)
+        matrix, exact_matrix = self._geometry[entry.usd_prim or "Mesh"](gprim, shape)
         self._set_transform(gprim, matrix)
         prim = gprim.GetPrim()
         self._attr(prim, C.A_SHAPE, self.Sdf.ValueTypeNames.Token, kind)
         if exact_matrix is not None:
             self._attr(prim, C.A_MATRIX, self.Sdf.ValueTypeNames.Matrix4d, C.to_gf(exact_matrix))
-        if kind == "taperedCylinder":
-            self._double(prim, C.A_SMALL_RADIUS, shape.tapered_radius)
-        if kind == "mesh":
+        for parameter, value in zip(entry.parameters, shape.parameters):
+            self._double(prim, parameter.usd_attribute, value)
+        if entry.file_argument:
             self._mesh_data(prim, shape)
         extent = UsdGeom.Boundable.ComputeExtentFromPlugins(gprim, self.Usd.TimeCode.Default())
         if extent is not None:
@@ -277,6 +254,41 @@ class _Writer:
         gprim.CreateDisplayColorAttr(self.Vt.Vec3fArray([self.Gf.Vec3f(*map(float, shape.material.diffuse))]))
         self._material(prim, shape.material)
         return prim
+
+    @property
+    def _geometry(self) -> dict:
+        """Per UsdGeom schema a kind may name (ShapeKind.usd_prim), what authors its prim's geometry."""
+        return {"Sphere": self._sphere, "Cube": self._cube, "Cylinder": self._round, "Cone": self._round,
+                "Plane": self._plane, "Mesh": self._tessellated}
+
+    @staticmethod
+    def _sphere(gprim, shape: Shape):
+        gprim.CreateRadiusAttr(1.0)
+        return shape.matrix, None
+
+    @staticmethod
+    def _cube(gprim, shape: Shape):
+        gprim.CreateSizeAttr(2.0)
+        return shape.matrix, None
+
+    def _round(self, gprim, shape: Shape):
+        """USD's cylinder and cone, centred on the origin: ours stand on z = 0 (see CENTRED)."""
+        gprim.CreateRadiusAttr(1.0)
+        gprim.CreateHeightAttr(1.0)
+        gprim.CreateAxisAttr(self.UsdGeom.Tokens.z)
+        return shape.matrix @ CENTRED, shape.matrix  # (M @ CENTRED @ CENTRED⁻¹ may be off by an ulp)
+
+    def _plane(self, gprim, shape: Shape):
+        half = self._plane_half_size(shape.matrix)
+        gprim.CreateWidthAttr(2.0 * half)
+        gprim.CreateLengthAttr(2.0 * half)
+        gprim.CreateAxisAttr(self.UsdGeom.Tokens.z)
+        gprim.CreateDoubleSidedAttr(True)
+        return shape.matrix, None
+
+    def _tessellated(self, gprim, shape: Shape):
+        self._mesh(gprim, self._generic_mesh(shape))
+        return shape.matrix, None
 
     def _plane_half_size(self, matrix: np.ndarray) -> float:
         """Half the side of the square that stands in for an infinite plane: it reaches ``PLANE_REACH`` times
@@ -287,14 +299,13 @@ class _Writer:
 
     @staticmethod
     def _generic_mesh(shape: Shape) -> MeshData:
+        """The polygons of a shape USD has no implicit prim for: its kind's tessellation, else its mesh."""
         entry = shapes.KINDS[shape.kind]
-        if entry.tessellate is not None:  # the parameterless kinds USD has no implicit prim for
-            return entry.function("tessellate")()
-        if shape.kind == "taperedCylinder":
-            return tapered_cylinder_mesh(shape.tapered_radius)
+        if entry.tessellate is not None:
+            return entry.function("tessellate")(*entry.traced(shape.parameters))
         if shape.mesh is None:
-            if shape.kind in POLYHEDRON_KINDS or shape.kind == "teapot":
-                from ..sdl.parser import builtin_mesh
+            if entry.builtin_mesh:
+                from ..geometry import builtin_mesh
                 return builtin_mesh(shape.kind)
             raise TracerError(f"cannot write the {shape.kind}: it has no mesh data")
         return shape.mesh

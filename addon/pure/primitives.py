@@ -17,7 +17,8 @@ from typing import Optional
 
 import numpy as np
 
-from . import deps
+from ..tracer.geometry.tessellate import tapered_cylinder_mesh, torus_mesh
+from ..tracer.shapes import KINDS
 
 #: Segments around the sphere, the cylinders and the torus ring; rings of the sphere; segments of the tube.
 SEGMENTS = 64
@@ -146,7 +147,7 @@ def plane() -> GenericMesh:
 def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMesh:
     """Wall from z = 0 (radius 1) to z = 1 (radius ``small_radius``), with the base and cap discs: the
     tracer's tessellation, the wall smooth and the discs flat, the rims sharp."""
-    data = deps.module("geometry.tessellate").tapered_cylinder_mesh(small_radius, segments)
+    data = tapered_cylinder_mesh(small_radius, segments)
     faces = [vertices for vertices, _ in data.faces]
     n = segments
     smooth = np.arange(len(faces)) < n  # the wall's faces come first
@@ -158,7 +159,7 @@ def tapered_cylinder(small_radius: float, segments: int = SEGMENTS) -> GenericMe
 
 def torus(segments: int = SEGMENTS, tube_segments: int = TORUS_TUBE_SEGMENTS) -> GenericMesh:
     """The tracer's tessellation of the generic torus, smooth."""
-    data = deps.module("geometry.tessellate").torus_mesh(segments, tube_segments)
+    data = torus_mesh(segments, tube_segments)
     faces = [vertices for vertices, _ in data.faces]
     return GenericMesh(np.asarray(data.vertices, dtype=np.float64), faces, np.ones(len(faces), bool))
 
@@ -177,31 +178,42 @@ def from_mesh_data(mesh, smooth: bool) -> GenericMesh:
     return GenericMesh(vertices, faces, np.full(len(faces), bool(smooth)), [], corner)
 
 
-#: Kinds whose Blender mesh is built here from a parameter-free recipe.
-_BUILDERS = {"sphere": sphere, "cube": cube, "square": square, "plane": plane, "torus": torus,
-             "cylinder": lambda: tapered_cylinder(1.0), "cone": lambda: tapered_cylinder(0.0)}
-
-
-def generic_mesh(kind: str, param: float = 1.0, mesh_data=None) -> GenericMesh:
-    """The Blender mesh of a generic shape.  ``param`` is the taper of ``taperedCylinder``; ``mesh_data``
-    the tracer's MeshData for the polyhedra, the teapot and ``mesh`` shapes."""
-    if kind in _BUILDERS:
-        return _BUILDERS[kind]()
-    entry = deps.module("shapes").KINDS.get(kind)
-    if entry is not None and entry.tessellate is not None:  # any other parameterless registered shape
-        return from_mesh_data(entry.function("tessellate")(), smooth=True)
-    if kind == "taperedCylinder":
-        return tapered_cylinder(float(param))
+def generic_mesh(kind: str, parameters: tuple[float, ...] = (), mesh_data=None) -> GenericMesh:
+    """The Blender mesh of a generic shape with these parameters (Shape.parameters): the builder of this
+    module its registry entry names (ShapeKind.blender_mesh), else the tracer's tessellation, else
+    ``mesh_data``, the tracer's MeshData of a polyhedron, the teapot or a ``mesh`` shape."""
+    entry = KINDS[kind]
+    values = entry.traced(parameters or entry.defaults)
+    if entry.blender_mesh is not None:
+        return globals()[entry.blender_mesh](*values)
+    if entry.tessellate is not None:
+        return from_mesh_data(entry.function("tessellate")(*values), smooth=True)
     if mesh_data is None:
         raise ValueError(f"the {kind} needs its mesh data")
-    return from_mesh_data(mesh_data, smooth=kind in ("teapot", "mesh"))
+    return from_mesh_data(mesh_data, smooth=entry.family == "mesh")
 
 
-def mesh_name(kind: str, param: float = 1.0, mesh_file: Optional[str] = None) -> str:
-    """Name of the shared Blender mesh of one kind and parameter ("SDL sphere", "SDL taperedCylinder 0.5")."""
-    if kind == "taperedCylinder":
-        return f"SDL taperedCylinder {float(param):g}"
-    if kind == "mesh":
+def mesh_name(kind: str, parameters: tuple[float, ...] = (), mesh_file: Optional[str] = None) -> str:
+    """Name of the shared Blender mesh of one kind and parameters ("SDL sphere", "SDL taperedCylinder 0.5",
+    "SDL mesh pawn.3vn")."""
+    if KINDS[kind].file_argument:
         import os
-        return f"SDL mesh {os.path.basename(mesh_file or 'mesh')}"
-    return f"SDL {kind}"
+        return f"SDL {kind} {os.path.basename(mesh_file or kind)}"
+    return " ".join(["SDL", kind, *(f"{float(v):g}" for v in parameters)])
+
+
+def stored_parameters(parameters: tuple[float, ...]):
+    """What the ``sdl_param`` custom property of an object or mesh holds for these parameters: the one number
+    (1.0 for a kind that takes none), or the list of them."""
+    if len(parameters) <= 1:
+        return float(parameters[0]) if parameters else 1.0
+    return [float(v) for v in parameters]
+
+
+def parameters_of(kind: str, stored) -> tuple[float, ...]:
+    """The parameters of a ``kind`` whose ``sdl_param`` property holds ``stored`` (None: its defaults)."""
+    entry = KINDS[kind]
+    if not entry.parameters or stored is None:
+        return entry.defaults
+    values = [float(v) for v in stored] if hasattr(stored, "__len__") else [float(stored)]
+    return tuple(values[:len(entry.parameters)]) + entry.defaults[len(values):]

@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from . import deps
+from ..tracer.transforms import rotation_scale_rotation
 
 _AXES = {"X": (0, 1.0), "Y": (1, 1.0), "Z": (2, 1.0), "-X": (0, -1.0), "-Y": (1, -1.0), "-Z": (2, -1.0)}
 
@@ -107,7 +107,7 @@ def split_shear(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     linear = matrix[:3, :3]
     if not has_shear(linear):
         return matrix.copy(), np.eye(4)
-    u, s, vt = deps.module("transforms").rotation_scale_rotation(linear)
+    u, s, vt = rotation_scale_rotation(linear)
     obj = np.eye(4)
     obj[:3, :3] = u * s  # U diag(s): orthogonal columns
     obj[:3, 3] = matrix[:3, 3]

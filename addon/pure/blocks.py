@@ -14,14 +14,16 @@ from __future__ import annotations
 import concurrent.futures
 import threading
 import time
-from typing import TYPE_CHECKING, Callable, Iterator, Optional
+from typing import Callable, Iterator, Optional
 
 import numpy as np
 
-from . import deps
-
-if TYPE_CHECKING:  # a work item is one tile of one pass
-    from tracer.tiles import Tile
+from ..tracer import tiles
+from ..tracer.backend import make_tracer
+from ..tracer.errors import RenderCancelled
+from ..tracer.target import sample_to_error
+from ..tracer.threads import default_threads
+from ..tracer.trace import RayCounts, first_hits
 
 RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]  # (rows, cols, dy, dx) -> (origins, directions)
 
@@ -30,12 +32,12 @@ DEFAULT_CHUNK = 4096  # rays per call into the tracer: a 64 x 64 tile in one, Es
 
 
 def block_passes(block_size: int, progressive: bool) -> list[int]:
-    return deps.module("tiles").block_passes(int(block_size), bool(progressive))
+    return tiles.block_passes(int(block_size), bool(progressive))
 
 
 def resolve_threads(threads: int) -> int:
     """0 means the tracer's default: $SDL_TRACER_THREADS, else every core this process may run on."""
-    return int(threads) if threads and threads > 0 else deps.module("native").default_threads()
+    return int(threads) if threads and threads > 0 else default_threads()
 
 
 def _work_items(plan) -> list:
@@ -43,7 +45,6 @@ def _work_items(plan) -> list:
     pass traces one ray per stride x stride block, so each work item still traces about tile x tile rays
     (at 1080p with block size 8 this is 700 items instead of 2,040, and a second less in Blender 3.4).
     Sub-pixel offsets depend on the pixel alone, so the image is the same for any tiling."""
-    tiles = deps.module("tiles")
     finest = plan.passes[-1]
     items = []
     for p, stride in enumerate(plan.passes):
@@ -71,7 +72,7 @@ class BlockRenderer:
                  progressive: bool = False, threads: int = 1, tile: int = DEFAULT_TILE,
                  chunk: Optional[int] = None, alpha: bool = False, backend: str = "auto", samples: int = 1,
                  sampling: str = "jittered", threshold: float = 0.05, seed: int = 0):
-        self.plan = deps.module("tiles").TilePlan(
+        self.plan = tiles.TilePlan(
             int(width), int(height), block_size=int(block_size), progressive=bool(progressive), tile=int(tile),
             samples=int(samples), sampling_mode=sampling, threshold=float(threshold), seed=int(seed))
         self.compiled = compiled
@@ -105,7 +106,7 @@ class BlockRenderer:
     def _tracer(self):
         tracer = getattr(self._local, "tracer", None)
         if tracer is None:
-            tracer = deps.module("backend").make_tracer(self.compiled, self.backend)
+            tracer = make_tracer(self.compiled, self.backend)
             if getattr(tracer, "name", "") == "c":
                 tracer.threads = self.threads  # the C core spreads each chunk over its own threads
             self._local.tracer = tracer
@@ -128,7 +129,7 @@ class BlockRenderer:
         """Which rays hit anything (for the film's alpha), by the same backend that shades them."""
         if hasattr(tracer, "first_hits"):
             return np.isfinite(tracer.first_hits(origins, directions)["t"])
-        return deps.module("trace").first_hits(self.compiled, origins, directions).hit
+        return first_hits(self.compiled, origins, directions).hit
 
     def _refine_mask(self) -> np.ndarray:
         with self._lock:  # judged once, on the film every block pass has finished
@@ -145,21 +146,21 @@ class BlockRenderer:
 
         tracer = self._tracer()
         tracer.cancel = cancel  # (also asked while a chunk is traced: a deep ray tree stops within 50 ms)
-        shade = deps.module("tiles").PixelTracer(
+        shade = tiles.PixelTracer(
             self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint, alpha=self.want_alpha,
             first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
         refine = self._refine_mask() if self.plan.is_refinement(item) else None
         try:
-            deps.module("tiles").trace_tile(self.plan, item, self._traced, shade, refine)
-        except deps.module("errors").RenderCancelled:
+            tiles.trace_tile(self.plan, item, self._traced, shade, refine)
+        except RenderCancelled:
             raise Cancelled() from None
         return item
 
-    def pass_items(self, pass_index: int) -> list[Tile]:
+    def pass_items(self, pass_index: int) -> list[tiles.Tile]:
         return [item for item in self.items if item.pass_index == pass_index]
 
     def run(self, cancel: Optional[Callable[[], bool]] = None,
-            on_item: Optional[Callable[[Tile], None]] = None, poll: float = 0.05) -> None:
+            on_item: Optional[Callable[[tiles.Tile], None]] = None, poll: float = 0.05) -> None:
         """Trace everything.  ``cancel`` and ``on_item`` are only ever called on the calling thread (Blender's
         API wants that); worker threads see cancellation through an event checked between chunks."""
         started = time.perf_counter()
@@ -202,11 +203,10 @@ class BlockRenderer:
         until their estimated error is below ``target``); returns the tracer's ErrorEstimate.  The alpha
         stays 1: the target's sampling shades colour only."""
         started = time.perf_counter()
-        target_module = deps.module("target")
         try:
-            film, estimate = target_module.sample_to_error(self._tracer().camera_rays, self.rays_for, self.width,
-                                                           self.height, float(target), self.plan.seed, cancel)
-        except deps.module("errors").RenderCancelled:
+            film, estimate = sample_to_error(self._tracer().camera_rays, self.rays_for, self.width, self.height,
+                                             float(target), self.plan.seed, cancel)
+        except RenderCancelled:
             raise Cancelled() from None
         finally:
             self.seconds += time.perf_counter() - started
@@ -214,7 +214,7 @@ class BlockRenderer:
         self.done = len(self.items)
         return estimate
 
-    def steps(self) -> Iterator[Tile]:
+    def steps(self) -> Iterator[tiles.Tile]:
         """The remaining items one at a time, on the calling thread (for time-sliced viewport drawing)."""
         while self.done < len(self.items):
             item = self.items[self.done]
@@ -251,7 +251,7 @@ class BlockRenderer:
         return self._film
 
     def counts(self):
-        total = deps.module("trace").RayCounts()
+        total = RayCounts()
         for tracer in self._tracers:
             total.add(tracer.counts)
         return total

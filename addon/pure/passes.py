@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import deps
+from ..tracer.trace import first_hits
 
 #: Blender's pass name -> (ViewLayer switch, channel ids, socket type).
 PASSES = {
@@ -49,7 +49,7 @@ def _first_hits(tracer, compiled, origins, directions):
     if hasattr(tracer, "first_hits"):
         hits = tracer.first_hits(origins, directions)
         return hits["t"], hits["normal"], hits["shape"]
-    hits = deps.module("trace").first_hits(compiled, origins, directions)
+    hits = first_hits(compiled, origins, directions)
     return hits.t, hits.normal, hits.shape
 
 
@@ -62,7 +62,7 @@ def _albedo(compiled, shape, points, origins, directions, hit) -> np.ndarray:
     textured = hit & np.array([s >= 0 and primitives[s].shape.material.texture != 0 for s in shape])
     if textured.any():
         # the part of the surface hit (side or cap, face of a polyhedron) decides the texture coordinates
-        found = deps.module("trace").first_hits(compiled, origins[textured], directions[textured])
+        found = first_hits(compiled, origins[textured], directions[textured])
         out[textured] *= compiled.textures.colors(found.shape, points[textured], found.part)
     return out
 

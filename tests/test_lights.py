@@ -1,0 +1,323 @@
+"""The physical lights of Blender scenes (docs/tracer.md, "Lights"): each against its formula on both backends
+(falloff, Blender's spot cone, sun, area light irradiance, soft-shadow penumbrae against the analytic share of
+a disk behind an edge), C = NumPy bit for bit, shadow rays counted, and the SDL statements both ways with
+names."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import tracer
+from helpers import Light, scaled, scene_of, shape
+from tracer.backend import make_tracer
+from tracer.compile import compile_scene
+from tracer.errors import SceneError, SDLError
+from tracer.model import Camera
+from tracer.sdl.parser import parse_sdl
+from tracer.sdl.writer import save_sdl
+from tracer.transforms import rotation, scaling, translation
+
+WHITE = dict(ambient=(0.0, 0.0, 0.0), diffuse=(1.0, 1.0, 1.0))
+
+
+def floor(**material):
+    """The plane y = 0 as a big square facing +y."""
+    return shape("square", translation(0, 0, 0) @ rotation(-90, 1, 0, 0) @ scaling(50, 50, 1),
+                 **{**WHITE, **material})
+
+
+def shade_down(backend, scene, xs, zs=(0.0,), height=5.0):
+    """Colours of rays shot straight down at floor points (x, 0, z) for x in xs, z in zs: (len(zs), len(xs), 3);
+    and the tracer (for its ray counts)."""
+    compiled = compile_scene(scene)
+    t = make_tracer(compiled, backend, threads=1)
+    x, z = np.meshgrid(np.asarray(xs, float), np.asarray(zs, float))
+    origins = np.stack([x.ravel(), np.full(x.size, height), z.ravel()], axis=1)
+    directions = np.tile([0.0, -1.0, 0.0], (x.size, 1))
+    return t.camera_rays(origins, directions).reshape(len(zs), len(xs), 3), t
+
+
+def lit(*lights, objects=(), **settings):
+    return scene_of(floor(), *objects, lights=list(lights), background=(0.0, 0.0, 0.0),
+                    global_ambient=(0.0, 0.0, 0.0), **settings)
+
+
+# ------------------------------------------------------------------------------------------------ formulas
+
+
+def test_sphere_light_falls_off_as_inverse_square(backend):
+    xs = np.linspace(-4, 4, 17)
+    colour, t = shade_down(backend, lit(Light((0.5, 2.0, 0.0), (3.0, 2.0, 1.0), kind="sphere")), xs)
+    r2 = (xs - 0.5) ** 2 + 4.0
+    expected = np.outer(2.0 / np.sqrt(r2) / r2, (3.0, 2.0, 1.0))  # colour * cos / r^2
+    np.testing.assert_allclose(colour[0], expected, rtol=1e-12)
+    assert t.counts.shadow == len(xs)  # one feeler per point: no radius, no soft shadow
+
+
+def test_sdl_point_light_keeps_no_falloff(backend):
+    xs = np.linspace(-4, 4, 9)
+    colour, _ = shade_down(backend, lit(Light((0.0, 2.0, 0.0), (1.0, 1.0, 1.0))), xs)
+    np.testing.assert_allclose(colour[0, :, 0], 2.0 / np.sqrt(xs ** 2 + 4.0), rtol=1e-12)
+
+
+def blender_spot(cos_alpha, size_degrees, blend):
+    """Blender (Cycles 4.x)'s spot attenuation: smoothstep of (cos a - cos(size/2)) / ((1 - cos(size/2)) blend)."""
+    cos_half = math.cos(math.radians(size_degrees) / 2)
+    if cos_alpha <= cos_half:
+        return 0.0
+    if blend == 0:
+        return 1.0
+    t = min(1.0, (cos_alpha - cos_half) / ((1 - cos_half) * blend))
+    return t * t * (3 - 2 * t)
+
+
+@pytest.mark.parametrize("size, blend", [(60.0, 0.3), (90.0, 1.0), (45.0, 0.0)])
+def test_spot_cone_is_blenders_smoothstep(backend, size, blend):
+    height = 3.0
+    xs = np.linspace(0.0, 3.0, 61)
+    spot = Light((0.0, height, 0.0), (1.0, 1.0, 1.0), kind="spot", direction=(0.0, -2.0, 0.0), spot_size=size,
+                 spot_blend=blend)
+    colour, t = shade_down(backend, lit(spot), xs)
+    r2 = xs ** 2 + height ** 2
+    cos = height / np.sqrt(r2)
+    expected = np.array([blender_spot(c, size, blend) for c in cos]) * cos / r2
+    np.testing.assert_allclose(colour[0, :, 0], expected, rtol=1e-9, atol=1e-15)
+    assert t.counts.shadow == int(np.count_nonzero(expected > 0))  # no feelers outside the cone
+
+
+def test_sun_lights_by_the_cosine_without_falloff(backend):
+    sun = Light((0.0, 0.0, 0.0), (0.5, 0.5, 0.5), kind="sun", direction=(1.0, -2.0, 0.0))
+    colour, _ = shade_down(backend, lit(sun), np.linspace(-10, 10, 5))
+    np.testing.assert_allclose(colour[0, :, 0], 0.5 * 2.0 / math.sqrt(5.0), rtol=1e-12)
+
+
+def corner_integral(a, b, h):
+    """The integral of cos cos / r^2 over a rectangle [0, a] x [0, b] parallel to the receiver at height h,
+    with a corner over the receiving point (pi times the point-to-rectangle form factor)."""
+    A, B = a / h, b / h
+    return 0.5 * (A / math.hypot(1, A) * math.atan(B / math.hypot(1, A))
+                  + B / math.hypot(1, B) * math.atan(A / math.hypot(1, B)))
+
+
+def test_area_light_irradiance_matches_the_form_factor(backend):
+    width, height, above = 2.0, 1.0, 1.5
+    area = Light((0.0, above, 0.0), (1.0, 1.0, 1.0), kind="area", direction=(0, -1, 0), axis=(1, 0, 0),
+                 size=(width, height), samples=256)
+    colour, t = shade_down(backend, lit(area), [0.0])
+    expected = 4 * corner_integral(width / 2, height / 2, above)
+    assert colour[0, 0, 0] == pytest.approx(expected, rel=2e-3)
+    assert t.counts.shadow == 256
+    # one-sided: from behind it gives nothing
+    back = Light((0.0, above, 0.0), (1.0, 1.0, 1.0), kind="area", direction=(0, 1, 0), size=(width, height))
+    assert shade_down(backend, lit(back), [0.0])[0].max() == 0.0
+
+
+def test_ellipse_light_of_small_size_is_a_point_light_of_its_area(backend):
+    d = 0.02
+    disk = Light((0.0, 3.0, 0.0), (1.0, 1.0, 1.0), kind="area", shape="ellipse", direction=(0, -1, 0),
+                 size=(d, d), samples=16)
+    colour, _ = shade_down(backend, lit(disk), [0.0, 1.0])
+    area = math.pi * d * d / 4
+    expected = area * np.array([1 / 9, (3 / math.sqrt(10)) ** 2 / 10])  # cos_x cos_l / r^2
+    np.testing.assert_allclose(colour[0, :, 0], expected, rtol=1e-3)  # (its finite size: ~(d/r)^2)
+
+
+# ------------------------------------------------------------------------------------------------ penumbrae
+
+
+def segment_share(a, radius):
+    """The share of a disk of ``radius`` beyond the chord at distance ``a`` from its centre (a < 0: more than
+    half)."""
+    a = max(-radius, min(radius, a))
+    return (radius * radius * math.acos(a / radius) - a * math.sqrt(radius * radius - a * a)) / (math.pi * radius ** 2)
+
+
+def edge_blocker(height):
+    """A thin sheet at ``height`` covering x < 0 (its edge along z at x = 0)."""
+    return shape("square", translation(-20, height, 0) @ rotation(-90, 1, 0, 0) @ scaling(20, 20, 1), **WHITE)
+
+
+def visible_along(backend, light, xs, height_of_edge, samples_at=None):
+    scene = lit(light, objects=[edge_blocker(height_of_edge)])
+    bare = lit(light)
+    zs = np.linspace(-1.0, 1.0, 41)
+    shaded, t = shade_down(backend, scene, xs, zs, height=height_of_edge - 0.01)
+    full, _ = shade_down(backend, bare, xs, zs, height=height_of_edge - 0.01)
+    return (shaded[..., 0] / full[..., 0]).mean(axis=0), t
+
+
+def test_sun_penumbra_is_the_share_of_its_disk_past_the_edge(backend):
+    angle, h = 6.0, 1.0
+    sun = Light((0, 0, 0), (1.0, 1.0, 1.0), kind="sun", direction=(0, -1, 0), angle=angle, samples=32)
+    xs = np.linspace(-0.08, 0.08, 17)
+    share, t = visible_along(backend, sun, xs, h)
+    radius = math.tan(math.radians(angle / 2))  # the sun's disk seen through the edge, at unit height
+    expected = np.array([1 - segment_share(x / h, radius) for x in xs])
+    np.testing.assert_allclose(share, expected, atol=0.03)
+    assert share[0] == 0.0 and share[-1] == 1.0
+    assert t.counts.shadow == 32 * 41 * len(xs)
+
+
+def test_sphere_light_penumbra(backend):
+    light_height, edge, radius = 4.0, 1.0, 0.5
+    light = Light((0, light_height, 0), (1.0, 1.0, 1.0), kind="sphere", radius=radius, samples=32)
+    xs = np.linspace(-0.25, 0.25, 11)
+    share, _ = visible_along(backend, light, xs, edge)
+    # a floor point at x sees the light's disk cut by the edge's line at u = -x (H - h) / h
+    expected = np.array([1 - segment_share(x * (light_height - edge) / edge, radius) for x in xs])
+    np.testing.assert_allclose(share, expected, atol=0.04)
+
+
+def test_area_light_penumbra(backend):
+    light_height, edge, side = 4.0, 1.0, 1.0
+    area = Light((0, light_height, 0), (1.0, 1.0, 1.0), kind="area", direction=(0, -1, 0), size=(side, side),
+                 samples=64)
+    xs = np.linspace(-0.2, 0.2, 9)
+    share, _ = visible_along(backend, area, xs, edge)
+    # the strip of the square (seen from nearly below) past the edge's line, weighted nearly evenly
+    cut = np.clip(0.5 - xs * (light_height - edge) / edge / side, 0.0, 1.0)
+    np.testing.assert_allclose(share, 1.0 - cut, atol=0.04)
+
+
+# ------------------------------------------------------------------------------------------------ backends
+
+
+def showcase():
+    return parse_sdl("""background 0 0 0 globalAmbient 0.05 0.05 0.05
+camera 0 5 7  0 0.5 0  0 1 0 50
+sphereLight -2 3 1 6 6 6 0.4 8
+spotLight 2 4 0 -0.3 -1 0 8 8 8 50 0.3 0.2 6
+sunLight 1 -2 -1 0.3 0.3 0.25 5 5
+areaLight 0 3.5 -2 0 -1 0.3 1 0 0 3 3 3 1.5 0.8 9
+ellipseLight -2 2 -2 0.5 -1 0.5 1 0 0 2 1 1 1 0.6 4
+light 0 6 6 0.2 0.2 0.2
+ambient 0.2 0.2 0.2 diffuse 0.8 0.7 0.6 specular 0.5 0.5 0.5 specularExponent 30
+push translate 0 1 0 sphere pop
+push translate -1.5 0.5 1 scale 0.5 0.5 0.5 cube pop
+push rotate -90 1 0 0 scale 10 10 1 square pop
+""")
+
+
+def test_c_and_numpy_agree_bit_for_bit_with_every_light():
+    from tracer import native
+    if native.load_error is not None:
+        pytest.skip(f"C core not available: {native.load_error}")
+    scene = showcase()
+    c = tracer.render(scene, 80, 60, backend="c")
+    n = tracer.render(scene, 80, 60, backend="numpy")
+    assert np.array_equal(c.image, n.image)
+    assert c.rays.as_dict() == n.rays.as_dict() and c.rays.skipped() == n.rays.skipped()
+    assert {"physical-lights", "soft-shadows"} <= set(c.stats()["effects"])
+
+
+def test_renders_are_reproducible_and_tile_independent(backend):
+    scene = showcase()
+    w, h = scaled(backend, 64, 48)
+    one = tracer.render(scene, w, h, backend=backend)
+    tiled = tracer.render(scene, w, h, backend=backend, block_size=4, progressive=True)
+    assert np.array_equal(one.image, tiled.image)
+
+
+def test_only_scenes_with_physical_lights_pay_for_them():
+    effects = compile_scene(lit(Light((0, 3, 0), (1, 1, 1)))).effects
+    assert not effects & {"physical-lights", "soft-shadows"}
+    hard = compile_scene(lit(Light((0, 3, 0), (1, 1, 1), kind="sphere", samples=16))).effects
+    assert "physical-lights" in hard and "soft-shadows" not in hard  # (no radius: one feeler, samples unused)
+
+
+# ------------------------------------------------------------------------------------------------ SDL
+
+
+SDL_LIGHTS = """! name: Key Light
+light 1 2 3 1 1 1
+! name: Fill
+sphereLight 0 4 0 10 10 10 0.25 16
+spotLight 0 5 0 0 -1 0 5 5 5 60 0.2 0.1 4
+! name: Sun
+sunLight 1 -2 -1 0.5 0.5 0.4 0.53 8
+areaLight 0 3 0 0 -1 0 1 0 0 2 2 2 1 0.5 9
+ellipseLight 0 3 0 0 -1 0 1 1 0 2 2 2 1 1 9
+! name: ball
+sphere
+"""
+
+
+def test_sdl_light_statements_read_as_documented():
+    scene = parse_sdl(SDL_LIGHTS)
+    key, fill, spot, sun, area, disk = scene.lights
+    assert key == Light((1.0, 2.0, 3.0), (1.0, 1.0, 1.0), name="Key Light")
+    assert fill == Light((0.0, 4.0, 0.0), (10.0, 10.0, 10.0), kind="sphere", name="Fill", radius=0.25, samples=16)
+    assert (spot.kind, spot.direction, spot.spot_size, spot.spot_blend, spot.radius, spot.samples) == (
+        "spot", (0.0, -1.0, 0.0), 60.0, 0.2, 0.1, 4)
+    assert (sun.kind, sun.name, sun.direction, sun.angle) == ("sun", "Sun", (1.0, -2.0, -1.0), 0.53)
+    assert (area.shape, area.size, area.axis, disk.shape) == ("rectangle", (1.0, 0.5), (1.0, 0.0, 0.0), "ellipse")
+    assert scene.shapes()[0].name == "ball"  # a name comment still names the shape after the lights
+
+
+def test_sdl_round_trip_keeps_every_light_and_its_name(tmp_path):
+    scene = parse_sdl(SDL_LIGHTS)
+    save_sdl(scene, tmp_path / "lights.sdl")
+    again = tracer.load(tmp_path / "lights.sdl")
+    assert again.lights == scene.lights
+    assert [s.name for s in again.shapes()] == ["ball"]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("sphereLight 0 0 0 1 1 1 -1 1", "radius must not be negative"),
+    ("sphereLight 0 0 0 1 1 1 0 0", "samples must be a whole number"),
+    ("sphereLight 0 0 0 1 1 1 0 2.5", "samples must be a whole number"),
+    ("sunLight 0 0 0 1 1 1 1 1", "direction is zero"),
+    ("sunLight 0 -1 0 1 1 1 180 1", "angle"),
+    ("spotLight 0 0 0 0 0 1 1 1 1 0 0 0 1", "spot size"),
+    ("spotLight 0 0 0 0 0 1 1 1 1 40 1.5 0 1", "blend"),
+    ("areaLight 0 0 0 0 0 1 0 0 2 1 1 1 1 1 1", "axis"),
+    ("areaLight 0 0 0 0 0 1 1 0 0 1 1 1 0 1 1", "width and height"),
+    ("sphereLight 0 0 0 1 1 1", "end of file"),
+])
+def test_bad_light_statements_are_one_error_naming_the_place(text, message):
+    with pytest.raises(SDLError) as err:
+        parse_sdl("camera 0 0 5 0 0 0 0 1 0 40\n" + text, strict=True)
+    assert message in str(err.value) and ":2:" in str(err.value)
+
+
+def test_lenient_reading_skips_a_bad_light_with_a_warning():
+    scene = parse_sdl("sphereLight 0 0 0 1 1 1 -1 1\nlight 0 1 0 1 1 1\nsphere", strict=False)
+    assert len(scene.lights) == 1 and len(scene.warnings) == 1
+
+
+def test_model_refuses_unknown_kinds_and_sample_counts():
+    with pytest.raises(SceneError):
+        Light((0, 0, 0), (1, 1, 1), kind="laser")
+    with pytest.raises(SceneError):
+        Light((0, 0, 0), (1, 1, 1), kind="area", shape="star")
+    with pytest.raises(SceneError):
+        Light((0, 0, 0), (1, 1, 1), samples=0)
+
+
+def test_the_c_reader_leaves_named_lights_to_the_python_reader():
+    from tracer.sdl import fastread
+    if not fastread.available():
+        pytest.skip("C core not available")
+    text = "! name: Key\nlight 0 1 0 1 1 1\n" + "sphere\n" * 10
+    declined = fastread.scan(text)
+    assert isinstance(declined, fastread.Declined) and declined.reason == "namedLight"
+    assert parse_sdl(text * 1000).lights[0].name == "Key"
+
+
+def test_editing_lights_in_place_renders_as_from_scratch(backend):
+    from tracer.edit import EditableScene
+    scene = showcase()
+    lights = list(scene.lights)
+    scene.lights = lights[-1:]  # SDL's point light alone: no physical lights yet
+    editable = EditableScene(scene)
+    w, h = scaled(backend, 48, 36)
+    tracer.render(editable.compiled, w, h, backend=backend)
+    editable.set_lights(lights[:3])
+    edited = tracer.render(editable.compiled, w, h, backend=backend)
+    fresh = showcase()
+    fresh.lights = lights[:3]
+    expected = tracer.render(fresh, w, h, backend=backend)
+    assert np.array_equal(edited.image, expected.image)
+    assert edited.rays.as_dict() == expected.rays.as_dict()

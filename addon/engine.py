@@ -134,15 +134,6 @@ def blocky_warning(block_size: int) -> str:
             f"{block_size} x {block_size} block (set Block Size 1, or tick Progressive Refinement)")
 
 
-def preview_lighting(tracer_scene) -> None:
-    """Blender's preview scene has lights of 10 and 70 W, which as SDL lights (1000 W is colour 1) leave a
-    material preview nearly black: scale them together so that the brightest is white, as SDL scenes are lit."""
-    peak = max((max(light.color) for light in tracer_scene.lights), default=0.0)
-    if peak > 0:
-        tracer_scene.lights = [dataclasses.replace(light, color=tuple(c / peak for c in light.color))
-                               for light in tracer_scene.lights]
-
-
 def displayed() -> bool:
     """Whether anyone sees a final render while it is traced: not under ``blender -b`` nor in the bpy module."""
     return not bpy.app.background
@@ -270,8 +261,6 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             params = camera_params(cam_obj, matrix)
             self.update_stats("", "SDL Ray Tracer | building the scene")
             tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
-            if self.is_preview:
-                preview_lighting(tracer_scene)
             for message in warnings:
                 self.report({"WARNING"}, message)
             compiled = compile_scene(tracer_scene)

@@ -106,6 +106,35 @@ def _decode_with_blender(path: Path) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
+#: The linear copies of sRGB pictures made so far (linear_copy): content digest -> file.
+_linear: dict[bytes, str] = {}
+_linear_folder = None  # a tempfile.TemporaryDirectory, made on first use, removed at exit
+
+
+def linear_copy(path: str) -> str:
+    """An 8-bit picture file holding ``path``'s colours made linear (the sRGB curve undone), as Cycles reads
+    an sRGB Image Texture; the tracer, which uses a picture's values as they are stored (as SDL does), is
+    given this copy for a Blender material's texture.  One copy per content, in a temporary folder.  (8 bits
+    of linear values are coarse in the darkest tenth: a stored 10 of 255 becomes 1.)"""
+    global _linear_folder
+    digest = _digest(Path(path))
+    made = _linear.get(digest)
+    if made is not None and os.path.isfile(made):
+        return made
+    import tempfile
+
+    from .tracer.imageio import save_image
+
+    if _linear_folder is None:
+        _linear_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")
+    stored = np.clip(decode(Path(path)), 0.0, 1.0)
+    linear = np.where(stored <= 0.04045, stored / 12.92, ((stored + 0.055) / 1.055) ** 2.4)
+    made = os.path.join(_linear_folder.name, digest.hex()[:24] + "-linear.png")
+    save_image(np.rint(linear[::-1] * 255.0).astype(np.uint8), made)  # (rows top first for the file)
+    _linear[digest] = made
+    return made
+
+
 def register() -> None:
     limits.set_fallback_decoder(decode)
     bpy.app.handlers.load_post.append(forget)

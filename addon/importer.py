@@ -5,6 +5,7 @@ read leaves the Blender scene as it was; if creating fails half way, what was cr
 """
 from __future__ import annotations
 
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -15,7 +16,7 @@ import numpy as np
 from mathutils import Matrix
 
 from . import meshes, props
-from .pure import convert, primitives
+from .pure import convert, light_units, primitives
 from .scene_build import (OBJ_FILE, OBJ_KIND, OBJ_MATRIX, OBJ_ORDER, OBJ_PARAM, OBJ_SHOWN, SDL_TO_BOOLEAN, flat)
 from .tracer import model, shapes
 from .tracer.camera import CameraFrame, focal_length, framing_camera
@@ -61,6 +62,20 @@ def read_scene(filepath: str, strict: bool = False):
     return scene
 
 
+def light_matrix(direction, axis, position) -> np.ndarray:
+    """A Blender light's world matrix: at ``position``, shining along ``direction`` (its local -Z), its local X
+    along ``axis`` made perpendicular to that (any perpendicular where ``axis`` is along ``direction``)."""
+    z = -np.asarray(direction, dtype=np.float64)
+    z /= np.linalg.norm(z)
+    x = np.asarray(axis, dtype=np.float64) - np.dot(axis, z) * z
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [0.0, 0.0, 1.0] if abs(z[2]) < 0.9 else [1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    matrix = np.eye(4)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = x, np.cross(z, x), z, position
+    return matrix
+
+
 def camera_matrix(camera) -> np.ndarray:
     """The lecture's camera frame (u right, v up, n backwards: tracer.camera) as a Blender camera's world
     matrix; ``camera`` is in Blender's axes."""
@@ -99,7 +114,8 @@ class Importer:
         self.order = 0
         self.pixmaps: dict[int, str] = {}  # the file's makePixmap images, by number
         self.file_stem = ""  # the SDL file's name without its extension, as the exporter spells it
-        self._scene_before: tuple = ()  # (world, camera, recursion depth) before run(): see undo()
+        self.soft_lights = 0  # physical lights with an extent made so far (see _physical_light)
+        self._scene_before: tuple = ()  # (world, camera, recursion depth, light samples) before run(): see undo()
 
     # -- collections ------------------------------------------------------------------------------------
 
@@ -227,16 +243,48 @@ class Importer:
         return left
 
     def _light(self, light, index: int):
-        data = self.created.add("lights", bpy.data.lights.new(f"SDL light {index + 1}", "POINT"))
-        props.set_light(data, light.color)
-        obj = self.created.add("objects", bpy.data.objects.new(f"SDL light {index + 1}", data))
+        """A Blender light for an SDL light: SDL's ``light`` a point light that keeps SDL's meaning (see
+        blender_lights); the physical kinds as the Blender light of the same meaning, in Blender's units."""
+        name = light.name or f"SDL light {index + 1}"
+        blender_type = {"point": "POINT", "sphere": "POINT", "spot": "SPOT", "sun": "SUN", "area": "AREA"}[light.kind]
+        data = self.created.add("lights", bpy.data.lights.new(name, blender_type))
+        obj = self.created.add("objects", bpy.data.objects.new(name, data))
         self.result.collection.objects.link(obj)
-        obj.location = tuple(convert.points_to_blender(light.position, self.conversion))
-        obj["sdl_position"] = [float(v) for v in convert.points_to_blender(light.position, self.conversion)]
+        position = convert.points_to_blender(light.position, self.conversion)
+        if light.kind == "point":
+            props.set_light(data, light.color)
+            obj["sdl_position"] = [float(v) for v in position]
+        else:
+            self._physical_light(obj, light, position)
+        obj.location = tuple(position)
         obj[OBJ_ORDER] = self.order
         self.order += 1
         self.result.lights.append(obj)
         return obj
+
+    def _physical_light(self, obj, light, position) -> None:
+        data = obj.data
+        data.shadow_soft_size = float(light.radius)
+        direction = convert.points_to_blender(light.direction, self.conversion)
+        axis = convert.points_to_blender(light.axis, self.conversion)
+        obj.matrix_world = Matrix(light_matrix(direction, axis, position).tolist())
+        if light.kind == "sun":
+            data.color, data.energy = light_units.strength_of_sun(light.color)
+            data.angle = math.radians(light.angle)
+        elif light.kind == "area":
+            width, height = light.size
+            data.shape = "ELLIPSE" if light.shape == "ellipse" else "RECTANGLE"
+            data.size, data.size_y = width, height
+            surface = width * height * (math.pi / 4.0 if light.shape == "ellipse" else 1.0)
+            data.color, data.energy = light_units.watts_of_area_light(light.color, surface)
+        else:
+            data.color, data.energy = light_units.watts_of_sphere_light(light.color)
+            if light.kind == "spot":
+                data.spot_size, data.spot_blend = math.radians(light.spot_size), light.spot_blend
+        settings = getattr(self.context.scene, "sdl_render", None)
+        if light.soft and settings is not None:  # (one setting for the scene: its lights' most)
+            settings.light_samples = max(settings.light_samples if self.soft_lights else 1, light.samples)
+            self.soft_lights += 1
 
     def _camera(self, camera, framed: bool, far: float):
         data = self.created.add("cameras", bpy.data.cameras.new("SDL camera"))
@@ -263,7 +311,8 @@ class Importer:
         sdl_view = colour_management == "SDL" or (colour_management == "AUTO" and len(bl_scene.objects) == 0)
         settings = getattr(bl_scene, "sdl_render", None)
         self._scene_before = (bl_scene.world, bl_scene.camera,
-                              settings.max_recursion_depth if settings is not None else None)
+                              settings.max_recursion_depth if settings is not None else None,
+                              settings.light_samples if settings is not None else None)
         self._view_before = view_settings(bl_scene)
         self.file_stem = re.sub(r"[^A-Za-z0-9._-]", "_", os.path.splitext(os.path.basename(filepath))[0])
         self.pixmaps = dict(scene.pixmaps)
@@ -323,9 +372,10 @@ class Importer:
         management it had."""
         bl_scene = self.context.scene
         if self._scene_before:
-            bl_scene.world, bl_scene.camera, depth = self._scene_before
+            bl_scene.world, bl_scene.camera, depth, samples = self._scene_before
             if depth is not None:
                 bl_scene.sdl_render.max_recursion_depth = depth
+                bl_scene.sdl_render.light_samples = samples
             set_view_settings(bl_scene, self._view_before)
         self.created.remove_all()
 

@@ -216,31 +216,46 @@ def _triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return tri_verts, tri_loops, tri_polygons, mat_index
 
 
-def triangle_meshes(mesh, origin: str = "") -> dict[int, object]:
+def triangle_meshes(mesh, origin: str = "", uvs: bool = False) -> dict[int, object]:
     """The mesh's triangles (as Blender splits its polygons) with its shading normals, as one tracer MeshData
     per material index.  Faces are kept as flat arrays (model.FaceList): a million-polygon mesh as Python
     tuples took seconds to make and to hash.  The parts share the vertex and normal arrays.  Their digest
-    (compile.mesh_digest) is taken here, once: whoever keeps them must not change them."""
+    (compile.mesh_digest) is taken here, once: whoever keeps them must not change them.  With ``uvs``, each
+    triangle corner's texture coordinates from the UV map that renders (``corner_uvs``; none without one)."""
     tri_verts, tri_loops, tri_polygons, mat_index = _triangles(mesh)
     if len(mat_index) == 0:
         return {}
     vertices = _read(mesh.vertices, "co", len(mesh.vertices) * 3, np.float32).reshape(-1, 3).astype(np.float64)
     normals, normal_index = _triangle_normals(mesh, tri_verts, tri_loops, tri_polygons)
     materials = np.unique(mat_index)
+    loop_uvs = _render_uvs(mesh) if uvs else None
     out = {}
     for index in materials:
-        if len(materials) == 1:
+        corners = None if len(materials) == 1 else _corners_of(np.nonzero(mat_index == index)[0])
+        if corners is None:
             verts, norms = tri_verts, normal_index
         else:
-            corners = _corners_of(np.nonzero(mat_index == index)[0])
             verts = tri_verts[corners]
             # (normals per vertex: one index array serves both, as FaceList allows)
             norms = verts if normal_index is tri_verts else normal_index[corners]
         faces = model.FaceList(np.full(len(verts) // 3, 3, dtype=np.int64), verts, norms)
-        data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin)
+        corner_uvs = None
+        if loop_uvs is not None:
+            corner_uvs = loop_uvs[tri_loops if corners is None else tri_loops[corners]]
+        data = model.MeshData(vertices=vertices, normals=normals, faces=faces, origin=origin, corner_uvs=corner_uvs)
         # Never changed after this (a changed object is converted anew): hashed here, once, not at every compile.
         out[int(index)] = remember_digest(data)
     return out
+
+
+def _render_uvs(mesh) -> Optional[np.ndarray]:
+    """(corners, 2) float64: the UV map that renders (Blender's active_render layer), per corner; None if
+    the mesh has no UV map."""
+    layers = mesh.uv_layers
+    layer = next((layer for layer in layers if layer.active_render), None) or layers.active
+    if layer is None:
+        return None
+    return _read(layer.data, "uv", len(mesh.loops) * 2, np.float32).reshape(-1, 2).astype(np.float64)
 
 
 def _corners_of(triangles: np.ndarray) -> np.ndarray:

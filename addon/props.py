@@ -9,11 +9,13 @@
 from __future__ import annotations
 
 from array import array
+from typing import Optional
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        PointerProperty, StringProperty)
 
+from . import shader_nodes
 from .pure import convert
 from .tracer.appearance import display_roughness
 from .tracer.model import Material, Settings
@@ -42,7 +44,7 @@ def _sync_material(self, context) -> None:
 
 def _sync_world(self, context) -> None:
     world = self.id_data
-    if isinstance(world, bpy.types.World):
+    if isinstance(world, bpy.types.World) and world.sdl.use_sdl:
         apply_world_colors(world)
 
 
@@ -77,6 +79,14 @@ class SDLMaterialSettings(bpy.types.PropertyGroup):
 
 
 class SDLWorldSettings(bpy.types.PropertyGroup):
+    use_sdl: BoolProperty(name="SDL World", default=False,
+                          description="Use these SDL values when ray tracing (otherwise the world's colour, or its "
+                                      "Background node's colour times strength, is the background and the ambient "
+                                      "light, as in Cycles); an imported SDL file's world has it ticked")
+    smooth_terminator: BoolProperty(name="Smooth Terminator", default=False,
+                                    description="Shadow feelers of smooth-shaded meshes start from the smooth "
+                                                "surface their normals describe (SDL smoothTerminator); Blender "
+                                                "worlds always have it")
     background: FloatVectorProperty(name="Background", subtype="COLOR", size=3, default=(0.0, 0.0, 0.6),
                                     min=0.0, soft_max=1.0, update=_sync_world,
                                     description="Colour of rays that hit nothing")
@@ -106,6 +116,9 @@ class SDLRenderSettings(bpy.types.PropertyGroup):
                                  "than the threshold")])
     threshold: FloatProperty(name="Threshold", default=0.05, min=0.0, soft_max=1.0,
                              description="Adaptive sampling: colour difference that makes a pixel refined")
+    light_samples: IntProperty(name="Light Samples", default=16, min=1, max=1024,
+                               description="Shadow rays per shaded point for each light with an extent (a radius, "
+                                           "a sun's angle, an area light): soft shadows")
     target_error: FloatProperty(name="Target Error", default=0.0, min=0.0, soft_max=0.1, precision=4,
                                 description="Final renders: sample each pixel until its estimated error (linear "
                                             "colour) is below this, and report the estimate; 0 is off")
@@ -285,8 +298,10 @@ def _fill_sdl(material, sdl_material) -> None:
     store_exact(material, s, values)
 
 
-def material_to_sdl(material):
-    """The tracer Material for a Blender material (None: SDL's default material)."""
+def material_to_sdl(material, warnings: Optional[list] = None):
+    """The tracer Material for a Blender material (None: SDL's default material): its SDL values where SDL
+    Material is ticked, else what its shader nodes make of it (blender_material; a picture on it is left
+    out here)."""
     if material is None:
         return Material()
     s = material.sdl
@@ -298,17 +313,18 @@ def material_to_sdl(material):
         values.update({name: exact_field(material, s, name)[0] for name in FLOAT_FIELDS})
         params = exact_field(material, s, "parameters")[: s.parameter_count]
         return Material(texture=int(s.texture), parameters=tuple(params), **values)
-    # A Blender material: its base colour as the diffuse colour, its emission as emissive.
-    node = _principled(material)
-    if node is not None:
-        base = tuple(_get_input(node, ("Base Color",), (0.8, 0.8, 0.8, 1.0)))[:3]
-        emission = tuple(_get_input(node, ("Emission Color", "Emission"), (0.0, 0.0, 0.0, 1.0)))[:3]
-        strength = float(_get_input(node, ("Emission Strength",), 1.0))
-        emissive = tuple(convert.shortest32(c * strength) for c in emission)
-    else:
-        base = tuple(material.diffuse_color)[:3]
-        emissive = (0.0, 0.0, 0.0)
-    return Material(diffuse=tuple(convert.shortest32(c) for c in base), emissive=emissive)
+    return blender_material(material, warnings)[0]
+
+
+def blender_material(material, warnings: Optional[list] = None):
+    """(tracer Material, shader_nodes.Picture or None) of a material traced by its shader nodes, by the rules
+    of addon/pure/whitted.py; the picture is an Image Texture's on its Base Color, which the caller numbers
+    (the Material's texture is 0 here)."""
+    fields = shader_nodes.material_fields(material, warnings)
+    image = fields.pop("image")
+    fields = {name: tuple(convert.shortest32(c) for c in value) if isinstance(value, tuple) else
+              (convert.shortest32(value) if isinstance(value, float) else value) for name, value in fields.items()}
+    return Material(**fields), image
 
 
 @bpy.app.handlers.persistent
@@ -324,6 +340,9 @@ def take_material_edits(scene, depsgraph) -> None:
 # World
 
 WORLD_FIELDS = ("background", "global_ambient", "min_reflectivity", "min_transparency")
+#: A Blender world's minReflectivity and minTransparency: every mirror and glass gets its rays (what is too
+#: faint to matter is left to the tracer's contribution cutoff).
+BLENDER_MIN_WEIGHT = 1e-3
 
 
 def apply_world_colors(world) -> None:
@@ -338,6 +357,8 @@ def apply_world_colors(world) -> None:
 
 def set_world(world, settings) -> None:
     s = world.sdl
+    s.use_sdl = True
+    s.smooth_terminator = bool(settings.smooth_terminator)
     s.background = settings.background
     s.global_ambient = settings.global_ambient
     s.min_reflectivity = settings.min_reflectivity
@@ -346,16 +367,20 @@ def set_world(world, settings) -> None:
     apply_world_colors(world)
 
 
-def world_settings(world, max_recursion_depth: int):
-    """Tracer Settings from a world (None: SDL's defaults) and the render settings' recursion depth."""
-    if world is None:
-        return Settings(max_recursion_depth=max_recursion_depth)
+def world_settings(world, max_recursion_depth: int, warnings: Optional[list] = None):
+    """Tracer Settings from a world and the render settings' recursion depth: an SDL world's values, or a
+    Blender world's (none: black) as Cycles uses it, its colour the background and the ambient light."""
+    if world is None or not world.sdl.use_sdl:
+        color = shader_nodes.world_color(world, warnings) if world is not None else (0.0, 0.0, 0.0)
+        return Settings(global_ambient=color, background=color, min_reflectivity=BLENDER_MIN_WEIGHT,
+                        min_transparency=BLENDER_MIN_WEIGHT, max_recursion_depth=int(max_recursion_depth),
+                        smooth_terminator=True)
     s = world.sdl
     return Settings(global_ambient=tuple(exact_field(world, s, "global_ambient")),
                     background=tuple(exact_field(world, s, "background")),
                     min_reflectivity=exact_field(world, s, "min_reflectivity")[0],
                     min_transparency=exact_field(world, s, "min_transparency")[0],
-                    max_recursion_depth=int(max_recursion_depth))
+                    max_recursion_depth=int(max_recursion_depth), smooth_terminator=bool(s.smooth_terminator))
 
 
 # ---------------------------------------------------------------------------------------------------------

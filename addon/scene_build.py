@@ -8,7 +8,8 @@
   a CSG or a mesh.
 * Anything else that has geometry is traced as the triangles Blender makes of its evaluated mesh, one
   tracer mesh per material slot.
-* Lights become point lights at their position (sun lights far away against their direction).
+* Lights: see blender_lights (SDL's lights stay SDL's; Blender's are physical lights in Blender's units).
+* Materials: SDL's values where SDL Material is ticked, else the shader nodes' (shader_nodes, pure/whitted).
 * A material's texture above 0 is its own image (Material.sdl.image), numbered per image: its own number
   unless an earlier material's other image has it (two imported files may both use ``makePixmap 1``).
 """
@@ -23,7 +24,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import meshes, object_cache, props
+from . import blender_lights, images, meshes, object_cache, props
 from .pure import convert
 from .tracer import model
 from .tracer.shapes import KINDS
@@ -32,8 +33,6 @@ from .tracer.model import FaceList, MeshData
 BOOLEAN_OPS = {"UNION": "union", "INTERSECT": "intersection", "DIFFERENCE": "difference"}
 SDL_TO_BOOLEAN = {v: k for k, v in BOOLEAN_OPS.items()}
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
-#: A sun light is put this far from the scene's origin, against its direction.
-SUN_DISTANCE = 1.0e6
 
 #: Custom properties on an imported object.
 OBJ_KIND, OBJ_PARAM, OBJ_FILE = "sdl_kind", "sdl_param", "sdl_mesh_file"
@@ -80,15 +79,27 @@ class SceneBuilder:
         self.mesh_object_names: dict[int, str] = {}
         self._materials: dict = {}
         self._pixmaps: dict[str, int] = {}  # image file -> its texture number in the built scene
+        self._uv_materials: set[int] = set()  # materials whose picture is looked up through the UV map
 
     # -- helpers --------------------------------------------------------------------------------------
 
     def _material(self, material):
         key = material.as_pointer() if material is not None else 0
         if key not in self._materials:
-            sdl_material = props.material_to_sdl(material)
+            if material is not None and not material.sdl.use_sdl:  # Blender's own: its shader nodes
+                sdl_material, picture = props.blender_material(material, self.warnings)
+                image = ""
+                if picture is not None:  # (a picture on Base Color, looked up through the UV map)
+                    self._uv_materials.add(key)
+                    sdl_material = dataclasses.replace(sdl_material, texture=1)
+                    image = picture.path
+                    if picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
+                        image = images.linear_copy(image)  # (as Cycles reads it; SDL keeps the file's values)
+            else:
+                sdl_material = props.material_to_sdl(material)
+                image = material.sdl.image if material is not None and material.sdl.image else ""
+                image = bpy.path.abspath(image, library=material.library) if image else ""
             if sdl_material.texture > 0:
-                image = bpy.path.abspath(material.sdl.image, library=material.library) if material.sdl.image else ""
                 if os.path.isfile(image):
                     number = self._pixmap_number(sdl_material.texture, image)
                 else:  # drawn with its own colours, as a lenient read draws it, and said
@@ -206,12 +217,13 @@ class SceneBuilder:
             self.mesh_object_names[id(shape)] = original.name
         return shape
 
-    def _blender_mesh(self, mesh, name: Optional[str] = None) -> dict:
-        """A Blender mesh as tracer meshes, one per material: polygons for export, else triangles."""
+    def _blender_mesh(self, mesh, name: Optional[str] = None, uvs: bool = False) -> dict:
+        """A Blender mesh as tracer meshes, one per material: polygons for export, else triangles (with their
+        corners' UVs where ``uvs``)."""
         name = mesh.name if name is None else name
-        return polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, name)
+        return polygon_meshes(mesh) if self.mode == "EXPORT" else meshes.triangle_meshes(mesh, name, uvs)
 
-    def _evaluated_mesh(self, obj_eval) -> dict:
+    def _evaluated_mesh(self, obj_eval, uvs: bool = False) -> dict:
         """_blender_mesh of the object's evaluated geometry (modifiers applied; curves and text as meshes)."""
         try:
             mesh = obj_eval.to_mesh()
@@ -220,7 +232,7 @@ class SceneBuilder:
         if mesh is None:
             return {}
         try:
-            return self._blender_mesh(mesh, obj_eval.name)
+            return self._blender_mesh(mesh, obj_eval.name, uvs)
         finally:
             obj_eval.to_mesh_clear()
 
@@ -229,7 +241,12 @@ class SceneBuilder:
             return []
         if not self._usable(matrix_world, obj_eval.name):
             return []
-        parts = self.cache.get(obj_eval, f"evaluated mesh {self.mode}", lambda: self._evaluated_mesh(obj_eval), own)
+        # (the UV map is read only for a material with a picture on it)
+        uvs = any(self._material(slot.material) is not None and
+                  (slot.material.as_pointer() if slot.material is not None else 0) in self._uv_materials
+                  for slot in obj_eval.material_slots)
+        kind = f"evaluated mesh {self.mode}" + (" with UVs" if uvs else "")
+        parts = self.cache.get(obj_eval, kind, lambda: self._evaluated_mesh(obj_eval, uvs), own)
         shapes = []
         for index, data in sorted(parts.items()):
             shapes.append(self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=data,
@@ -248,17 +265,8 @@ class SceneBuilder:
     # -- the scene ------------------------------------------------------------------------------------
 
     def light(self, obj_eval, matrix_world: np.ndarray):
-        data = obj_eval.data
-        position = matrix_world[:3, 3].copy()
-        exact, shown = obj_eval.original.get("sdl_position"), obj_eval.original.get("sdl_position_shown")
-        if exact is not None and shown is not None and [float(v) for v in position] == list(shown):
-            position = np.array(list(exact), dtype=np.float64)
-        if data.type == "SUN":
-            direction = -matrix_world[:3, 2]
-            direction /= max(np.linalg.norm(direction), 1e-300)
-            position = -SUN_DISTANCE * direction
-        position = (self.to_target @ np.append(position, 1.0))[:3]
-        return self.model.Light(tuple(float(v) for v in position), props.light_color(data))
+        samples = self.depsgraph.scene.sdl_render.light_samples if hasattr(self.depsgraph.scene, "sdl_render") else 16
+        return blender_lights.tracer_light(obj_eval, matrix_world, self.to_target, samples, self.warnings)
 
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
         """The tracer Scene of everything the depsgraph shows (its object instances)."""
@@ -301,7 +309,7 @@ class SceneBuilder:
         self.cache.end_build()
         world = scene.world
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
-                                        if hasattr(scene, "sdl_render") else 3)
+                                        if hasattr(scene, "sdl_render") else 3, self.warnings)
         tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
         tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
         return tracer_scene

@@ -43,6 +43,7 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         row = sub.row()
         row.active = settings.sampling == "ADAPTIVE"
         row.prop(settings, "threshold")
+        layout.column().prop(settings, "light_samples")
         layout.column().prop(settings, "target_error")
         # Blender's own switch (Cycles shows it under Performance): keep this engine between final renders,
         # so that F12 after moving a light or editing a material rebuilds only what changed.
@@ -78,24 +79,37 @@ class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
 
 
 class SDL_PT_light(_PropertiesPanel, bpy.types.Panel):
-    """What the engine uses of a light: its colour times its power, as an SDL point light's colour."""
+    """What the engine makes of a light: an imported SDL light keeps SDL's meaning (colour x power / 1000 W,
+    no falloff); any other is a physical light in Blender's units, with its extent (soft shadows)."""
     bl_idname = "SDL_PT_light"
     bl_label = "SDL Light"
     bl_context = "data"
     COMPAT_ENGINES = {ENGINE_ID}
+    #: Per Blender light type, the settings that shape it for the tracer.
+    SHAPE = {"POINT": ("shadow_soft_size",), "SPOT": ("shadow_soft_size", "spot_size", "spot_blend"),
+             "SUN": ("angle",), "AREA": ("shape", "size", "size_y")}
 
     @classmethod
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
 
     def draw(self, context):
+        from . import blender_lights
+
         layout = self.layout
         layout.use_property_split = True
         light = context.light
         layout.prop(light, "color")
         layout.prop(light, "energy", text="Strength" if light.type == "SUN" else "Power")
-        rgb = props.light_color(light)
-        layout.label(text="SDL light colour: " + " ".join(f"{c:g}" for c in rgb), icon="LIGHT")
+        if blender_lights.is_sdl_light(light):
+            rgb = props.light_color(light)
+            layout.label(text="SDL light colour: " + " ".join(f"{c:g}" for c in rgb), icon="LIGHT")
+            return
+        for name in self.SHAPE.get(light.type, ()):
+            if name == "size_y" and light.shape not in ("RECTANGLE", "ELLIPSE"):
+                continue
+            layout.prop(light, name, text="Radius" if name == "shadow_soft_size" else None)
+        layout.prop(context.scene.sdl_render, "light_samples")
 
 
 class SDL_PT_world(_PropertiesPanel, bpy.types.Panel):
@@ -107,12 +121,18 @@ class SDL_PT_world(_PropertiesPanel, bpy.types.Panel):
     def poll(cls, context):
         return context.world is not None
 
+    def draw_header(self, context):
+        self.layout.prop(context.world.sdl, "use_sdl", text="")
+
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
         s = context.world.sdl
-        for name in ("background", "global_ambient", "min_reflectivity", "min_transparency"):
-            layout.prop(s, name)
+        col = layout.column()
+        col.active = s.use_sdl
+        for name in ("background", "global_ambient", "min_reflectivity", "min_transparency", "smooth_terminator"):
+            col.prop(s, name)
+
 
 
 class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):

@@ -364,18 +364,19 @@ def test_any_object_as_the_scene_camera():
         bpy.data.objects.remove(viewer)
 
 
-def test_a_sun_lights_the_scene_like_an_sdl_light():
-    """A Blender sun's strength is an irradiance: strength 1 is an SDL light of colour 1 1 1 (it was taken
-    as 1 W of a point light's 1000, a nearly black light)."""
-    from addon import props
+def test_a_sun_is_a_sun_of_its_strength():
+    """A Blender sun of strength S (W/m^2) lights a diffuse surface as Cycles does: a tracer sun of colour
+    S / pi x its colour, its light travelling along the object's -Z (it was an SDL point light 10^6 away, of
+    colour S)."""
+    import math
 
-    bpy.ops.object.light_add(type="SUN")
+    bpy.ops.object.light_add(type="SUN", rotation=(0.0, 0.0, 0.0))
     sun = bpy.context.object
-    sun.data.energy, sun.data.color = 2.0, (1.0, 0.5, 0.25)
-    assert props.light_color(sun.data) == (2.0, 1.0, 0.5)
+    sun.data.energy, sun.data.color, sun.data.angle = 2.0, (1.0, 0.5, 0.25), 0.0
     scene, _ = engine.build_scene(bpy.context.evaluated_depsgraph_get(), "RENDER")
-    assert [light.color for light in scene.lights] == [(2.0, 1.0, 0.5)]
-
+    (light,) = scene.lights
+    assert (light.kind, light.direction, light.angle) == ("sun", (0.0, 0.0, -1.0), 0.0)
+    assert light.color == pytest.approx((2.0 / math.pi, 1.0 / math.pi, 0.5 / math.pi))
 
 def test_threads_zero_is_the_tracers_default(monkeypatch):
     compiled = tracer.compile.compile_scene(tracer.load(str(SCENES / "shapes.sdl")))

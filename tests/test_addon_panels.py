@@ -30,14 +30,3 @@ def test_material_and_light_panels_show_for_the_engine():
     assert _polls(ui.SDL_PT_light, light=light.data)
     bpy.context.scene.render.engine = "BLENDER_WORKBENCH"
     assert not _polls(ui.SDL_PT_light, light=light.data)
-
-
-def test_material_previews_are_lit_like_sdl_scenes():
-    """Blender's preview scene has 10 W and 70 W lights (SDL colours 0.01 and 0.07: a black preview);
-    previews scale them together so that the brightest is white."""
-    import tracer
-
-    scene = tracer.model.Scene()
-    scene.lights = [tracer.model.Light((0, 0, 1), (0.07, 0.07, 0.07)), tracer.model.Light((1, 0, 0), (0.01, 0.0, 0.01))]
-    engine.preview_lighting(scene)
-    assert [light.color for light in scene.lights] == [(1.0, 1.0, 1.0), (0.01 / 0.07, 0.0, 0.01 / 0.07)]

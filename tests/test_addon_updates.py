@@ -58,7 +58,8 @@ def _bumps(count: int) -> np.ndarray:
 
 
 def _scene() -> bpy.types.Object:
-    """A bumpy 10,000-quad grid under a point light, seen from above, with a grey Principled material."""
+    """A bumpy 10,000-quad grid under a point light, seen from above, with a grey Principled material that
+    has no specular layer."""
     fresh()
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=GRID, y_subdivisions=GRID, size=4)
     grid = bpy.context.active_object
@@ -68,10 +69,12 @@ def _scene() -> bpy.types.Object:
     mesh.update()
     material = bpy.data.materials.new("Grey")
     material.use_nodes = True
-    mesh.materials.append(material)
+    specular = material.node_tree.nodes["Principled BSDF"].inputs
+    specular["Specular IOR Level" if "Specular IOR Level" in specular else "Specular"].default_value = 0.0
+    mesh.materials.append(material)  # (without its white highlight, a red or green grid is only red or green)
     bpy.ops.object.light_add(type="POINT", location=(-1.0, 0.0, 2.0))
     bpy.context.active_object.name = "Lamp"
-    bpy.context.active_object.data.energy = 1000.0  # SDL colour 1 1 1
+    bpy.context.active_object.data.energy = 1000.0
     bpy.ops.object.camera_add(location=(0.0, -5.0, 6.0), rotation=(0.6, 0.0, 0.0))
     bpy.context.scene.camera = bpy.context.active_object
     set_resolution(WIDTH, HEIGHT)

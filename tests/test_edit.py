@@ -17,7 +17,7 @@ from tracer.compile import compile_scene
 from tracer.edit import EditableScene
 from tracer.errors import TracerError
 from tracer.meshio import read_3vn
-from tracer.model import CSG, Material, MeshData, Scene, Settings, Shape
+from tracer.model import CSG, Material, MeshData, Scene, Settings, Shape, ShapeTable
 from tracer.render import render
 from tracer.trace import first_hits
 
@@ -237,9 +237,9 @@ def test_parts_of_one_key_are_edited_together(backend):
 _EDIT_NAMES = sorted(set(EDITS) - {"remove"})
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(st.tuples(st.sampled_from(_EDIT_NAMES + ["remove", "add", "lights"]), st.sampled_from(KEYS)),
-                min_size=1, max_size=6))
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.sampled_from(_EDIT_NAMES + ["remove", "add", "lights", "frame", "shared", "batch"]),
+                          st.sampled_from(KEYS)), min_size=1, max_size=8))
 def test_random_edit_sequences_render_as_from_scratch(steps):
     scene, keys = mixed_scene()
     editable = EditableScene(scene, keys)
@@ -249,8 +249,22 @@ def test_random_edit_sequences_render_as_from_scratch(steps):
             editable.add_objects(f"added {number}", [Shape("sphere", translation(number * 0.3 - 1, 1.6, 0), RED)])
         elif edit == "lights":
             editable.set_lights([Light((number - 2.0, 4, 5), (1, 1, 1))])
+        elif edit == "frame":  # (every object moved at once)
+            editable.set_transforms((k, translation(0.05, 0.02 * number, 0) @ _first_matrix(editable, k))
+                                    for k in editable.keys())
+        elif edit == "shared":  # (one shared material edited, wherever it is now)
+            old = next((s.material for obj in editable.scene.objects
+                        for s in ([obj.left, obj.right] if isinstance(obj, CSG) else [obj])), None)
+            if old is not None:
+                editable.replace_material(old, dataclasses.replace(old, diffuse=(0.1 * (number % 10), 0.5, 0.5)))
+        elif edit == "batch":
+            with editable.batch():
+                for k in editable.keys()[:3]:
+                    EDITS["move"](editable, k)
         elif key in editable:
             EDITS[edit](editable, key)
+        if number % 3 == 2:  # (and along the way, on the C core)
+            assert_renders_alike(editable, "c")
     assert_renders_alike(editable, "c")
     assert_renders_alike(editable, "numpy")
 
@@ -437,3 +451,38 @@ def test_an_animation_frame_moves_every_object_at_once(backend):
     with pytest.raises(TracerError, match="'torus'.*singular"):
         editable.set_transforms([("red", np.eye(4)), ("torus", np.diag([1.0, 1.0, 0.0, 1.0]))])
     assert np.array_equal(editable.objects_of("red")[0].matrix, frame["red"])  # (nothing changed)
+
+
+def test_a_scene_read_as_columns_is_edited_as_its_shapes(backend):
+    """A ShapeTable (the C reader's columns: a tapered cylinder, a polyhedron, the teapot) becomes its list of
+    Shapes once, and is edited like any list."""
+    from tracer.sdl.parser import parse_sdl
+    text = ("light 5 5 5 1 1 1\ncamera 0 2 8 0 0 0 0 1 0 40\ndiffuse 1 0 0\ntranslate 1 0 0 sphere\n"
+            "push scale 0.5 1 0.5 rotate 30 0 0 1 cube pop\nreflectivity 0.6 diffuse 0 1 0\n"
+            "push translate -1 0 0 taperedCylinder 0.25 pop\npush translate 0 1 0 scale 0.5 0.5 0.5 octahedron pop\n"
+            "push translate -2 0 0 scale 0.3 0.3 0.3 teapot pop\n")
+    scene = parse_sdl(text, file="table.sdl")
+    scene.objects = ShapeTable.of_shapes(scene.objects)
+    editable = EditableScene(scene)
+    assert isinstance(editable.scene.objects, list) and len(editable) == 5
+    render(editable.compiled, 8, 6, backend=backend)
+    editable.set_transform(2, translation(-1.5, 0.2, 0) @ scaling(1, 1.5, 1))
+    editable.set_material(3, GLASS)
+    editable.remove_objects(4)
+    assert_renders_alike(editable, backend)
+
+
+def test_a_key_whose_parts_change_in_number_is_replaced_whole(backend):
+    """A Blender mesh edited to use one material more: its parts are replaced (removed, added at the end)."""
+    octahedron, pawn = _octahedron(), _pawn()
+    scene = Scene(objects=[Shape("mesh", np.eye(4), RED, mesh=octahedron), Shape("sphere", translation(2, 0, 0), GLASS)],
+                  lights=[Light((4, 5, 6), (1, 1, 1))], camera=Camera(eye=(0, 2, 8), look=(0, 0, 0)))
+    editable = EditableScene(scene, ["mesh object", "ball"])
+    render(editable.compiled, 8, 6, backend=backend)
+    parts = [Shape("mesh", translation(-1, 0, 0), RED, mesh=octahedron),
+             Shape("mesh", translation(-1, 0, 0) @ scaling(0.3, 0.6, 0.3), MIRROR, mesh=pawn)]
+    editable.replace_objects("mesh object", parts)
+    assert editable.objects_of("mesh object") == parts and editable.positions_of("mesh object") == [1, 2]
+    assert_renders_alike(editable, backend)
+    editable.replace_objects("mesh object", parts[1:])
+    assert_renders_alike(editable, backend)

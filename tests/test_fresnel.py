@@ -155,3 +155,16 @@ def test_unknown_modes_are_refused():
         parse_sdl("fresnel shiny sphere")
     with pytest.raises(tracer.errors.SceneError):
         Material(fresnel="shiny")
+
+
+def test_usd_keeps_the_modes_and_shows_a_metal_as_metallic(tmp_path):
+    from pxr import Usd, UsdShade
+    from tracer.usd import load_usd, save_usd
+    scene = parse_sdl("fresnel metal fresnelTint 0.9 0.6 0.2 reflectivity 1 sphere\n"
+                      "fresnel dielectric transparency 1 speedOfLight 0.7 cube\ndefaultMaterials cone\n")
+    save_usd(scene, tmp_path / "f.usda")
+    assert [s.material for s in load_usd(tmp_path / "f.usda").shapes()] == [s.material for s in scene.shapes()]
+    stage = Usd.Stage.Open(str(tmp_path / "f.usda"))
+    shaders = [UsdShade.Shader(p) for p in stage.Traverse() if p.IsA(UsdShade.Shader)]
+    metals = [s for s in shaders if s.GetInput("metallic").Get() == 1.0]
+    assert len(metals) == 1 and tuple(metals[0].GetInput("diffuseColor").Get()) == pytest.approx((0.9, 0.6, 0.2))

@@ -321,3 +321,78 @@ def test_editing_lights_in_place_renders_as_from_scratch(backend):
     expected = tracer.render(fresh, w, h, backend=backend)
     assert np.array_equal(edited.image, expected.image)
     assert edited.rays.as_dict() == expected.rays.as_dict()
+
+
+# ------------------------------------------------------------------------------------------------ USD
+
+
+def test_usd_round_trip_keeps_every_light_exactly_and_its_name(tmp_path):
+    from tracer.usd import load_usd, save_usd
+    scene = parse_sdl(SDL_LIGHTS.replace("ellipseLight 0 3 0 0 -1 0 1 1 0 2 2 2 1 1 9",
+                                         "ellipseLight 0.3 3 0.1 0.2 -1 0.1 1 1 0 2 2 2 1.5 0.7 9"))
+    save_usd(scene, tmp_path / "lights.usda")
+    again = load_usd(tmp_path / "lights.usda")
+    assert again.lights == scene.lights
+    assert again.warnings == []
+
+
+def test_usd_lights_are_usdlux_for_other_tools(tmp_path):
+    from pxr import Usd, UsdLux
+    from tracer.usd import save_usd
+    save_usd(parse_sdl(SDL_LIGHTS), tmp_path / "lights.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "lights.usda"))
+    prims = {p.GetName(): p for p in stage.Traverse() if p.HasAPI(UsdLux.LightAPI)}
+    assert set(prims) == {"Key_Light", "Fill", "light_2", "Sun", "light_4", "light_5"}
+    assert prims["Key_Light"].GetTypeName() == "SphereLight"
+    assert UsdLux.SphereLight(prims["Fill"]).GetRadiusAttr().Get() == pytest.approx(0.25)
+    spot = UsdLux.ShapingAPI(prims["light_2"])
+    assert spot.GetShapingConeAngleAttr().Get() == pytest.approx(30.0)  # the half-angle
+    assert spot.GetShapingConeSoftnessAttr().Get() == pytest.approx(0.2)
+    assert UsdLux.DistantLight(prims["Sun"]).GetAngleAttr().Get() == pytest.approx(0.53)
+    rect = UsdLux.RectLight(prims["light_4"])
+    assert (rect.GetWidthAttr().Get(), rect.GetHeightAttr().Get()) == (1.0, 0.5)
+    assert prims["light_5"].GetTypeName() == "DiskLight"
+    # the rect light shines down its -z: here the light's direction, -y
+    matrix = UsdGeom_world(prims["light_4"])
+    np.testing.assert_allclose(-matrix[:3, 2], (0.0, -1.0, 0.0), atol=1e-12)
+
+
+def UsdGeom_world(prim) -> np.ndarray:
+    from pxr import UsdGeom
+    from tracer.usd.common import from_gf
+    return from_gf(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(0))
+
+
+def test_usd_lights_edited_in_another_tool_follow_the_edit(tmp_path):
+    from pxr import Gf, Usd, UsdLux
+    from tracer.usd import load_usd, save_usd
+    save_usd(parse_sdl(SDL_LIGHTS), tmp_path / "lights.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "lights.usda"))
+    rect = UsdLux.RectLight(stage.GetPrimAtPath("/SDLScene/Lights/light_4"))
+    rect.GetWidthAttr().Set(3.0)
+    sun = stage.GetPrimAtPath("/SDLScene/Lights/Sun")
+    UsdLux.DistantLight(sun).GetAngleAttr().Set(2.0)
+    stage.Save()
+    area, sun_light = load_usd(tmp_path / "lights.usda").lights[4], load_usd(tmp_path / "lights.usda").lights[3]
+    assert area.size == (3.0, 0.5)
+    assert sun_light.angle == 2.0 and sun_light.direction == (1.0, -2.0, -1.0)  # (the direction untouched)
+
+
+def test_usd_rect_and_disk_lights_of_other_tools_are_area_lights(tmp_path):
+    from pxr import Gf, Usd, UsdGeom, UsdLux
+    from tracer.usd import load_usd
+    stage = Usd.Stage.CreateNew(str(tmp_path / "foreign.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    rect = UsdLux.RectLight.Define(stage, "/World/Panel")
+    rect.CreateWidthAttr(2.0)
+    rect.CreateHeightAttr(1.0)
+    rect.AddTranslateOp().Set(Gf.Vec3d(0, 3, 0))
+    rect.AddRotateXOp().Set(-90.0)  # its -z turns to -y: it shines down
+    disk = UsdLux.DiskLight.Define(stage, "/World/Disk")
+    disk.CreateRadiusAttr(0.25)
+    stage.Save()
+    panel, round_light = load_usd(tmp_path / "foreign.usda").lights
+    assert (panel.kind, panel.shape, panel.name, panel.size) == ("area", "rectangle", "Panel", (2.0, 1.0))
+    np.testing.assert_allclose(panel.direction, (0.0, -1.0, 0.0), atol=1e-12)
+    np.testing.assert_allclose(panel.position, (0.0, 3.0, 0.0))
+    assert (round_light.shape, round_light.size) == ("ellipse", (0.5, 0.5))

@@ -113,3 +113,38 @@ def test_coordinates_change_the_meshs_identity():
     a = Shape("mesh", np.eye(4), Material(), mesh=quad(TURNED))
     b = Shape("mesh", np.eye(4), Material(), mesh=quad(TURNED[1:] + TURNED[:1]))
     assert a != b
+
+
+def test_usd_keeps_the_coordinates_exactly_and_shows_them_as_st(tmp_path, picture):
+    from pxr import Usd, UsdGeom
+    from tracer.usd import load_usd, save_usd
+    uvs = np.array([(0.1, 0.7), (0.0, 1e-9), (1.0 / 3.0, 0.0), (1.0, 1.0)])
+    scene = scene_with(quad(uvs), picture)
+    save_usd(scene, tmp_path / "quad.usda")
+    again = load_usd(tmp_path / "quad.usda")
+    assert np.array_equal(again.shapes()[0].mesh.corner_uvs, uvs)
+    stage = Usd.Stage.Open(str(tmp_path / "quad.usda"))
+    prim = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    st = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
+    assert st.GetInterpolation() == UsdGeom.Tokens.faceVarying
+    np.testing.assert_allclose(np.array(st.Get()), uvs, rtol=1e-7)
+
+
+def test_usd_meshes_of_other_tools_bring_their_uv_map(tmp_path):
+    """An indexed faceVarying map named as Blender names it, on a left-handed quad (whose corners turn)."""
+    from pxr import Sdf, Usd, UsdGeom, Vt
+    from tracer.usd import load_usd
+    stage = Usd.Stage.CreateNew(str(tmp_path / "foreign.usda"))
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Plane")
+    mesh.CreatePointsAttr([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)])
+    mesh.CreateFaceVertexCountsAttr([4])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    uv_map = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("UVMap", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                     UsdGeom.Tokens.faceVarying)
+    uv_map.Set(Vt.Vec2fArray([(0, 0), (1, 0), (1, 1), (0, 1)]))
+    uv_map.SetIndices(Vt.IntArray([0, 1, 2, 3]))
+    stage.Save()
+    read = load_usd(tmp_path / "foreign.usda").shapes()[0].mesh
+    assert read.faces[0][0] == (3, 2, 1, 0)
+    np.testing.assert_array_equal(read.corner_uvs, [(0, 1), (1, 1), (1, 0), (0, 0)])

@@ -89,3 +89,12 @@ def test_the_setting_is_sdl_and_costs_nothing_without_meshes():
     assert "smooth-terminator" in compile_scene(scene).effects
     assert "smooth-terminator" not in compile_scene(parse_sdl("smoothTerminator 1\nlight 0 5 5 1 1 1\nsphere")).effects
     assert "smooth-terminator" not in compile_scene(parse_sdl("light 0 5 5 1 1 1\nteapot")).effects
+
+
+def test_usd_keeps_the_setting(tmp_path):
+    from tracer.usd import load_usd, save_usd
+    scene = parse_sdl("smoothTerminator 1\nlight 0 5 5 1 1 1\nteapot\n")
+    save_usd(scene, tmp_path / "t.usda")
+    assert load_usd(tmp_path / "t.usda").settings.smooth_terminator
+    save_usd(parse_sdl("teapot"), tmp_path / "plain.usda")
+    assert not load_usd(tmp_path / "plain.usda").settings.smooth_terminator

@@ -467,11 +467,10 @@ def test_foreign_stage_materials_lights_and_camera(foreign):
     assert by_kind["sphere"].material.diffuse == (0.0, 1.0, 0.0)  # displayColor, no material bound
     assert by_kind["mesh"].material == Material()  # nothing said: SDL's defaults
     key, sun = scene.lights
-    assert key == Light(z_up((0.0, -10.0, 10.0)), (1.0, 1.0, 1.0))
-    assert sun.color == (0.5, 0.5, 0.5)
-    # the sun shines along the stage's -y: it is far away towards its +y
-    far = Z_UP.T @ np.asarray(sun.position)  # back in the stage's frame
-    assert far[1] > 1e5 and abs(far[0]) < 1e-4 * far[1] and abs(far[2]) < 1e-4 * far[1]
+    assert key == Light(z_up((0.0, -10.0, 10.0)), (1.0, 1.0, 1.0), name="Key")  # (named as its prim)
+    assert (sun.kind, sun.name, sun.color, sun.angle) == ("sun", "Sun", (0.5, 0.5, 0.5), 0.0)
+    # the sun shines along the stage's -y
+    np.testing.assert_allclose(Z_UP.T @ np.asarray(sun.direction), (0.0, -1.0, 0.0), atol=1e-12)
     camera = scene.camera  # at the stage's z = 30 looking down its -z, its +y up
     assert camera.eye == z_up((0.0, 0.0, 30.0)) and camera.look == z_up((0.0, 0.0, 29.0))
     assert camera.up == z_up((0.0, 1.0, 0.0))

@@ -41,11 +41,9 @@ def _openblas() -> Optional[tuple]:
         except OSError:
             continue
         for set_name, get_name in _SYMBOLS:
-            setter, getter = getattr(lib, set_name, None), getattr(lib, get_name, None)
-            if setter is not None and getter is not None:
-                setter.argtypes, setter.restype = [ctypes.c_int], None
-                getter.argtypes, getter.restype = [], ctypes.c_int
-                return setter, getter
+            if hasattr(lib, set_name) and hasattr(lib, get_name):
+                return (ctypes.CFUNCTYPE(None, ctypes.c_int)((set_name, lib)),
+                        ctypes.CFUNCTYPE(ctypes.c_int)((get_name, lib)))
     return None
 
 

@@ -33,11 +33,6 @@ from .build import BuildError
 _lib: Optional[ctypes.CDLL] = None
 load_error: Optional[str] = None
 
-_dp = ctypes.POINTER(ctypes.c_double)
-_i8p = ctypes.POINTER(ctypes.c_int8)
-_i32p = ctypes.POINTER(ctypes.c_int32)
-_i64p = ctypes.POINTER(ctypes.c_int64)
-_u8p = ctypes.POINTER(ctypes.c_uint8)
 
 
 #: A library file to load instead of looking for one ($SDL_TRACER_LIBRARY; make sanitize uses it).
@@ -64,104 +59,49 @@ def _load() -> ctypes.CDLL:
 
 
 def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
-    """Declares the functions' types and checks that the library speaks this contract."""
-    lib.rt_desc_size.restype = ctypes.c_int64
-    lib.rt_desc_size.argtypes = []
-    lib.rt_create.restype = ctypes.c_void_p
-    lib.rt_create.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_char_p, ctypes.c_int64]
-    lib.rt_create_threaded.restype = ctypes.c_void_p
-    lib.rt_create_threaded.argtypes = [ctypes.POINTER(flatten.SceneDesc), ctypes.c_int64, ctypes.c_char_p,
-                                       ctypes.c_int64]
-    lib.rt_object_tree.restype = ctypes.c_int64
-    lib.rt_object_tree.argtypes = [ctypes.c_void_p, ctypes.c_void_p, _i64p, _i64p]
-    lib.rt_destroy.restype = None
-    lib.rt_destroy.argtypes = [ctypes.c_void_p]
-    lib.rt_edit.restype = ctypes.c_int
-    lib.rt_edit.argtypes = [ctypes.c_void_p, ctypes.POINTER(flatten.SceneDesc), _i64p, ctypes.c_int64, ctypes.c_int64,
-                            ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64]
-    lib.rt_set_sealed.restype = ctypes.c_int
-    lib.rt_set_sealed.argtypes = [ctypes.c_void_p, _u8p, ctypes.c_int64]
-    lib.rt_interrupt_install.restype = ctypes.c_int
-    lib.rt_interrupt_install.argtypes = [ctypes.c_int64]
-    lib.rt_interrupt_uninstall.restype = None
-    lib.rt_interrupt_uninstall.argtypes = []
-    lib.rt_interrupt_disarm.restype = None
-    lib.rt_interrupt_disarm.argtypes = []
-    lib.rt_interrupt_heard.restype = ctypes.c_int32
-    lib.rt_interrupt_heard.argtypes = []
-    lib.rt_interrupt_clear.restype = None
-    lib.rt_interrupt_clear.argtypes = []
-    lib.rt_interrupt_hold_file.restype = ctypes.c_int32
-    lib.rt_interrupt_hold_file.argtypes = [ctypes.c_char_p]
-    lib.rt_interrupt_release_file.restype = None
-    lib.rt_interrupt_release_file.argtypes = [ctypes.c_int32]
-    lib.rt_trace.restype = ctypes.c_int
-    lib.rt_trace.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _i64p, ctypes.c_int64, ctypes.c_double,
-                             ctypes.c_int64, ctypes.c_int64, _i32p]
-    lib.rt_first_hits.restype = ctypes.c_int
-    lib.rt_first_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, _dp, _dp, _i32p, _i32p, _i8p,
-                                  ctypes.c_int64]
-    lib.rt_occluded.restype = ctypes.c_int
-    lib.rt_occluded.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_double, _i8p, ctypes.c_int64]
-    lib.rt_object_hits.restype = ctypes.c_int64
-    lib.rt_object_hits.argtypes = [ctypes.c_void_p, ctypes.c_int64, _dp, _dp, ctypes.c_int64, _dp, _i8p, _dp,
-                                   _i32p, _i32p, _dp, _i8p]
-    lib.rt_texture_colors.restype = ctypes.c_int
-    lib.rt_texture_colors.argtypes = [ctypes.c_void_p, ctypes.c_int64, _i32p, _dp, _i32p, _dp, _dp]
-    lib.rt_scan_numbers.restype = ctypes.c_int64
-    lib.rt_scan_numbers.argtypes = [ctypes.c_char_p, ctypes.c_int64, _dp, ctypes.c_int64, _i64p]
-    lib.rt_scan3_state_size.restype = ctypes.c_int64
-    lib.rt_scan3_state_size.argtypes = []
-    lib.rt_scan_3vn.restype = ctypes.c_int64
-    lib.rt_scan_3vn.argtypes = [_i64p, ctypes.c_char_p, ctypes.c_int64, _dp, _dp, _i64p, _i32p, _i32p]
-    lib.rt_scan_3vn_end.restype = ctypes.c_int64
-    lib.rt_scan_3vn_end.argtypes = [_i64p, ctypes.c_int]
-    lib.rt_build_mesh_bvh.restype = ctypes.c_int64
-    lib.rt_build_mesh_bvh.argtypes = [ctypes.c_int64, _dp, _i32p, ctypes.c_int64, ctypes.c_int64, ctypes.c_double,
-                                      ctypes.c_int64, _i32p, ctypes.POINTER(ctypes.c_void_p)]
-    lib.rt_free.restype = None
-    lib.rt_free.argtypes = [ctypes.c_void_p]
-    lib.rt_desc_layout.restype = ctypes.c_int64
-    lib.rt_desc_layout.argtypes = [_i64p, _i64p, ctypes.c_int64]
-    lib.rt_contract_digest.restype = ctypes.c_char_p
-    lib.rt_contract_digest.argtypes = []
+    """Declares the functions' types (contract.FUNCTIONS) and checks that the library speaks this contract."""
+    contract.declare(lib)
     mismatch = layout_mismatch(lib)
     if mismatch:
         raise BuildError(mismatch)
     return lib
 
 
-def c_layout(lib: ctypes.CDLL) -> list[tuple[int, int]]:
-    """(offset, size) of every SceneDesc field as the C compiler laid it out, in contract.py's order."""
-    capacity = len(contract.SCENE_DESC)
+def c_layout(lib: ctypes.CDLL, which: int = 0) -> list[tuple[int, int]]:
+    """(offset, size) of every field of struct ``which`` of contract.STRUCTS (SceneDesc by default) as the C
+    compiler laid it out, in the table's order."""
+    capacity = len(contract.STRUCTS[which].fields)
     offsets, sizes = np.zeros(capacity, np.int64), np.zeros(capacity, np.int64)
-    count = lib.rt_desc_layout(_ptr(offsets, ctypes.c_int64), _ptr(sizes, ctypes.c_int64), capacity)
+    count = lib.rt_struct_layout(which, _ptr(offsets, ctypes.c_int64), _ptr(sizes, ctypes.c_int64), capacity)
     if count != capacity:
-        return [(-1, -1)] * int(count)
+        return [(-1, -1)] * max(0, int(count))
     return list(zip(offsets.tolist(), sizes.tolist()))
 
 
-def ctypes_layout() -> list[tuple[int, int]]:
-    """(offset, size) of every field of flatten.SceneDesc, the ctypes mirror."""
-    return [(getattr(flatten.SceneDesc, f.name).offset, getattr(flatten.SceneDesc, f.name).size)
-            for f in contract.SCENE_DESC]
+def ctypes_layout(which: int = 0) -> list[tuple[int, int]]:
+    """(offset, size) of every field of the ctypes mirror of struct ``which`` (contract.CTYPES)."""
+    struct = contract.STRUCTS[which]
+    mirror = contract.CTYPES[struct.name]
+    return [(getattr(mirror, f.name).offset, getattr(mirror, f.name).size) for f in struct.fields]
 
 
 def layout_mismatch(lib: ctypes.CDLL) -> Optional[str]:
-    """None if the library was built from this contract and lays SceneDesc out as ctypes does, else why not."""
+    """None if the library was built from this contract and lays every struct out as ctypes does, else why
+    not."""
     built_from = lib.rt_contract_digest().decode()
     if built_from != contract.digest():
         return (f"the C core was built from another contract ({built_from}, not {contract.digest()}): "
                 "regenerate contract.h (python -m tracer.native.contract) and rebuild")
-    c, py = c_layout(lib), ctypes_layout()
-    if len(c) != len(py):
-        return f"the C core's SceneDesc has {len(c)} fields, contract.py {len(py)}"
-    for f, (c_off, c_size), (py_off, py_size) in zip(contract.SCENE_DESC, c, py):
-        if (c_off, c_size) != (py_off, py_size):
-            return (f"SceneDesc.{f.name} is at offset {c_off} ({c_size} bytes) in C but {py_off} ({py_size} bytes) "
-                    "in ctypes")
-    if lib.rt_desc_size() != ctypes.sizeof(flatten.SceneDesc):
-        return "the C core's SceneDesc size differs from flatten.py's"
+    for which, struct in enumerate(contract.STRUCTS):
+        c, py = c_layout(lib, which), ctypes_layout(which)
+        if len(c) != len(py):
+            return f"the C core's {struct.name} has {len(c)} fields, contract.py {len(py)}"
+        for f, (c_off, c_size), (py_off, py_size) in zip(struct.fields, c, py):
+            if (c_off, c_size) != (py_off, py_size):
+                return (f"{struct.name}.{f.name} is at offset {c_off} ({c_size} bytes) in C but {py_off} "
+                        f"({py_size} bytes) in ctypes")
+        if lib.rt_struct_size(which) != ctypes.sizeof(contract.CTYPES[struct.name]):
+            return f"the C core's {struct.name} size differs from its ctypes mirror's"
     return None
 
 

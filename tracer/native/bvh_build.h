@@ -370,7 +370,7 @@ static MeshNode *bvh_stitch(const MeshNode *top, BvhTask *tasks, int64_t *total)
  * rt_free), the MeshNode records with their boxes grown by `pad` and rounded outward.  Returns the number of
  * nodes, or -1 when memory runs out or the arguments are out of range. */
 int64_t rt_build_mesh_bvh(int64_t n, const double *vertices, const int32_t *tri, int64_t leaf_size, int64_t bins,
-                          double pad, int64_t threads, int32_t *order, MeshNode **nodes_out)
+                          double pad, int64_t threads, int32_t *order, void **nodes_out)
 {
     *nodes_out = NULL;
     if (n < 0 || n > INT32_MAX || leaf_size < 1 || leaf_size > UINT16_MAX || bins < 2 || bins > BVH_MAX_BINS)

@@ -5,12 +5,16 @@ This table is the single source of what both sides must agree on:
 * the codes of the shape kinds, CSG operations, effect bits and ray kinds;
 * the constants the C core needs from the NumPy modules (each names the module attribute that holds its
   value, so the NumPy code keeps reading its own constant and the header is generated from it);
-* the layout of ``SceneDesc``, the struct of pointers into flat arrays that flatten.py fills.
+* the layout of the structs that cross the boundary: ``SceneDesc``, the struct of pointers into flat arrays
+  that flatten.py fills, and ``SdlResult``, what the C SDL reader hands back (:data:`STRUCTS`);
+* the prototype of every function the library exports (:data:`FUNCTIONS`).
 
 ``python -m tracer.native.contract`` writes ``contract.h`` (checked in; tests/test_contract.py fails when it
-is stale).  flatten.py builds its ctypes struct from :data:`SCENE_DESC`, and the C core exports every
-field's offset and size (``rt_desc_layout``), which the loader compares with ctypes' before using the
-library.  How to add a field: docs/contributing.md.
+is stale): the codes, constants, structs and prototypes, so the C compiler holds every definition to this
+table.  The ctypes side is made from the same tables: the struct mirrors (:data:`CTYPES`) and every
+function's argument and result types (:func:`declare`), with no declaration written by hand.  The C core
+exports every field's offset and size (``rt_struct_layout``), which the loader compares with ctypes' before
+using the library.  How to add a field or a function: docs/contributing.md.
 """
 from __future__ import annotations
 
@@ -117,8 +121,10 @@ _P = ctypes.POINTER
 SCALARS = {
     "i8": ("int8_t", ctypes.c_int8, np.int8),
     "u8": ("uint8_t", ctypes.c_uint8, np.uint8),
+    "i16": ("int16_t", ctypes.c_int16, np.int16),
     "i32": ("int32_t", ctypes.c_int32, np.int32),
     "i64": ("int64_t", ctypes.c_int64, np.int64),
+    "u64": ("uint64_t", ctypes.c_uint64, np.uint64),
     "f64": ("double", ctypes.c_double, np.float64),
 }
 
@@ -161,12 +167,14 @@ class Field:
             return np.uintp
         return SCALARS[self.scalar][2] if self.is_pointer else None
 
-    def c_declaration(self) -> str:
+    def c_declaration(self, const: bool = True) -> str:
+        """The member's declaration; ``const``: it points into memory the C core only reads."""
         base = SCALARS[self.scalar][0]
+        qualifier = "const " if const else ""
         if self.type.startswith("**"):
-            return f"const {base} *const *{self.name};"
+            return f"{qualifier}{base} *const *{self.name};"
         if self.is_pointer:
-            return f"const {base} *{self.name};"
+            return f"{qualifier}{base} *{self.name};"
         return f"{base} {self.name}[{self.length}];" if self.length else f"{base} {self.name};"
 
 
@@ -255,9 +263,181 @@ def field(name: str) -> Field:
     raise KeyError(name)
 
 
-def ctypes_fields() -> list[tuple[str, object]]:
-    """``_fields_`` of the ctypes mirror of SceneDesc."""
-    return [(f.name, f.ctype) for f in SCENE_DESC]
+F = Field
+#: What the C SDL reader (sdl_read.h) hands back: its columns (shapes, materials, lights, cameras, names),
+#: the settings the text set, and its working state.
+SDL_RESULT: tuple[Field, ...] = (
+    F("status", "i64", "SDL_READ or a decline reason"),
+    F("decline_offset", "i64", "the byte where it declined (the caller turns it into a character offset)"),
+    F("shapes", "i64"), F("materials", "i64"), F("lights", "i64"), F("cameras", "i64"), F("names", "i64"),
+    F("kinds", "*i16", "shapes"),
+    F("affines", "*f64", "shapes x 12"),
+    F("material_ids", "*i32", "shapes"),
+    F("parameters", "*f64", "shapes x PRIM_PARAMS: the numbers after each shape's keyword, 0 after them"),
+    F("lines", "*i32"), F("columns", "*i32"),
+    F("material_rows", "*f64", "materials x SDL_MATERIAL_WIDTH"),
+    F("light_rows", "*f64", "lights x 6"),
+    F("camera_rows", "*f64", "cameras x 10"),
+    F("name_rows", "*i64", "names x 3: shape row, start and length of the name in the text"),
+    F("settings_set", "i64", "SDL_SET_* bits"),
+    F("global_ambient", "f64", length=3), F("background", "f64", length=3),
+    F("min_reflectivity", "f64"), F("min_transparency", "f64"), F("max_recursion_depth", "i64"),
+    F("shape_capacity", "i64", section="working state, not read by the caller"),
+    F("material_capacity", "i64"), F("light_capacity", "i64"), F("camera_capacity", "i64"),
+    F("name_capacity", "i64"),
+    F("material_table", "*u64", "open addressing (see sdl_table_entry)"),
+    F("table_size", "i64"),
+    F("stack", "*f64", "transform stack, depth x 12"),
+    F("depth", "i64"), F("stack_capacity", "i64"),
+)
+del F
+
+
+@dataclass(frozen=True)
+class Struct:
+    """A struct that crosses the boundary: its C name, fields and whether its pointers are read-only to C."""
+
+    name: str
+    fields: tuple[Field, ...]
+    const: bool
+    doc: str
+
+    @property
+    def macro(self) -> str:
+        """The name of its fields' X-macro: RT_SCENE_DESC_FIELDS."""
+        return "RT_" + "".join(f"_{c}" if c.isupper() else c.upper() for c in self.name).lstrip("_") + "_FIELDS"
+
+
+STRUCTS: tuple[Struct, ...] = (
+    Struct("SceneDesc", SCENE_DESC, True, "The scene: pointers into the flat arrays flatten.py fills."),
+    Struct("SdlResult", SDL_RESULT, False, "What one read of the C SDL reader gives (tracer/sdl/fastread.py)."),
+)
+
+
+def ctypes_fields(fields: tuple[Field, ...] = SCENE_DESC) -> list[tuple[str, object]]:
+    """``_fields_`` of the ctypes mirror of a struct (SceneDesc's by default)."""
+    return [(f.name, f.ctype) for f in fields]
+
+
+#: The ctypes mirror of each struct, by name, made from its table.
+CTYPES: dict[str, type] = {s.name: type(s.name, (ctypes.Structure,), {"_fields_": ctypes_fields(s.fields)})
+                           for s in STRUCTS}
+SceneDesc = CTYPES["SceneDesc"]
+SdlResult = CTYPES["SdlResult"]
+
+# ------------------------------------------------------------------------------------------------ functions
+
+#: Argument and result types of the exported functions: code -> (C spelling, ctypes type).  "<f64" is an
+#: array the C core reads (const double *), ">f64" one it writes (double *).
+_VALUES = {"void": ("void", None), "int": ("int", ctypes.c_int), "f64": ("double", ctypes.c_double),
+           "i64": ("int64_t", ctypes.c_int64),
+           "handle": ("void *", ctypes.c_void_p),  # a scene the core made (rt_create)
+           "chandle": ("const void *", ctypes.c_void_p),
+           "buffer": ("void *", ctypes.c_void_p),  # memory of any type (None for none)
+           ">buffer": ("void **", _P(ctypes.c_void_p)),  # where the core puts a buffer it allocated
+           "str": ("const char *", ctypes.c_char_p),  # bytes (NUL-ended where no length goes with them)
+           ">str": ("char *", ctypes.c_char_p),  # room for a message (ctypes.create_string_buffer)
+           "text": ("const char *", ctypes.c_void_p),  # bytes, or the address of bytes (an int)
+           "desc": ("const SceneDesc *", _P(SceneDesc)),
+           "result": ("SdlResult *", _P(SdlResult))}
+
+
+def _type(code: str) -> tuple[str, object]:
+    """(C spelling, ctypes type) of an argument or result type code."""
+    if code in _VALUES:
+        return _VALUES[code]
+    base, ctype, _ = SCALARS[code[1:]]
+    return (f"const {base} *" if code[0] == "<" else f"{base} *"), _P(ctype)
+
+
+@dataclass(frozen=True)
+class Function:
+    """A function the library exports: ``result`` and each parameter ("code name") in _VALUES' codes."""
+
+    name: str
+    result: str
+    parameters: tuple[str, ...]
+    doc: str = ""
+
+    def c_prototype(self) -> str:
+        arguments = []
+        for parameter in self.parameters:
+            code, name = parameter.split()
+            c_type = _type(code)[0]
+            arguments.append(f"{c_type}{name}" if c_type.endswith("*") else f"{c_type} {name}")
+        result = _type(self.result)[0]
+        head = f"{result}{self.name}" if result.endswith("*") else f"{result} {self.name}"
+        return f"{head}({', '.join(arguments) or 'void'});"
+
+    @property
+    def argtypes(self) -> list:
+        return [_type(parameter.split()[0])[1] for parameter in self.parameters]
+
+    @property
+    def restype(self):
+        return _type(self.result)[1]
+
+
+def _function(result: str, name: str, *parameters: str, doc: str = "") -> Function:
+    return Function(name, result, parameters, doc)
+
+
+_f = _function
+FUNCTIONS: tuple[Function, ...] = (
+    _f("i64", "rt_struct_size", "i64 which", doc="sizeof STRUCTS[which]"),
+    _f("i64", "rt_struct_layout", "i64 which", ">i64 offsets", ">i64 sizes", "i64 capacity",
+       doc="offset and size of each field of STRUCTS[which]; returns the count (writes them if it fits)"),
+    _f("str", "rt_contract_digest"),
+    _f("str", "rt_build_id", doc="RT_SOURCE_HASH=...; (build.py finds the marker in the library file)"),
+    _f("handle", "rt_create", "desc desc", ">str error", "i64 capacity",
+       doc="NULL when the description is refused; then `error` (capacity bytes, may be NULL) says why"),
+    _f("handle", "rt_create_threaded", "desc desc", "i64 threads", ">str error", "i64 capacity"),
+    _f("i64", "rt_object_tree", "chandle scene", "buffer pairs", ">i64 items", ">i64 root"),
+    _f("void", "rt_destroy", "handle scene"),
+    _f("int", "rt_edit", "handle scene", "desc desc", "<i64 objects", "i64 n", "i64 flags", "i64 threads",
+       ">str error", "i64 capacity"),
+    _f("int", "rt_set_sealed", "handle scene", "<u8 sealed", "i64 count"),
+    _f("int", "rt_trace", "handle scene", "i64 n", "<f64 origins", "<f64 directions", ">f64 colors", ">i64 counts",
+       "i64 threads", "f64 cutoff", "i64 savings", "i64 ray_budget", "<i32 cancel",
+       doc="0; -1 out of memory; -2 stopped by `cancel` (polled at every ray; may be NULL) or a signal"),
+    _f("int", "rt_first_hits", "handle scene", "i64 n", "<f64 origins", "<f64 directions", ">f64 t", ">f64 normal",
+       ">i32 shape", ">i32 object", ">i8 entering", "i64 threads"),
+    _f("int", "rt_occluded", "handle scene", "i64 n", "<f64 origins", "<f64 directions", "f64 t_max",
+       ">i8 blocked", "i64 threads"),
+    _f("i64", "rt_object_hits", "handle scene", "i64 object", "<f64 origin", "<f64 direction", "i64 capacity",
+       ">f64 t", ">i8 entering", ">f64 normal", ">i32 shape", ">i32 part", ">f64 uv", ">i8 inside_at_start"),
+    _f("int", "rt_texture_colors", "handle scene", "i64 n", "<i32 shape", "<f64 points", "<i32 part",
+       "<f64 bary", ">f64 out"),
+    _f("i64", "rt_scan_numbers", "str text", "i64 length", ">f64 out", "i64 capacity", ">i64 bad"),
+    _f("i64", "rt_scan3_state_size"),
+    _f("i64", "rt_scan_3vn", ">i64 state", "str text", "i64 length", ">f64 vertices", ">f64 normals",
+       ">i64 sizes", ">i32 vertex_index", ">i32 normal_index"),
+    _f("i64", "rt_scan_3vn_end", ">i64 state", "int filled"),
+    _f("i64", "rt_build_mesh_bvh", "i64 n", "<f64 vertices", "<i32 tri", "i64 leaf_size", "i64 bins", "f64 pad",
+       "i64 threads", ">i32 order", ">buffer nodes_out"),
+    _f("void", "rt_free", "buffer buffer"),
+    _f("result", "rt_sdl_read", "text text", "i64 length", "str words", "i64 words_length", "<i32 codes",
+       "i64 count", "<f64 defaults", "i64 shared_libm"),
+    _f("void", "rt_sdl_free", "result res"),
+    _f("str", "rt_sdl_decline_names"),
+    _f("int", "rt_interrupt_install", "i64 grace_ms", doc="interrupt.h: the C handler and its watchdog; 0 on success"),
+    _f("void", "rt_interrupt_uninstall"),
+    _f("void", "rt_interrupt_disarm"),
+    _f("int", "rt_interrupt_heard", doc="the signal heard since rt_interrupt_clear(), or 0"),
+    _f("void", "rt_interrupt_clear"),
+    _f("int", "rt_interrupt_hold_file", "str path", doc="the watchdog removes it if it ends the process; slot or -1"),
+    _f("void", "rt_interrupt_release_file", "int slot"),
+    _f("i64", "rt_sdl_material_width"),
+)
+del _f
+
+
+def declare(lib: ctypes.CDLL) -> None:
+    """Give every exported function of ``lib`` its argument and result types, from :data:`FUNCTIONS`."""
+    for f in FUNCTIONS:
+        function = getattr(lib, f.name)
+        function.restype = f.restype
+        function.argtypes = f.argtypes
 
 
 # ------------------------------------------------------------------------------------------------ the header
@@ -339,7 +519,7 @@ def _shape_dispatch() -> list[str]:
 def header_text() -> str:
     """The C header, as generated from the tables above (and the constants' current values)."""
     out = ["/* GENERATED by `python -m tracer.native.contract` from tracer/native/contract.py: do not edit.",
-           " * The codes, constants and SceneDesc layout shared by the C core and flatten.py. */",
+           " * The codes, constants, structs and exported functions shared by the C core and its Python side. */",
            "#ifndef RT_CONTRACT_H", "#define RT_CONTRACT_H", "", "#include <stdint.h>", ""]
     out.append(_enum("K", [k for k, _ in SHAPE_KINDS], range(len(SHAPE_KINDS))))
     out.append(_enum("OP", CSG_OPS, range(len(CSG_OPS))))
@@ -364,24 +544,36 @@ def header_text() -> str:
         text = _double(value) if c.kind == "double" else str(value)
         out.append(f"/* {c.doc} ({c.source}) */")
         out.append(f"#define {c.name} {text}")
-    out += ["", "typedef struct {"]
-    for f in SCENE_DESC:
-        if f.section:
-            out.append(f"    /* {f.section} */")
-        declaration = f"    {f.c_declaration()}"
+    for struct in STRUCTS:
+        out += _struct_text(struct)
+    out += ["", "/* Every function the library exports (FUNCTIONS), which ctypes declares from the same table. */"]
+    for f in FUNCTIONS:
         if f.doc:
-            declaration = f"{declaration:<44} /* {f.doc} */"
-        out.append(declaration)
-    out.append("} SceneDesc;")
-    out += ["", "/* X-macro over the fields in table order: rt_desc_layout() reports offsetof and sizeof of each. */",
-            "#define RT_SCENE_DESC_FIELDS(X) \\"]
-    out += [f"    X({f.name}) \\" for f in SCENE_DESC]
-    out[-1] = out[-1][:-2]
-    out.append(f"#define RT_SCENE_DESC_FIELD_COUNT {len(SCENE_DESC)}")
+            out.append(f"/* {f.doc} */")
+        out.append(f.c_prototype())
+    out += ["", "/* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */",
+            "#define RT_STRUCTS(X) " + " ".join(f"X({k}, {st.name}, {st.macro})" for k, st in enumerate(STRUCTS))]
     body = "\n".join(out)
     # A fingerprint of everything above: the loader refuses a library built from another contract.
     stamp = hashlib.sha256(body.encode()).hexdigest()[:16]
     return f"{body}\n#define RT_CONTRACT_DIGEST \"{stamp}\"\n\n#endif\n"
+
+
+def _struct_text(struct: Struct) -> list[str]:
+    """A struct's typedef and the X-macro over its fields in table order (rt_struct_layout reports offsetof
+    and sizeof of each)."""
+    out = ["", f"/* {struct.doc} */", "typedef struct {"]
+    for f in struct.fields:
+        if f.section:
+            out.append(f"    /* {f.section} */")
+        declaration = f"    {f.c_declaration(struct.const)}"
+        if f.doc:
+            declaration = f"{declaration:<44} /* {f.doc} */"
+        out.append(declaration)
+    out.append(f"}} {struct.name};")
+    out += [f"#define {struct.macro}(X) \\"] + [f"    X({struct.name}, {f.name}) \\" for f in struct.fields]
+    out[-1] = out[-1][:-2]
+    return out
 
 
 def stale_reason(path: Path = HEADER) -> Optional[str]:

@@ -36,22 +36,35 @@ const char rt_build_marker[] = "RT_SOURCE_HASH=" RT_SOURCE_HASH ";";
 
 const char *rt_build_id(void) { return rt_build_marker; }
 
-int64_t rt_desc_size(void) { return (int64_t)sizeof(SceneDesc); }
-
-/* Offset and size of every SceneDesc field in contract.py's order, for the loader to compare with ctypes';
- * returns the number of fields (nothing is written when capacity is smaller). */
-int64_t rt_desc_layout(int64_t *offsets, int64_t *sizes, int64_t capacity)
+int64_t rt_struct_size(int64_t which)
 {
-    if (capacity < RT_SCENE_DESC_FIELD_COUNT)
-        return RT_SCENE_DESC_FIELD_COUNT;
+    switch (which) {
+#define RT_STRUCT_SIZE(code, type, fields) case code: return (int64_t)sizeof(type);
+    RT_STRUCTS(RT_STRUCT_SIZE)
+#undef RT_STRUCT_SIZE
+    }
+    return -1;
+}
+
+/* Offset and size of every field of struct `which` (contract.py's STRUCTS) in its table's order, for the
+ * loader to compare with ctypes'; returns the number of fields (nothing is written when capacity is smaller),
+ * -1 for no such struct. */
+int64_t rt_struct_layout(int64_t which, int64_t *offsets, int64_t *sizes, int64_t capacity)
+{
     int64_t k = 0;
-#define RT_FIELD_LAYOUT(name)                                  \
-    offsets[k] = (int64_t)offsetof(SceneDesc, name);           \
-    sizes[k] = (int64_t)sizeof(((const SceneDesc *)0)->name);  \
+#define RT_FIELD_LAYOUT(type, name)                             \
+    if (k < capacity) {                                         \
+        offsets[k] = (int64_t)offsetof(type, name);             \
+        sizes[k] = (int64_t)sizeof(((const type *)0)->name);    \
+    }                                                           \
     k++;
-    RT_SCENE_DESC_FIELDS(RT_FIELD_LAYOUT)
+#define RT_STRUCT_LAYOUT(code, type, fields) case code: fields(RT_FIELD_LAYOUT) return k;
+    switch (which) {
+    RT_STRUCTS(RT_STRUCT_LAYOUT)
+    }
+#undef RT_STRUCT_LAYOUT
 #undef RT_FIELD_LAYOUT
-    return k;
+    return -1;
 }
 
 const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }

@@ -11,7 +11,6 @@ with a reason, and the NumPy path takes the scene.
 """
 from __future__ import annotations
 
-import ctypes
 from typing import Optional, Union
 
 import numpy as np
@@ -45,8 +44,8 @@ TEX_PARAMS = _SHARED["TEX_PARAMS"]
 PRIM_PARAMS = _SHARED["PRIM_PARAMS"]
 
 
-class SceneDesc(ctypes.Structure):
-    _fields_ = contract.ctypes_fields()
+#: The ctypes mirror of SceneDesc (made from contract.SCENE_DESC).
+SceneDesc = contract.SceneDesc
 
 
 

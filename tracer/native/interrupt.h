@@ -24,7 +24,7 @@
 /* The signal heard since the last rt_interrupt_clear(), or 0. */
 static _Atomic int rt_heard_signal;
 
-int32_t rt_interrupt_heard(void) { return (int32_t)atomic_load_explicit(&rt_heard_signal, memory_order_relaxed); }
+int rt_interrupt_heard(void) { return atomic_load_explicit(&rt_heard_signal, memory_order_relaxed); }
 
 void rt_interrupt_clear(void) { atomic_store(&rt_heard_signal, 0); }
 
@@ -143,7 +143,7 @@ void rt_interrupt_uninstall(void)
 
 /* Remember a file for the watchdog to remove; its slot (for rt_interrupt_release_file), or -1 when the table
  * is full or the path too long (the file is then not removed by the watchdog). */
-int32_t rt_interrupt_hold_file(const char *path)
+int rt_interrupt_hold_file(const char *path)
 {
     size_t length = strlen(path);
     if (length >= RT_HELD_PATH)
@@ -159,7 +159,7 @@ int32_t rt_interrupt_hold_file(const char *path)
     return -1;
 }
 
-void rt_interrupt_release_file(int32_t slot)
+void rt_interrupt_release_file(int slot)
 {
     if (slot >= 0 && slot < RT_HELD_FILES)
         atomic_store(&rt_held_used[slot], 0);
@@ -174,12 +174,12 @@ int rt_interrupt_install(int64_t grace_ms)
 }
 void rt_interrupt_disarm(void) {}
 void rt_interrupt_uninstall(void) {}
-int32_t rt_interrupt_hold_file(const char *path)
+int rt_interrupt_hold_file(const char *path)
 {
     (void)path;
     return -1;
 }
-void rt_interrupt_release_file(int32_t slot) { (void)slot; }
+void rt_interrupt_release_file(int slot) { (void)slot; }
 
 #endif
 #endif

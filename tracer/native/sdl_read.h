@@ -62,30 +62,8 @@ static const char sdl_decline_names[] =
 enum { SDL_SET_GLOBAL_AMBIENT = 1, SDL_SET_BACKGROUND = 2, SDL_SET_MIN_REFLECTIVITY = 4,
        SDL_SET_MIN_TRANSPARENCY = 8, SDL_SET_MAX_RECURSION_DEPTH = 16 };
 
-/* What one read gives; fastread.py mirrors it with ctypes (every field 8 bytes, in this order). */
-typedef struct {
-    int64_t status;          /* SDL_READ or a decline reason */
-    int64_t decline_offset;  /* the byte where it declined (the caller turns it into a character offset) */
-    int64_t shapes, materials, lights, cameras, names;
-    int16_t *kinds;          /* shapes */
-    double *affines;         /* shapes x 12 */
-    int32_t *material_ids;   /* shapes */
-    double *parameters;      /* shapes x PRIM_PARAMS: the numbers after each shape's keyword, 0 after them */
-    int32_t *lines, *columns;
-    double *material_rows;   /* materials x SDL_MATERIAL_WIDTH */
-    double *light_rows;      /* lights x 6 */
-    double *camera_rows;     /* cameras x 10 */
-    int64_t *name_rows;      /* names x 3: shape row, start and length of the name in the text */
-    int64_t settings_set;
-    double global_ambient[3], background[3], min_reflectivity, min_transparency;
-    int64_t max_recursion_depth;
-    /* Working state, not read by the caller. */
-    int64_t shape_capacity, material_capacity, light_capacity, camera_capacity, name_capacity;
-    uint64_t *material_table;  /* open addressing (see sdl_table_entry) */
-    int64_t table_size;
-    double *stack;            /* transform stack, depth x 12 */
-    int64_t depth, stack_capacity;
-} SdlResult;
+/* What one read gives is contract.h's SdlResult (its fields are contract.py's SDL_RESULT, the table the
+ * ctypes mirror fastread.py reads is made from). */
 
 /* Grows *buffer (of *capacity items of size bytes) to hold at least need items; 0 when out of memory. */
 static int sdl_reserve(void **buffer, int64_t *capacity, int64_t need, size_t size)

@@ -50,24 +50,6 @@ class Declined:
     offset: int
 
 
-class _Result(ctypes.Structure):
-    """sdl_read.h's SdlResult, up to the fields the caller reads."""
-
-    _fields_ = [("status", ctypes.c_int64), ("decline_offset", ctypes.c_int64),
-                ("shapes", ctypes.c_int64), ("materials", ctypes.c_int64), ("lights", ctypes.c_int64),
-                ("cameras", ctypes.c_int64), ("names", ctypes.c_int64),
-                ("kinds", ctypes.POINTER(ctypes.c_int16)), ("affines", ctypes.POINTER(ctypes.c_double)),
-                ("material_ids", ctypes.POINTER(ctypes.c_int32)),
-                ("parameters", ctypes.POINTER(ctypes.c_double)),
-                ("lines", ctypes.POINTER(ctypes.c_int32)), ("columns", ctypes.POINTER(ctypes.c_int32)),
-                ("material_rows", ctypes.POINTER(ctypes.c_double)),
-                ("light_rows", ctypes.POINTER(ctypes.c_double)), ("camera_rows", ctypes.POINTER(ctypes.c_double)),
-                ("name_rows", ctypes.POINTER(ctypes.c_int64)),
-                ("settings_set", ctypes.c_int64), ("global_ambient", ctypes.c_double * 3),
-                ("background", ctypes.c_double * 3), ("min_reflectivity", ctypes.c_double),
-                ("min_transparency", ctypes.c_double), ("max_recursion_depth", ctypes.c_int64)]
-
-
 # sdl_read.h's SDL_SET_* bits: which settings the text set.
 _SET_GLOBAL_AMBIENT, _SET_BACKGROUND, _SET_MIN_REFLECTIVITY, _SET_MIN_TRANSPARENCY, _SET_MAX_DEPTH = 1, 2, 4, 8, 16
 
@@ -95,17 +77,7 @@ def _setup() -> Optional[_Setup]:
     from .. import native  # here, not at the top: the parser must not import the C core for small texts
     if native.load_error is not None or native._lib is None:
         return None
-    lib = native._lib
-    lib.rt_sdl_read.restype = ctypes.POINTER(_Result)
-    lib.rt_sdl_read.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_char_p, ctypes.c_int64,
-                                ctypes.POINTER(ctypes.c_int32), ctypes.c_int64, ctypes.POINTER(ctypes.c_double),
-                                ctypes.c_int64]
-    lib.rt_sdl_free.restype = None
-    lib.rt_sdl_free.argtypes = [ctypes.POINTER(_Result)]
-    lib.rt_sdl_decline_names.restype = ctypes.c_char_p
-    lib.rt_sdl_decline_names.argtypes = []
-    lib.rt_sdl_material_width.restype = ctypes.c_int64
-    lib.rt_sdl_material_width.argtypes = []
+    lib = native._lib  # (its functions declared from tracer/native/contract.py's FUNCTIONS)
     from . import parser
     _check_material_rows(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
     vocabulary = statements.vocabulary()  # (the library speaks its actions' codes: the contract's digest)
@@ -212,10 +184,8 @@ class _Utf8:
 def _cpython_utf8_and_size():
     if sys.implementation.name != "cpython":
         return None
-    function = ctypes.pythonapi.PyUnicode_AsUTF8AndSize
-    function.restype = ctypes.c_void_p
-    function.argtypes = [ctypes.py_object, ctypes.POINTER(ctypes.c_ssize_t)]
-    return function
+    prototype = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.py_object, ctypes.POINTER(ctypes.c_ssize_t))
+    return prototype(("PyUnicode_AsUTF8AndSize", ctypes.pythonapi))
 
 
 _utf8_and_size = _cpython_utf8_and_size()
@@ -233,7 +203,8 @@ def _view(pointer, shape: tuple[int, ...], dtype) -> np.ndarray:
     return np.ctypeslib.as_array(pointer, shape=shape)  # (of the pointer's type, which is dtype)
 
 
-def _columns(res: _Result, utf8: _Utf8) -> Columns:
+def _columns(res, utf8: _Utf8) -> Columns:
+    """The columns of a read's result (contract.SdlResult)."""
     n = res.shapes
     # (what becomes Python objects is read in place; what the scene keeps as arrays is copied)
     name_rows = _view(res.name_rows, (res.names, 3), np.int64).tolist()

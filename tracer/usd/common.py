@@ -29,6 +29,7 @@ A_MESH_FILE = "sdl:meshFile"  # mesh statement's file, relative to the USD file'
 A_MESH_POINTS = "sdl:meshPoints"  # double3[]: the mesh's vertices, exactly
 A_MESH_NORMALS = "sdl:meshNormals"  # double3[]: the mesh's normal list, exactly
 A_MESH_NORMAL_INDICES = "sdl:meshNormalIndices"  # int[], one per face corner; -1 for faces without normals
+A_MESH_UVS = "sdl:meshUVs"  # double2[], one per face corner: MeshData.corner_uvs exactly (primvars:st for others)
 A_MATRIX = "sdl:matrix"  # matrix4d: our exact matrix (USD convention) where the prim's own op differs
 A_GROUPS = "sdl:groups"  # string[]: def macros the object was made in
 A_CSG = "sdl:csg"  # token on a CSG group: union, intersection, difference
@@ -42,6 +43,8 @@ MATERIAL_COLORS = {"ambient": "ambient", "diffuse": "diffuse", "specular": "spec
 MATERIAL_FLOATS = {"specular_exponent": "specularExponent", "reflectivity": "reflectivity",
                    "transparency": "transparency", "speed_of_light": "speedOfLight",
                    "specular_fraction": "specularFraction", "surface_roughness": "surfaceRoughness"}
+A_FRESNEL = "sdl:fresnel"  # token: Material.fresnel (written where not "constant")
+A_FRESNEL_TINT = "sdl:fresnelTint"  # color3d
 A_TEXTURE = "sdl:texture"
 A_PARAMETERS = "sdl:parameters"
 
@@ -49,6 +52,7 @@ A_PARAMETERS = "sdl:parameters"
 SETTING_COLORS = {"global_ambient": "sdl:globalAmbient", "background": "sdl:background"}
 SETTING_FLOATS = {"min_reflectivity": "sdl:minReflectivity", "min_transparency": "sdl:minTransparency"}
 A_MAX_DEPTH = "sdl:maxRecursionDepth"
+A_SMOOTH_TERMINATOR = "sdl:smoothTerminator"  # bool, written where true
 A_PIXMAP_NUMBERS = "sdl:pixmapNumbers"  # int[]
 A_PIXMAP_FILES = "sdl:pixmapFiles"  # asset[], same order
 

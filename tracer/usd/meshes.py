@@ -35,7 +35,8 @@ def sdl_mesh(reader, prim) -> Optional[MeshData]:
     if any(not 0 <= v < len(vertices) for f in faces for v in f[0]) or \
             any(not 0 <= i < len(normals) for f in faces for i in f[1]):
         raise SceneError("a face index is out of range")
-    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>"))
+    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>",
+                                           corner_uvs=_our_uvs(reader, prim, len(indices))))
 
 
 def _checked(reader, prim, mesh: MeshData) -> Optional[MeshData]:
@@ -45,6 +46,51 @@ def _checked(reader, prim, mesh: MeshData) -> Optional[MeshData]:
         return mesh
     reader.problem(prim, problem)
     return None
+
+
+def _our_uvs(reader, prim, n_corners: int) -> Optional[np.ndarray]:
+    """Our exact corner_uvs, unless primvars:st was changed in another tool since (then its values)."""
+    exact = reader.get(prim, C.A_MESH_UVS)
+    found = _texture_coordinates(reader, prim, n_corners, list(range(n_corners)), list(range(n_corners)))
+    if exact is None or len(exact) != n_corners:
+        return found
+    exact = np.array(exact, dtype=np.float64).reshape(-1, 2)
+    if found is not None and not np.array_equal(exact.astype(np.float32), found.astype(np.float32)):
+        return found
+    return exact
+
+
+def _texture_coordinates(reader, prim, n_points_or_corners: int, corners: list[int],
+                         vertices: list[int]) -> Optional[np.ndarray]:
+    """(len(corners), 2) texture coordinates of these face corners (their places among all the faces'
+    corners, and their vertices) from the mesh's ``st`` primvar (else its first texCoord2f one): per corner
+    (faceVarying) or per point (vertex), indexed or not; None where it has none that fits (with a note)."""
+    UsdGeom = reader.UsdGeom
+    primvars = UsdGeom.PrimvarsAPI(prim)
+    primvar = primvars.GetPrimvar("st")
+    if not (primvar and primvar.HasAuthoredValue()):
+        candidates = [p for p in primvars.GetPrimvars() if p.HasAuthoredValue()
+                      and p.GetTypeName().role == reader.Sdf.ValueTypeNames.TexCoord2f.role
+                      and p.GetTypeName().isArray]
+        if not candidates:
+            return None
+        primvar = candidates[0]
+    values = primvar.ComputeFlattened(reader.time)
+    if values is None or len(values) == 0:
+        return None
+    uvs = np.array(values, dtype=np.float64).reshape(-1, 2)
+    interpolation = primvar.GetInterpolation()
+    if interpolation == UsdGeom.Tokens.faceVarying:
+        pick = corners
+    elif interpolation in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+        pick = vertices
+    else:
+        reader.note(prim, f"its texture coordinates are {interpolation}: left out")
+        return None
+    if pick and (max(pick) >= len(uvs)):
+        reader.note(prim, f"its texture coordinates ({len(uvs)}, {interpolation}) do not fit the mesh: left out")
+        return None
+    return uvs[pick]
 
 
 def usd_mesh(reader, prim) -> Optional[MeshData]:
@@ -66,7 +112,7 @@ def usd_mesh(reader, prim) -> Optional[MeshData]:
     normals, normal_of = _normals(reader, prim, mesh, len(vertices), len(counts), len(indices))
     holes = set(int(h) for h in (mesh.GetHoleIndicesAttr().Get(reader.time) or []))
     left_handed = str(mesh.GetOrientationAttr().Get(reader.time)) == UsdGeom.Tokens.leftHanded
-    faces, at, skipped = [], 0, 0
+    faces, kept_corners, at, skipped = [], [], 0, 0
     for f, n in enumerate(counts):
         corners = range(at, at + n)
         at += n
@@ -77,14 +123,18 @@ def usd_mesh(reader, prim) -> Optional[MeshData]:
             continue
         verts = tuple(indices[c] for c in corners)
         norms = tuple(normal_of(f, c, indices[c]) for c in corners) if normal_of else ()
+        order = list(corners)
         if left_handed:
-            verts, norms = verts[::-1], norms[::-1]
+            verts, norms, order = verts[::-1], norms[::-1], order[::-1]
         faces.append((verts, norms))
+        kept_corners += order
     if skipped:
         reader.note(prim, f"{skipped} faces with fewer than 3 vertices left out")
     if not faces:
         return None
-    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{prim.GetPath()}>"))
+    uvs = _texture_coordinates(reader, prim, len(indices), kept_corners, [indices[c] for c in kept_corners])
+    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{prim.GetPath()}>",
+                                           corner_uvs=uvs))
 
 
 def _normals(reader, prim, mesh, n_points: int, n_faces: int, n_corners: int):

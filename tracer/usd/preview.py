@@ -35,6 +35,9 @@ def preview_inputs(material: Material) -> dict[str, object]:
         "opacity": _clamp(1.0 - material.transparency), "roughness": display_roughness(material)}
     if material.speed_of_light > 0:
         inputs["ior"] = 1.0 / material.speed_of_light
+    if material.fresnel == "metal":  # a tinted mirror: the metallic workflow with the tint as its colour
+        inputs.update(useSpecularWorkflow=0, metallic=_clamp(material.reflectivity),
+                      diffuseColor=tuple(material.fresnel_tint))
     return inputs
 
 

@@ -3,7 +3,7 @@
 Stages we wrote come back exactly: the ``sdl:*`` attributes are read first (shape keyword, material,
 settings, camera, exact matrices).  Stages from other tools are read from their schemas: implicit prims
 (Sphere, Cube, Cylinder, Cylinder_1, Cone, Plane), Mesh prims, world transforms composed by
-UsdGeom.XformCache, UsdPreviewSurface materials, SphereLight/DistantLight (and the other lights as points),
+UsdGeom.XformCache, UsdPreviewSurface materials, Sphere/Distant/Rect/Disk lights (tracer/usd/lights.py),
 and the first Camera.  Invisible prims and guide/proxy purposes are skipped.  A z-up stage is turned into
 SDL's y-up world.  Strict (the default), what cannot be read is a TracerError naming the file and prim;
 lenient, a warning.  See docs/usd.md.
@@ -22,12 +22,13 @@ import numpy as np
 
 from .. import shapes
 from ..camera import focal_length, view_angle
-from ..errors import TracerError
-from ..model import (CSG, MAX_RECURSION_DEPTH, SHAPE_KINDS, Camera, Light, Material, Scene,
+from ..errors import SceneError, TracerError
+from ..model import (CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, SHAPE_KINDS, Camera, Light, Material, Scene,
                      SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
+from .lights import read_light
 from .meshes import sdl_mesh, usd_mesh
 from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
@@ -37,12 +38,10 @@ PathLike = Union[str, "os.PathLike[str]"]
 #: Kinds written as their tessellation (USD has no implicit prim for them) and read back as the exact shape.
 _TESSELLATED = frozenset(e.keyword for e in shapes.REGISTRY if e.family == "analytic" and e.usd_prim is None)
 
-#: A distant light becomes a point light this many scene radii away, against its direction.
-DISTANT_LIGHT_DISTANCE = 1.0e5
 #: Our sdl:matrix is used instead of the prim's transform only while the two agree to this (relative).
 MATRIX_AGREEMENT = 1e-12
-#: Lights read as point lights at their centre.
-POINT_LIKE_LIGHTS = ("SphereLight", "RectLight", "DiskLight", "CylinderLight")
+#: The UsdLux lights read (tracer/usd/lights.py; a CylinderLight as a point light at its centre).
+READ_LIGHTS = ("SphereLight", "DistantLight", "RectLight", "DiskLight", "CylinderLight")
 #: What a value of the wrong type or shape raises while a prim is read (float("x"), a float where a triple
 #: belongs, an index out of range): the prim cannot be read.
 _BAD_VALUE = (ValueError, IndexError, TypeError)
@@ -71,7 +70,6 @@ class _Reader:
         # SDL's world is y-up: a z-up stage is turned so that its up becomes +y (see common.to_y_up).
         self.up = C.to_y_up(str(self.UsdGeom.GetStageUpAxis(stage)))
         self.scene = Scene()
-        self.distant: list[tuple[np.ndarray, tuple[float, float, float]]] = []
 
     # -- messages and attributes ------------------------------------------------------------------------
 
@@ -139,7 +137,6 @@ class _Reader:
                 walk.PruneChildren()
                 if obj is not None:
                     self._place(obj, stack)
-        self._finish_distant_lights()
         return self.scene
 
     def _shown(self, prim) -> bool:
@@ -195,6 +192,7 @@ class _Reader:
             for field_name, name in C.SETTING_FLOATS.items():
                 setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
             s.max_recursion_depth = int(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth))
+            s.smooth_terminator = bool(self.get(root, C.A_SMOOTH_TERMINATOR, False))
             numbers = list(self.get(root, C.A_PIXMAP_NUMBERS, []))
             files = list(self.get(root, C.A_PIXMAP_FILES, []))
         except _BAD_VALUE as exc:
@@ -239,7 +237,7 @@ class _Reader:
         if prim.IsA(self.UsdGeom.Camera):
             self._camera(prim)
             return None
-        if type_name in POINT_LIKE_LIGHTS or type_name == "DistantLight":
+        if type_name in READ_LIGHTS:
             self._light(prim, type_name)
             return None
         if prim.HasAPI(self.UsdLux.LightAPI) or type_name.endswith("Light") or type_name.startswith("DomeLight"):
@@ -378,6 +376,12 @@ class _Reader:
             values[field_name] = float(self.get(prim, C.NS + keyword, getattr(default, field_name)))
         values["texture"] = int(self.get(prim, C.A_TEXTURE, 0))
         values["parameters"] = tuple(float(p) for p in self.get(prim, C.A_PARAMETERS, []))
+        fresnel = self.get(prim, C.A_FRESNEL)
+        if fresnel is not None:
+            if str(fresnel) not in FRESNEL_MODES:
+                raise ValueError(f"unknown sdl:fresnel {str(fresnel)!r}")
+            values["fresnel"] = str(fresnel)
+            values["fresnel_tint"] = self.triple(prim, C.A_FRESNEL_TINT, default.fresnel_tint)
         return Material(**values)
 
     def _preview_material(self, prim) -> Material:
@@ -434,38 +438,15 @@ class _Reader:
         # Our exact colour, unless the light was changed in another tool since (its float colour differs).
         if exact is not None and tuple(float(np.float32(c)) for c in exact) == color:
             color = exact
-        world = self.world(prim)
-        if type_name == "DistantLight":
-            direction = -world[:3, 2]  # it shines down its -z axis
-            norm = float(np.linalg.norm(direction))
-            if not norm > 0:
-                self.problem(prim, "distant light with a degenerate transform")
-                return
-            self.distant.append((direction / norm, color))
-            self.scene.lights.append(None)  # placeholder, in stage order
-            return
-        if type_name != "SphereLight":
+        if type_name == "CylinderLight":
             self.note(prim, f"{type_name} read as a point light at its centre")
-        self.scene.lights.append(Light(tuple(float(x) for x in world[:3, 3]), color))
-
-    def _finish_distant_lights(self) -> None:
-        """Distant lights become point lights far away against their direction (SDL has no attenuation, so
-        only the direction matters): DISTANT_LIGHT_DISTANCE times the scene's radius from its centre."""
-        if not self.distant:
+            self.scene.lights.append(Light(tuple(float(x) for x in self.world(prim)[:3, 3]), color,
+                                           name=str(prim.GetName())))
             return
-        points = C.scene_points(self.scene.objects, [light for light in self.scene.lights if light is not None],
-                                self.scene.camera)
-        centre = 0.5 * (points.min(axis=0) + points.max(axis=0)) if len(points) else np.zeros(3)
-        radius = float(np.max(np.linalg.norm(points - centre, axis=1))) if len(points) else 0.0
-        far = DISTANT_LIGHT_DISTANCE * (radius + 1.0)
-        distant = iter(self.distant)
-        lights = []
-        for light in self.scene.lights:
-            if light is None:
-                direction, color = next(distant)
-                light = Light(tuple(float(x) for x in centre - far * direction), color)
-            lights.append(light)
-        self.scene.lights = lights
+        try:
+            self.scene.lights.append(read_light(self, prim, type_name, color))
+        except (*_BAD_VALUE, SceneError) as err:
+            self.problem(prim, f"{type_name} with {err}")
 
     def _camera(self, prim) -> None:
         if self.scene.camera is not None:

@@ -21,6 +21,7 @@ from ..errors import TracerError
 from ..model import CSG, Camera, Light, Material, MeshData, Scene, SceneObject, Shape
 from ..transforms import translation
 from . import common as C
+from .lights import prim_name, write_light
 from .preview import preview_inputs
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -59,6 +60,7 @@ class _Writer:
         self.materials: dict[Material, object] = {}  # each distinct material's UsdShade.Material
         self.material_paths: dict[Material, str] = {}  # and its prim's path
         self.names: dict[str, int] = {}
+        self.light_names: set[str] = set()
         self.reach = self._scene_reach()
 
     # -- small helpers ----------------------------------------------------------------------------------
@@ -118,6 +120,8 @@ class _Writer:
         for field, name in C.SETTING_FLOATS.items():
             self._double(root, name, getattr(s, field))
         self._attr(root, C.A_MAX_DEPTH, self.Sdf.ValueTypeNames.Int, int(s.max_recursion_depth))
+        if s.smooth_terminator:
+            self._attr(root, C.A_SMOOTH_TERMINATOR, self.Sdf.ValueTypeNames.Bool, True)
         numbers = sorted(self.scene.pixmaps)
         self._attr(root, C.A_PIXMAP_NUMBERS, self.Sdf.ValueTypeNames.IntArray, self.Vt.IntArray(numbers))
         files = [self._relative(self.scene.pixmaps[i]) for i in numbers]
@@ -138,14 +142,9 @@ class _Writer:
         return rel if rel.startswith("../") or os.path.isabs(rel) else "./" + rel
 
     def _light(self, light: Light) -> None:
-        path = f"{C.LIGHTS}/{self._name('light')}"
-        lux = self.UsdLux.SphereLight.Define(self.stage, path)
-        lux.CreateRadiusAttr(0.0)
-        lux.CreateTreatAsPointAttr(True)
-        lux.CreateColorAttr(self.Gf.Vec3f(*map(float, light.color)))
-        lux.CreateIntensityAttr(1.0)
-        self._set_transform(lux, translation(*light.position))
-        self._color(lux.GetPrim(), C.A_LIGHT_COLOR, light.color)
+        index = self.names.get("light", 0)
+        self.names["light"] = index + 1
+        write_light(self, light, f"{C.LIGHTS}/{prim_name(light, index, self.light_names)}")
 
     def _camera(self, camera: Camera) -> None:
         cam = self.UsdGeom.Camera.Define(self.stage, C.CAMERA)
@@ -334,6 +333,10 @@ class _Writer:
         mesh.SetNormalsInterpolation(self.UsdGeom.Tokens.faceVarying)
         mesh.CreateSubdivisionSchemeAttr(self.UsdGeom.Tokens.none)
         mesh.CreateOrientationAttr(self.UsdGeom.Tokens.rightHanded)
+        if data.corner_uvs is not None:  # texture coordinates, one per face corner, as other tools name them
+            st = self.UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", self.Sdf.ValueTypeNames.TexCoord2fArray,
+                                                              self.UsdGeom.Tokens.faceVarying)
+            st.Set(Vt.Vec2fArray.FromNumpy(np.asarray(data.corner_uvs, dtype=np.float32).reshape(-1, 2)))
 
     def _mesh_data(self, prim, shape: Shape) -> None:
         """A ``mesh`` statement's data exactly (doubles, and the separate normal list of .3vn), and its file."""
@@ -353,6 +356,9 @@ class _Writer:
         corners = [int(n) for verts, norms in data.faces
                    for n in (norms if len(norms) == len(verts) else [-1] * len(verts))]
         self._attr(prim, C.A_MESH_NORMAL_INDICES, Sdf.ValueTypeNames.IntArray, Vt.IntArray(corners))
+        if data.corner_uvs is not None:
+            self._attr(prim, C.A_MESH_UVS, Sdf.ValueTypeNames.Double2Array,
+                       Vt.Vec2dArray.FromNumpy(np.asarray(data.corner_uvs, dtype=np.float64).reshape(-1, 2)))
 
     # -- materials --------------------------------------------------------------------------------------
 
@@ -365,6 +371,9 @@ class _Writer:
         self._attr(prim, C.A_TEXTURE, Sdf.ValueTypeNames.Int, int(material.texture))
         self._attr(prim, C.A_PARAMETERS, Sdf.ValueTypeNames.DoubleArray,
                    self.Vt.DoubleArray([float(p) for p in material.parameters]))
+        if material.fresnel != "constant":
+            self._attr(prim, C.A_FRESNEL, Sdf.ValueTypeNames.Token, material.fresnel)
+            self._color(prim, C.A_FRESNEL_TINT, material.fresnel_tint)
         usd_material = self.materials.get(material)
         if usd_material is None:
             usd_material = self._preview_surface(material, self.material_paths[material])

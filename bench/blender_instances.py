@@ -1,0 +1,159 @@
+"""Instances at scale: geometry nodes put N instances of one mesh of T triangles on a grid's points; the
+add-on turns the depsgraph into a tracer scene and compiles it.  What each instance costs, against the mesh
+once, in the bpy module:
+
+    python bench/blender_instances.py [--instances 100000] [--triangles 10000] [--render 320x240]
+
+Measured, each in its own step: the scene build (depsgraph -> tracer Scene: a Shape per instance, all
+sharing one MeshData), compile_scene (primitive rows, bounds, the mesh's BVH once, the object hierarchy) and
+an F12 (the engine's whole render, build and compile included).  Memory is the process's resident size
+before and after each step (/proc/self/statm) and, in a second pass, Python's own allocations per step
+(tracemalloc: slower, so its times are not reported).  The mesh once is its arrays plus its BVH, measured
+alone (one instance).  Prints JSON and writes bench/results/blender_instances.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+
+
+def _rss() -> int:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096
+
+
+def _scene(instances: int, triangles: int):
+    """A grid of ``instances`` points with a UV sphere of about ``triangles`` triangles on each."""
+    import math
+
+    import bpy
+
+    from blender_scripts.addon_env import fresh, set_resolution
+
+    fresh()
+    side = max(1, round(math.sqrt(instances)))
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=side - 1, y_subdivisions=side - 1, size=side * 3.0)
+    grid = bpy.context.object
+    rings = max(3, round(math.sqrt(triangles / 4)))
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=2 * rings, ring_count=rings, radius=1.0, location=(0, 0, -50))
+    ball = bpy.context.object
+    ball.hide_render = ball.hide_viewport = True
+    tree = bpy.data.node_groups.new("instances", "GeometryNodeTree")
+    if hasattr(tree, "interface"):
+        tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+        tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    else:
+        tree.inputs.new("NodeSocketGeometry", "Geometry")
+        tree.outputs.new("NodeSocketGeometry", "Geometry")
+    grid.modifiers.new("instances", "NODES").node_group = tree
+    group_in, group_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    on_points, info = tree.nodes.new("GeometryNodeInstanceOnPoints"), tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = ball
+    tree.links.new(group_in.outputs[0], on_points.inputs["Points"])
+    tree.links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    tree.links.new(on_points.outputs[0], group_out.inputs[0])
+    bpy.ops.object.light_add(type="SUN", rotation=(0.5, 0.2, 0.0))
+    bpy.ops.object.camera_add(location=(0.0, -side * 2.0, side * 1.5), rotation=(0.9, 0.0, 0.0))
+    bpy.context.scene.camera = bpy.context.object
+    bpy.context.view_layer.update()
+    return len(ball.data.polygons), side * side
+
+
+def _steps(traced: bool) -> dict:
+    """Build and compile the evaluated scene; per step CPU seconds, resident growth and (``traced``)
+    Python's allocations."""
+    import bpy
+
+    from addon import engine
+    from addon.tracer.compile import compile_scene
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out = {}
+    kept = {}
+
+    def step(name, work):
+        before_rss, before_cpu = _rss(), time.process_time()
+        if traced:
+            tracemalloc.start()
+        kept[name] = work()
+        entry = {"seconds_cpu": round(time.process_time() - before_cpu, 2), "rss_growth": _rss() - before_rss}
+        if traced:
+            entry["python_allocated"] = tracemalloc.get_traced_memory()[0]
+            tracemalloc.stop()
+        out[name] = entry
+
+    step("build", lambda: engine.build_scene(depsgraph, "RENDER")[0])
+    step("compile", lambda: compile_scene(kept["build"]))
+    out["objects"] = len(kept["build"].objects)
+    out["meshes"] = len({id(s.mesh) for s in kept["build"].objects})
+    return out, kept
+
+
+def _mesh_once(scene) -> int:
+    """The bytes of the one mesh and its BVH (a scene of one instance of it, compiled)."""
+    from addon.tracer.compile import compile_scene
+    from addon.tracer.model import Scene
+
+    mesh = scene.objects[0].mesh
+    arrays = sum(a.nbytes for a in (mesh.vertices, mesh.normals) + tuple(mesh.faces.arrays()))
+    before = _rss()
+    tracemalloc.start()
+    single = compile_scene(Scene(objects=[scene.objects[0]], lights=scene.lights, settings=scene.settings))
+    python = tracemalloc.get_traced_memory()[0]
+    tracemalloc.stop()
+    del single
+    return {"arrays": int(arrays), "compiled_python_allocated": int(python), "rss_growth": _rss() - before}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--instances", type=int, default=100_000)
+    parser.add_argument("--triangles", type=int, default=10_000)
+    parser.add_argument("--render", default="320x240", help="F12 size, or 'none'")
+    args = parser.parse_args()
+    import bpy
+
+    from addon import engine
+    import addon.tracer.native  # noqa: F401  (the C core built before anything is measured)
+
+    triangles, points = _scene(args.instances, args.triangles)
+    timed, kept = _steps(traced=False)
+    mesh = _mesh_once(kept["build"])
+    del kept
+    traced, _ = _steps(traced=True)
+    result = {"instances": points, "mesh_polygons": triangles, "blender": bpy.app.version_string,
+              "timed": timed, "python_allocated": {k: v.get("python_allocated") for k, v in traced.items()
+                                                   if isinstance(v, dict)}, "mesh_once": mesh}
+    total = timed["build"]["rss_growth"] + timed["compile"]["rss_growth"]
+    result["bytes_per_instance_rss"] = round((total - mesh["rss_growth"]) / points, 1)
+    result["bytes_per_instance_python"] = round(
+        (sum(v for v in result["python_allocated"].values()) - mesh["compiled_python_allocated"]) / points, 1)
+    if args.render != "none":
+        from blender_scripts.addon_env import set_resolution
+
+        width, height = (int(v) for v in args.render.split("x"))
+        set_resolution(width, height)
+        scene = bpy.context.scene
+        scene.render.engine = engine.ENGINE_ID
+        scene.sdl_render.block_size, scene.sdl_render.progressive = 1, False
+        before_rss, before_cpu = _rss(), time.process_time()
+        bpy.ops.render.render()
+        result["f12"] = {"seconds_cpu": round(time.process_time() - before_cpu, 2),
+                         "rss_growth": _rss() - before_rss, "rays": engine.LAST_RENDER.get("rays"),
+                         "error": engine.LAST_RENDER.get("error")}
+    text = json.dumps(result, indent=1)
+    print(text)
+    out = ROOT / "bench" / "results" / "blender_instances.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

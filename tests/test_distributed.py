@@ -376,7 +376,7 @@ def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
 #: The numbers of an accuracy summary that are measured, not computed from images and ray counts.
 TIMINGS = {"seconds_median", "seconds_iqr", "cpu_median", "cpu_iqr", "compile_median", "trace_median",
            "pareto_seconds", "seconds", "seconds_all", "seconds_with", "iqr_all", "iqr_with", "cpu_all", "cpu_with",
-           "cpu_iqr_all", "cpu_iqr_with"}
+           "cpu_iqr_all", "cpu_iqr_with", "cpu_mean", "cpu_sd"}
 
 
 def _without_timings(value):
@@ -390,7 +390,7 @@ def _without_timings(value):
 def test_an_accuracy_sweep_on_the_cluster_equals_the_local_sweep(client, tmp_path):
     """bench accuracy --scheduler: every render of the sweep is a task that carries its setting (depth, solver
     tolerances, ray savings, seed) to a worker, which reads the scene once from the bundle; errors, rays,
-    slopes, fronts and targets equal the local sweep's, and the progress lines come in order."""
+    slopes, fronts, targets and the cost to reach them equal the local sweep's, and the progress lines come in order."""
     from tracer.accuracy import BenchConfig, measure
 
     path = SCENES / "shapes.sdl"  # a torus (its Newton steps are swept), mirrors, shadows

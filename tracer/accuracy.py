@@ -19,7 +19,10 @@ For each scene:
 * **slopes**: RMSE against samples per sampling mode, fitted on log-log axes (``scipy.stats.linregress``)
   over N >= 4;
 * the **Pareto front** of the sampling and block-size rows, error against rays and against CPU seconds;
-* **error targets**: ``--target-error E`` renders, their estimated against their measured error.
+* **error targets**: ``--target-error E`` renders, their estimated against their measured error;
+* **the cost to reach each E**: for the error target (one render per seed), and for uniform jittered and
+  adaptive sampling the fewest rays per pixel (from COST_LADDER) whose mean RMSE over the seeds is at most
+  E: camera rays, all rays and CPU seconds, mean and spread over the seeds.
 
 Every render is a task ``fn(scene, *args)`` whose arguments carry all it depends on (the setting, the
 seed, the configuration; a setting's solver tolerances are applied while its scene compiles, under a lock,
@@ -61,6 +64,8 @@ FIELDS = ("group", "setting", "samples", "runs", "rays", *(f"rays_{k}" for k in 
           "trace_median", "pareto_rays", "pareto_seconds")
 #: Edges of the bins of per-pixel error estimates in the target plot (at least 10 pixels per bin are shown).
 TARGET_BINS = 1e-4 * 2.0 ** np.arange(11)
+#: Rays per pixel tried, in turn, for the cheapest uniform jittered and adaptive setting reaching each target.
+COST_LADDER = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 48, 64, 96, 128, 192, 256)
 #: The rows that trade error for cost (the Pareto fronts are taken over them).
 TRADE_GROUPS = ("block size", "baseline", "samples (regular)", "samples (jittered)", "samples (adaptive)")
 
@@ -267,10 +272,12 @@ def _summarise(setting: Setting, runs: list[dict]) -> dict:
             "skipped": {k: float(np.mean([r["skipped"][k] for r in runs])) for k in runs[0]["skipped"]}}
 
 
-def target_render(scene: Scene, config: BenchConfig, target: float, seed: int = 7) -> RenderResult:
-    """A task: a render to an error target."""
-    return render(compiled_for(scene), config.width, config.height, target_error=target, seed=seed,
-                  backend=config.backend, threads=config.threads)
+def target_render(scene: Scene, config: BenchConfig, target: float, seed: int = 7) -> dict:
+    """A task: a render to an error target, and the CPU seconds of all the process's threads it took."""
+    cpu_started = time.process_time()
+    result = render(compiled_for(scene), config.width, config.height, target_error=target, seed=seed,
+                    backend=config.backend, threads=config.threads)
+    return {"result": result, "cpu": time.process_time() - cpu_started}
 
 
 def target_row(result: RenderResult, target: float, reference: np.ndarray) -> dict:
@@ -288,6 +295,57 @@ def target_row(result: RenderResult, target: float, reference: np.ndarray) -> di
             "worst_estimate": estimate.worst, "measured_p99": float(np.percentile(per_pixel, 99)),
             "samples_mean": estimate.samples_mean, "pixels_at_limit": estimate.pixels_at_limit,
             "rays": int(sum(result.rays.as_dict().values())), "seconds": result.seconds, "bins": bins}
+
+
+def _cost(method: str, target: float, samples: Optional[int], runs: list[dict]) -> dict:
+    """One row of the cost to reach ``target``: a method's camera rays, all rays, CPU seconds and RMSE, mean
+    and standard deviation over its runs (one per seed)."""
+    def spread(key: str) -> tuple[float, float]:
+        values = np.array([r[key] for r in runs], dtype=float)
+        return float(values.mean()), float(values.std(ddof=1)) if len(values) > 1 else 0.0
+
+    row = {"target": target, "method": method, "samples": samples, "runs": len(runs)}
+    for key in ("camera", "rays", "cpu", "rmse"):
+        row[f"{key}_mean"], row[f"{key}_sd"] = spread(key)
+    if runs and "estimated" in runs[0]:  # an error target: how far its estimates were from the truth
+        ratios = [r["rmse"] / r["estimated"] for r in runs if r["estimated"] > 0]
+        row["measured_over_estimated"] = [min(ratios), max(ratios)] if ratios else None
+    return row
+
+
+def cost_to_reach(scene: Scene, config: BenchConfig, reference: np.ndarray, run_tasks: RunTasks,
+                  target_runs: dict[float, list[dict]], progress=print) -> list[dict]:
+    """Per target E: the error target's cost (``target_runs``: its runs, one per seed), and the cheapest
+    uniform jittered and adaptive settings of COST_LADDER whose mean RMSE reaches E, each step of the ladder
+    one batch of renders (one per seed), until every target is reached or the ladder ends."""
+    rows = []
+    for target in config.targets:
+        rows.append(_cost("target", target, None, target_runs[target]))
+    for mode in ("jittered", "adaptive"):
+        left = sorted(config.targets, reverse=True)
+        for samples in COST_LADDER:
+            if not left:
+                break
+            setting = Setting("cost", f"{mode} {samples}", samples=samples, mode=mode)
+            records = run_tasks([(run_setting, (setting, seed, config)) for seed in range(config.seeds)],
+                                lambda index, result: None)
+            runs = [{"camera": r["rays"]["camera"], "rays": sum(r["rays"].values()), "cpu": r["cpu"],
+                     "rmse": errors(r["image"], reference)["rmse"]} for r in records]
+            rmse = float(np.mean([r["rmse"] for r in runs]))
+            while left and rmse <= left[0]:
+                rows.append(_cost(f"uniform {mode}" if mode == "jittered" else mode, left.pop(0), samples, runs))
+        for target in left:  # not reached on the ladder
+            rows.append({"target": target, "method": f"uniform {mode}" if mode == "jittered" else mode,
+                         "samples": None, "runs": 0})
+    for row in rows:
+        if row["runs"]:
+            progress(f"  cost to reach {row['target']:g}: {row['method']:<16} "
+                     + (f"N={row['samples']:<4} " if row["samples"] else "       ")
+                     + f"{row['camera_mean']:>10,.0f} camera rays (sd {row['camera_sd']:,.0f}), "
+                       f"RMSE {row['rmse_mean']:.5f}, CPU {row['cpu_mean']:.3f} s")
+        else:
+            progress(f"  cost to reach {row['target']:g}: {row['method']:<16} not reached by {COST_LADDER[-1]} rays")
+    return rows
 
 
 def measure_savings(scene: Scene, config: BenchConfig) -> dict:
@@ -360,7 +418,7 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
     parts = reference_parts(config)
     calls = [(reference_part, (config, *part)) for part in parts]
     calls += [(run_setting, (setting, seed, config)) for seed in range(config.seeds) for setting in settings]
-    calls += [(target_render, (config, target)) for target in config.targets]
+    calls += [(target_render, (config, target, seed)) for target in config.targets for seed in range(config.seeds)]
     calls += [(measure_savings, (config,))] if timed_savings else []
     first_run, first_target = len(parts), len(parts) + config.seeds * len(settings)
     progress_lines = _SweepProgress(progress, len(parts), len(settings), config.seeds)
@@ -389,8 +447,15 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
         for r, on in zip(trade, front):
             r[key] = bool(on)
     slopes = fitted_slopes(rows)
-    targets = [target_row(result, target, reference)
-               for result, target in zip(results[first_target:first_target + len(config.targets)], config.targets)]
+    target_results = results[first_target:first_target + len(config.targets) * config.seeds]
+    target_runs = {target: [{"camera": t["result"].rays.camera, "rays": sum(t["result"].rays.as_dict().values()),
+                             "cpu": t["cpu"], "rmse": errors(t["result"].image, reference)["rmse"],
+                             "estimated": t["result"].error_estimate.rms}
+                            for t in target_results[k * config.seeds:(k + 1) * config.seeds]]
+                   for k, target in enumerate(config.targets)}
+    targets = [target_row(target_results[k * config.seeds]["result"], target, reference)
+               for k, target in enumerate(config.targets)]
+    cost = cost_to_reach(scene, config, reference, run_tasks or run_here(scene), target_runs, progress)
     baseline = next(r for r in rows if r["group"] == "baseline")
     every = next((r for r in rows if r["group"] == "ray savings"), None)
     summary = {
@@ -400,7 +465,7 @@ def measure(scene: Scene, name: str, out_dir: Path, config: BenchConfig = BenchC
                       "seconds": reference_seconds,
                       "smallest_reported_rmse": min(r["rmse_mean"] for r in rows if r["rmse_mean"] > 0)},
         "depth_bias": None if bias is None else {"depth": depth, "against": DEEP, "rmse": bias},
-        "slopes": slopes, "targets": targets, "rows": rows,
+        "slopes": slopes, "targets": targets, "cost": cost, "rows": rows,
         "savings": None if every is None else {
             "rays_all": every["rays"], "rays_saved": every["rays"] - baseline["rays"],
             "skipped": baseline["skipped"], "timed": results[-1]},
@@ -595,6 +660,28 @@ def write_report(summaries: list[dict], path: Path) -> None:
             lines += [f"| {t['target']:g} | {_fmt(t['estimated_rmse'])} | {_fmt(t['measured_rmse'])} | "
                       f"{_fmt(t['measured_p99'])} | {t['samples_mean']:.1f} | {t['pixels_at_limit']} |"
                       for t in s["targets"]]
+        if s.get("cost"):
+            lines += ["", "Cost to reach each target E (mean ± sd over the seeds; uniform and adaptive: the fewest "
+                      "rays per pixel N whose mean RMSE is at most E):", "",
+                      "| E | method | N | camera rays | all rays | CPU s | RMSE | camera rays / uniform's |",
+                      "|---|---|---|---|---|---|---|---|"]
+            for c in s["cost"]:
+                if not c["runs"]:
+                    lines.append(f"| {c['target']:g} | {c['method']} | > {COST_LADDER[-1]} | | | | | |")
+                    continue
+                uniform = next((u for u in s["cost"] if u["target"] == c["target"] and u["runs"]
+                                and u["method"] == "uniform jittered"), None)
+                ratio = f"{c['camera_mean'] / uniform['camera_mean']:.2f}" if uniform else ""
+                lines.append(f"| {c['target']:g} | {c['method']} | {c['samples'] or ''} | "
+                             f"{c['camera_mean']:,.0f} ± {c['camera_sd']:,.0f} | {c['rays_mean']:,.0f} ± "
+                             f"{c['rays_sd']:,.0f} | {c['cpu_mean']:.3f} ± {c['cpu_sd']:.3f} | "
+                             f"{_fmt(c['rmse_mean'])} ± {_fmt(c['rmse_sd'])} | {ratio} |")
+            spans = [(c["target"], c["measured_over_estimated"]) for c in s["cost"]
+                     if c.get("measured_over_estimated")]
+            if spans:
+                lines.append("")
+                lines.append("Measured over estimated RMSE of the error target, lowest and highest over the seeds: "
+                             + ", ".join(f"E = {e:g}: {lo:.2f}–{hi:.2f}" for e, (lo, hi) in spans) + ".")
         lines.append("")
     tmp = _atomic_path(path)
     tmp.write_text("\n".join(lines))

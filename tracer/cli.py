@@ -62,9 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="override the scene's maxRecursionDepth")
     r.add_argument("--target-error", type=float, default=None, metavar="E",
-                   help="sample each pixel until its estimated error (standard error of its mean, linear "
-                        "colour; 1/255 is one 8-bit step) is at most E, and report the estimate "
-                        "(replaces --samples, --sampling, --threshold, --block-size and --progressive)")
+                   help="sample until the image's estimated RMSE (linear colour clipped to [0, 1]; 1/255 is "
+                        "one 8-bit step) is at most E, rays going where they lower it most, and report the "
+                        "estimate (replaces --samples, --sampling, --threshold, --block-size and --progressive)")
+    r.add_argument("--per-pixel", action="store_true",
+                   help="with --target-error: every pixel's standard error at most E instead of the image's "
+                        "RMSE (many more rays)")
     r.add_argument("--cutoff", type=float, default=None, metavar="W",
                    help="do not trace reflected or transmitted rays whose weight in the pixel is below W "
                         "(default 1/512; 0 traces them all)")
@@ -226,6 +229,8 @@ def _render(args) -> int:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
             raise TracerError("--target-error cannot be combined with --scheduler or --frames")
         return _render_job(args)
+    if args.per_pixel and args.target_error is None:
+        print("warning: --per-pixel only changes --target-error, which is not given", file=sys.stderr)
     if args.target_error is not None:
         replaced = _replaced_options_given(args)
         if replaced:
@@ -249,7 +254,8 @@ def _render(args) -> int:
     progress = _Progress(not args.quiet)
     options = dict(block_size=args.block_size, progressive=args.progressive, on_tile=progress,
                    samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
-                   backend=args.backend, threads=args.threads, savings=savings, target_error=args.target_error)
+                   backend=args.backend, threads=args.threads, savings=savings, target_error=args.target_error,
+                   error_per_pixel=args.per_pixel)
     try:
         if image_format == "PNG":  # the rows go into the file as bands of tiles are done: no whole image kept
             check_size(args.width, args.height)
@@ -265,7 +271,8 @@ def _render(args) -> int:
     if result.error_estimate is not None and not args.quiet:
         from .target import MAX_SAMPLES
         e = result.error_estimate
-        print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g}); "
+        goal = "every pixel" if e.kind == "pixel" else "the image's RMSE"
+        print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g} for {goal}); "
               f"{e.samples_mean:.1f} rays per pixel on average, {e.pixels_at_limit} pixels at the "
               f"{MAX_SAMPLES}-ray limit", file=sys.stderr)
     if args.stats:

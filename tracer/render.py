@@ -99,15 +99,16 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            samples: int = 1, sampling_mode: str = "jittered",
            threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
            threads: Optional[int] = None, savings: Optional[RaySavings] = None,
-           target_error: Optional[float] = None, eight_bit: bool = False,
+           target_error: Optional[float] = None, error_per_pixel: bool = False, eight_bit: bool = False,
            on_rows: Optional[Callable[[np.ndarray], None]] = None) -> RenderResult:
     """Ray trace ``scene`` into a (height, width, 3) float32 image.
 
     ``samples`` rays per traced pixel, placed by ``sampling_mode`` (see :mod:`tracer.sampling`).
     ``threads``: the C core's worker threads (default: $SDL_TRACER_THREADS, else every core).
     ``savings``: which rays that cannot change the image are skipped (default: tracer.savings' defaults).
-    ``target_error``: instead of a fixed number of samples, sample each pixel until its estimated error is
-    at most this (see :mod:`tracer.target`; block size, samples and sampling mode are then not used).
+    ``target_error``: instead of a fixed number of samples, sample until the image's estimated RMSE is at
+    most this, or with ``error_per_pixel`` every pixel's standard error (see :mod:`tracer.target`; block
+    size, samples and sampling mode are then not used).
     ``eight_bit``: keep only the 8-bit values an image file gets (3 bytes a pixel instead of 12), each tile
     converted as it is traced; the image is then uint8, the bytes :func:`tracer.imageio.to_8bit` gives for
     the float image, in memory that :func:`tracer.imageio.save_image` can release as it writes.  (Adaptive
@@ -129,7 +130,8 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         result = render(scene, width, height, block_size=block_size, progressive=progressive, tile=tile,
                         on_tile=on_tile, cancel=cancel, backend=backend, samples=samples,
                         sampling_mode=sampling_mode, threshold=threshold, seed=seed, threads=threads,
-                        savings=savings, target_error=target_error, eight_bit=True)
+                        savings=savings, target_error=target_error, error_per_pixel=error_per_pixel,
+                        eight_bit=True)
         for band in bands_8bit(result.image, release=True):
             on_rows(band)
         result.image, result.size = None, (width, height)
@@ -140,7 +142,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         check(target_error)
         compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
         result = render_to_error(compiled, width, height, target_error, backend=backend, threads=threads,
-                                 seed=seed, savings=savings, cancel=cancel)
+                                 seed=seed, savings=savings, cancel=cancel, per_pixel=error_per_pixel)
         if eight_bit:
             result.image = to_8bit(result.image, out=new_8bit_image(height, width))
         return result

@@ -199,8 +199,8 @@ class BlockRenderer:
             self.seconds += time.perf_counter() - started
 
     def run_to_error(self, target: float, cancel: Optional[Callable[[], bool]] = None):
-        """Trace the whole film to an error target instead of the block plan (tracer.target: pixels sampled
-        until their estimated error is below ``target``); returns the tracer's ErrorEstimate.  The alpha
+        """Trace the whole film to an error target instead of the block plan (tracer.target: rays where they
+        lower the image's estimated RMSE most, until it is below ``target``); returns the tracer's ErrorEstimate.  The alpha
         stays 1: the target's sampling shades colour only."""
         started = time.perf_counter()
         try:

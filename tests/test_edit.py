@@ -300,6 +300,8 @@ def assert_hierarchy_holds_every_object(editable: EditableScene) -> None:
     object_box = flat.arrays["object_box"].reshape(-1, 6)
 
     def objects_below(p: int, c: int) -> list[int]:
+        if count[p, c] < 0:  # (a leaf whose objects were all removed)
+            return []
         if count[p, c]:
             return items[child[p, c]:child[p, c] + count[p, c]].tolist()
         return objects_below(child[p, c], 0) + objects_below(child[p, c], 1)
@@ -486,3 +488,47 @@ def test_a_key_whose_parts_change_in_number_is_replaced_whole(backend):
     assert_renders_alike(editable, backend)
     editable.replace_objects("mesh object", parts[1:])
     assert_renders_alike(editable, backend)
+
+
+def test_adding_and_removing_among_many_objects_keeps_the_hierarchy(backend):
+    editable = EditableScene(many_spheres(300))
+    render(editable.compiled, 8, 6, backend="c")
+    core = editable.compiled._flat_cache[1].core
+    for k in (0, 17, 18, 150, 299):  # (the hierarchy renumbered, the leaves that lost them refitted)
+        editable.remove_objects(k)
+    for k in range(12):  # (added outside the hierarchy)
+        editable.add_objects(("new", k), [Shape("sphere", translation(k / 3 - 2, 2.5, 1) @ scaling(0.2, 0.2, 0.2), RED)])
+    editable.set_transform(("new", 3), translation(0, -2, 2) @ scaling(0.3, 0.3, 0.3))  # (moved while outside)
+    editable.set_transform(5, translation(2, -2, 2) @ scaling(0.3, 0.3, 0.3))  # (refitted in its renumbered leaf)
+    assert editable.done["restructure"] == 17 and editable.done["rebuild"] == 0
+    assert editable.compiled._flat_cache[1].core is core
+    assert_hierarchy_holds_every_object(editable)
+    assert_renders_alike(editable, backend)
+    with editable.batch():  # (more than are kept outside: built again)
+        for k in range(70):
+            editable.add_objects(("more", k), [Shape("sphere", translation(k / 20 - 2, -3, 0) @ scaling(0.1, 0.1, 0.1),
+                                                     MIRROR)])
+    assert_hierarchy_holds_every_object(editable)
+    assert_renders_alike(editable, backend)
+
+
+def test_removing_many_objects_one_by_one_empties_leaves_safely():
+    """Leaves lose all their objects (they then list none) while others are added and moved; the image stays
+    the rebuilt scene's."""
+    rng = np.random.default_rng(7)
+    editable = EditableScene(many_spheres(240))
+    render(editable.compiled, 8, 6, backend="c")
+    for step in range(150):
+        keys = editable.keys()
+        editable.remove_objects(keys[int(rng.integers(len(keys) - 1))])  # (never the plane, last)
+        if step % 5 == 0:
+            editable.add_objects(("new", step), [Shape("sphere", translation(*rng.uniform(-3, 3, 3)) @
+                                                       scaling(0.2, 0.2, 0.2), RED)])
+        if step % 7 == 0:
+            key = keys[int(rng.integers(len(keys) - 1))]
+            if key in editable:
+                editable.set_transform(key, translation(*rng.uniform(-3, 3, 3)) @ scaling(0.25, 0.25, 0.25))
+        if step % 50 == 49:
+            assert_hierarchy_holds_every_object(editable)
+            assert_renders_alike(editable, "c")
+    assert editable.done["restructure"] >= 150

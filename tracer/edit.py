@@ -104,8 +104,9 @@ class EditableScene:
         self._refitted = 0  # objects refitted since the hierarchy was last built
         # material rows the FlatScene has not read yet (written in place, or added)
         self._rows_written: set[int] = set()
-        #: what the last edits did, for the tests and the bench: "rows", "materials", "effects", "textures",
-        #: "refit", "rebuild", "flat" (the FlatScene made anew), counted since the scene was made editable
+        #: what the edits did, for the tests and the bench: "rows", "materials", "effects", "textures",
+        #: "refit", "rebuild", "restructure" (objects added or removed in the C core's scene), "flat" (the
+        #: FlatScene made anew), counted since the scene was made editable
         self.done: Counter = Counter()
 
     # -- keys ---------------------------------------------------------------------------------------------
@@ -367,8 +368,12 @@ class EditableScene:
 
     def _restructure(self, removed: list[int], key: Hashable, added: list[SceneObject]) -> None:
         """Remove the objects at ``removed`` and append ``added`` under ``key``: their own rows, then the
-        FlatScene made anew and the object hierarchy rebuilt."""
+        FlatScene made anew, and the C core's hierarchy renumbered (the added objects outside it until there
+        are many: then it is built again)."""
         compiled, table = self.compiled, self.compiled.table
+        incremental = not self._pending_rebuild
+        if incremental:
+            self._sync(force=True)  # (moves not yet sent name objects by their positions before this edit)
         n = len(self._serial)
         keep = np.ones(n, dtype=bool)
         keep[removed] = False
@@ -406,13 +411,19 @@ class EditableScene:
             compiled.__dict__[_SEALED] = np.concatenate([sealed[kept], fresh])
         self.done["rows"] += 1
         old = _flat_of(compiled)
-        if old is not None:  # (a new flat scene; the C core's scene moves over to it)
-            flat = flatten.FlatScene(compiled)
-            flat.core = getattr(old, "core", None)
-            compiled._flat_cache = (compiled._flat_cache[0], flat)
+        if old is None:
+            return
+        flat = flatten.FlatScene(compiled)  # (a new flat scene; the C core's scene moves over to it)
+        core = flat.core = getattr(old, "core", None)
+        compiled._flat_cache = (compiled._flat_cache[0], flat)
+        self.done["flat"] += 1
+        if core is not None and incremental:
+            core.edit(flat, None, meshes=True, rebuild=False, threads=default_threads(),
+                      removed=np.asarray(removed, dtype=np.int64))
+            self.done["restructure"] += 1
+        else:
             self._pending_flat = self._pending_meshes = self._pending_rebuild = True
-            self.done["flat"] += 1
-        self._sync()
+            self._sync()
 
     # -- what depends on many rows ------------------------------------------------------------------------
 
@@ -454,11 +465,11 @@ class EditableScene:
 
     # -- the C core ---------------------------------------------------------------------------------------
 
-    def _sync(self) -> None:
-        """Tell the C core's scene (when there is one) what the edits since the last time changed: a refit of
-        the hierarchy to the objects that moved, or a rebuild (objects added or removed, or more than
-        REBUILD_SHARE of the objects refitted since the last build)."""
-        if self._batch_depth:
+    def _sync(self, force: bool = False) -> None:
+        """Tell the C core's scene (when there is one) what the edits since the last time changed (at the end
+        of a batch, unless ``force``): a refit of the hierarchy to the objects that moved, or a rebuild
+        (asked for, or more than REBUILD_SHARE of the objects refitted since the last build)."""
+        if self._batch_depth and not force:
             return
         flat = _flat_of(self.compiled)
         core = getattr(flat, "core", None) if flat is not None else None

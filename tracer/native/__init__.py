@@ -279,15 +279,21 @@ class CoreScene:
         self._sealed_sent = sealed
 
     def edit(self, flat: flatten.FlatScene, objects: Optional[np.ndarray], meshes: bool, rebuild: bool,
-             threads: int) -> None:
+             threads: int, removed: Optional[np.ndarray] = None) -> None:
         """The C core takes ``flat``'s description as it is now (see rt_edit): the hierarchy refitted to the
-        boxes of ``objects`` (None: every object), or built anew with ``rebuild`` (or where the objects'
-        boundedness or number changed); ``meshes``: the mesh tables may have changed."""
-        flags = (contract.EDIT_BITS["meshes"] if meshes else 0) | (contract.EDIT_BITS["rebuild"] if rebuild else 0)
-        listed = np.ascontiguousarray(np.zeros(1, np.int64) if objects is None else objects, dtype=np.int64)
+        boxes of ``objects`` (None: every object), or built anew with ``rebuild`` (or where an object in it
+        became unbounded); with ``removed`` (ascending indices before), those objects were removed and the
+        objects after the survivors added; ``meshes``: the mesh tables may have changed."""
+        bits = contract.EDIT_BITS
+        flags = (bits["meshes"] if meshes else 0) | (bits["rebuild"] if rebuild else 0) | \
+            (bits["objects"] if removed is not None else 0)
+        if removed is not None:
+            objects = removed
+        listed = np.ascontiguousarray(np.zeros(1, np.int64) if objects is None or not len(objects) else objects,
+                                      dtype=np.int64)
         message = ctypes.create_string_buffer(256)
         if _lib.rt_edit(self.handle, ctypes.byref(flat.desc), _ptr(listed, ctypes.c_int64),
-                        -1 if objects is None else len(listed), flags, threads, message, len(message)) != 0:
+                        -1 if objects is None else len(objects), flags, threads, message, len(message)) != 0:
             self._release()  # (a scene refused half way is never traced)
             flat.core = None
             reason = message.value.decode(errors="replace") or "no reason given"

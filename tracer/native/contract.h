@@ -17,7 +17,7 @@ enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7,
        SKIP_BUDGET = 8 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
-enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
+enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
 #define K_COUNT 9
 /* Every kind's generic hits, as a call in analytic_hits' names (tracer/shapes.py: c_intersect with its
  * parameters, face planes and error budget; meshes are traced by the BVH instead). */
@@ -340,6 +340,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "0b672e1017e78156"
+#define RT_CONTRACT_DIGEST "748cc8b9b1c1904a"
 
 #endif

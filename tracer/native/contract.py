@@ -54,8 +54,9 @@ RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
 SKIP_REASONS = _savings.SKIP_REASONS
 SAVINGS_SWITCHES = _savings.SWITCHES
-#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew.
-EDIT_FLAGS = ("meshes", "rebuild")
+#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew; objects
+#: were removed (those listed) and added (at the end).
+EDIT_FLAGS = ("meshes", "rebuild", "objects")
 
 
 def c_name(name: str) -> str:

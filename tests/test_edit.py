@@ -112,7 +112,7 @@ def assert_renders_alike(editable: EditableScene, backend: str) -> None:
         h0, h1 = first_hits(editable.compiled, origins, directions), first_hits(fresh, origins, directions)
         pairs = [(h0.t, h1.t), (h0.normal, h1.normal), (h0.shape, h1.shape), (h0.obj, h1.obj)]
     else:
-        from tracer.native import NativeTracer
+        from tracer.native.tracer import NativeTracer
         h0 = NativeTracer(editable.compiled, threads=2).first_hits(origins, directions)
         h1 = NativeTracer(fresh, threads=2).first_hits(origins, directions)
         pairs = [(h0[k], h1[k]) for k in ("t", "normal", "shape", "obj", "entering")]
@@ -293,7 +293,7 @@ def _pair_boxes(tracer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def assert_hierarchy_holds_every_object(editable: EditableScene) -> None:
     """Every pair's child box holds the boxes of the objects below it (what a refit must keep true)."""
-    from tracer.native import NativeTracer
+    from tracer.native.tracer import NativeTracer
     tracer = NativeTracer(editable.compiled, threads=1)
     boxes, child, count, items = _pair_boxes(tracer)
     flat = editable.compiled._flat_cache[1]

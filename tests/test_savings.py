@@ -15,7 +15,8 @@ from tracer import native
 from tracer.cli import main
 from tracer.compile import compile_scene
 from tracer.render import render
-from tracer.savings import SKIP_REASONS, RaySavings, sealed_lights
+from tracer.savings import SKIP_REASONS, RaySavings
+from tracer.skippable import sealed_lights
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = sorted((ROOT / "scenes").glob("*.sdl"))

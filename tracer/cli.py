@@ -14,11 +14,23 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+# (Everything the tracer package itself imports (tracer/__init__.py: the reader, compiling, rendering) is
+# imported here as usual: the program has loaded it anyway.  What only some commands use is imported by them.)
 from . import sampling, signals
-from .bulk import one_blas_thread
+from .backend import load_core
+from .bulk import collector_paused, one_blas_thread
+from .compile import compile_scene, fold_tree
 from .errors import RenderCancelled, TracerError, warnings_as_lines
-from .model import MAX_RECURSION_DEPTH, traced_depth
+from .imageio import output_format, png_rows, save_image
+from .model import MAX_RECURSION_DEPTH, ShapeTable, traced_depth
+from .render import budget_note, check_size, render
 from .reporting import error_message
+from .savings import RaySavings
+from .sdl.parser import load
+from .shapes import REGISTRY
+from .textures import drop_unreadable_textures
+from .tiles import DEFAULT_TILE
+from .trace import RayCounts
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -126,7 +138,7 @@ SDL_EXTENSIONS = (".sdl", ".dat")
 
 def _scene_format(path: str, role: str) -> str:
     """'sdl' or 'usd' from a file name's extension (a scene to read may have any other extension: SDL)."""
-    from .usd.common import USD_EXTENSIONS
+    from .usd.common import USD_EXTENSIONS  # deferred: the USD package is loaded only for USD files
 
     suffix = os.path.splitext(path)[1].lower()
     if suffix in USD_EXTENSIONS:
@@ -139,9 +151,8 @@ def _scene_format(path: str, role: str) -> str:
 
 def _read_scene(path: str, lenient: bool, role: str = "scene"):
     if _scene_format(path, role) == "usd":
-        from .usd import load_usd
+        from .usd import load_usd  # deferred: (as above)
         return load_usd(path, strict=not lenient)
-    from .sdl.parser import load
     return load(path, strict=not lenient)
 
 
@@ -159,10 +170,10 @@ def _convert(args) -> int:
         print(f"warning: {message}", file=sys.stderr)
     try:
         if target == "usd":
-            from .usd import save_usd
+            from .usd import save_usd  # deferred: (the USD package, as above)
             save_usd(scene, args.destination)
         else:
-            from .sdl.writer import save_sdl
+            from .sdl.writer import save_sdl  # deferred: only convert writes SDL
             save_sdl(scene, args.destination)
     except TracerError:
         raise
@@ -197,8 +208,6 @@ class _Progress:
 
 def _savings(args):
     """The RaySavings that --all-rays and --cutoff ask for."""
-    from .savings import RaySavings
-
     savings = RaySavings.none() if args.all_rays else RaySavings()
     if args.cutoff is not None:
         if not (math.isfinite(args.cutoff) and 0.0 <= args.cutoff <= 1.0):
@@ -220,10 +229,6 @@ def _replaced_options_given(args) -> list[str]:
 
 
 def _render(args) -> int:
-    from .backend import load_core
-    from .imageio import output_format, png_rows, save_image
-    from .render import check_size, render
-
     image_format = output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
@@ -238,8 +243,6 @@ def _render(args) -> int:
                   file=sys.stderr)
     scene = _load(args)
     if args.lenient:
-        from .textures import drop_unreadable_textures
-
         for message in drop_unreadable_textures(scene):
             print(f"warning: {message}", file=sys.stderr)
     if args.max_depth is not None:
@@ -269,7 +272,7 @@ def _render(args) -> int:
         save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
     _warn_about_budget(args.scene, result.rays)
     if result.error_estimate is not None and not args.quiet:
-        from .target import MAX_SAMPLES
+        from .target import MAX_SAMPLES  # deferred: only renders to an error target load tracer.target
         e = result.error_estimate
         goal = "every pixel" if e.kind == "pixel" else "the image's RMSE"
         print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g} for {goal}); "
@@ -283,8 +286,6 @@ def _render(args) -> int:
 
 
 def _warn_about_budget(scene_file: str, rays) -> None:
-    from .render import budget_note
-
     note = budget_note(rays)
     if note is not None:
         print(f"warning: {scene_file}: {note}", file=sys.stderr)
@@ -295,11 +296,7 @@ def _render_job(args) -> int:
     import dataclasses
     import time
 
-    from . import distributed as dist
-    from .backend import load_core
-    from .imageio import save_image
-    from .render import check_size, render
-    from .trace import RayCounts
+    from . import distributed as dist  # deferred: only cluster and frame renders load it (and Dask)
 
     if args.scheduler is not None:
         dist.parse_address(args.scheduler)
@@ -314,7 +311,6 @@ def _render_job(args) -> int:
         print(f"warning: {message}", file=sys.stderr)
     if args.tile is not None and args.tile < 1:
         raise TracerError(f"--tile must be 1 or more, not {args.tile}")
-    from .tiles import DEFAULT_TILE
     tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
                    tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
@@ -364,10 +360,6 @@ def _render_job(args) -> int:
 
 def describe(scene) -> dict:
     """What ``info`` prints: objects, lights, camera, settings and live effects."""
-    from .bulk import collector_paused
-    from .compile import compile_scene, fold_tree
-    from .model import ShapeTable
-
     def shape_info(shape):
         info = {"shape": shape.kind, "position": [round(x, 6) for x in shape.matrix[:3, 3].tolist()],
                 "groups": list(shape.groups)}
@@ -423,8 +415,6 @@ def _rows_info(rows) -> list[dict]:
     """describe()'s objects for a ShapeTable's columns (tracer.model.ShapeColumns), the same as for its
     Shapes without making them (a big file's shapes stay columns): each row is a shape with no groups and
     no mesh file, at the last column of its affine."""
-    from .shapes import REGISTRY
-
     keywords = [entry.keyword for entry in REGISTRY]
     positions = _round_decimals(rows.affines[:, 3::4], 6).tolist()
     objects = [{"shape": keywords[kind], "position": position, "groups": []}
@@ -501,9 +491,8 @@ def _info(args) -> int:
 def _bench(args) -> int:
     from pathlib import Path
 
+    # deferred: the accuracy bench (and scikit-image, SciPy, matplotlib) is loaded by its command only
     from .accuracy import BenchConfig, measure, plot_targets, write_report
-    from .render import check_size
-    from .sdl.parser import load
 
     check_size(args.width, args.height)
     if min(args.width, args.height) < 7:  # scikit-image's SSIM window
@@ -524,7 +513,7 @@ def _bench(args) -> int:
     if args.scheduler is None:
         summaries = [measure(scene, name, out, config, progress=progress) for _, name, scene in scenes]
     else:
-        from . import distributed as dist
+        from . import distributed as dist  # deferred: (as in _render_job)
 
         dist.parse_address(args.scheduler)
         dist.require_dask()
@@ -615,6 +604,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         with signals.working(_final_output(args)), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
                 one_blas_thread(), _stdout_named():
+            load_core(getattr(args, "backend", "auto"))  # (its signal handler and watchdog: tracer.signals)
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except signals.Interrupted as err:
         print("\ninterrupted", file=sys.stderr)

@@ -23,13 +23,17 @@ import numpy as np
 from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
+from .geometry import builtin_mesh
+from .geometry.polyhedra import face_planes
 from .intersect import analytic
+from .intersect import mesh as mesh_module
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
+from .lights import LightTable
 from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
-from .lights import LightTable
+from .textures import TextureSet
 from .transforms import transform_points
 
 
@@ -193,7 +197,6 @@ class Primitive:
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
-            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
@@ -230,7 +233,6 @@ class Primitive:
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
-            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
@@ -455,6 +457,13 @@ def fold_tree(root, leaf: Callable, join: Callable):
         else:
             todo += ((node, True), (node.right, False), (node.left, False))
     return values[0]
+
+
+#: The deepest nesting of booleans any backend traces (tracer.backend refuses deeper trees, for every backend).
+#: The C core evaluates a boolean tree recursively, about 100 bytes of a worker's stack per level; the NumPy
+#: path walks it iteratively but its time grows with pixels x depth (5,000 levels at 64x48: 48 s), so a deeper
+#: tree (only ever seen in generated or hostile files) is refused up front rather than traced for hours.
+MAX_CSG_DEPTH = 2000
 
 
 def boolean_depth(root) -> int:
@@ -1138,18 +1147,28 @@ def _hash_indices(h, array) -> None:
 
 
 def shared_triangle_mesh(mesh: MeshData):
-    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after."""
-    from .intersect import mesh as mesh_module
-
+    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after.  The C core
+    builds its BVH when it is loaded (the NumPy builder's tree, in a fraction of the time)."""
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
         problem = mesh.coordinate_problem()  # (the readers check; a mesh made in a program may not be)
         if problem is not None:
             raise SceneError(f"{mesh.origin or 'mesh'}: {problem}")
-        built = mesh_module.TriangleMesh(mesh)
+        built = mesh_module.TriangleMesh(mesh, builder=c_bvh_builder())
         _TRIANGLE_MESHES[key] = built
     return built
+
+
+def c_bvh_builder():
+    """tracer.native.build_mesh_bvh when the C core is loaded, else None (TriangleMesh builds in NumPy)."""
+    try:
+        # deferred: the C core is loaded (in a checkout: compiled) by the first mesh or render that wants it,
+        # not by importing the tracer
+        from . import native
+    except ImportError:  # no C core in this installation
+        return None
+    return native.build_mesh_bvh if native.load_error is None else None
 
 
 def content_key(scene: Scene) -> tuple:
@@ -1212,7 +1231,6 @@ class _RowShapes(Sequence):
         """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
         kind = _KEYWORDS[self.columns.kinds[index]]
         if shapes.KINDS[kind].builtin_mesh:
-            from .geometry import builtin_mesh
             return builtin_mesh(kind)
         return None
 
@@ -1376,7 +1394,6 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
                        uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
-        from .textures import TextureSet
         textures = TextureSet(scene, primitives)
     lights = LightTable.of(scene.lights)
     return CompiledScene(

@@ -45,13 +45,13 @@ from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, del
 from .edit_ledger import MaterialLedger
 from .errors import TracerError
 from .model import CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
-from .native import flatten
-from .threads import default_threads
 from .lights import LightTable
-from .savings import sealed_lights
+from .native import flatten
+from .skippable import sealed_lights
 from .textures import TextureSet
 from .textures.images import load_image
 from .textures.solid import SOLID_TEXTURES
+from .threads import default_threads
 
 
 def _edit(method):
@@ -524,7 +524,7 @@ class EditableScene:
 #: build: refitted boxes of objects moved far apart overlap more and more.
 REBUILD_SHARE = 0.5
 _NONE = np.zeros(0, dtype=np.int64)
-_SEALED = "_sealed_lights"  # (where tracer.savings.sealed_table keeps its table)
+_SEALED = "_sealed_lights"  # (where tracer.skippable.sealed_table keeps its table)
 
 
 def _flat_of(compiled: CompiledScene):

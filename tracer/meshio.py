@@ -148,7 +148,7 @@ def _bulk_numbers(data: bytes) -> Optional[np.ndarray]:
 def _native():
     """tracer.native when the C core is built, else None."""
     try:
-        from . import native
+        from . import native  # deferred: the C core is loaded (in a checkout: compiled) by the first mesh file
     except ImportError:
         return None
     return native if native.load_error is None else None

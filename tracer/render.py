@@ -23,7 +23,7 @@ from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
-from .savings import RaySavings
+from .savings import RAY_BUDGET, RaySavings
 from .tiles import DEFAULT_TILE, PixelTracer, TilePlan, block_passes, camera_rays_for, trace_tile
 from .trace import RayCounts
 
@@ -79,8 +79,6 @@ def budget_note(rays: RayCounts) -> Optional[str]:
     """What to tell a user when the ray budget cut rays (tracer.savings: RAY_BUDGET), else None."""
     if not rays.skipped_budget:
         return None
-    from .savings import RAY_BUDGET
-
     return (f"{rays.skipped_budget:,} reflected or transmitted rays were not traced: a camera ray's tree traces "
             f"at most {RAY_BUDGET:,} (its rays double at every level: reflectivity and transparency that add up "
             f"to more than 1, or minReflectivity/minTransparency 0 with a deep maxRecursionDepth)")
@@ -138,11 +136,8 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         return result
     check_size(width, height)
     if target_error is not None:
-        from .target import check, render_to_error
-        check(target_error)
-        compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
-        result = render_to_error(compiled, width, height, target_error, backend=backend, threads=threads,
-                                 seed=seed, savings=savings, cancel=cancel, per_pixel=error_per_pixel)
+        result = _render_to_error(scene, width, height, target_error, error_per_pixel, backend, threads, seed,
+                                  savings, cancel)
         if eight_bit:
             result.image = to_8bit(result.image, out=new_8bit_image(height, width))
         return result
@@ -171,6 +166,26 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)
+
+
+def _render_to_error(scene: Union[Scene, CompiledScene], width: int, height: int, target: float, per_pixel: bool,
+                     backend: str, threads: Optional[int], seed: int, savings: Optional[RaySavings],
+                     cancel: Optional[Callable[[], bool]]) -> RenderResult:
+    """render(..., target_error=...): sampled by tracer.target, with the result's ``error_estimate``."""
+    # deferred: sampling to an error target (and the SciPy it uses) is loaded only by the renders that ask
+    # for it (tests/test_cli.py: what a plain render must not load)
+    from .target import check, sample_to_error
+
+    check(target)
+    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+    started = time.perf_counter()
+    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
+    tracer = make_tracer(compiled, backend, threads, savings)
+    film, estimate = sample_to_error(tracer.camera_rays, camera_rays_for(frame, width, height), width, height,
+                                     target, seed, cancel, per_pixel)
+    return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
+                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
+                        error_estimate=estimate)
 
 
 def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],

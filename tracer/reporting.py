@@ -58,7 +58,7 @@ def error_message(err: BaseException, subject: Optional[str] = None) -> Optional
     if type(err).__name__ == "ErrorException" and type(err).__module__.startswith("pxr"):
         # usd-core refusing a value while reading or writing (an asset path with a control character, say):
         # its own words, which name what was wrong, after the file being worked on.
-        from .usd.opening import usd_error_message
+        from .usd.opening import usd_error_message  # deferred: only a USD error needs the USD modules
 
         where = f"{shown_name(subject)}: " if subject else ""
         return shortened(f"{where}USD: {usd_error_message(str(err))}")

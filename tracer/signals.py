@@ -12,21 +12,21 @@ A run goes through three phases, and one handler serves both signals in each:
   main() returns 128 + the signal.  Inside :func:`shielded` (importing usd-core, whose module loader catches
   any exception, a KeyboardInterrupt too, and goes on with half its modules) the signal is only recorded,
   and raised when the block ends.
-* **done** (the program's last output committed, see :func:`commit`): a signal changes nothing any more,
-  and the run ends as it would have.
+* **done** (the program's last output committed, see :func:`commit`, or its command over): a signal changes
+  nothing any more, and the run ends as it would have.
 
 Python runs signal handlers only between bytecodes of the main thread, so a signal that arrives while C
-code runs (a ray tree, a BVH build, usd-core writing a file) waits for that code to return.  When the C
-core is loaded, :func:`working` also installs its handler in front of Python's (tracer/native/interrupt.h):
-the tracer polls the signal at every ray, and a watchdog ends the process 0.3 s after a signal that nothing
-acted on, first removing the named temporary files that :func:`holding` registered.
+code runs (a ray tree, a BVH build, usd-core writing a file) waits for that code to return.  Once the C core
+is loaded (it calls :func:`attach_library`), its handler stands in front of Python's while a command works
+(tracer/native/interrupt.h): the tracer polls the signal at every ray, and a watchdog ends the process 0.3 s
+after a signal that nothing acted on, first removing the named temporary files that :func:`holding`
+registered.
 """
 from __future__ import annotations
 
 import contextlib
 import os
 import signal
-import sys
 from typing import Iterator, Optional
 
 #: The signals heard: Ctrl-C and a polite request to stop.
@@ -53,6 +53,8 @@ class _State:
     pending: Optional[int] = None  # a signal heard inside a shield
     heard: Optional[int] = None
     final_output: Optional[str] = None  # the file whose commit finishes the program's work
+    library = None  # the C core's library (attach_library), once loaded
+    native_installed = False  # its handler stands in front of Python's
 
 
 _state = _State()
@@ -104,13 +106,14 @@ def working(final_output: Optional[str] = None) -> Iterator[None]:
         return
     outer = (_state.phase, _state.final_output)
     _state.phase, _state.final_output, _state.heard, _state.pending = "working", final_output, None, None
-    native = _native_interrupts()
+    _install_native()
     try:
         yield
     finally:
         _state.phase = "done"
-        if native is not None:
-            native.rt_interrupt_uninstall()
+        if _state.native_installed:
+            _state.library.rt_interrupt_uninstall()
+            _state.native_installed = False
         # The program's work is over: from here to its exit signals are ignored (SIG_IGN, which Python keeps
         # while it shuts down; a handler of its own it would reset to the default, which kills the process).
         program = outer[0] == "starting"
@@ -119,17 +122,20 @@ def working(final_output: Optional[str] = None) -> Iterator[None]:
         _state.phase, _state.final_output = ("done" if program else outer[0]), outer[1]
 
 
-def _native_interrupts():
-    """The C core's library with its handler installed and watchdog armed, or None without a C core."""
-    try:
-        from . import native
-    except ImportError:
-        return None
-    lib = native.interrupt_library()
-    if lib is None:
-        return None
+def attach_library(lib) -> None:
+    """The C core's library, once loaded (tracer.native calls this): from then on, while a command works, its
+    handler stands in front of Python's and its watchdog is armed (see the module's note)."""
+    _state.library = lib
+    if _state.phase == "working":
+        _install_native()
+
+
+def _install_native() -> None:
+    lib = _state.library
+    if lib is None or _state.native_installed:
+        return
     lib.rt_interrupt_clear()
-    return lib if lib.rt_interrupt_install(WATCHDOG_GRACE_MS) == 0 else None
+    _state.native_installed = lib.rt_interrupt_install(WATCHDOG_GRACE_MS) == 0
 
 
 @contextlib.contextmanager
@@ -154,7 +160,7 @@ def _raise_if_heard() -> None:
         if taken is not None:
             _state.heard = _state.heard or taken.si_signo
             raise Interrupted(taken.si_signo)
-    lib = _loaded_library()
+    lib = _state.library if _state.native_installed else None
     signum = _state.pending or (lib.rt_interrupt_heard() if lib is not None else 0)
     if signum:
         _state.pending = None
@@ -166,17 +172,12 @@ def _let_python_handle_signals() -> None:
     """A Python-level call: the interpreter runs the handlers of signals it has been told of on entering one."""
 
 
-def _loaded_library():
-    native = sys.modules.get(__package__ + ".native")
-    return None if native is None else native.interrupt_library()
-
-
 @contextlib.contextmanager
 def holding(path: str) -> Iterator[None]:
     """While the block runs, the C watchdog removes ``path`` (a named temporary file) if it has to end the
     process.  Without the C core, or off the main program, nothing is registered."""
-    lib = _loaded_library()
-    slot = lib.rt_interrupt_hold_file(os.fsencode(path)) if lib is not None and _state.phase == "working" else -1
+    lib = _state.library if _state.native_installed and _state.phase == "working" else None
+    slot = lib.rt_interrupt_hold_file(os.fsencode(path)) if lib is not None else -1
     try:
         yield
     finally:
@@ -199,9 +200,8 @@ def commit(target: str, replace) -> None:
         final = _state.final_output
         if final is not None and os.path.abspath(os.fspath(target)) == os.path.abspath(final):
             _state.phase = "done"
-            lib = _loaded_library()
-            if lib is not None:
-                lib.rt_interrupt_disarm()
+            if _state.native_installed:
+                _state.library.rt_interrupt_disarm()
     finally:
         if blocking:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)

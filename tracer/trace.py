@@ -14,12 +14,11 @@ import numpy as np
 from .compile import CompiledScene
 from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
-from .model import traced_depth
-from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_table
+from .model import MEDIA_DEPTH, traced_depth
+from .savings import SKIP_REASONS, RaySavings
+from .skippable import dark_materials, sealed_table
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
-#: How many nested transparent objects a ray remembers being inside.
-MEDIA_DEPTH = 8
 
 
 @dataclass

@@ -56,7 +56,7 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
 #define TORUS_RING 1.0
 /* the generic torus' tube radius (tracer.model:TORUS_TUBE_RADIUS) */
 #define TORUS_TUBE 0.2
-/* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
+/* nested transparent media a ray keeps track of (tracer.model:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
 /* most octaves of turbulence summed (marble); a larger count is read as this one (tracer.textures.noise:MAX_OCTAVES) */
 #define MAX_OCTAVES 32
@@ -340,6 +340,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "748cc8b9b1c1904a"
+#define RT_CONTRACT_DIGEST "de16b7b774433d4f"
 
 #endif

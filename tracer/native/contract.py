@@ -95,7 +95,7 @@ class Constant:
 CONSTANTS = (
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
-    Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MEDIA_DEPTH", "tracer.model:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
     Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
              "most octaves of turbulence summed (marble); a larger count is read as this one"),
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",

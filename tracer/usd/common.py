@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import signals
 from ..errors import TracerError
 from ..model import iter_shapes
 
@@ -61,8 +62,6 @@ FORMAT_VERSION = 1
 
 def pxr():
     """The pxr modules we use, or a TracerError saying how to get them."""
-    from .. import signals
-
     try:
         # usd-core's module loader catches any exception raised while its modules load, a KeyboardInterrupt
         # too, and goes on with the rest half set up: a signal meanwhile is acted on once they are loaded.

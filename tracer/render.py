@@ -18,13 +18,13 @@ import numpy as np
 
 from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
-from .errors import RenderCancelled, TracerError
+from .errors import TracerError
 from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
 from .savings import RAY_BUDGET, RaySavings
-from .tiles import DEFAULT_TILE, PixelTracer, TilePlan, block_passes, camera_rays_for, trace_tile
+from .tiles import DEFAULT_TILE, PixelTracer, Tile, TilePlan, TileRun, camera_rays_for
 from .trace import RayCounts
 
 #: Width/height limit: a 16k x 16k float image is already 3 GiB.
@@ -149,19 +149,11 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
     shown = new_8bit_image(height, width) if bytes_while_tracing else np.zeros((height, width, 3), np.float32)
-    film = shown[::-1]
-    refine = None
-    for done, item in enumerate(plan.items, 1):
-        if cancel is not None and cancel():
-            raise RenderCancelled("render cancelled")
-        if plan.is_refinement(item) and refine is None:
-            refine = plan.refine_mask(film)
-        trace_tile(plan, item, film, shade, refine)
+    run = TileRun(plan, shown[::-1], lambda checkpoint: shade)  # (a tile at once: no chunks to check between)
+    for done, item in enumerate(run.run(plan.items, cancel), 1):
         if on_tile is not None:
-            on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
-                               block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
-                               tiles_done=done, tiles_total=len(plan.items), image=shown))
-    refine = None  # (the mask is not kept through the conversion below)
+            on_tile(_update(plan, item, done, shown))
+    run = None  # (its refinement mask is not kept through the conversion below)
     if eight_bit and not bytes_while_tracing:
         shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,
@@ -186,6 +178,13 @@ def _render_to_error(scene: Union[Scene, CompiledScene], width: int, height: int
     return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
                         error_estimate=estimate)
+
+
+def _update(plan: TilePlan, item: Tile, done: int, image: Optional[np.ndarray]) -> TileUpdate:
+    """The TileUpdate of a finished tile (in image coordinates, row 0 at the top)."""
+    return TileUpdate(x0=item.c0, y0=plan.height - item.r1, x1=item.c1, y1=plan.height - item.r0,
+                      block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
+                      tiles_done=done, tiles_total=len(plan.items), image=image)
 
 
 def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],
@@ -217,18 +216,12 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     for r0 in sorted(rects_from, reverse=True):  # (tile rows are counted from the bottom)
         r1 = min(r0 + plan.tile, height)
         rows = band[:r1 - r0]
-        window = rows[::-1]  # the band as tiles are traced: rows from the bottom, image row r0 first
-        for rect in rects_from[r0]:
-            for item in plan.rect_items(rect):
-                if cancel is not None and cancel():
-                    raise RenderCancelled("render cancelled")
-                trace_tile(plan, item, window, shade, at=(r0, 0))
-                done += 1
-                if on_tile is not None:
-                    on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
-                                       block_size=item.stride, pass_index=item.pass_index,
-                                       pass_count=plan.pass_count, tiles_done=done, tiles_total=len(plan.items),
-                                       image=None))
+        # the band as tiles are traced: rows from the bottom, image row r0 first
+        run = TileRun(plan, rows[::-1], lambda checkpoint: shade, at=(r0, 0))
+        for item in run.run((item for rect in rects_from[r0] for item in plan.rect_items(rect)), cancel):
+            done += 1
+            if on_tile is not None:
+                on_tile(_update(plan, item, done, None))
         on_rows(rows)
     return RenderResult(image=None, rays=tracer.counts, seconds=time.perf_counter() - started,
                         backend=tracer.name, effects=compiled.effects, size=(width, height))

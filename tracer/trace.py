@@ -362,14 +362,16 @@ class Tracer:
             to_light = table.position[light] - at.point
             distance2 = numerics.dot3(to_light, to_light)
             s = to_light / np.sqrt(distance2)[:, None]
-            scale = 1.0 / distance2
+            radius = table.param[light, 0]
+            falloff = distance2 + radius * radius  # (Cycles': a disk of the radius facing the point)
+            scale = 1.0 / falloff
         lambert = numerics.dot3(s, at.normal)
         lit = lambert > 0.0
         if kind == lights.SPOT:
             _, cos_half, blend_width, _ = table.param[light]
             factor = lights.spot_factor(-numerics.dot3(s, table.frame[light, :3]), cos_half, blend_width)
             lit &= factor > 0.0
-            scale = factor / distance2
+            scale = factor / falloff
         rows = np.nonzero(lit)[0]
         visible = np.ones(rows.size)
         if "shadows" in self.effects and rows.size:

@@ -6,7 +6,7 @@
 #include <stdint.h>
 
 enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TORUS = 5, K_POLYHEDRON = 6,
-       K_MESH = 7, K_PARABOLOID = 8 };
+       K_MESH = 7, K_PARABOLOID = 8, K_HYPERBOLOID = 9 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
@@ -18,7 +18,7 @@ enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_M
        SKIP_BUDGET = 8 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
-#define K_COUNT 9
+#define K_COUNT 10
 /* Every kind's generic hits, as a call in analytic_hits' names (tracer/shapes.py: c_intersect with its
  * parameters, face planes and error budget; meshes are traced by the BVH instead). */
 #define RT_SHAPE_HITS(X) \
@@ -29,7 +29,8 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
     X(K_TAPERED, hits_tapered(o, d, param[0], out)) \
     X(K_TORUS, hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out)) \
     X(K_POLYHEDRON, hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out)) \
-    X(K_PARABOLOID, hits_paraboloid(o, d, out))
+    X(K_PARABOLOID, hits_paraboloid(o, d, out)) \
+    X(K_HYPERBOLOID, hits_hyperboloid(o, d, param[0], out))
 /* Every kind's texture mapping (ShapeKind.c_uv). */
 #define RT_SHAPE_UV(X) \
     X(K_SPHERE, sphere_uv) \
@@ -40,9 +41,10 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
     X(K_TORUS, torus_uv) \
     X(K_POLYHEDRON, direction_uv) \
     X(K_MESH, direction_uv) \
-    X(K_PARABOLOID, wall_and_discs_uv)
+    X(K_PARABOLOID, wall_and_discs_uv) \
+    X(K_HYPERBOLOID, hyperboloid_uv)
 /* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
-#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
+#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID || (kind) == K_HYPERBOLOID)
 /* Kinds made of triangles, traced by their BVH (the mesh family). */
 #define RT_IS_MESH(kind) ((kind) == K_MESH)
 /* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index
@@ -340,6 +342,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "de16b7b774433d4f"
+#define RT_CONTRACT_DIGEST "2dff39909d05ef7c"
 
 #endif

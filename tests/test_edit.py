@@ -579,3 +579,25 @@ def test_a_picture_on_a_mesh_with_texture_coordinates_follows_mesh_and_material_
     editable.set_transform(3, translation(0.5, 1.5, 0.5))
     assert "mesh-uv" in editable.compiled.effects
     assert_renders_alike(editable, backend)
+
+
+def test_a_c_tracer_made_before_an_edit_traces_the_edited_scene():
+    """The C core reads the edited rows where they lie, and gets the sealed-lights table again: a tracer made
+    before an edit shades and skips as one made after it."""
+    from tracer.native.tracer import NativeTracer
+    scene, keys = mixed_scene()
+    editable = EditableScene(scene, keys)
+    before = NativeTracer(editable.compiled, threads=2)
+    before.camera_rays(*_grid_rays(5))  # (the sealed-lights table sent)
+    editable.set_transform("glass", translation(-5, 3, 2) @ scaling(1.5, 1.5, 1.5))  # (a light inside it now)
+    editable.set_transform("oct2", translation(-0.5, 1.3, -0.5) @ scaling(0.7, 0.7, 0.7))
+    editable.remove_objects("red")
+    editable.add_objects("ball", [Shape("sphere", translation(1.5, 0.5, 0) @ scaling(0.5, 0.5, 0.5), GLASS)])
+    before.counts = type(before.counts)()
+    origins, _ = _grid_rays(15)
+    targets = np.array([-5.0, 3.0, 2.0]) + 0.1 * (origins - origins.mean(axis=0))  # (the glass, round a light now)
+    directions = targets - origins
+    colours = before.camera_rays(origins, directions)  # (before any tracer made after the edits)
+    after = NativeTracer(editable.compiled, threads=2)
+    assert np.array_equal(colours, after.camera_rays(origins, directions))
+    assert before.counts == after.counts

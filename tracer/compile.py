@@ -598,8 +598,8 @@ class PrimitiveTable:
     it); ``boxes`` (N, 6), world boxes (lo, hi) of the points the spheres are made from (the generic box's
     corners, a mesh's vertices; not padded, meaningless for unbounded shapes); ``material_ids`` (N,);
     ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``parameters`` (N,
-    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: a tapered cylinder's
-    top radius, 1 for a cylinder...; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
+    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: its parameters, or
+    its fixed values; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
     its MeshData.  The matrices themselves are the shapes' own (not kept twice)."""
 
     def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, parameters: np.ndarray,

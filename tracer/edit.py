@@ -451,8 +451,10 @@ class EditableScene:
         compiled._flat_cache = (compiled._flat_cache[0], flat)
         self.done["flat"] += 1
         if core is not None and incremental:
+            had_sealed = core.sealed_sent
             core.edit(flat, None, meshes=True, rebuild=False, threads=default_threads(),
                       removed=np.asarray(removed, dtype=np.int64))
+            self._resend_sealed(core, had_sealed)
             self.done["restructure"] += 1
         else:
             self._pending_flat = self._pending_meshes = self._pending_rebuild = True
@@ -515,13 +517,22 @@ class EditableScene:
             return
         self._refitted += objects.size
         rebuild = self._pending_rebuild or self._refitted > REBUILD_SHARE * max(1, len(self._serial))
+        had_sealed = core.sealed_sent
         core.edit(flat, objects, meshes=self._pending_meshes, rebuild=rebuild, threads=default_threads())
+        self._resend_sealed(core, had_sealed)
         if rebuild:
             self._refitted = 0
             self.done["rebuild"] += 1
         elif objects.size:
             self.done["refit"] += 1
         self._pending_meshes = self._pending_rebuild = self._pending_flat = False
+
+    def _resend_sealed(self, core, had: bool) -> None:
+        """The C core's sealed-lights table as the compiled scene's is now, where a tracer had sent one: a tracer
+        made before the edit then skips the feelers one made after it skips (none while the table is not
+        known again, after a light edit)."""
+        if had:
+            core.send_sealed(self.compiled.__dict__.get(_SEALED))
 
     # -- checks -------------------------------------------------------------------------------------------
 

@@ -30,6 +30,8 @@ ANALYTIC_KINDS = shapes.keywords("analytic")
 POLYHEDRON_KINDS = shapes.keywords("polyhedron")
 #: Shapes made of triangles.
 MESH_KINDS = shapes.keywords("mesh")
+#: Kinds whose shapes hold the kind's own mesh (tracer.geometry.builtin_mesh): the polyhedra and the teapot.
+BUILTIN_MESH_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.builtin_mesh)
 SHAPE_KINDS = shapes.keywords()
 
 
@@ -277,7 +279,7 @@ class ShapeColumns:
         kind = _KEYWORD_OF_CODE[self.kinds[i]]
         matrix = matrices_of_affines(self.affines[i:i + 1])[0]
         mesh = None
-        if kind in POLYHEDRON_KINDS or kind == "teapot":
+        if kind in BUILTIN_MESH_KINDS:
             mesh = builtin_mesh(kind)
         return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]), mesh,
                      None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
@@ -287,7 +289,7 @@ class ShapeColumns:
         """Every row's Shape, in order (as shape() makes them; a chunk of rows' matrices at a time, with the
         collector paused: a million new objects would otherwise run it hundreds of times)."""
         used = set(np.unique(self.kinds).tolist())
-        meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
+        meshes = {kind: builtin_mesh(kind) for kind in BUILTIN_MESH_KINDS if _KIND_CODE[kind] in used}
         names = self.names or {}
         with_parameters = any(_ARITY[_KEYWORD_OF_CODE[code]] for code in used)
         out: list[Shape] = []
@@ -404,7 +406,7 @@ class ShapeTable(MutableSequence):
         files = {s.source.file for s in shapes if isinstance(s, Shape) and s.source is not None}
         for i, s in enumerate(shapes):
             if not isinstance(s, Shape) or s.groups or s.mesh_file is not None or s.source is None or (
-                    s.mesh is not (builtin_mesh(s.kind) if s.kind in POLYHEDRON_KINDS + ("teapot",) else None)) or (
+                    s.mesh is not (builtin_mesh(s.kind) if s.kind in BUILTIN_MESH_KINDS else None)) or (
                     np.asarray(s.matrix)[3].tolist() != [0.0, 0.0, 0.0, 1.0]):
                 raise ValueError(f"ShapeTable.of_shapes: object {i} cannot be a row of a table")
         if len(files) > 1:

@@ -65,6 +65,11 @@ class CoreScene:
             core = flat.core = cls(flat, threads)
         return core
 
+    @property
+    def sealed_sent(self) -> bool:
+        """Whether the C core holds a sealed-lights table (a tracer that skips feelers from inside sent it)."""
+        return self._sealed_sent is not None
+
     def send_sealed(self, sealed: Optional[np.ndarray]) -> None:
         """Give the C core this sealed-lights table (objects x lights; None: none), unless it has it already."""
         if sealed is self._sealed_sent:

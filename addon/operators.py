@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import time
 import traceback
 
 import bpy
@@ -18,6 +19,12 @@ from .tracer.shapes import KINDS, REGISTRY
 
 #: How many of a file's warnings are shown one by one (the rest are counted).
 SHOWN_WARNINGS = 8
+#: Seconds of importing between two redraws, at least and at most, when the import runs from Blender's window.
+IMPORT_SLICE, IMPORT_SLICE_MAX = 0.1, 1.0
+
+
+class _Failed(Exception):
+    """An import that stopped and said why (reported to the operator)."""
 
 
 def _report_warnings(op, warnings) -> None:
@@ -45,8 +52,10 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
     set_camera: BoolProperty(name="Set Scene Camera", default=True,
                              description="Make the file's camera (or a camera framing the scene) the scene camera")
     colour_management: EnumProperty(name="Colour Management", default="AUTO", items=COLOUR_MANAGEMENT)
+    interactive: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
 
     def invoke(self, context, event):
+        self.interactive = True  # (execute() then imports a piece at a time, with a progress bar and Esc)
         if self.properties.is_property_set("filepath") and hasattr(ImportHelper, "invoke_popup"):
             return self.invoke_popup(context)  # a dropped file
         return ImportHelper.invoke(self, context, event)
@@ -57,6 +66,62 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
         return [self.filepath]
 
     def execute(self, context):
+        """Import at once; or, asked from Blender's window (File > Import, a dropped file), a piece at a time
+        from a timer, with a progress bar and the count in the status bar, Esc stopping it (what was made is
+        removed again)."""
+        self._steps = self._import(context, self.interactive)
+        if not (self.interactive and context.window is not None and not bpy.app.background):
+            try:
+                for _ in self._steps:
+                    pass
+            except _Failed:
+                return {"CANCELLED"}
+            return {"FINISHED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.001, window=context.window)
+        self._slice_end = None  # when the last slice ended
+        wm.progress_begin(0, 1000)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._steps.close()  # (the importers remove what they made)
+            self._end(context)
+            self.report({"WARNING"}, "SDL import cancelled: nothing was imported")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"RUNNING_MODAL"}  # (nothing else happens to the scene while it is being made)
+        started = time.perf_counter()
+        # What Blender did since the last slice (drawing and evaluating what was made: it grows with that):
+        # the slices are long enough that it takes at most a fifth of the time, and short enough that the
+        # window shows the progress and answers Esc.
+        outside = started - self._slice_end if self._slice_end is not None else 0.0
+        until = started + min(IMPORT_SLICE_MAX, max(IMPORT_SLICE, 4.0 * outside))
+        try:
+            while time.perf_counter() < until:
+                done, total = next(self._steps)
+                context.window_manager.progress_update(int(1000 * done / max(total, 1)))
+                context.workspace.status_text_set(f"Importing SDL: {done:,} of {total:,} objects and materials "
+                                                  f"(Esc to cancel)")
+        except StopIteration:
+            self._end(context)
+            return {"FINISHED"}
+        except _Failed:
+            self._end(context)
+            return {"CANCELLED"}
+        self._slice_end = time.perf_counter()
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context) -> None:
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def _import(self, context, hidden_while_made: bool = False):
+        """The import, as steps (done, total): every file read first, then made; raises _Failed after
+        reporting why (what was made removed again, of every file)."""
         conversion = convert.axis_matrix(self.axis_forward, self.axis_up)
         parsed = []
         for path in self._paths():  # read every file before creating anything
@@ -64,29 +129,33 @@ class IMPORT_SCENE_OT_sdl(bpy.types.Operator, ImportHelper):
                 parsed.append((path, importer.read_scene(path, strict=self.strict)))
             except errors.TracerError as exc:  # SDLError and the rest of the tracer's errors (a folder, a FIFO)
                 self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
-                return {"CANCELLED"}
+                raise _Failed from exc
         total = 0
         done = []
-        for path, scene in parsed:
-            imp = importer.Importer(context, conversion)
-            try:
-                result = imp.run(scene, path, set_camera=self.set_camera, colour_management=self.colour_management)
-            except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
-                for earlier in reversed(done):  # and the files before it: all of them or nothing
-                    earlier.undo()
-                if not isinstance(exc, (ValueError, RuntimeError, errors.TracerError)):
-                    traceback.print_exc()
-                self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
-                return {"CANCELLED"}
-            done.append(imp)
-            _report_warnings(self, result.warnings)
-            total += len(result.objects)
-            kept_view = not result.sdl_view and self.colour_management == "AUTO"
+        try:
+            for path, scene in parsed:
+                imp = importer.Importer(context, conversion)
+                try:
+                    yield from imp.steps(scene, path, set_camera=self.set_camera,
+                                         colour_management=self.colour_management,
+                                         hidden_while_made=hidden_while_made)
+                except Exception as exc:  # noqa: BLE001 - reported in Blender's UI (the importer undid its work)
+                    if not isinstance(exc, (ValueError, RuntimeError, errors.TracerError)):
+                        traceback.print_exc()
+                    self.report({"ERROR"}, f"Cannot import {os.path.basename(path)}: {exc}")
+                    raise _Failed from exc
+                done.append(imp)
+                _report_warnings(self, imp.result.warnings)
+                total += len(imp.result.objects)
+                kept_view = not imp.result.sdl_view and self.colour_management == "AUTO"
+        except BaseException:  # a failure, or Esc: and the files before it, all of them or nothing
+            for earlier in reversed(done):
+                earlier.undo()
+            raise
         self.report({"INFO"}, f"Imported {total} shapes from {len(parsed)} SDL file(s)")
         if parsed and kept_view:
             self.report({"INFO"}, f"The scene keeps its View Transform ({context.scene.view_settings.view_transform}): "
                                   "choose Colour Management SDL's to see the tracer's colours unchanged")
-        return {"FINISHED"}
 
     def draw(self, context):
         layout = self.layout

@@ -27,7 +27,7 @@ def hits_on(backend: str, scene, start, direction) -> list:
 
     if backend == "numpy":
         return tracer.hits(scene, start, direction)
-    from tracer.native import NativeTracer
+    from tracer.native.tracer import NativeTracer
 
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     core = NativeTracer(compiled, threads=1)

@@ -378,7 +378,12 @@ def test_a_scene_read_as_a_shape_table_imports_as_its_list(monkeypatch):
 
     path = SCENES / "shapes.sdl"
     import_sdl(path)
-    expected = [(o["sdl_kind"], list(o["sdl_matrix"])) for o in shape_objects()]
+
+    def made():
+        return [(o.name, o["sdl_kind"], list(o["sdl_matrix"]), o.get("sdl_source"), o.active_material.name,
+                 props.material_to_sdl(o.active_material)) for o in shape_objects()]
+
+    expected = made()
     fresh()
     real_load = parser.load
 
@@ -389,4 +394,92 @@ def test_a_scene_read_as_a_shape_table_imports_as_its_list(monkeypatch):
 
     monkeypatch.setattr(parser, "load", load_as_table)
     import_sdl(path)
-    assert [(o["sdl_kind"], list(o["sdl_matrix"])) for o in shape_objects()] == expected
+    assert made() == expected
+
+
+def test_objects_and_materials_get_the_names_blender_would_give(tmp_path):
+    """The importer works out Blender's names (naming.py) to make its objects and materials in the order of
+    their names: they must be the names Blender itself gives when the objects are made one by one in the
+    file's order, past 999 of one name, beside names the file already has."""
+    lines = ["! name: sphere.002\nsphere", "! name: Ball\nsphere", "! name: ball\ncube", "! name: Ballon d'or\ncube"]
+    lines += [f"diffuse 0.5 0.{i % 3} 0.5 push translate {i} 0 0 sphere pop" for i in range(1010)]
+    lines += ["! name: sphere.002\nsphere", "! name: Ball\ncube"]
+    path = tmp_path / "names.sdl"
+    path.write_text("\n".join(lines) + "\n")
+    fresh()
+    existing_mesh = bpy.data.meshes.new("m")
+    for name in ("sphere", "sphere.001", "sphere.005", "Ball"):
+        bpy.data.objects.new(name, existing_mesh)
+    bpy.data.materials.new("SDL 0.5 0.1 0.5")
+    import_sdl(path)
+    got = [o.name for o in shape_objects()]
+    got_materials = [o.active_material.name for o in shape_objects()]
+    # Blender, asked for each name in the file's order
+    fresh()
+    existing_mesh = bpy.data.meshes.new("m")
+    for name in ("sphere", "sphere.001", "sphere.005", "Ball"):
+        bpy.data.objects.new(name, existing_mesh)
+    bpy.data.materials.new("SDL 0.5 0.1 0.5")
+    scene = tracer.load(str(path))
+    expected = [bpy.data.objects.new(s.name or s.kind, existing_mesh).name for s in scene.shapes()]
+    by_value: dict = {}
+    for s in scene.shapes():
+        if s.material not in by_value:
+            d = s.material.diffuse
+            by_value[s.material] = bpy.data.materials.new(f"SDL {d[0]:g} {d[1]:g} {d[2]:g}").name
+    assert got == expected
+    assert got_materials == [by_value[s.material] for s in scene.shapes()]
+    assert "sphere.1000" in got
+
+
+def test_datablocks_sorted_as_naming_sort_key_says():
+    from addon.pure import naming
+
+    fresh()
+    names = ["b", "B2", "a", "sphere.1000", "sphere.999", "sphere", "Zeta", "zeta.001", "é", "e", "_x", "~", "A b",
+             "ab", "a.b", "10", "9"]
+    for name in names:
+        bpy.data.materials.new(name)
+    assert [m.name for m in bpy.data.materials] == sorted(names, key=naming.sort_key)
+
+
+def test_closing_an_import_half_way_removes_what_it_made(tmp_path):
+    """Esc in Blender's window closes the import's steps (operators.py): what was made goes again."""
+    path = tmp_path / "many.sdl"
+    path.write_text("".join(f"diffuse 0.{i % 9} 0.5 0.5 push translate {i} 0 0 sphere pop\n" for i in range(1500)))
+    before, camera, world_before = _counts(), bpy.context.scene.camera, bpy.context.scene.world
+    imp = importer.Importer(bpy.context, convert.axis_matrix())
+    steps = imp.steps(importer.read_scene(str(path)), str(path), hidden_while_made=True)
+    for _ in range(4):  # (the plan, then materials and objects a STEP at a time)
+        next(steps)
+    assert _counts()["objects"] > before["objects"]
+    steps.close()
+    assert _counts() == before
+    assert bpy.context.scene.camera == camera and bpy.context.scene.world == world_before
+
+
+def test_an_import_kept_out_of_the_view_layer_while_made_ends_in_it(tmp_path, monkeypatch):
+    monkeypatch.setattr(importer, "STEP", 1)
+    path = tmp_path / "two.sdl"
+    path.write_text("sphere\npush translate 3 0 0 cube pop\n")
+    imp = importer.Importer(bpy.context, convert.axis_matrix())
+    seen = []
+    for _ in imp.steps(importer.read_scene(str(path)), str(path), hidden_while_made=True):
+        layer = importer._layer_collection(bpy.context.view_layer, imp.result.collection)
+        seen.append(layer is not None and layer.exclude)
+    assert True in seen and seen[-1] is False
+    assert all(o.visible_get() for o in imp.result.objects)
+
+
+@pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)
+def test_the_transforms_kept_at_import_are_what_blender_shows(path):
+    """The importer keeps what Blender shows of each transform (the snapshot the exact SDL values are kept
+    against) without evaluating the scene: it must be, bit for bit, the evaluated world matrix."""
+    import_sdl(path)
+    bpy.context.view_layer.update()
+    for obj in shape_objects():
+        assert list(obj["sdl_matrix_shown"]) == world(obj).ravel().tolist(), obj.name
+    camera = bpy.context.scene.camera
+    assert list(camera["sdl_camera_shown"])[:16] == world(camera).ravel().tolist()
+    for light in (o for o in bpy.data.objects if o.type == "LIGHT"):
+        assert list(light["sdl_position_shown"]) == list(light.matrix_world.translation)

@@ -97,3 +97,42 @@ def test_materials_made_one_after_another_keep_nothing_of_the_one_before(tmp_pat
         assert np.allclose(tuple(_base(blender).default_value)[:3], material.diffuse, atol=1e-6)
         assert np.allclose(tuple(blender.diffuse_color)[:3], material.diffuse, atol=1e-6)
     assert len({m.name for m in made.values()}) == 4
+
+
+def _principled_values(material) -> dict:
+    node = next(n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    return {s.name: (tuple(s.default_value) if hasattr(s.default_value, "__len__") else s.default_value)
+            for s in node.inputs if hasattr(s, "default_value")}
+
+
+def test_materials_imported_in_bulk_equal_materials_made_one_by_one(tmp_path, monkeypatch):
+    """The importer writes each new material's Principled inputs all at once (props.PrincipledWriter), not
+    input by input: every set of one input made Blender look through all the node trees in the file. Each
+    material must hold what setting it up the ordinary way gives, in every input and viewport value, and no
+    input is set one by one after the first material (counted, not timed)."""
+    lines = []
+    for i in range(40):
+        lines.append(f"diffuse {i / 40:.3f} {1 - i / 40:.3f} 0.25 specular 0.{i % 10} 0.2 0.2 specularExponent {i + 1} "
+                     f"reflectivity {i / 80:.4f} transparency {(i % 3) / 4} speedOfLight {1 - (i % 5) / 10} "
+                     f"emissive 0 {(i % 4) / 8} 0 push translate {2 * i} 0 0 sphere pop")
+    path = tmp_path / "many.sdl"
+    path.write_text("\n".join(lines) + "\n")
+    one_by_one = []
+    real_set_input = props._set_input
+    monkeypatch.setattr(props, "_set_input", lambda node, names, value: (one_by_one.append(names),
+                                                                          real_set_input(node, names, value)))
+    fresh()
+    import_sdl(path)
+    assert len(one_by_one) <= len(props.principled_inputs(bpy.data.materials[0].sdl))  # the first material's
+    wanted = [s.material for s in tracer.load(path).objects]
+    for obj, material in zip(shape_objects(), wanted):
+        made = obj.active_material
+        assert props.material_to_sdl(made) == material
+        reference = bpy.data.materials.new("reference")
+        reference.use_nodes = True
+        props.set_material(reference, material)
+        assert _principled_values(made) == _principled_values(reference), made.name
+        for name in ("diffuse_color", "roughness", "metallic"):
+            assert np.array_equal(np.array(getattr(made, name)), np.array(getattr(reference, name)))
+        assert list(made[props.BASE_SHOWN]) == list(reference[props.BASE_SHOWN])
+        bpy.data.materials.remove(reference)

@@ -3,7 +3,6 @@ CLI prints both as one line (and exits 130 on a cancel)."""
 from __future__ import annotations
 
 import ctypes
-import importlib
 import warnings
 
 import numpy as np
@@ -11,6 +10,7 @@ import pytest
 
 import tracer
 from tracer import cli, native
+from tracer.native import flatten
 from tracer.backend import MAX_CSG_DEPTH, make_tracer
 from tracer.compile import compile_scene
 from tracer.errors import FallbackWarning, RenderCancelled, TracerError
@@ -74,7 +74,7 @@ def test_booleans_nested_past_the_limit_are_refused_by_every_backend(backend):
     (lambda d: d.object_ref.__setitem__(0, 5), "object 0 refers to nothing (5)"),
 ])
 def test_rt_create_names_what_it_refused(corrupt, fragment):
-    flat = native.flatten.FlatScene(_compiled())
+    flat = flatten.FlatScene(_compiled())
     corrupt(flat.desc)
     message = ctypes.create_string_buffer(256)
     assert not native._lib.rt_create(ctypes.byref(flat.desc), message, len(message))
@@ -83,12 +83,12 @@ def test_rt_create_names_what_it_refused(corrupt, fragment):
 
 @requires_core
 def test_a_refused_description_reaches_the_user(monkeypatch):
-    class Corrupt(native.flatten.FlatScene):
+    class Corrupt(flatten.FlatScene):
         def __init__(self, compiled):
             super().__init__(compiled)
             self.desc.n_materials = 0
 
-    monkeypatch.setattr(native.flatten, "FlatScene", Corrupt)
+    monkeypatch.setattr(flatten, "FlatScene", Corrupt)
     with pytest.raises(TracerError, match="refused the scene description: primitive 0 has material 0 of 0"):
         make_tracer(_compiled(), "c")
     with pytest.warns(FallbackWarning, match="primitive 0 has material"):
@@ -116,7 +116,7 @@ def test_cli_cancel_exits_130(tmp_path, capsys, monkeypatch):
     def cancelled(*args, **kwargs):
         raise RenderCancelled("render cancelled")
 
-    monkeypatch.setattr(importlib.import_module("tracer.render"), "render", cancelled)
+    monkeypatch.setattr(cli, "render", cancelled)
     code, err = _cli(tmp_path, capsys)
     assert code == cli.EXIT_INTERRUPTED == 130
     assert err.strip() == "error: cancelled"

@@ -81,7 +81,7 @@ def test_the_table_renders_the_lists_image(backend, shapes_made):
     assert tabled.objects.columns is not None  # never made into a list of Shapes
     if backend == "c":
         # the C core reads the arrays; only the two transparent solids are probed by the NumPy path for
-        # whether a light is inside them (tracer.savings.sealed_lights), each from its own Shape
+        # whether a light is inside them (tracer.skippable.sealed_lights), each from its own Shape
         assert shapes_made["count"] == 2
     else:  # the NumPy path's primitives make their own shape each (shape_at), once
         assert shapes_made["count"] == len(tabled.objects)

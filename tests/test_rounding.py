@@ -23,6 +23,7 @@ from hypothesis import given, settings, strategies as st
 
 from helpers import scaling, scene_of, shape, translation
 from tracer import native, numerics
+from tracer.native.tracer import NativeTracer
 from tracer.compile import compile_scene
 from tracer.trace import first_hits, occluded
 
@@ -44,7 +45,7 @@ def _hits(kind, origin, direction, backend, matrix=None):
     compiled = compile_scene(scene_of(solid))
     o, d = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
     if backend == "c":
-        h = native.NativeTracer(compiled).object_hits(0, o, d)
+        h = NativeTracer(compiled).object_hits(0, o, d)
     else:
         h = compiled.objects[0].intersect(o[None], d[None])
     keep = np.isfinite(h.t[0])
@@ -301,7 +302,7 @@ def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, 
     if kind == "taperedCylinder":
         solid.parameters = (0.5,)
     compiled = compile_scene(scene_of(solid))
-    core = native.NativeTracer(compiled) if native.load_error is None else None
+    core = NativeTracer(compiled) if native.load_error is None else None
     rng = np.random.default_rng(seed)
     # Rays from outside toward random points of the generic shape's extent.
     n = 64
@@ -363,7 +364,7 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
         return
     lights = eyes[rows] + hit.t[rows, None] * (targets - eyes)[rows]
     normal = hit.normal[rows]
-    core = native.NativeTracer(compiled) if native.load_error is None else None
+    core = NativeTracer(compiled) if native.load_error is None else None
     for light, n in zip(lights, normal):
         w = rng.normal(size=(32, 3))
         w = np.where((w @ n < 0)[:, None], -w, w) + 0.2 * n * np.linalg.norm(w, axis=1, keepdims=True)
@@ -380,7 +381,7 @@ def test_a_feeler_is_blocked_before_a_light_on_a_surface_but_not_by_that_surface
     # from (0, 0, -3) it passes through the sphere first (blocked); the light 1e-12 inside the sphere is
     # blocked from above, and a light at (0, 0, 1 + 1e-15) from below.
     compiled = compile_scene(scene_of(shape("sphere")))
-    ask = (native.NativeTracer(compiled).occluded if backend == "c"
+    ask = (NativeTracer(compiled).occluded if backend == "c"
            else lambda o, d: occluded(compiled, np.asarray(o, float), np.asarray(d, float)))
     light = np.array([0.0, 0.0, 1.0])
     starts = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -3.0], [2.0, 0.5, 1.5], [0.3, -0.2, -2.0]])

@@ -22,14 +22,18 @@ import numpy as np
 
 from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
-from .errors import TracerError
+from .errors import SceneError, TracerError
+from .geometry import builtin_mesh
+from .geometry.polyhedra import face_planes
 from .intersect import analytic
+from .intersect import mesh as mesh_module
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
+from .lights import LightTable
 from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
-from .lights import LightTable
+from .textures import TextureSet
 from .transforms import transform_points
 
 
@@ -193,7 +197,6 @@ class Primitive:
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
-            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
@@ -230,7 +233,6 @@ class Primitive:
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
-            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
@@ -457,6 +459,13 @@ def fold_tree(root, leaf: Callable, join: Callable):
     return values[0]
 
 
+#: The deepest nesting of booleans any backend traces (tracer.backend refuses deeper trees, for every backend).
+#: The C core evaluates a boolean tree recursively, about 100 bytes of a worker's stack per level; the NumPy
+#: path walks it iteratively but its time grows with pixels x depth (5,000 levels at 64x48: 48 s), so a deeper
+#: tree (only ever seen in generated or hostile files) is refused up front rather than traced for hours.
+MAX_CSG_DEPTH = 2000
+
+
 def boolean_depth(root) -> int:
     """How deeply booleans nest in ``root`` (0 for a primitive), for a compiled or a model tree."""
     return fold_tree(root, lambda _: 0, lambda _, left, right: 1 + max(left, right))
@@ -589,8 +598,8 @@ class PrimitiveTable:
     it); ``boxes`` (N, 6), world boxes (lo, hi) of the points the spheres are made from (the generic box's
     corners, a mesh's vertices; not padded, meaningless for unbounded shapes); ``material_ids`` (N,);
     ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``parameters`` (N,
-    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: a tapered cylinder's
-    top radius, 1 for a cylinder...; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
+    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: its parameters, or
+    its fixed values; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
     its MeshData.  The matrices themselves are the shapes' own (not kept twice)."""
 
     def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, parameters: np.ndarray,
@@ -811,9 +820,11 @@ class PrimitiveTable:
             groups.setdefault(key, (vertices, []))[1].append(rows)
         for vertices, rows in [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
-            per_chunk = max(1, _CHUNK // max(1, len(vertices)))
+            # (a mesh without vertices has no surface: its bounds are a point at its origin)
+            points = vertices.reshape(-1, 3) if vertices.size else np.zeros((1, 3))
+            per_chunk = max(1, _CHUNK // max(1, len(points)))
             for start in range(0, len(rows), per_chunk):
-                self._bound(rows[start:start + per_chunk], vertices)
+                self._bound(rows[start:start + per_chunk], points)
 
     def _bound_generic_boxes(self, rows, matrix: np.ndarray) -> None:
         """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
@@ -1136,15 +1147,28 @@ def _hash_indices(h, array) -> None:
 
 
 def shared_triangle_mesh(mesh: MeshData):
-    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after."""
-    from .intersect import mesh as mesh_module
-
+    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after.  The C core
+    builds its BVH when it is loaded (the NumPy builder's tree, in a fraction of the time)."""
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
-        built = mesh_module.TriangleMesh(mesh)
+        problem = mesh.coordinate_problem()  # (the readers check; a mesh made in a program may not be)
+        if problem is not None:
+            raise SceneError(f"{mesh.origin or 'mesh'}: {problem}")
+        built = mesh_module.TriangleMesh(mesh, builder=c_bvh_builder())
         _TRIANGLE_MESHES[key] = built
     return built
+
+
+def c_bvh_builder():
+    """tracer.native.build_mesh_bvh when the C core is loaded, else None (TriangleMesh builds in NumPy)."""
+    try:
+        # deferred: the C core is loaded (in a checkout: compiled) by the first mesh or render that wants it,
+        # not by importing the tracer
+        from . import native
+    except ImportError:  # no C core in this installation
+        return None
+    return native.build_mesh_bvh if native.load_error is None else None
 
 
 def content_key(scene: Scene) -> tuple:
@@ -1207,7 +1231,6 @@ class _RowShapes(Sequence):
         """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
         kind = _KEYWORDS[self.columns.kinds[index]]
         if shapes.KINDS[kind].builtin_mesh:
-            from .geometry import builtin_mesh
             return builtin_mesh(kind)
         return None
 
@@ -1371,7 +1394,6 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
                        uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
-        from .textures import TextureSet
         textures = TextureSet(scene, primitives)
     lights = LightTable.of(scene.lights)
     return CompiledScene(

@@ -21,6 +21,8 @@ import numpy as np
 
 from .model import CSG, Camera, Light, Material, Scene, SceneObject, Settings, Shape
 from .render import render
+from .sdl.parser import load
+from .transforms import rotation, scaling, translation
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 #: How far back the telephoto reference stands: far enough that the remaining perspective is < 0.1 pixel.
@@ -72,8 +74,6 @@ def telephoto(scene: Scene, farther: float) -> Scene:
 
 def glass_pane(thickness: float = 1e-5) -> Scene:
     """A thin glass pane at the origin in front of three coloured blocks on a floor, lit from above."""
-    from .transforms import scaling, translation
-
     glass = Material(ambient=(0, 0, 0), diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9),
                      specular_exponent=120, transparency=0.9, speed_of_light=0.67, reflectivity=0.1)
     floor = Shape("plane", translation(0, -1, 0) @ np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0],
@@ -100,8 +100,6 @@ _MATT = {"specular": (0.0, 0.0, 0.0)}
 
 def _room_shapes() -> list[Shape]:
     """A floor, a cube turned 30 degrees and a sphere: the hosts of the lights on surfaces."""
-    from .transforms import rotation, scaling, translation
-
     floor = Shape("plane", _FLOOR, Material(diffuse=(0.6, 0.6, 0.6), **_MATT))
     cube = Shape("cube", translation(-1.2, 0.55, -0.6) @ rotation(30, 0, 1, 0) @ scaling(0.5, 0.5, 0.5),
                  Material(diffuse=(0.9, 0.25, 0.2), **_MATT))
@@ -142,8 +140,6 @@ def far_light(distance: float) -> Scene:
 
 
 def bundled(name: str) -> Scene:
-    from . import load
-
     return load(SCENES / f"{name}.sdl")
 
 

@@ -49,7 +49,6 @@ the estimate does not see either.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -477,24 +476,3 @@ def sample_each_pixel(camera_rays: CameraRays, rays_for, width: int, height: int
                            per_pixel=_shown(estimate, width, height), samples=_shown(count, width, height),
                            kind="pixel")
     return film.reshape(height, width, 3), result
-
-
-# ---------------------------------------------------------------------------------------------------------
-
-def render_to_error(compiled, width: int, height: int, target: float, *, backend: str = "auto",
-                    threads: Optional[int] = None, seed: int = 0, savings=None,
-                    cancel: Optional[Callable[[], bool]] = None, per_pixel: bool = False):
-    """tracer.render.render with ``target_error``: a RenderResult whose ``error_estimate`` is filled in."""
-    from .backend import make_tracer
-    from .camera import CameraFrame, scene_camera
-    from .render import RenderResult
-    from .tiles import camera_rays_for
-
-    started = time.perf_counter()
-    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
-    tracer = make_tracer(compiled, backend, threads, savings)
-    film, estimate = sample_to_error(tracer.camera_rays, camera_rays_for(frame, width, height), width, height,
-                                     target, seed, cancel, per_pixel)
-    return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
-                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
-                        error_estimate=estimate)

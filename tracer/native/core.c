@@ -19,6 +19,7 @@
 #endif
 
 #include "core.h"
+#include "interrupt.h"
 #include "numeric.h"
 #include "shapes.h"
 #include "mesh.h"
@@ -77,7 +78,7 @@ const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 typedef struct {
     double b[3][2][2];    /* [axis][0: lo, 1: hi][child] */
     int32_t child[2];     /* inner: pair index; leaf: first item */
-    int32_t count[2];     /* leaf: items (> 0); inner: 0 */
+    int32_t count[2];     /* leaf: items (> 0; -1: none left after removals); inner: 0 */
 } PairNode;
 
 typedef struct {
@@ -93,9 +94,11 @@ typedef struct {
     PairNode *pairs;      /* none when the whole hierarchy is one leaf */
     int64_t n_pairs;
     int32_t root_first, root_count;  /* the root when it is a leaf */
-    int64_t *items;       /* bounded objects in leaf order */
-    int64_t *unbounded;
-    int64_t n_unbounded;
+    int64_t *items;       /* bounded objects in leaf order (after removals, a leaf may list one twice) */
+    int64_t n_items;
+    int64_t *unbounded;   /* the objects outside the hierarchy, each tried by every ray: the unbounded ones, */
+    int64_t n_unbounded;  /* and those added since it was built (n_loose of them) */
+    int64_t n_loose;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
     int64_t n_mesh_views;
@@ -103,7 +106,8 @@ typedef struct {
      * NULL: none known).  Which savings a trace uses is the trace's own (rt_trace's cutoff and flags). */
     uint8_t *sealed;
     /* for refitting the hierarchy (made when first needed, dropped when it is built again): per object, its
-     * leaf as 2 * pair + child (-1: unbounded, or in a root leaf), and per pair its parent as 2 * pair + child */
+     * leaf as 2 * pair + child (< 0: outside the hierarchy, or in a root leaf), and per pair its parent as
+     * 2 * pair + child */
     int64_t *leaf_of, *parent_of;
 } Scene;
 
@@ -125,8 +129,19 @@ typedef struct {
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
     double cutoff;        /* tracer.savings: a secondary ray of smaller cumulative weight is not traced */
     int64_t savings;      /* SAVE_* bits: the other savings this trace makes */
+    int64_t ray_budget;   /* most reflected and transmitted rays one camera ray's tree may trace (see shade.h) */
+    int64_t rays_used;    /* reflected and transmitted rays traced for the current camera ray */
+    int64_t ray_limit;    /* ...which the current ray's descendants may bring up to this (shade.h) */
+    const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_trace's flag); may be NULL */
     int oom;
+    int stopped;          /* stop_requested() was seen: the colours are not to be used */
 } Work;
+
+/* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
+static inline int stop_requested(const Work *w)
+{
+    return rt_interrupt_heard() != 0 || (w->cancel != NULL && *w->cancel != 0);
+}
 
 static int work_init(Work *w, const Scene *S)
 {
@@ -793,7 +808,7 @@ static void drop_tree(Scene *S)
     S->nodes = NULL;
     S->pairs = NULL;
     S->items = S->unbounded = S->leaf_of = S->parent_of = NULL;
-    S->n_nodes = S->n_pairs = S->n_unbounded = 0;
+    S->n_nodes = S->n_pairs = S->n_unbounded = S->n_items = S->n_loose = 0;
     S->root_first = S->root_count = 0;
 }
 
@@ -809,6 +824,7 @@ static int build_tree(Scene *S, int64_t threads)
     if (nb >= INT32_MAX)
         return 0;
     S->n_unbounded = D->n_objects - nb;
+    S->n_items = nb;
     S->unbounded = (int64_t *)malloc((size_t)(S->n_unbounded + 1) * sizeof(int64_t));
     S->items = (int64_t *)malloc((size_t)(nb + 1) * sizeof(int64_t));
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
@@ -989,6 +1005,87 @@ static int mesh_check_indices(const MeshView *m)
         if (m->tri_vertex[i] < 0 || m->tri_vertex[i] >= m->n_vertices ||
             (m->tri_normal && m->tri_normal[i] >= m->n_normals))
             return 0;
+    return 1;
+}
+
+/* Most objects added since the hierarchy was built that are kept outside it (each is tried by every ray)
+ * before it is built again. */
+#define LOOSE_MAX 64
+
+/* After objects were removed (`removed`: their indices before, ascending, n of them) and added (the objects
+ * after the old_n - n survivors): the hierarchy keeps its shape, its objects renumbered; a leaf's slots of a
+ * removed object take a surviving object of the same leaf (tried twice, found once), or the leaf lists none
+ * (count -1: an empty box, never entered by a ray the fast box test sees, and nothing in it if entered); the
+ * added objects go outside the hierarchy; the leaves that lost objects are refitted.  S->d is the new description; leaf_of and parent_of are those of the old numbering
+ * (tree_links).  1 when done; 0 when the hierarchy must be built again instead (or memory ran out). */
+static int restructure_tree(Scene *S, int64_t old_n, const int64_t *removed, int64_t n)
+{
+    int64_t new_n = S->d.n_objects, added = new_n - (old_n - n);
+    if (S->n_pairs == 0 || added < 0 || S->n_loose + added > LOOSE_MAX)
+        return 0;
+    int64_t *renumber = (int64_t *)malloc((size_t)(old_n + 1) * sizeof(int64_t));
+    int64_t *touched = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    int64_t *leaf_of = (int64_t *)malloc((size_t)(new_n + 1) * sizeof(int64_t));
+    int64_t *outside = (int64_t *)malloc((size_t)(S->n_unbounded + added + 1) * sizeof(int64_t));
+    int ok = renumber && touched && leaf_of && outside;
+    for (int64_t o = 0, r = 0; ok && o < old_n; o++) {
+        if (r < n && removed[r] == o) {
+            renumber[o] = -1;
+            r++;
+            ok = r == n || removed[r] > o;  /* (ascending, in range) */
+        } else {
+            renumber[o] = o - r;
+        }
+    }
+    ok = ok && (n == 0 || removed[n - 1] < old_n);
+    int64_t n_touched = 0;
+    for (int64_t r = 0; ok && r < n; r++) {
+        int64_t link = S->leaf_of[removed[r]];
+        if (link < 0)
+            continue;
+        PairNode *pair = &S->pairs[link / 2];
+        int64_t first = pair->child[link % 2], end = first + pair->count[link % 2], survivor = -1;
+        for (int64_t k = first; k < end && survivor < 0; k++)
+            if (renumber[S->items[k]] >= 0)
+                survivor = S->items[k];
+        if (survivor < 0)  /* no object left in the leaf: a count of -1 lists none (and its box is empty) */
+            pair->count[link % 2] = -1;
+        for (int64_t k = first; k < end; k++)
+            if (renumber[S->items[k]] < 0)
+                S->items[k] = survivor;
+        touched[n_touched++] = link;
+    }
+    if (!ok) {
+        free(renumber);
+        free(touched);
+        free(leaf_of);
+        free(outside);
+        return 0;
+    }
+    for (int64_t k = 0; k < S->n_items; k++)  /* (slots of emptied leaves hold -1, and are never read) */
+        S->items[k] = S->items[k] < 0 ? -1 : renumber[S->items[k]];
+    int64_t u = 0;
+    for (int64_t k = 0; k < S->n_unbounded; k++)
+        if (renumber[S->unbounded[k]] >= 0)
+            outside[u++] = renumber[S->unbounded[k]];
+    for (int64_t o = new_n - added; o < new_n; o++)
+        outside[u++] = o;
+    for (int64_t o = 0; o < old_n; o++)
+        if (renumber[o] >= 0)
+            leaf_of[renumber[o]] = S->leaf_of[o];
+    for (int64_t o = new_n - added; o < new_n; o++)
+        leaf_of[o] = -2;  /* (outside, though maybe bounded) */
+    free(S->unbounded);
+    free(S->leaf_of);
+    S->unbounded = outside;
+    S->n_unbounded = u;
+    S->n_loose += added;
+    S->leaf_of = leaf_of;
+    for (int64_t t = 0; t < n_touched; t++)
+        for (int64_t link = touched[t]; link >= 0; link = S->parent_of[link / 2])
+            set_child_box(S, link / 2, (int)(link % 2));
+    free(renumber);
+    free(touched);
     return 1;
 }
 
@@ -1233,11 +1330,14 @@ fail:
 
 /* An edit of the scene in place (tracer.edit): `desc` describes the scene as it is now (its arrays edited,
  * or new ones), and is checked and taken as rt_create takes it.  flags: EDIT_MESHES when the meshes may have
- * changed (each mesh not seen before is checked), EDIT_REBUILD to build the object hierarchy anew (on
- * `threads` threads); else the hierarchy is refitted to the boxes of `objects` (n of them; n < 0: every
- * object's), or rebuilt where an object's boundedness or the number of objects changed.  Keeps the sealed
- * table only while the numbers of objects and lights stay.  0 on success; -1 (with the reason in `error`) when
- * the description is refused or memory runs out: the scene must then be destroyed, not traced. */
+ * changed (each mesh not seen before is checked); EDIT_REBUILD to build the object hierarchy anew (on
+ * `threads` threads); EDIT_OBJECTS when the objects `objects` (n of them, their indices before, ascending)
+ * were removed and the objects after the survivors added (restructure_tree: the hierarchy renumbered, the
+ * added objects outside it, until LOOSE_MAX of them call for a build); else the hierarchy is refitted to the
+ * boxes of `objects` (n of them; n < 0: every object's), or rebuilt where an object in it became unbounded.
+ * Keeps the sealed table only while the numbers of objects and lights stay.  0 on success; -1 (with the reason
+ * in `error`) when the description is refused or memory runs out: the scene must then be destroyed, not
+ * traced. */
 int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads,
             char *error, int64_t capacity)
 {
@@ -1245,21 +1345,21 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
     if (error && capacity > 0)
         error[0] = '\0';
     int64_t n_objects = S->d.n_objects, n_lights = S->d.n_lights;
-    int rebuild = (flags & EDIT_REBUILD) || desc->n_objects != n_objects || S->n_pairs == 0;
-    if (!rebuild && n != 0) {
-        /* an object that became bounded or unbounded is in the wrong list: only a build puts it right */
-        if (!tree_links(S)) {
-            if (error && capacity > 0)
-                snprintf(error, (size_t)capacity, "out of memory");
-            return -1;
-        }
-        for (int64_t k = 0; k < (n < 0 ? n_objects : n) && !rebuild; k++) {
-            int64_t i = n < 0 ? k : objects[k];
-            rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0) != (desc->object_bounded[i] != 0);
-        }
+    int restructured = (flags & EDIT_OBJECTS) != 0;
+    int rebuild = (flags & EDIT_REBUILD) || (desc->n_objects != n_objects && !restructured) || S->n_pairs == 0;
+    if (!rebuild && (n != 0 || restructured) && !tree_links(S)) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
+        return -1;
+    }
+    /* an object in the hierarchy that became unbounded has no box to be found by: only a build puts it right
+     * (one outside it may be bounded or not: every ray tries it) */
+    for (int64_t k = 0; !rebuild && !restructured && k < (n < 0 ? n_objects : n); k++) {
+        int64_t i = n < 0 ? k : objects[k];
+        rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0 && !desc->object_bounded[i]);
     }
     /* an edit in place (no object added or removed, the meshes as they were) checks its own objects again */
-    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD)) && desc->n_objects == n_objects &&
+    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD | EDIT_OBJECTS)) && desc->n_objects == n_objects &&
                    desc->n_csg == S->d.n_csg && desc->n_prims == S->d.n_prims && n >= 0;
     if (!take_desc(S, desc, in_place ? objects : NULL, in_place ? n : -1, error, capacity))
         return -1;
@@ -1269,7 +1369,10 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
         free(S->sealed);
         S->sealed = NULL;
     }
-    if (rebuild ? !build_tree(S, threads) : !refit_tree(S, objects, n)) {
+    if (restructured && !rebuild)
+        rebuild = !restructure_tree(S, n_objects, objects, n);
+    int fitted = rebuild ? build_tree(S, threads) : restructured ? 1 : refit_tree(S, objects, n);
+    if (!fitted) {
         if (error && capacity > 0)
             snprintf(error, (size_t)capacity, "out of memory fitting the object hierarchy");
         return -1;
@@ -1285,7 +1388,7 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
 int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *root)
 {
     const Scene *S = (const Scene *)scene;
-    int64_t n_items = S->d.n_objects - S->n_unbounded;
+    int64_t n_items = S->n_items;
     if (pairs && S->n_pairs)
         memcpy(pairs, S->pairs, (size_t)S->n_pairs * sizeof(PairNode));
     if (items && n_items)
@@ -1345,6 +1448,8 @@ typedef struct {
     ShadeFn shade;
     double cutoff;        /* JOB_TRACE: the savings it makes (Work.cutoff, Work.savings) */
     int64_t savings;
+    int64_t ray_budget;   /* JOB_TRACE: Work.ray_budget */
+    const volatile int32_t *cancel;  /* Work.cancel */
     _Atomic int64_t next;
 } Job;
 
@@ -1352,6 +1457,7 @@ typedef struct {
     Job *job;
     int64_t counts[N_COUNTS];
     int failed;
+    int stopped;
 } Worker;
 
 #define CHUNK 16
@@ -1368,6 +1474,8 @@ static void *run_worker(void *arg)
     }
     w.cutoff = job->cutoff;
     w.savings = job->savings;
+    w.ray_budget = job->ray_budget;
+    w.cancel = job->cancel;
     Media air;
     memset(&air, 0, sizeof(air));
     for (;;) {
@@ -1375,9 +1483,15 @@ static void *run_worker(void *arg)
         if (start >= job->n)
             break;
         int64_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
+        if (stop_requested(&w)) {
+            w.stopped = 1;
+            break;
+        }
         for (int64_t i = start; i < end; i++) {
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
+                w.rays_used = 0;
+                w.ray_limit = w.ray_budget;
                 job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
@@ -1402,13 +1516,15 @@ static void *run_worker(void *arg)
     }
     memcpy(wk->counts, w.counts, sizeof(wk->counts));
     wk->failed = w.oom;
+    wk->stopped = w.stopped;
     work_free(&w);
     return NULL;
 }
 
 #define MAX_THREADS 256
 
-/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure. */
+/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure, -2 when
+ * it stopped because stop_requested() (its results are then incomplete). */
 static int run_job(Job *job, int64_t threads, int64_t *counts)
 {
     if (threads < 1)
@@ -1426,25 +1542,31 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
         workers[k].job = job;
         memset(workers[k].counts, 0, sizeof(workers[k].counts));
         workers[k].failed = 0;
+        workers[k].stopped = 0;
         started[k] = 0;
     }
     for (int64_t k = 1; k < threads; k++)
         started[k] = pthread_create(&ids[k], NULL, run_worker, &workers[k]) == 0;
     run_worker(&workers[0]);
-    int failed = 0;
+    int failed = 0, stopped = 0;
     for (int64_t k = 0; k < threads; k++) {
         if (k > 0 && started[k])
             pthread_join(ids[k], NULL);
         failed |= workers[k].failed;
+        stopped |= workers[k].stopped;
         if (counts)
             for (int c = 0; c < N_COUNTS; c++)
                 counts[c] += workers[k].counts[c];
     }
-    return failed ? -1 : 0;
+    return failed ? -1 : stopped ? -2 : 0;
 }
 
+/* Shades n camera rays.  `ray_budget`: the most reflected and transmitted rays each one's tree traces (see
+ * shade.h); `cancel`: a flag polled at every ray (NULL: none) which, set, stops the batch: -2 is returned
+ * (as when a signal is heard, interrupt.h) and the colours are not to be used. */
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
-             int64_t *counts, int64_t threads, double cutoff, int64_t savings)
+             int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget,
+             const int32_t *cancel)
 {
     const Scene *S = (const Scene *)scene;
     Job job;
@@ -1458,6 +1580,8 @@ int rt_trace(void *scene, int64_t n, const double *origins, const double *direct
     job.shade = pick_shade(S->d.effects);
     job.cutoff = cutoff;
     job.savings = savings;
+    job.ray_budget = ray_budget < 0 ? 0 : ray_budget;
+    job.cancel = cancel;
     counts[RAY_CAMERA] += n;
     return run_job(&job, threads, counts);
 }

@@ -413,4 +413,74 @@ static int hits_paraboloid(const double *o, const double *d, Hit *out)
     return 2;
 }
 
+/* The generic hyperboloid of one sheet x^2 + y^2 - (1 - S^2) z^2 <= S^2, -1 <= z <= 1 (intersect/hyperboloid.py):
+ * wall (part 0), bottom cap z = -1 (part 1), top cap z = 1 (part 2); S is the waist.  Up to two intervals of
+ * the line inside (a line steeper than the wall's asymptotes can cross the waist's hole): up to 4 hits. */
+static int hits_hyperboloid(const double *o, const double *d, double waist, Hit *out)
+{
+    double w2 = waist * waist;
+    double k = 1.0 - w2;
+    double a = d[0] * d[0] + d[1] * d[1] - k * d[2] * d[2];
+    double b = o[0] * d[0] + o[1] * d[1] - k * o[2] * d[2];
+    double c = o[0] * o[0] + o[1] * o[1] - k * o[2] * o[2] - w2;
+    double t_bottom = (-1.0 - o[2]) / d[2], t_top = (1.0 - o[2]) / d[2];
+    int rising = d[2] > 0.0;
+    double slab_lo, slab_hi;
+    if (d[2] == 0.0) {
+        int in_slab = o[2] >= -1.0 && o[2] <= 1.0;
+        slab_lo = in_slab ? -INFINITY : NAN;
+        slab_hi = in_slab ? INFINITY : NAN;
+    } else {
+        slab_lo = rising ? t_bottom : t_top;
+        slab_hi = rising ? t_top : t_bottom;
+    }
+    /* hyperboloid._inside_intervals: a >= 0 between the roots, a < 0 outside them */
+    double lo = NAN, hi = NAN;
+    int real = solve_quadratic(a, b, c, b * b - a * c, &lo, &hi);
+    double between_lo = real ? lo : NAN, between_hi = real ? hi : NAN;
+    if (a == 0.0 && b == 0.0) {  /* no t at all: inside everywhere or nowhere */
+        between_lo = c <= 0.0 ? -INFINITY : NAN;
+        between_hi = c <= 0.0 ? INFINITY : NAN;
+    }
+    double t[4];
+    if (a < 0.0) {
+        t[0] = slab_lo;
+        t[1] = real ? nan_min2(lo, slab_hi) : slab_hi;
+        t[2] = real ? nan_max2(hi, slab_lo) : NAN;
+        t[3] = real ? slab_hi : NAN;
+    } else {
+        t[0] = nan_max2(between_lo, slab_lo);
+        t[1] = nan_min2(between_hi, slab_hi);
+        t[2] = t[3] = NAN;
+    }
+    if (t[0] <= t[1] && t[2] <= t[3] && t[1] >= t[2]) {  /* touching intervals are one */
+        t[1] = t[3];
+        t[2] = t[3] = NAN;
+    }
+    int n = 0;
+    for (int interval = 0; interval < 2; interval++) {
+        double t_in = t[2 * interval], t_out = t[2 * interval + 1];
+        if (!(t_in <= t_out) || !isfinite(t_in) || !isfinite(t_out))
+            continue;
+        /* An end on the slab's boundary is a cap (ties too). */
+        int part_in = t_in <= slab_lo ? (rising ? 1 : 2) : 0;
+        int part_out = t_out >= slab_hi ? (rising ? 2 : 1) : 0;
+        for (int end = 0; end < 2; end++) {
+            double at = end ? t_out : t_in;
+            int part = end ? part_out : part_in;
+            double p[3] = {o[0] + at * d[0], o[1] + at * d[1], o[2] + at * d[2]};
+            double nv[3] = {p[0], p[1], -k * p[2]};  /* half the gradient */
+            if (part) {
+                nv[0] = nv[1] = 0.0;
+                nv[2] = part == 1 ? -1.0 : 1.0;
+            } else if (dot3(nv, nv) < 1e-300) {  /* the double cone's apex */
+                nv[0] = nv[1] = 0.0;
+                nv[2] = 1.0;
+            }
+            set_hit(&out[n++], at, !end, nv[0], nv[1], nv[2], part);
+        }
+    }
+    return n;
+}
+
 #endif

@@ -23,6 +23,7 @@ import numpy as np
 from .. import shapes
 from ..camera import focal_length, view_angle
 from ..errors import SceneError, TracerError
+from ..geometry import builtin_mesh
 from ..model import (CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, SHAPE_KINDS, Camera, Light, Material, Scene,
                      SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
@@ -32,6 +33,7 @@ from .lights import read_light
 from .meshes import sdl_mesh, usd_mesh
 from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
+from .writer import camera_frame
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -343,7 +345,6 @@ class _Reader:
     def _mesh(self, prim, world: np.ndarray, kind: Optional[str]) -> Optional[Shape]:
         entry = shapes.KINDS.get(kind)
         if entry is not None and entry.builtin_mesh:
-            from ..geometry import builtin_mesh
             return Shape(kind, world, mesh=builtin_mesh(kind))
         if kind in _TESSELLATED:
             return Shape("mesh", world)  # the caller makes the exact shape
@@ -486,8 +487,6 @@ class _Reader:
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
         """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
         in another tool since)."""
-        from .writer import camera_frame
-
         eye, look, up = (self.triple(prim, name) for name in (C.A_EYE, C.A_LOOK, C.A_UP))
         angle = self.get(prim, C.A_VIEW_ANGLE)
         if None in (eye, look, up, angle):

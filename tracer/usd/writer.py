@@ -18,6 +18,8 @@ from .. import shapes
 from ..atomic import replacing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
+from ..geometry import builtin_mesh
+from ..meshio import _face_normal
 from ..model import CSG, Camera, Light, Material, MeshData, Scene, SceneObject, Shape
 from ..transforms import translation
 from . import common as C
@@ -304,15 +306,12 @@ class _Writer:
             return entry.function("tessellate")(*entry.traced(shape.parameters))
         if shape.mesh is None:
             if entry.builtin_mesh:
-                from ..geometry import builtin_mesh
                 return builtin_mesh(shape.kind)
             raise TracerError(f"cannot write the {shape.kind}: it has no mesh data")
         return shape.mesh
 
     def _mesh(self, mesh, data: MeshData) -> None:
         """Points, faces and per-corner (faceVarying) normals; faces without normals get their flat one."""
-        from ..meshio import _face_normal
-
         vertices = np.asarray(data.vertices, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(data.normals, dtype=np.float64).reshape(-1, 3)
         counts, indices, corner_normals = [], [], []

@@ -148,8 +148,8 @@ static int64_t bvh_node(const BvhInput *in, int64_t start, int64_t end, MeshNode
     double width = c_hi[axis] - c_lo[axis];
     double scale = (double)bins / width;
     int64_t middle;
-    if (!(width > 0.0) || !isfinite(scale)) {
-        middle = start + size / 2;  /* all centroids in one place: halve the range */
+    if (!(width > 0.0) || !isfinite(width) || !isfinite(scale)) {
+        middle = start + size / 2;  /* all centroids in one place (or spread past a double): halve the range */
     } else {
         double box_lo[BVH_MAX_BINS][3], box_hi[BVH_MAX_BINS][3];
         int64_t in_bin[BVH_MAX_BINS] = {0};
@@ -209,7 +209,8 @@ static int64_t bvh_node(const BvhInput *in, int64_t start, int64_t end, MeshNode
         }
         for (int64_t i = 0; i < moved; i++)
             order[kept + i] = scratch[start + i];
-        middle = kept;
+        /* (a split with an empty side would never end: halve instead; the order is then unchanged) */
+        middle = kept == start || kept == end ? start + size / 2 : kept;
     }
     *axis_out = axis;
     return middle;

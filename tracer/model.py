@@ -37,7 +37,8 @@ SHAPE_KINDS = shapes.keywords()
 
 @dataclass(frozen=True, slots=True)  # slots: one per shape, 40 bytes less each
 class SourceLocation:
-    """Where something came from, for messages: file (may be None for text), line and column (1-based)."""
+    """Where something came from, for messages: file (may be None for text), line and column (1-based; line 0
+    for a place without lines: a USD stage's prim, whose path the file name carries)."""
 
     file: Optional[str]
     line: int
@@ -45,6 +46,8 @@ class SourceLocation:
 
     def __str__(self) -> str:
         name = self.file or "<sdl>"
+        if not self.line:
+            return name
         return f"{name}:{self.line}:{self.column}" if self.column else f"{name}:{self.line}"
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
-from .errors import TracerError
+from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
 from .geometry.polyhedra import face_planes
 from .intersect import analytic
@@ -820,9 +820,11 @@ class PrimitiveTable:
             groups.setdefault(key, (vertices, []))[1].append(rows)
         for vertices, rows in [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
-            per_chunk = max(1, _CHUNK // max(1, len(vertices)))
+            # (a mesh without vertices has no surface: its bounds are a point at its origin)
+            points = vertices.reshape(-1, 3) if vertices.size else np.zeros((1, 3))
+            per_chunk = max(1, _CHUNK // max(1, len(points)))
             for start in range(0, len(rows), per_chunk):
-                self._bound(rows[start:start + per_chunk], vertices)
+                self._bound(rows[start:start + per_chunk], points)
 
     def _bound_generic_boxes(self, rows, matrix: np.ndarray) -> None:
         """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
@@ -1150,6 +1152,9 @@ def shared_triangle_mesh(mesh: MeshData):
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
+        problem = mesh.coordinate_problem()  # (the readers check; a mesh made in a program may not be)
+        if problem is not None:
+            raise SceneError(f"{mesh.origin or 'mesh'}: {problem}")
         built = mesh_module.TriangleMesh(mesh, builder=c_bvh_builder())
         _TRIANGLE_MESHES[key] = built
     return built

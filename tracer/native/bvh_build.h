@@ -509,10 +509,12 @@ static int64_t mesh_split(const void *input, int64_t start, int64_t end, BvhNode
     record->axis = (int8_t)axis;
     double width = c_hi[axis] - c_lo[axis];
     double scale = (double)in->bins / width;
-    if (!(width > 0.0) || !isfinite(scale))
-        return start + size / 2;  /* all centroids in one place: halve the range */
+    if (!(width > 0.0) || !isfinite(width) || !isfinite(scale))
+        return start + size / 2;  /* all centroids in one place (or spread past a double): halve the range */
     int64_t best = mesh_best_bucket(in, start, end, axis, c_lo[axis], scale);
-    return mesh_partition(in, start, end, axis, c_lo[axis], scale, best);
+    int64_t kept = mesh_partition(in, start, end, axis, c_lo[axis], scale, best);
+    /* (a split with an empty side would never end: halve instead; the order is then unchanged) */
+    return kept == start || kept == end ? start + size / 2 : kept;
 }
 
 /* Build over the n triangles tri (3 vertex indices each, checked by the caller) of the vertices, on up to

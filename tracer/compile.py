@@ -24,16 +24,13 @@ from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
-from .geometry.polyhedra import face_planes
 from .intersect import analytic
-from .intersect import mesh as mesh_module
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .lights import LightTable
 from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
-from .textures import TextureSet
 from .transforms import transform_points
 
 
@@ -197,6 +194,8 @@ class Primitive:
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
+            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
@@ -233,6 +232,8 @@ class Primitive:
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
+            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
@@ -1149,6 +1150,8 @@ def _hash_indices(h, array) -> None:
 def shared_triangle_mesh(mesh: MeshData):
     """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after.  The C core
     builds its BVH when it is loaded (the NumPy builder's tree, in a fraction of the time)."""
+    from .intersect import mesh as mesh_module  # deferred: loaded by the first mesh, not by import tracer
+
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
@@ -1394,6 +1397,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
                        uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
+        # deferred: the textures (and the noise tables made as they load) wait for the first textured scene
+        from .textures import TextureSet
         textures = TextureSet(scene, primitives)
     lights = LightTable.of(scene.lights)
     return CompiledScene(

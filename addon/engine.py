@@ -18,7 +18,6 @@ compiled scene is kept too, so that the meshes' BVHs, found again by content, ar
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import traceback

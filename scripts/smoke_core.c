@@ -29,7 +29,8 @@ typedef int64_t (*SizeFn)(void);
 typedef int64_t (*LayoutFn)(int64_t *, int64_t *, int64_t);
 typedef void *(*CreateFn)(const SceneDesc *, char *, int64_t);
 typedef void (*DestroyFn)(void *);
-typedef int (*TraceFn)(void *, int64_t, const double *, const double *, double *, int64_t *, int64_t);
+typedef int (*TraceFn)(void *, int64_t, const double *, const double *, double *, int64_t *, int64_t, double, int64_t,
+                       int64_t, const int32_t *);
 
 static int fail(const char *what)
 {
@@ -106,7 +107,7 @@ int main(int argc, char **argv)
         directions[3 * i + 1] = 1.0;
         directions[3 * i + 2] = -1.0;
     }
-    int status = trace(scene, N, origins, directions, colors, counts, 2);
+    int status = trace(scene, N, origins, directions, colors, counts, 2, 0.0, 0, RAY_BUDGET, NULL);
     destroy(scene);
     if (status != 0)
         return fail("rt_trace failed");

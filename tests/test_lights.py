@@ -144,6 +144,20 @@ def test_blender_lights_in_the_documented_units_light_as_cycles_does(backend, wh
     assert colour[0, 0, 0] == pytest.approx(cycles, rel=2e-3)
 
 
+#: Cycles' 100 W spot 2 units above the floor pointing down (as above), at floor points seen at angle alpha from
+#: its axis: (alpha, spot size, blend, value).
+CYCLES_SPOT = [(25.0, 60.0, 0.5, 0.30631), (20.0, 60.0, 0.5, 0.52545), (28.0, 60.0, 0.5, 0.06956),
+               (10.0, 45.0, 0.0, 0.60482)]
+
+
+@pytest.mark.parametrize("alpha, size, blend, cycles", CYCLES_SPOT)
+def test_spot_lights_as_cycles_does(backend, alpha, size, blend, cycles):
+    spot = Light((0.0, 2.0, 0.0), (100 / (4 * math.pi ** 2),) * 3, kind="spot", direction=(0.0, -1.0, 0.0),
+                 spot_size=size, spot_blend=blend)
+    colour, _ = shade_down(backend, lit(spot), [2.0 * math.tan(math.radians(alpha))])
+    assert colour[0, 0, 0] == pytest.approx(cycles, rel=3e-3)  # (Cycles averaged a pixel 0.0025 wide)
+
+
 # ------------------------------------------------------------------------------------------------ penumbrae
 
 

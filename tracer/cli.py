@@ -8,7 +8,6 @@ import argparse
 import contextlib
 import math
 import os
-import signal
 import sys
 from dataclasses import replace
 from typing import Optional, Sequence
@@ -17,14 +16,14 @@ import numpy as np
 
 # (Everything the tracer package itself imports (tracer/__init__.py: the reader, compiling, rendering) is
 # imported here as usual: the program has loaded it anyway.  What only some commands use is imported by them.)
-from . import sampling
+from . import sampling, signals
 from .backend import load_core
 from .bulk import collector_paused, one_blas_thread
 from .compile import compile_scene, fold_tree
 from .errors import RenderCancelled, TracerError, warnings_as_lines
 from .imageio import output_format, png_rows, save_image
 from .model import MAX_RECURSION_DEPTH, ShapeTable, traced_depth
-from .render import check_size, render
+from .render import budget_note, check_size, render
 from .reporting import error_message
 from .savings import RaySavings
 from .sdl.parser import load
@@ -176,8 +175,15 @@ def _convert(args) -> int:
         else:
             from .sdl.writer import save_sdl  # deferred: only convert writes SDL
             save_sdl(scene, args.destination)
+    except TracerError:
+        raise
     except ValueError as err:  # something SDL (or USD) cannot express
         raise TracerError(f"{args.destination}: {err}") from None
+    except Exception as err:  # noqa: BLE001 — a problem writing (usd-core's, the system's): about the destination
+        message = error_message(err, args.destination)
+        if message is None:
+            raise
+        raise TracerError(message) from None
     return 0
 
 
@@ -264,6 +270,7 @@ def _render(args) -> int:
         progress.close()
     if result.image is not None:
         save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
+    _warn_about_budget(args.scene, result.rays)
     if result.error_estimate is not None and not args.quiet:
         from .target import MAX_SAMPLES  # deferred: only renders to an error target load tracer.target
         e = result.error_estimate
@@ -276,6 +283,12 @@ def _render(args) -> int:
 
         print(json.dumps(result.stats()))
     return 0
+
+
+def _warn_about_budget(scene_file: str, rays) -> None:
+    note = budget_note(rays)
+    if note is not None:
+        print(f"warning: {scene_file}: {note}", file=sys.stderr)
 
 
 def _render_job(args) -> int:
@@ -334,6 +347,7 @@ def _render_job(args) -> int:
                                    progress, eight_bit=True)
     finally:
         progress.close()
+    _warn_about_budget(args.scene, rays)
     if args.stats:
         import json
 
@@ -514,24 +528,6 @@ def _bench(args) -> int:
     return 0
 
 
-@contextlib.contextmanager
-def _terminate_like_interrupt():
-    """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
-    removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
-    try:
-        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
-        installed = True
-    except ValueError:  # not the main thread (told this way, without loading the threading module)
-        installed = False
-    if not installed:
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def _output_closed() -> bool:
     """Whether standard output is a pipe whose reader has gone (then the broken pipe was the output's, not a
     connection's or a file's): polling such a pipe reports an error.  If so, output is sent to the null
@@ -551,14 +547,72 @@ def _output_closed() -> bool:
     return closed
 
 
+def _final_output(args) -> Optional[str]:
+    """The file whose completion ends the command's work (after it, a signal changes nothing)."""
+    if args.command == "convert":
+        return args.destination
+    if args.command == "render" and args.frames is None:
+        return args.output
+    return None
+
+
+class _NamedOutput:
+    """Standard output whose write errors (a full disk, ``> /dev/full``) name it: left alone, they would be
+    reported as the scene's (an OSError without a file name), or by Python's complaint at exit."""
+
+    NAME = "standard output"
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        return self._named(self._stream.write, text)
+
+    def flush(self):
+        return self._named(self._stream.flush)
+
+    def _named(self, call, *args):
+        try:
+            return call(*args)
+        except BrokenPipeError:  # (main tells a reader that went away from a real error)
+            raise
+        except OSError as err:
+            raise type(err)(err.errno, err.strerror or str(err), self.NAME) from None
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _stdout_named():
+    """sys.stdout is a :class:`_NamedOutput` meanwhile, written out before the block ends."""
+    stream = sys.stdout
+    if stream is None:
+        yield
+        return
+    sys.stdout = _NamedOutput(stream)
+    try:
+        yield
+        sys.stdout.flush()
+    finally:
+        sys.stdout = stream
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
-                one_blas_thread():
+        with signals.working(_final_output(args)), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
+                one_blas_thread(), _stdout_named():
+            load_core(getattr(args, "backend", "auto"))  # (its signal handler and watchdog: tracer.signals)
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
+    except signals.Interrupted as err:
+        print("\ninterrupted", file=sys.stderr)
+        return err.status
     except RenderCancelled:  # (a TracerError: caught first)
+        if signals.heard():  # the C core stopped for a signal, before Python's handler could say so
+            print("\ninterrupted", file=sys.stderr)
+            return 128 + signals.heard()
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError as err:  # (an OSError: caught before the input's errors)

@@ -22,18 +22,15 @@ import numpy as np
 
 from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
-from .errors import TracerError
+from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
-from .geometry.polyhedra import face_planes
 from .intersect import analytic
-from .intersect import mesh as mesh_module
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .lights import LightTable
 from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
-from .textures import TextureSet
 from .transforms import transform_points
 
 
@@ -197,6 +194,8 @@ class Primitive:
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
+            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
@@ -233,6 +232,8 @@ class Primitive:
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
+            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
@@ -820,9 +821,11 @@ class PrimitiveTable:
             groups.setdefault(key, (vertices, []))[1].append(rows)
         for vertices, rows in [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
-            per_chunk = max(1, _CHUNK // max(1, len(vertices)))
+            # (a mesh without vertices has no surface: its bounds are a point at its origin)
+            points = vertices.reshape(-1, 3) if vertices.size else np.zeros((1, 3))
+            per_chunk = max(1, _CHUNK // max(1, len(points)))
             for start in range(0, len(rows), per_chunk):
-                self._bound(rows[start:start + per_chunk], vertices)
+                self._bound(rows[start:start + per_chunk], points)
 
     def _bound_generic_boxes(self, rows, matrix: np.ndarray) -> None:
         """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
@@ -1147,9 +1150,14 @@ def _hash_indices(h, array) -> None:
 def shared_triangle_mesh(mesh: MeshData):
     """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after.  The C core
     builds its BVH when it is loaded (the NumPy builder's tree, in a fraction of the time)."""
+    from .intersect import mesh as mesh_module  # deferred: loaded by the first mesh, not by import tracer
+
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
+        problem = mesh.coordinate_problem()  # (the readers check; a mesh made in a program may not be)
+        if problem is not None:
+            raise SceneError(f"{mesh.origin or 'mesh'}: {problem}")
         built = mesh_module.TriangleMesh(mesh, builder=c_bvh_builder())
         _TRIANGLE_MESHES[key] = built
     return built
@@ -1389,6 +1397,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
                        uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
+        # deferred: the textures (and the noise tables made as they load) wait for the first textured scene
+        from .textures import TextureSet
         textures = TextureSet(scene, primitives)
     lights = LightTable.of(scene.lights)
     return CompiledScene(

@@ -114,6 +114,13 @@ class FaceList(Sequence):
         return tri_v.reshape(-1, 3), tri_n.reshape(-1, 3)
 
 
+#: Largest size of a mesh vertex's or normal's coordinate.  Building and tracing a mesh adds coordinates
+#: (centroids), subtracts them (edges, box sizes) and multiplies two such results (box areas, cross products):
+#: within 1e150 all of these stay finite, beyond it they overflow to infinity, which a bounding-volume
+#: hierarchy cannot split.
+MAX_MESH_COORDINATE = 1e150
+
+
 @dataclass
 class MeshData:
     """A polygon mesh in generic coordinates.
@@ -149,6 +156,18 @@ class MeshData:
         if isinstance(self.faces, FaceList):
             return len(self.faces.vertex_index)
         return sum(len(verts) for verts, _ in self.faces)
+
+    def coordinate_problem(self) -> Optional[str]:
+        """Why the mesh's numbers cannot be traced (see MAX_MESH_COORDINATE), or None."""
+        for what, values in (("vertex", self.vertices), ("normal", self.normals)):
+            values = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+            bad = ~(np.abs(values) <= MAX_MESH_COORDINATE).all(axis=1)  # (NaN is bad too)
+            if bad.any():
+                index = int(np.argmax(bad))
+                shown = ", ".join(f"{x:g}" for x in values[index].tolist())
+                return (f"{what} {index} is ({shown}): a mesh's {what} coordinates must be finite and at most "
+                        f"{MAX_MESH_COORDINATE:g} in size (the tracer adds and multiplies them)")
+        return None
 
     def triangles(self) -> tuple[np.ndarray, np.ndarray]:
         """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""

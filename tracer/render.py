@@ -23,7 +23,7 @@ from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
-from .savings import RaySavings
+from .savings import RAY_BUDGET, RaySavings
 from .tiles import DEFAULT_TILE, PixelTracer, Tile, TilePlan, TileRun, camera_rays_for
 from .trace import RayCounts
 
@@ -73,6 +73,15 @@ class RenderResult:
         if self.error_estimate is not None:
             out["error"] = self.error_estimate.as_dict()
         return out
+
+
+def budget_note(rays: RayCounts) -> Optional[str]:
+    """What to tell a user when the ray budget cut rays (tracer.savings: RAY_BUDGET), else None."""
+    if not rays.skipped_budget:
+        return None
+    return (f"{rays.skipped_budget:,} reflected or transmitted rays were not traced: a camera ray's tree traces "
+            f"at most {RAY_BUDGET:,} (its rays double at every level: reflectivity and transparency that add up "
+            f"to more than 1, or minReflectivity/minTransparency 0 with a deep maxRecursionDepth)")
 
 
 def check_size(width: int, height: int) -> None:
@@ -135,7 +144,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
     started = time.perf_counter()
-    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
@@ -179,12 +188,14 @@ def _update(plan: TilePlan, item: Tile, done: int, image: Optional[np.ndarray]) 
 
 
 def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],
-             savings: Optional[RaySavings]) -> tuple[CompiledScene, object, PixelTracer]:
+             savings: Optional[RaySavings],
+             cancel: Optional[Callable[[], bool]] = None) -> tuple[CompiledScene, object, PixelTracer]:
     """The compiled scene, the backend's tracer and the pixel tracer of a render."""
     width, height = plan.width, plan.height
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
     tracer = make_tracer(compiled, backend, threads, savings)
+    tracer.cancel = cancel  # (asked while a batch is traced too, so that a long ray tree stops at once)
     return compiled, tracer, PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
 
 
@@ -195,7 +206,7 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     time, from the top of the image, every pass of a tile before the next tile, into one band of 8-bit
     rows that goes to ``on_rows`` when its tiles are done."""
     started = time.perf_counter()
-    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     width, height = plan.width, plan.height
     band = np.zeros((min(plan.tile, height), width, 3), dtype=np.uint8)  # row 0 at the top, as files want
     rects_from = {}  # each band's tiles, by their first row

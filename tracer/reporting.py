@@ -10,22 +10,19 @@ Warnings become ``warning:`` lines through tracer.errors.warnings_as_lines.
 from __future__ import annotations
 
 import errno
-import re
 from typing import Optional
 
+from .atomic import user_file
 from .errors import TracerError
 from .userfiles import shown_name
 
 #: A message longer than this is cut in the middle (a 1 MB token must not become a 1 MB line).
 MAX_MESSAGE = 600
-# The name atomic.replacing gives its temporary file: ".NAME.<8 hex>.tmp" (or another suffix).
-_TEMPORARY = re.compile(r"(?P<folder>.*?)\.(?P<name>[^/]+)\.[0-9a-f]{8}(?P<suffix>\.[A-Za-z0-9]+)$")
 
 
 def user_path(name: str) -> str:
     """The file a user named, for a path that may be the temporary file of an atomic write."""
-    found = _TEMPORARY.fullmatch(name)
-    return found["folder"] + found["name"] if found else name
+    return user_file(name)
 
 
 def shortened(text: str, limit: int = MAX_MESSAGE) -> str:

@@ -6,11 +6,13 @@ Each effect runs only if the compiled scene says it is live, and every ray cast 
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 from .compile import CompiledScene
+from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
 from .model import MEDIA_DEPTH, traced_depth
 from .savings import SKIP_REASONS, RaySavings
@@ -31,6 +33,7 @@ class RayCounts:
     skipped_inside_shadow: int = 0
     skipped_shared_tir: int = 0
     skipped_dark_material: int = 0
+    skipped_budget: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {k: int(getattr(self, k)) for k in RAY_KINDS}
@@ -222,6 +225,10 @@ class Tracer:
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
         self.dark = dark_materials(scene)
         self.sealed = sealed_table(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
+        #: ``cancel() -> bool``, asked now and then while a batch is traced: True stops it (RenderCancelled).
+        self.cancel = None
+        self._next_cancel_check = 0.0
+        self._rays_used = np.zeros(0, dtype=np.int64)  # per camera ray of the batch: secondary rays traced
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         n = origins.shape[0]
@@ -229,11 +236,18 @@ class Tracer:
         return self.shade(origins, directions, 0, Media.air(n), np.ones(n))
 
     def shade(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media,
-              weight: np.ndarray | None = None) -> np.ndarray:
+              weight: np.ndarray | None = None, roots: np.ndarray | None = None,
+              limit: np.ndarray | None = None) -> np.ndarray:
         """Colours of the rays; ``weight``: each ray's share of its pixel (for the contribution cutoff;
-        default 1)."""
+        default 1).  ``roots``: each ray's camera ray (an index into the batch's ray budget, see
+        :meth:`_take_rays`), and ``limit`` how far its descendants may bring that camera ray's count of
+        secondary rays; by default each ray is a camera ray of a new batch."""
         n = origins.shape[0]
         weight = np.ones(n) if weight is None else weight
+        if roots is None:
+            self._rays_used = np.zeros(n, dtype=np.int64)
+            roots, limit = np.arange(n), np.full(n, self.savings.ray_budget, dtype=np.int64)
+        self._check_cancel()
         color = np.broadcast_to(self.background, (n, 3)).copy()
         if n == 0:
             return color
@@ -266,7 +280,8 @@ class Tracer:
         color[idx] = local
         if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
             reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
-                                                     hits.entering[idx], hits.obj[idx], weight[idx])
+                                                     hits.entering[idx], hits.obj[idx], weight[idx], roots[idx],
+                                                     limit[idx])
             color[idx] += reflected
             color[idx] += transmitted
         return color
@@ -437,13 +452,48 @@ class Tracer:
             response = self._response(lambert[lit], s[lit], at.normal[r], at.to_eye[r], at.mat[r], at.diffuse[r])
             total[r] += (response * table.color[light]) * (cos_light[lit] * share / distance2[lit])[:, None]
 
+    def _check_cancel(self) -> None:
+        """RenderCancelled if ``self.cancel`` says stop (asked at most every 50 ms: it may be slow)."""
+        if self.cancel is None:
+            return
+        now = time.monotonic()
+        if now >= self._next_cancel_check:
+            self._next_cancel_check = now + 0.05
+            if self.cancel():
+                raise RenderCancelled("render cancelled")
+
     def _worth_tracing(self, wanted: np.ndarray, weight: np.ndarray) -> np.ndarray:
-        """The rows of ``wanted`` whose weight reaches the contribution cutoff (the others are counted)."""
+        """Which of ``wanted`` have a weight that reaches the contribution cutoff (the others are counted)."""
         keep = wanted & (weight >= self.savings.cutoff)
         self.counts.skipped_cutoff += int(np.count_nonzero(wanted & ~keep))
-        return np.nonzero(keep)[0]
+        return keep
 
-    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight):
+    def _take_rays(self, wanted: np.ndarray, roots: np.ndarray, limit: np.ndarray, weight: np.ndarray,
+                   sibling_weight: np.ndarray | None, chain: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ray budget (take_ray in tracer/native/shade.h: the same rule and arithmetic): of the rows
+        ``wanted``, those whose camera ray may still trace a secondary ray under its row's ``limit`` (the others
+        are counted as skipped for the budget), and for each of them the limit its descendants get.  Where a
+        second child is wanted too (``sibling_weight`` not None and a row's second child wanted), this first
+        child's descendants get a part of what is left after both rays in proportion to its ``weight``, but
+        at least a chain of ``chain`` rays; otherwise everything left.  The rows of a batch belong to
+        different camera rays, so the counts are updated all at once."""
+        rows = np.nonzero(wanted)[0]
+        left = limit[rows] - self._rays_used[roots[rows]]
+        over = left <= 0
+        self.counts.skipped_budget += int(np.count_nonzero(over))
+        rows, left = rows[~over], left[~over]
+        share = left - 1
+        if sibling_weight is not None:
+            both = sibling_weight[rows] >= 0  # (rows whose second child is not wanted carry -1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratio = weight[rows] / (weight[rows] + sibling_weight[rows])
+            ratio = np.where((ratio >= 0.0) & (ratio <= 1.0), ratio, 0.5)  # (weights of 0 or infinity: even)
+            by_weight = np.floor((left - 2).astype(np.float64) * ratio).astype(np.int64)
+            share = np.where(both, np.maximum(by_weight, np.minimum(left - 2, chain)), share)
+        self._rays_used[roots[rows]] += 1
+        return rows, self._rays_used[roots[rows]] + np.maximum(share, 0)
+
+    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight, roots, limit):
         """The reflected and the transmitted colour, each already times its coefficient."""
         settings = self.scene.settings
         mats = self.scene.materials
@@ -474,25 +524,33 @@ class Tracer:
         tir[rows] = total_internal
         shared = tir & reflects if self.savings.shared_tir else np.zeros(n, dtype=bool)
         self.counts.skipped_shared_tir += int(shared.sum())
-        # The mirror ray, weighted by both coefficients where it also stands for the internal reflection.
+        # Which rays are wanted (the cutoff), decided before any is traced: they share the ray budget.
+        # The mirror ray is weighted by both coefficients where it also stands for the internal reflection.
         mirror_weight = weight * np.where(shared, kr_max + kt, kr_max)
-        mirror = self._worth_tracing(reflects, mirror_weight)
+        through_weight = weight * kt
+        want_mirror = self._worth_tracing(reflects, mirror_weight)
+        want_through = self._worth_tracing(transmits & ~shared, through_weight)
+        chain = traced_depth(settings.max_recursion_depth) - level
+        mirror, mirror_limit = self._take_rays(want_mirror, roots, limit, mirror_weight,
+                                               np.where(want_through, through_weight, -1.0), chain)
         if mirror.size:
             reflected[mirror] = self._reflected(point[mirror], normal[mirror], direction[mirror], offset[mirror],
-                                                level, media.subset(mirror), mirror_weight[mirror])
+                                                level, media.subset(mirror), mirror_weight[mirror], roots[mirror],
+                                                mirror_limit)
         transmitted[shared] = reflected[shared]
-        go = np.zeros(n, dtype=bool)
-        go[rows[~total_internal]] = True
-        go = self._worth_tracing(go, weight * kt)
+        taken, taken_limit = self._take_rays(want_through, roots, limit, through_weight, None, chain)
+        refracted = ~tir[taken]
+        go, go_limit = taken[refracted], taken_limit[refracted]
         if go.size:
             self.counts.refraction += go.size
             local = np.searchsorted(rows, go)
             transmitted[go] = self.shade(point[go] - offset[go] * normal[go], through[local], level + 1,
-                                         after.subset(local), weight[go] * kt[go])
-        bounce = self._worth_tracing(tir & ~shared, weight * kt)
+                                         after.subset(local), through_weight[go], roots[go], go_limit)
+        bounce, bounce_limit = taken[~refracted], taken_limit[~refracted]
         if bounce.size:  # total internal reflection: the light stays in the medium it came from
             transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
-                                                  level, media.subset(bounce), weight[bounce] * kt[bounce])
+                                                  level, media.subset(bounce), through_weight[bounce],
+                                                  roots[bounce], bounce_limit)
         return kr_color * reflected, kt[:, None] * transmitted
 
     def _fresnel_weights(self, direction, normal, mat, media, entering, obj, kr, kt, rows_wanted):
@@ -521,7 +579,7 @@ class Tracer:
             kt[glass] = kt[glass] * (1.0 - reflectance)
         return kr_color, kt
 
-    def _reflected(self, point, normal, direction, offset, level, media, weight) -> np.ndarray:
+    def _reflected(self, point, normal, direction, offset, level, media, weight, roots, limit) -> np.ndarray:
         r = reflect(direction, normal)
         self.counts.reflection += point.shape[0]
-        return self.shade(point + offset * normal, r, level + 1, media, weight)
+        return self.shade(point + offset * normal, r, level + 1, media, weight, roots, limit)

@@ -54,6 +54,17 @@ def _work_items(plan) -> list:
     return items + [item for item in plan.items if plan.is_refinement(item)]
 
 
+def _stopping(checkpoint: tiles.Checkpoint) -> Callable[[], bool]:
+    """A tile's checkpoint (which raises RenderCancelled to stop) as the backend tracer's ``cancel()``."""
+    def stop() -> bool:
+        try:
+            checkpoint()
+        except RenderCancelled:
+            return True
+        return False
+    return stop
+
+
 class Cancelled(Exception):
     pass
 
@@ -134,6 +145,8 @@ class BlockRenderer:
     def _shade(self, checkpoint: Optional[tiles.Checkpoint]) -> tiles.PixelTracer:
         """The pixel tracer of one work item, with the calling thread's backend tracer."""
         tracer = self._tracer()
+        # (asked while a chunk is traced too: a deep ray tree stops within 50 ms of a cancel)
+        tracer.cancel = None if checkpoint is None else _stopping(checkpoint)
         return tiles.PixelTracer(self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint,
                                  alpha=self.want_alpha,
                                  first_hits=lambda origins, directions: self._hits(tracer, origins, directions))

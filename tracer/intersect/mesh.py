@@ -515,10 +515,8 @@ def _choose_split(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, 
     c_lo, c_hi = centroid.min(axis=0), centroid.max(axis=0)
     axis = int(np.argmax(c_hi - c_lo))
     width = c_hi[axis] - c_lo[axis]
-    if not width > 0:
-        goes_left = np.zeros(n, dtype=bool)
-        goes_left[: n // 2] = True
-        return axis, goes_left
+    if not (width > 0 and np.isfinite(width) and np.isfinite(bins / width)):
+        return axis, _halves(n)
 
     bucket = np.minimum(((centroid[:, axis] - c_lo[axis]) * (bins / width)).astype(np.int64), bins - 1)
     # Per-bucket boxes: sort by bucket, then reduce each non-empty run (bucket 0 and bins-1 are
@@ -547,7 +545,16 @@ def _choose_split(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, 
     cost = left_area * left_count + right_area * right_count
     cost[(left_count == 0) | (right_count == 0)] = np.inf
     best = int(np.argmin(cost))
-    return axis, bucket <= best
+    goes_left = bucket <= best
+    count = int(goes_left.sum())
+    return axis, (goes_left if 0 < count < n else _halves(n))  # (an empty side would never end)
+
+
+def _halves(n: int) -> np.ndarray:
+    """The split of a range into its first and second half (the first half goes left)."""
+    goes_left = np.zeros(n, dtype=bool)
+    goes_left[: n // 2] = True
+    return goes_left
 
 
 

@@ -19,6 +19,7 @@ from typing import BinaryIO, Optional
 
 import numpy as np
 
+from .. import signals
 from ..errors import TracerError
 from ..intersect.mesh import NODE
 from ..threads import default_threads
@@ -218,3 +219,5 @@ try:
     _lib = _load()
 except (BuildError, OSError) as err:
     load_error = str(err) or type(err).__name__
+else:
+    signals.attach_library(_lib)  # (its signal handler and watchdog, while a command works: interrupt.h)

@@ -14,7 +14,8 @@ enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
-enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
+enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7,
+       SKIP_BUDGET = 8 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
 enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
 #define K_COUNT 10
@@ -51,7 +52,7 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
 #define RT_SDL_ACTIONS(X) X(0, sdl_light) X(1, sdl_global_ambient) X(2, sdl_background) X(3, sdl_min_reflectivity) X(4, sdl_min_transparency) X(5, sdl_max_recursion_depth) X(6, sdl_camera) X(7, sdl_color_material) X(8, sdl_float_material) X(9, sdl_texture) X(10, sdl_parameters) X(11, sdl_default_materials) X(12, sdl_translate) X(13, sdl_scale) X(14, sdl_rotate) X(15, sdl_push) X(16, sdl_pop) X(17, sdl_identity) X(18, sdl_shape)
 #define RT_SDL_ACTION_COUNT 19
 #define RAY_KIND_COUNT 4
-#define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
+#define N_COUNTS 9  /* rays cast per kind, then skipped per reason */
 
 /* the generic torus' ring radius (tracer.intersect.torus:RING_RADIUS) */
 #define TORUS_RING 1.0
@@ -63,6 +64,8 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
 #define MAX_OCTAVES 32
 /* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
 #define MAX_RECURSION_DEPTH 64
+/* reflected and transmitted rays one camera ray's tree may trace, unless rt_trace is given another (tracer.savings:RAY_BUDGET) */
+#define RAY_BUDGET 4096
 /* parameter slots per primitive in prim_param (the most any kind's intersection takes) (tracer.shapes:MAX_PARAMETERS) */
 #define PRIM_PARAMS 1
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
@@ -90,7 +93,7 @@ typedef struct {
     const int64_t *mesh_info;                /* 4 per mesh: node, triangle, vertex and normal counts */
     const double *mesh_extent;
     double mesh_constants[5];                /* tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT */
-    const uint8_t *const *mesh_nodes;        /* per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each */
+    const uint8_t *const *mesh_nodes;        /* per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each */
     const int32_t *const *mesh_order;        /* per mesh: leaf slot -> triangle */
     const int32_t *const *mesh_tri_vertex;   /* per mesh: 3 vertex indices per triangle */
     const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
@@ -310,7 +313,8 @@ int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *
 void rt_destroy(void *scene);
 int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads, char *error, int64_t capacity);
 int rt_set_sealed(void *scene, const uint8_t *sealed, int64_t count);
-int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors, int64_t *counts, int64_t threads, double cutoff, int64_t savings);
+/* 0; -1 out of memory; -2 stopped by `cancel` (polled at every ray; may be NULL) or a signal */
+int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors, int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget, const int32_t *cancel);
 int rt_first_hits(void *scene, int64_t n, const double *origins, const double *directions, double *t, double *normal, int32_t *shape, int32_t *object, int8_t *entering, int64_t threads);
 int rt_occluded(void *scene, int64_t n, const double *origins, const double *directions, double t_max, int8_t *blocked, int64_t threads);
 int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction, int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape, int32_t *part, double *uv, int8_t *inside_at_start);
@@ -324,10 +328,20 @@ void rt_free(void *buffer);
 SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int64_t words_length, const int32_t *codes, int64_t count, const double *defaults, int64_t shared_libm);
 void rt_sdl_free(SdlResult *res);
 const char *rt_sdl_decline_names(void);
+/* interrupt.h: the C handler and its watchdog; 0 on success */
+int rt_interrupt_install(int64_t grace_ms);
+void rt_interrupt_uninstall(void);
+void rt_interrupt_disarm(void);
+/* the signal heard since rt_interrupt_clear(), or 0 */
+int rt_interrupt_heard(void);
+void rt_interrupt_clear(void);
+/* the watchdog removes it if it ends the process; slot or -1 */
+int rt_interrupt_hold_file(const char *path);
+void rt_interrupt_release_file(int slot);
 int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "14afb16cc1d66757"
+#define RT_CONTRACT_DIGEST "3705aa591ad6fa03"
 
 #endif

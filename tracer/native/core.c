@@ -19,6 +19,7 @@
 #endif
 
 #include "core.h"
+#include "interrupt.h"
 #include "numeric.h"
 #include "shapes.h"
 #include "mesh.h"
@@ -88,7 +89,7 @@ typedef struct {
 typedef struct {
     SceneDesc d;
     MeshView *meshes;
-    TopNode *nodes;       /* only while building */
+    BvhNode *nodes;       /* only while building */
     int64_t n_nodes, tree_depth;
     PairNode *pairs;      /* none when the whole hierarchy is one leaf */
     int64_t n_pairs;
@@ -128,8 +129,19 @@ typedef struct {
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
     double cutoff;        /* tracer.savings: a secondary ray of smaller cumulative weight is not traced */
     int64_t savings;      /* SAVE_* bits: the other savings this trace makes */
+    int64_t ray_budget;   /* most reflected and transmitted rays one camera ray's tree may trace (see shade.h) */
+    int64_t rays_used;    /* reflected and transmitted rays traced for the current camera ray */
+    int64_t ray_limit;    /* ...which the current ray's descendants may bring up to this (shade.h) */
+    const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_trace's flag); may be NULL */
     int oom;
+    int stopped;          /* stop_requested() was seen: the colours are not to be used */
 } Work;
+
+/* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
+static inline int stop_requested(const Work *w)
+{
+    return rt_interrupt_heard() != 0 || (w->cancel != NULL && *w->cancel != 0);
+}
 
 static int work_init(Work *w, const Scene *S)
 {
@@ -720,17 +732,17 @@ static ShadeFn pick_shade(int64_t effects)
 /* ------------------------------------------------------------------------------------------------------
  * Building the scene: checks, mesh views, the top-level BVH */
 
-/* The built tree as PairNodes (see scene_first); frees the TopNodes. */
+/* The built tree as PairNodes (see scene_first); frees the BvhNodes. */
 static int pair_tree(Scene *S)
 {
-    const TopNode *nodes = S->nodes;
+    const BvhNode *nodes = S->nodes;
     S->n_pairs = 0;
     S->root_first = S->root_count = 0;
     if (S->n_nodes == 0)
         return 1;
     if (nodes[0].count) {
-        S->root_first = (int32_t)nodes[0].first;
-        S->root_count = (int32_t)nodes[0].count;
+        S->root_first = nodes[0].offset;
+        S->root_count = nodes[0].count;
         return 1;
     }
     int64_t *pair_of = (int64_t *)malloc((size_t)S->n_nodes * sizeof(int64_t));
@@ -749,12 +761,12 @@ static int pair_tree(Scene *S)
             continue;
         PairNode *p = &S->pairs[pair_of[k]];
         for (int c = 0; c < 2; c++) {
-            const TopNode *child = &nodes[nodes[k].left + c];
+            const BvhNode *child = &nodes[nodes[k].offset + c];
             for (int i = 0; i < 3; i++) {
                 p->b[i][0][c] = child->lo[i];
                 p->b[i][1][c] = child->hi[i];
             }
-            p->child[c] = (int32_t)(child->count ? child->first : pair_of[nodes[k].left + c]);
+            p->child[c] = (int32_t)(child->count ? child->offset : pair_of[nodes[k].offset + c]);
             p->count[c] = (int32_t)child->count;
         }
     }
@@ -964,7 +976,7 @@ static int64_t mesh_check_depth(const MeshView *m)
     stack[top++] = 1;
     while (top) {
         int64_t depth = stack[--top], node = stack[--top];
-        const MeshNode *nd = &m->nodes[node];
+        const BvhNode *nd = &m->nodes[node];
         if (++visited > m->n_nodes) { free(stack); return -1; }
         if (depth > deepest) deepest = depth;
         if (nd->count) {
@@ -1235,7 +1247,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
     for (int64_t k = 0; k < D->n_meshes && ok; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         MeshView *m = &S->meshes[k];
-        m->nodes = (const MeshNode *)D->mesh_nodes[k];
+        m->nodes = (const BvhNode *)D->mesh_nodes[k];
         m->n_nodes = info[0];
         m->n_tris = info[1];
         m->n_vertices = info[2];
@@ -1436,6 +1448,8 @@ typedef struct {
     ShadeFn shade;
     double cutoff;        /* JOB_TRACE: the savings it makes (Work.cutoff, Work.savings) */
     int64_t savings;
+    int64_t ray_budget;   /* JOB_TRACE: Work.ray_budget */
+    const volatile int32_t *cancel;  /* Work.cancel */
     _Atomic int64_t next;
 } Job;
 
@@ -1443,6 +1457,7 @@ typedef struct {
     Job *job;
     int64_t counts[N_COUNTS];
     int failed;
+    int stopped;
 } Worker;
 
 #define CHUNK 16
@@ -1459,6 +1474,8 @@ static void *run_worker(void *arg)
     }
     w.cutoff = job->cutoff;
     w.savings = job->savings;
+    w.ray_budget = job->ray_budget;
+    w.cancel = job->cancel;
     Media air;
     memset(&air, 0, sizeof(air));
     for (;;) {
@@ -1466,9 +1483,15 @@ static void *run_worker(void *arg)
         if (start >= job->n)
             break;
         int64_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
+        if (stop_requested(&w)) {
+            w.stopped = 1;
+            break;
+        }
         for (int64_t i = start; i < end; i++) {
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
+                w.rays_used = 0;
+                w.ray_limit = w.ray_budget;
                 job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
@@ -1493,13 +1516,15 @@ static void *run_worker(void *arg)
     }
     memcpy(wk->counts, w.counts, sizeof(wk->counts));
     wk->failed = w.oom;
+    wk->stopped = w.stopped;
     work_free(&w);
     return NULL;
 }
 
 #define MAX_THREADS 256
 
-/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure. */
+/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure, -2 when
+ * it stopped because stop_requested() (its results are then incomplete). */
 static int run_job(Job *job, int64_t threads, int64_t *counts)
 {
     if (threads < 1)
@@ -1517,25 +1542,31 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
         workers[k].job = job;
         memset(workers[k].counts, 0, sizeof(workers[k].counts));
         workers[k].failed = 0;
+        workers[k].stopped = 0;
         started[k] = 0;
     }
     for (int64_t k = 1; k < threads; k++)
         started[k] = pthread_create(&ids[k], NULL, run_worker, &workers[k]) == 0;
     run_worker(&workers[0]);
-    int failed = 0;
+    int failed = 0, stopped = 0;
     for (int64_t k = 0; k < threads; k++) {
         if (k > 0 && started[k])
             pthread_join(ids[k], NULL);
         failed |= workers[k].failed;
+        stopped |= workers[k].stopped;
         if (counts)
             for (int c = 0; c < N_COUNTS; c++)
                 counts[c] += workers[k].counts[c];
     }
-    return failed ? -1 : 0;
+    return failed ? -1 : stopped ? -2 : 0;
 }
 
+/* Shades n camera rays.  `ray_budget`: the most reflected and transmitted rays each one's tree traces (see
+ * shade.h); `cancel`: a flag polled at every ray (NULL: none) which, set, stops the batch: -2 is returned
+ * (as when a signal is heard, interrupt.h) and the colours are not to be used. */
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
-             int64_t *counts, int64_t threads, double cutoff, int64_t savings)
+             int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget,
+             const int32_t *cancel)
 {
     const Scene *S = (const Scene *)scene;
     Job job;
@@ -1549,6 +1580,8 @@ int rt_trace(void *scene, int64_t n, const double *origins, const double *direct
     job.shade = pick_shade(S->d.effects);
     job.cutoff = cutoff;
     job.savings = savings;
+    job.ray_budget = ray_budget < 0 ? 0 : ray_budget;
+    job.cancel = cancel;
     counts[RAY_CAMERA] += n;
     return run_job(&job, threads, counts);
 }

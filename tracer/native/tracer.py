@@ -18,7 +18,7 @@ import numpy as np
 
 from .. import native as library
 from ..compile import CompiledScene
-from ..errors import TracerError
+from ..errors import RenderCancelled, TracerError
 from ..intersect import mesh as mesh_module
 from ..intersect.hits import HitArrays
 from ..savings import RaySavings
@@ -137,6 +137,9 @@ class NativeTracer:
         self.savings = RaySavings() if savings is None else savings
         if self.savings.inside_shadows and "shadows" in compiled.effects:
             self._core.send_sealed(sealed_table(compiled))
+        #: ``cancel() -> bool``, asked every 50 ms while a batch is traced: True stops it (RenderCancelled).
+        self.cancel = None
+        self._stop = np.zeros(1, dtype=np.int32)  # the flag the C core polls at every ray
 
     def object_tree(self) -> tuple[bytes, np.ndarray, tuple[int, ...]]:
         """The C core's object hierarchy as built (for tests): its PairNode records as bytes, the bounded
@@ -156,12 +159,39 @@ class NativeTracer:
         o, d = _rays(origins, directions)
         colors = np.empty_like(o)
         counts = np.zeros(len(fields(RayCounts)), dtype=np.int64)
-        if library._lib.rt_trace(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                                 _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads,
-                                 float(self.savings.cutoff), self.savings.flags()) != 0:
+        status = self._polling_cancel(lambda: library._lib.rt_trace(
+            self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
+            _ptr(colors, ctypes.c_double), _ptr(counts, ctypes.c_int64), self.threads, float(self.savings.cutoff),
+            self.savings.flags(), int(self.savings.ray_budget), _ptr(self._stop, ctypes.c_int32)))
+        if status == -2:  # stopped: by a signal (whose Python handler runs now) or by self.cancel
+            raise RenderCancelled("render cancelled")
+        if status != 0:
             raise MemoryError("the C core ran out of memory")
         self.counts.add(RayCounts(*(int(c) for c in counts)))
         return colors
+
+    def _polling_cancel(self, call):
+        """``call()`` (a C function that polls self._stop), asking ``self.cancel`` every 50 ms meanwhile:
+        the call runs on a thread of its own (ctypes lets go of the interpreter while C runs) and this one
+        sets the flag when cancel() says so, or when it is interrupted itself."""
+        self._stop[0] = 0
+        if self.cancel is None:
+            return call()
+        import threading  # deferred: a command-line render, which has no cancel callback, never loads it
+
+        outcome = []
+        worker = threading.Thread(target=lambda: outcome.append(call()), name="sdl-tracer-batch", daemon=True)
+        worker.start()
+        try:
+            while worker.is_alive():
+                worker.join(0.05)
+                if worker.is_alive() and self.cancel():
+                    self._stop[0] = 1
+        finally:
+            self._stop[0] = 1  # (a no-op when the batch is done; else it ends it before this frame unwinds)
+            worker.join()
+            self._stop[0] = 0
+        return outcome[0]
 
     def first_hits(self, origins, directions) -> dict[str, np.ndarray]:
         """The nearest hit with t > 0 per ray: t (inf on a miss), unit world normal, shape, object, entering."""
@@ -172,7 +202,7 @@ class NativeTracer:
         if library._lib.rt_first_hits(self._handle, n, _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
                                       _ptr(out["t"], ctypes.c_double), _ptr(out["normal"], ctypes.c_double),
                                       _ptr(out["shape"], ctypes.c_int32), _ptr(out["obj"], ctypes.c_int32),
-                                      _ptr(out["entering"], ctypes.c_int8), self.threads) != 0:
+                                      _ptr(out["entering"], ctypes.c_int8), self.threads) == -1:
             raise MemoryError("the C core ran out of memory")
         out["entering"] = out["entering"].astype(bool)
         return out
@@ -182,7 +212,7 @@ class NativeTracer:
         o, d = _rays(origins, directions)
         blocked = np.empty(len(o), np.int8)
         if library._lib.rt_occluded(self._handle, len(o), _ptr(o, ctypes.c_double), _ptr(d, ctypes.c_double),
-                                    float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) != 0:
+                                    float(t_max), _ptr(blocked, ctypes.c_int8), self.threads) == -1:
             raise MemoryError("the C core ran out of memory")
         return blocked.astype(bool)
 

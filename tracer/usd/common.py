@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import signals
 from ..errors import TracerError
 from ..model import iter_shapes
 
@@ -62,7 +63,10 @@ FORMAT_VERSION = 1
 def pxr():
     """The pxr modules we use, or a TracerError saying how to get them."""
     try:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, Vt  # noqa: F401
+        # usd-core's module loader catches any exception raised while its modules load, a KeyboardInterrupt
+        # too, and goes on with the rest half set up: a signal meanwhile is acted on once they are loaded.
+        with signals.shielded():
+            from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, Vt  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise TracerError("USD files need the usd-core package: pip install usd-core") from exc
     import pxr as module

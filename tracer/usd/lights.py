@@ -10,6 +10,7 @@ from typing import Optional
 import numpy as np
 
 from ..model import Light
+from ..numerics import norm3
 from . import common as C
 
 A_KIND = "sdl:kind"
@@ -32,7 +33,7 @@ READ_TYPES = ("SphereLight", "DistantLight", "RectLight", "DiskLight")
 
 def _unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
-    return v / np.sqrt(v @ v)
+    return v / norm3(v)
 
 
 def light_matrix(light: Light) -> np.ndarray:

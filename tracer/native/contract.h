@@ -93,7 +93,7 @@ typedef struct {
     const int64_t *mesh_info;                /* 4 per mesh: node, triangle, vertex and normal counts */
     const double *mesh_extent;
     double mesh_constants[5];                /* tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT */
-    const uint8_t *const *mesh_nodes;        /* per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each */
+    const uint8_t *const *mesh_nodes;        /* per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each */
     const int32_t *const *mesh_order;        /* per mesh: leaf slot -> triangle */
     const int32_t *const *mesh_tri_vertex;   /* per mesh: 3 vertex indices per triangle */
     const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
@@ -342,6 +342,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "998aa150db981848"
+#define RT_CONTRACT_DIGEST "643f6b0c907b6cac"
 
 #endif

@@ -196,7 +196,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mesh_extent", "*f64"),
     F("mesh_constants", "f64", "tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, "
       "PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT", length=5),
-    F("mesh_nodes", "**u8", "per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each"),
+    F("mesh_nodes", "**u8", "per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each"),
     F("mesh_order", "**i32", "per mesh: leaf slot -> triangle"),
     F("mesh_tri_vertex", "**i32", "per mesh: 3 vertex indices per triangle"),
     F("mesh_tri_normal", "**i32", "per mesh: 3 normal indices per triangle (< 0: none), or NULL"),

@@ -89,7 +89,7 @@ typedef struct {
 typedef struct {
     SceneDesc d;
     MeshView *meshes;
-    TopNode *nodes;       /* only while building */
+    BvhNode *nodes;       /* only while building */
     int64_t n_nodes, tree_depth;
     PairNode *pairs;      /* none when the whole hierarchy is one leaf */
     int64_t n_pairs;
@@ -795,17 +795,17 @@ static ShadeFn pick_shade(int64_t effects)
 /* ------------------------------------------------------------------------------------------------------
  * Building the scene: checks, mesh views, the top-level BVH */
 
-/* The built tree as PairNodes (see scene_first); frees the TopNodes. */
+/* The built tree as PairNodes (see scene_first); frees the BvhNodes. */
 static int pair_tree(Scene *S)
 {
-    const TopNode *nodes = S->nodes;
+    const BvhNode *nodes = S->nodes;
     S->n_pairs = 0;
     S->root_first = S->root_count = 0;
     if (S->n_nodes == 0)
         return 1;
     if (nodes[0].count) {
-        S->root_first = (int32_t)nodes[0].first;
-        S->root_count = (int32_t)nodes[0].count;
+        S->root_first = nodes[0].offset;
+        S->root_count = nodes[0].count;
         return 1;
     }
     int64_t *pair_of = (int64_t *)malloc((size_t)S->n_nodes * sizeof(int64_t));
@@ -824,12 +824,12 @@ static int pair_tree(Scene *S)
             continue;
         PairNode *p = &S->pairs[pair_of[k]];
         for (int c = 0; c < 2; c++) {
-            const TopNode *child = &nodes[nodes[k].left + c];
+            const BvhNode *child = &nodes[nodes[k].offset + c];
             for (int i = 0; i < 3; i++) {
                 p->b[i][0][c] = child->lo[i];
                 p->b[i][1][c] = child->hi[i];
             }
-            p->child[c] = (int32_t)(child->count ? child->first : pair_of[nodes[k].left + c]);
+            p->child[c] = (int32_t)(child->count ? child->offset : pair_of[nodes[k].offset + c]);
             p->count[c] = (int32_t)child->count;
         }
     }
@@ -1039,7 +1039,7 @@ static int64_t mesh_check_depth(const MeshView *m)
     stack[top++] = 1;
     while (top) {
         int64_t depth = stack[--top], node = stack[--top];
-        const MeshNode *nd = &m->nodes[node];
+        const BvhNode *nd = &m->nodes[node];
         if (++visited > m->n_nodes) { free(stack); return -1; }
         if (depth > deepest) deepest = depth;
         if (nd->count) {
@@ -1310,7 +1310,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
     for (int64_t k = 0; k < D->n_meshes && ok; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         MeshView *m = &S->meshes[k];
-        m->nodes = (const MeshNode *)D->mesh_nodes[k];
+        m->nodes = (const BvhNode *)D->mesh_nodes[k];
         m->n_nodes = info[0];
         m->n_tris = info[1];
         m->n_vertices = info[2];

@@ -124,7 +124,7 @@ def render_settings(scene) -> dict:
     unregistered after it: see addon._MODULES)."""
     s = scene.sdl_render
     return dict(block_size=s.block_size, progressive=s.progressive, threads=s.threads, samples=s.samples,
-                sampling=s.sampling.lower(), threshold=s.threshold)
+                sampling=s.sampling.lower())
 
 
 def blocky_warning(block_size: int) -> str:

@@ -4,7 +4,7 @@
   with a Principled BSDF and the viewport colour that look close to it.
 * ``World.sdl``: background, global ambient light and the reflection/transparency thresholds.
 * ``Scene.sdl_render``: the render engine's settings (block size, progressive refinement, recursion
-  depth, threads, samples per pixel, sampling mode and adaptive threshold).
+  depth, threads, samples per pixel and sampling mode).
 """
 from __future__ import annotations
 
@@ -112,10 +112,12 @@ class SDLRenderSettings(bpy.types.PropertyGroup):
     sampling: EnumProperty(name="Sampling", default="JITTERED", items=[
         ("REGULAR", "Regular", "A grid of sub-pixel centres"),
         ("JITTERED", "Jittered", "One random point in each cell of the grid (repeatable)"),
-        ("ADAPTIVE", "Adaptive", "One ray per pixel, then all samples only where neighbours differ by more "
-                                 "than the threshold")])
+        ("ADAPTIVE", "Adaptive", "About Samples rays per pixel on average: one through each centre, the rest "
+                                 "where an error model says they lower the image's error most")])
+    # No longer used (adaptive sampling places its rays by an error model, tracer.adaptive) and not shown:
+    # kept so that files and scripts that set it still load and run.
     threshold: FloatProperty(name="Threshold", default=0.05, min=0.0, soft_max=1.0,
-                             description="Adaptive sampling: colour difference that makes a pixel refined")
+                             description="Not used: adaptive sampling places its rays by an error model")
     light_samples: IntProperty(name="Light Samples", default=16, min=1, max=1024,
                                description="Shadow rays per shaded point for each light with an extent (a radius, "
                                            "a sun's angle, an area light): soft shadows")

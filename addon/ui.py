@@ -40,9 +40,6 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = settings.samples > 1
         sub.prop(settings, "sampling")
-        row = sub.row()
-        row.active = settings.sampling == "ADAPTIVE"
-        row.prop(settings, "threshold")
         layout.column().prop(settings, "light_samples")
         layout.column().prop(settings, "target_error")
         # Blender's own switch (Cycles shows it under Performance): keep this engine between final renders,

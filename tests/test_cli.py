@@ -83,7 +83,6 @@ def test_messy_file_stops_by_default_and_renders_with_lenient(tmp_path):
     (("render", "scenes/lecture.sdl", "-o", "x.unknown"), ".unknown"),
     (("render", "scenes/lecture.sdl", "-o", "x.png", "--block-size", "0"), "block size"),
     (("render", "scenes/lecture.sdl", "-o", "x.png", "--threads", "0"), "threads"),
-    (("render", "scenes/lecture.sdl", "-o", "x.png", "--sampling", "adaptive", "--threshold", "nan"), "threshold"),
     (("convert", "scenes/lecture.sdl", "/no/such/folder/x.sdl"), "/no/such/folder' does not exist"),
 ])
 def test_bad_requests_get_one_line(args, fragment):
@@ -102,6 +101,21 @@ def test_target_error_names_the_options_it_replaces(tmp_path):
     assert proc.stderr.splitlines() == ["warning: --target-error chooses the samples itself: --samples ignored"]
     proc = run(*common)
     assert proc.returncode == 0 and "warning:" not in proc.stderr, proc.stderr
+
+
+def test_the_adaptive_threshold_is_no_longer_used_and_says_so(tmp_path):
+    """--threshold (adaptive sampling's neighbour difference, before it spent its samples by an error model)
+    still parses, so that scripts run on, with a warning; the image is the one without it."""
+    common = ("render", ROOT / "scenes" / "lecture.sdl", "--width", 16, "--height", 12, "-q", "--samples", 4,
+              "--sampling", "adaptive")
+    proc = run(*common, "-o", tmp_path / "with.png", "--threshold", "0.1")
+    assert proc.returncode == 0, proc.stderr
+    assert [line for line in proc.stderr.splitlines() if line.startswith("warning:")] == [
+        "warning: --threshold is no longer used: adaptive sampling spends about --samples rays per pixel where "
+        "its error model says they lower the image's error most (docs/accuracy.md)"]
+    proc = run(*common, "-o", tmp_path / "without.png")
+    assert proc.returncode == 0 and "warning:" not in proc.stderr, proc.stderr
+    assert (tmp_path / "with.png").read_bytes() == (tmp_path / "without.png").read_bytes()
 
 
 # Runs the CLI as an installation without Pillow would: importing PIL fails, and tracing (which must not

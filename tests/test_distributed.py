@@ -68,14 +68,14 @@ def _cluster_render(client, path, job, times=(None,), on_tile=None, eight_bit=Fa
 def _local_render(path, job, time=None, eight_bit=False):
     return tracer.render(dist.read_scene(path, time=time), job.width, job.height, block_size=job.block_size,
                          progressive=job.progressive, tile=job.tile, samples=job.samples,
-                         sampling_mode=job.sampling_mode, threshold=job.threshold, seed=job.seed,
+                         sampling_mode=job.sampling_mode, seed=job.seed,
                          eight_bit=eight_bit)
 
 
 @pytest.mark.parametrize("eight_bit", [False, True])
 @pytest.mark.parametrize("job", [
     dist.Job(64, 48, samples=4, tile=16),  # jittered
-    dist.Job(64, 48, samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),
+    dist.Job(64, 48, samples=4, sampling_mode="adaptive", tile=16),
     dist.Job(50, 30, block_size=8, progressive=True, tile=16),
 ])
 def test_cluster_render_equals_local_bytes(client, job, eight_bit):

@@ -169,7 +169,7 @@ def test_rays_go_through_pixel_centres():
     dict(block_size=8, progressive=True, tile=16),
     dict(samples=4, sampling_mode="jittered", tile=16),
     dict(samples=4, sampling_mode="regular", block_size=2, progressive=True),
-    dict(samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),
+    dict(samples=4, sampling_mode="adaptive", tile=16),
     dict(target_error=0.05),
 ])
 def test_eight_bit_render_keeps_the_bytes_of_the_float_film(settings):
@@ -195,7 +195,7 @@ def test_eight_bit_render_keeps_the_bytes_of_the_float_film(settings):
     dict(block_size=8, progressive=True, tile=16),
     dict(samples=4, sampling_mode="jittered", tile=16),
     dict(block_size=64),  # a block (and so a tile) taller than the image
-    dict(samples=4, sampling_mode="adaptive", threshold=0.02, tile=16),  # rows given at the end
+    dict(samples=4, sampling_mode="adaptive", tile=16),  # rows given at the end
     dict(target_error=0.05),
 ])
 def test_rows_handed_over_as_bands_finish_are_the_eight_bit_image(settings):

@@ -1,13 +1,18 @@
 """Anti-aliasing: regular, jittered and adaptive supersampling."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import tracer
 from helpers import Camera, scene_of, shape
+from tracer.compile import compile_scene
 from tracer import sampling
 from tracer.errors import TracerError
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
 
 def _edge_scene():
@@ -31,7 +36,7 @@ def test_aliased_edges_have_no_partial_pixels_and_antialiased_ones_do():
         partial = (smooth > 0.02) & (smooth < 0.98)
         assert partial.sum() > 20, mode
         # Partial pixels lie only along the edges of the square (within a pixel of the aliased steps).
-        edges = sampling.contrast_mask(aliased[..., None].repeat(3, axis=2), 0.5)
+        edges = _differs_from_a_neighbour(aliased)
         near_edges = edges.copy()
         for axis in (0, 1):
             for step in (-1, 1):
@@ -39,15 +44,49 @@ def test_aliased_edges_have_no_partial_pixels_and_antialiased_ones_do():
         assert np.all(near_edges[partial])
 
 
-def test_ray_counts_and_adaptive_economy():
+def _differs_from_a_neighbour(image: np.ndarray) -> np.ndarray:
+    """Pixels of a (H, W) image whose value differs from a 4-neighbour's."""
+    mask = np.zeros(image.shape, dtype=bool)
+    vertical, horizontal = np.diff(image, axis=0) != 0, np.diff(image, axis=1) != 0
+    mask[:-1] |= vertical
+    mask[1:] |= vertical
+    mask[:, :-1] |= horizontal
+    mask[:, 1:] |= horizontal
+    return mask
+
+
+def test_adaptive_spends_about_n_rays_per_pixel_on_the_edges():
+    """Adaptive N: N camera rays per pixel on average at most, most of them spent (here, with few distinct
+    edges, the ladder's steps leave more unspent than on the bundled scenes); the pixels whose centre rays
+    show no edge keep their colour (a pilot pixel's jittered rays of a flat colour give it again), the edges
+    get partial colours."""
+    from tracer.target import centre_error
+
     full = tracer.render(_edge_scene(), 40, 30, samples=9, sampling_mode="regular")
     assert full.rays.camera == 40 * 30 * 9
     adaptive = tracer.render(_edge_scene(), 40, 30, samples=9, sampling_mode="adaptive")
+    assert 0.8 * full.rays.camera <= adaptive.rays.camera <= full.rays.camera
     base = tracer.render(_edge_scene(), 40, 30).image
-    refined = sampling.contrast_mask(base, sampling.DEFAULT_THRESHOLD)
-    assert adaptive.rays.camera == 40 * 30 + refined.sum() * 9
-    assert adaptive.rays.camera < full.rays.camera / 3
-    assert np.array_equal(adaptive.image[~refined], base[~refined])
+    unseen = centre_error(base) == 0.0
+    assert 0.5 < unseen.mean() < 1.0
+    assert np.array_equal(adaptive.image[unseen], base[unseen])
+    near_edges = adaptive.image[~unseen][:, 0]
+    assert np.count_nonzero((near_edges > 0.02) & (near_edges < 0.98)) > 0.5 * near_edges.size
+
+
+def test_adaptive_keeps_converging_where_centre_rays_see_no_edge():
+    """On scenes/textures.sdl's bricks and checks, centre rays look smooth where a pixel holds fine texture:
+    adaptive sampling that refines only what they show stopped improving from 16 samples on (at 0.037,
+    docs/accuracy.md).  Now 128 samples have a quarter of 16's error, close to uniform jittered 128's."""
+    scene = compile_scene(tracer.load(SCENES / "textures.sdl"))
+
+    def error(samples, mode):
+        image = tracer.render(scene, 48, 36, samples=samples, sampling_mode=mode).image
+        return float(np.sqrt(np.mean((np.clip(image, 0, 1) - reference) ** 2)))
+
+    reference = np.clip(tracer.render(scene, 48, 36, samples=512, seed=99).image, 0, 1)
+    sixteen, many = error(16, "adaptive"), error(128, "adaptive")
+    assert many < 0.4 * sixteen and many < 1.25 * error(128, "jittered")
 
 
 def test_strata():

@@ -50,7 +50,8 @@ def test_uniforms_are_spread_evenly():
 
 @pytest.mark.parametrize("settings", [
     dict(samples=4, sampling_mode="jittered"),
-    dict(samples=4, sampling_mode="adaptive", threshold=0.02),
+    dict(samples=4, sampling_mode="adaptive"),
+    dict(samples=16, sampling_mode="adaptive", block_size=4, progressive=True),
     dict(samples=1, block_size=8, progressive=True),
     dict(samples=4, block_size=4, progressive=True, sampling_mode="jittered"),
 ])
@@ -62,29 +63,34 @@ def test_any_tile_size_gives_the_same_bytes(compiled, settings):
 
 
 def test_tiles_of_a_pass_in_any_order_and_whole_tiles_at_once_give_the_same_film(compiled):
-    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=4, progressive=True, tile=16, samples=4,
-                          sampling_mode="adaptive", threshold=0.02)
+    from tracer import adaptive
+
+    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=4, progressive=True, tile=16, samples=8,
+                          sampling_mode="adaptive")
     shade = _shade(compiled, plan)
-    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=4, progressive=True, tile=16, samples=4,
-                             sampling_mode="adaptive", threshold=0.02).image[::-1]
+    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=4, progressive=True, tile=16, samples=8,
+                             sampling_mode="adaptive").image[::-1]
     # Pass by pass, each pass's tiles in reverse order.
     film = np.zeros((HEIGHT, WIDTH, 3), np.float32)
-    refine = None
+    run = tiles.TileRun(plan, film, lambda checkpoint: shade)
     for p in range(plan.pass_count):
         for item in reversed(plan.pass_items(p)):
-            if plan.is_refinement(item) and refine is None:
-                refine = plan.refine_mask(film)
-            tiles.trace_tile(plan, item, film, shade, refine)
+            run.trace(item)
     assert np.array_equal(film, expected)
-    # Tile by tile, every block pass of a tile at once into a window of its own (as a cluster worker does),
-    # then the refinement pass on the assembled film.
+    # Tile by tile, every block pass of a tile and its pilot at once into a window of its own (as a cluster
+    # worker does), then the refinement judged on the assembled film and traced tile by tile.
     film = np.zeros((HEIGHT, WIDTH, 3), np.float32)
-    for r0, c0, r1, c1 in reversed(plan.rects):
-        film[r0:r1, c0:c1] = tiles.trace_rect(plan, (r0, c0, r1, c1), shade)
-    refine = plan.refine_mask(film)
-    assert refine.any() and not refine.all()
-    for item in plan.pass_items(len(plan.passes)):
-        tiles.trace_tile(plan, item, film, shade, refine)
+    pilot = {}
+    for rect in reversed(plan.rects):
+        r0, c0, r1, c1 = rect
+        film[r0:r1, c0:c1] = tiles.trace_rect(plan, rect, shade)
+        pilot[rect] = adaptive.trace_pilot(plan, rect, shade)
+    counts = adaptive.refinement(plan, film, pilot.values())
+    assert counts.any() and not counts.all() and np.array_equal(counts, run.refinement)
+    for rect in reversed(plan.rects):
+        r0, c0, r1, c1 = rect
+        rows, cols, values = adaptive.trace_refinement(plan, rect, shade, counts[r0:r1, c0:c1], pilot[rect])
+        film[rows, cols] = values
     assert np.array_equal(film, expected)
 
 
@@ -99,7 +105,10 @@ def test_plan_cuts_tiles_on_every_stride():
     assert len(plan.items) == 3 * len(plan.rects)
     assert [item.pass_index for item in plan.items] == sorted(item.pass_index for item in plan.items)
     adaptive = tiles.TilePlan(100, 50, samples=4, sampling_mode="adaptive")
-    assert adaptive.pass_count == 2 and adaptive.per_pixel == 1 and adaptive.is_refinement(adaptive.items[-1])
+    assert adaptive.pass_count == 3 and adaptive.per_pixel == 1 and adaptive.is_refinement(adaptive.items[-1])
+    rects = len(adaptive.rects)
+    assert [item.pass_index for item in adaptive.items] == [0] * rects + [1] * rects + [2] * rects
+    assert adaptive.is_pilot(adaptive.items[rects]) and not adaptive.is_refinement(adaptive.items[rects])
 
 
 def test_the_addon_traces_the_same_pixels_as_the_command_line(compiled):
@@ -123,55 +132,67 @@ def test_the_addon_on_threads_traces_the_same_pixels(compiled, sampling_mode):
     frame = CameraFrame.from_camera(compiled.scene.camera, 24 / 18)
     options = dict(block_size=4, progressive=True, tile=8, samples=4, seed=7, backend="numpy")
     renderer = blocks.BlockRenderer(compiled, tiles.camera_rays_for(frame, 24, 18), 24, 18, threads=3,
-                                    sampling=sampling_mode, threshold=0.02, **options)
+                                    sampling=sampling_mode, **options)
     assert renderer.item_threads == 3
     reported = []
     renderer.run(on_item=reported.append)
-    expected = tracer.render(compiled, 24, 18, sampling_mode=sampling_mode, threshold=0.02, **options).image
+    expected = tracer.render(compiled, 24, 18, sampling_mode=sampling_mode, **options).image
     assert np.array_equal(renderer.color, expected[::-1])
     assert sorted(map(renderer.items.index, reported)) == list(range(len(renderer.items)))  # each once
     assert [item.pass_index for item in reported] == sorted(item.pass_index for item in reported)
-    assert renderer.finished and renderer.pass_count == 3 + (sampling_mode == "adaptive")
+    assert renderer.finished and renderer.pass_count == 3 + 2 * (sampling_mode == "adaptive")
     with pytest.raises(blocks.Cancelled):
         blocks.BlockRenderer(compiled, tiles.camera_rays_for(frame, 24, 18), 24, 18, threads=3,
                              **options).run(cancel=lambda: True)
 
 
-def test_a_tile_run_keeps_its_refinement_mask(compiled):
-    """TileRun judges the refinement mask once, on the film the block passes left: tiles traced one at a time
-    (the viewport's slices), after earlier refinement tiles changed the film, give the whole render's bytes."""
-    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=2, progressive=True, tile=16, samples=4,
-                          sampling_mode="adaptive", threshold=0.02)
+def test_a_tile_run_keeps_its_refinement(compiled):
+    """TileRun judges the refinement once, on the film the block passes left and the pilot: tiles traced one
+    at a time (the viewport's slices), after earlier refinement tiles changed the film, give the whole
+    render's bytes."""
+    from tracer import adaptive
+
+    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=2, progressive=True, tile=16, samples=8,
+                          sampling_mode="adaptive")
     film = np.zeros((HEIGHT, WIDTH, 3), dtype=np.float32)
     shade = _shade(compiled, plan)
     run = tiles.TileRun(plan, film, lambda checkpoint: shade)
     for item in plan.items:
-        if plan.is_refinement(item) and run.refine is None:
-            after_the_block_passes = plan.refine_mask(film)
+        if plan.is_refinement(item) and run.refinement is None:
+            after_the_block_passes = adaptive.refinement(plan, film.copy(), run.pilot.values())
         run.trace(item)
-    assert after_the_block_passes.any() and np.array_equal(run.refine, after_the_block_passes)
-    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=2, progressive=True, tile=16, samples=4,
-                             sampling_mode="adaptive", threshold=0.02).image
+    assert after_the_block_passes.any() and np.array_equal(run.refinement, after_the_block_passes)
+    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=2, progressive=True, tile=16, samples=8,
+                             sampling_mode="adaptive").image
     assert np.array_equal(film, expected[::-1])
 
 
-@pytest.mark.parametrize("rows_a_band", [1, 2, 5, HEIGHT])
-def test_refinement_mask_judged_in_bands_is_the_whole_film_mask(monkeypatch, rows_a_band):
-    """The mask is judged a band of rows at a time (no full-size float temporaries): bands of any height,
-    not dividing the image's, mark exactly the pixels the whole film's contrast marks."""
-    from tracer import imageio
+@pytest.mark.parametrize("rows_a_band", [1, 2, 5])
+def test_the_refinement_judged_in_bands_is_the_whole_film_s(monkeypatch, rows_a_band):
+    """The refinement is judged a band of rows at a time (no full-size float temporaries): bands of any
+    height, not dividing the image's, give each pixel the e0 of the whole film and the same rays."""
+    from tracer import adaptive, imageio, target
 
     rng = np.random.default_rng(rows_a_band)
     film = rng.uniform(0, 1, size=(HEIGHT, WIDTH, 4)).astype(np.float32)  # (a fourth channel is not judged)
     film[..., :3] = np.where(rng.uniform(size=(HEIGHT, WIDTH, 1)) < 0.9, 0.5, film[..., :3])
-    plan = tiles.TilePlan(WIDTH, HEIGHT, samples=4, sampling_mode="adaptive", threshold=0.1)
+    plan = tiles.TilePlan(WIDTH, HEIGHT, samples=64, sampling_mode="adaptive")
+    pixels = np.flatnonzero(rng.uniform(size=HEIGHT * WIDTH) < 1 / 16)
+    pilot = [adaptive.PilotTile(pixels, rng.uniform(0, 1, size=(2, pixels.size, 4)))]
+    whole = adaptive.refinement(plan, film, pilot)
     monkeypatch.setattr(imageio, "BAND_VALUES", rows_a_band * WIDTH * 4)
-    expected = sampling.contrast_mask(film[..., :3], 0.1)
-    assert expected.any() and not expected.all()
-    assert np.array_equal(plan.refine_mask(film), expected)
-    assert np.array_equal(plan.refine_mask(film[::-1]), expected[::-1])  # a film seen through a flipped view
+    e0 = np.concatenate([band for _, _, band in adaptive._centre_errors(film)])
+    assert np.array_equal(e0, target.centre_error(np.clip(film[..., :3], 0, 1)))
+    banded = adaptive.refinement(plan, film, pilot)
+    assert np.array_equal(banded, whole)
+    assert len(np.unique(whole)) >= 2 and whole.min() >= adaptive.every_pixel(plan) == 4
+    # The same film through a view of an image kept top row first (as tracer.render keeps it); the pilot's
+    # tiles in any order.
+    seen_flipped = film[::-1].copy()[::-1]
+    halves = [adaptive.PilotTile(pixels[k::2], pilot[0].means[:, k::2]) for k in (1, 0)]
+    assert np.array_equal(adaptive.refinement(plan, seen_flipped, halves), whole)
     with pytest.raises(ValueError, match="float film"):
-        plan.refine_mask(film.astype(np.uint8))
+        adaptive.refinement(plan, film.astype(np.uint8), pilot)
 
 
 def test_an_eight_bit_film_gets_the_bytes_of_the_float_film(compiled):

@@ -16,7 +16,7 @@ import numpy as np
 
 # (Everything the tracer package itself imports (tracer/__init__.py: the reader, compiling, rendering) is
 # imported here as usual: the program has loaded it anyway.  What only some commands use is imported by them.)
-from . import sampling, signals
+from . import signals
 from .backend import load_core
 from .bulk import collector_paused, one_blas_thread
 from .compile import compile_scene, fold_tree
@@ -62,11 +62,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--samples", type=int, default=1, metavar="N",
                    help="rays per pixel for anti-aliasing (default 1: one ray through the pixel centre)")
     r.add_argument("--sampling", choices=("regular", "jittered", "adaptive"), default="jittered",
-                   help="where the samples go: a regular grid, one random point per stratum, or jittered "
-                        "samples only where neighbouring pixels differ (default jittered)")
-    r.add_argument("--threshold", type=float, default=sampling.DEFAULT_THRESHOLD,
-                   help="adaptive sampling: colour difference between neighbours that triggers refinement "
-                        f"(default {sampling.DEFAULT_THRESHOLD})")
+                   help="where the samples go: a regular grid, one random point per stratum, or about N "
+                        "rays per pixel on average, jittered, where an error model says they lower the "
+                        "image's error most (default jittered)")
+    r.add_argument("--threshold", type=float, default=None, help=argparse.SUPPRESS)  # no longer used: warned
     r.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto",
                    help="who does the per-ray work (default: the C core when it is built)")
     r.add_argument("--threads", type=int, default=None, metavar="N",
@@ -76,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--target-error", type=float, default=None, metavar="E",
                    help="sample until the image's estimated RMSE (linear colour clipped to [0, 1]; 1/255 is "
                         "one 8-bit step) is at most E, rays going where they lower it most, and report the "
-                        "estimate (replaces --samples, --sampling, --threshold, --block-size and --progressive)")
+                        "estimate (replaces --samples, --sampling, --block-size and --progressive)")
     r.add_argument("--per-pixel", action="store_true",
                    help="with --target-error: every pixel's standard error at most E instead of the image's "
                         "RMSE (many more rays)")
@@ -217,7 +216,7 @@ def _savings(args):
 
 
 #: The fixed-sampling options that --target-error replaces (argparse names), in the order --help lists them.
-REPLACED_BY_TARGET_ERROR = ("block_size", "progressive", "samples", "sampling", "threshold")
+REPLACED_BY_TARGET_ERROR = ("block_size", "progressive", "samples", "sampling")
 
 
 def _replaced_options_given(args) -> list[str]:
@@ -230,6 +229,9 @@ def _replaced_options_given(args) -> list[str]:
 
 def _render(args) -> int:
     image_format = output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing)
+    if args.threshold is not None:
+        print("warning: --threshold is no longer used: adaptive sampling spends about --samples rays per pixel "
+              "where its error model says they lower the image's error most (docs/accuracy.md)", file=sys.stderr)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
             raise TracerError("--target-error cannot be combined with --scheduler or --frames")
@@ -256,9 +258,8 @@ def _render(args) -> int:
     load_core(args.backend)  # a first-use compile of the C core is not render time
     progress = _Progress(not args.quiet)
     options = dict(block_size=args.block_size, progressive=args.progressive, on_tile=progress,
-                   samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
-                   backend=args.backend, threads=args.threads, savings=savings, target_error=args.target_error,
-                   error_per_pixel=args.per_pixel)
+                   samples=args.samples, sampling_mode=args.sampling, backend=args.backend, threads=args.threads,
+                   savings=savings, target_error=args.target_error, error_per_pixel=args.per_pixel)
     try:
         if image_format == "PNG":  # the rows go into the file as bands of tiles are done: no whole image kept
             check_size(args.width, args.height)
@@ -313,9 +314,8 @@ def _render_job(args) -> int:
         raise TracerError(f"--tile must be 1 or more, not {args.tile}")
     tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
-                   tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
-                   backend=args.backend, threads=args.threads, max_depth=args.max_depth,
-                   savings=_savings(args))
+                   tile=tile, samples=args.samples, sampling_mode=args.sampling, backend=args.backend,
+                   threads=args.threads, max_depth=args.max_depth, savings=_savings(args))
     job.plan()  # bad settings are reported before any cluster starts
     load_core(args.backend)  # a first-use compile of the C core is not render time
     started = time.perf_counter()
@@ -336,8 +336,8 @@ def _render_job(args) -> int:
                     scene.settings.max_recursion_depth = args.max_depth
                 result = render(scene, args.width, args.height, block_size=args.block_size,
                                 progressive=args.progressive, tile=tile, on_tile=progress, samples=args.samples,
-                                sampling_mode=args.sampling, threshold=args.threshold, backend=args.backend,
-                                threads=args.threads, savings=job.savings, eight_bit=True)
+                                sampling_mode=args.sampling, backend=args.backend, threads=args.threads,
+                                savings=job.savings, eight_bit=True)
                 write(index, result.image, result.rays, result.backend)
         else:
             bundle = dist.SceneBundle.of(args.scene, scene, args.lenient)

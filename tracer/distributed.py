@@ -7,10 +7,11 @@ and reaches Slurm, PBS or Kubernetes through dask-jobqueue and dask-kubernetes. 
   assets), as bytes.  It is scattered to every worker once; each worker process unpacks it into a
   folder of its own, reads and compiles it once per frame and keeps the compiled scene (and one backend
   tracer per worker thread) while tiles arrive.
-* Tasks are tiles of :mod:`tracer.tiles`: one task traces every block pass of one tile of one frame; with
-  adaptive sampling a second task per tile traces the refinement pass once its frame's film is whole (the
-  refinement mask crosses tile borders).  Sub-pixel samples are keyed by pixel, so the image is the local
-  render's, byte for byte, whichever worker traces which tile and however often a tile is traced again.
+* Tasks are tiles of :mod:`tracer.tiles`: one task traces every block pass of one tile of one frame (and,
+  with adaptive sampling, the tile's pilot); with adaptive sampling a second task per tile traces the
+  refinement pass once its frame's film and pilot are whole (the refinement is judged on the whole film:
+  :mod:`tracer.adaptive`).  Sub-pixel samples are keyed by pixel, so the image is the local render's, byte
+  for byte, whichever worker traces which tile and however often a tile is traced again.
 * The client assembles tiles as they complete and hands each finished frame back.
 
 ``--scheduler local:N`` starts a LocalCluster of N worker processes on this machine, one thread each, whose
@@ -46,7 +47,7 @@ from .render import TileUpdate
 from .savings import RaySavings
 from .sdl.parser import load
 from .threads import default_threads
-from .tiles import PixelTracer, Tile, TilePlan, camera_rays_for, trace_rect, trace_tile
+from .tiles import PixelTracer, TilePlan, camera_rays_for, trace_rect
 from .trace import RayCounts
 
 INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
@@ -169,7 +170,6 @@ class Job:
     tile: int = CLUSTER_TILE
     samples: int = 1
     sampling_mode: str = "jittered"
-    threshold: float = 0.05
     seed: int = 0
     backend: str = "auto"
     threads: Optional[int] = None  # the C core's threads per task (None: the worker's cores / its threads)
@@ -178,8 +178,7 @@ class Job:
 
     def plan(self):
         return TilePlan(self.width, self.height, block_size=self.block_size, progressive=self.progressive,
-                        tile=self.tile, samples=self.samples, sampling_mode=self.sampling_mode,
-                        threshold=self.threshold, seed=self.seed)
+                        tile=self.tile, samples=self.samples, sampling_mode=self.sampling_mode, seed=self.seed)
 
 
 # -- the worker side -----------------------------------------------------------------------------------------
@@ -283,25 +282,44 @@ def _plan(job: Job):
     return job.plan()
 
 
-def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: tuple[int, int, int, int],
-                    refine: Optional[np.ndarray] = None):
-    """A task: every block pass of one tile (or, given its window of the refinement mask, the refinement
-    pass).  Returns (the tile's film, bottom row first; the rays it cast; the backend's name)."""
+def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: tuple[int, int, int, int]):
+    """A task: every block pass of one tile, and with adaptive sampling its pilot.  Returns (the tile's
+    film, bottom row first; its tracer.adaptive.PilotTile or None; the rays it cast; the backend's name)."""
+    with _tile_tracing(bundle, job, time) as (plan, shade, rays):
+        window = trace_rect(plan, rect, shade)
+        pilot = None
+        if plan.adaptive:
+            from .adaptive import trace_pilot  # (deferred as in tracer.tiles.TileRun)
+
+            pilot = trace_pilot(plan, rect, shade)
+    return window, pilot, rays, shade.tracer.name
+
+
+def refine_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: tuple[int, int, int, int],
+                     counts: np.ndarray, pilot):
+    """A task: adaptive sampling's refinement of one tile, given its window of the refinement's rays per
+    pixel and its pilot.  Returns ((rows, columns, colours) of the pixels it gives a colour, as
+    tracer.adaptive.trace_refinement; the rays it cast; the backend's name)."""
+    from .adaptive import trace_refinement
+
+    with _tile_tracing(bundle, job, time) as (plan, shade, rays):
+        pixels = trace_refinement(plan, rect, shade, counts, pilot)
+    return pixels, rays, shade.tracer.name
+
+
+@contextlib.contextmanager
+def _tile_tracing(bundle: SceneBundle, job: Job, time: Optional[float]) -> Iterator[tuple]:
+    """(plan, shade, rays) for a task's tracing: the job's plan, a PixelTracer of the worker's tracer for
+    the frame's camera, and a RayCounts that holds the rays the task cast when the block ends."""
     compiled, tracer = _tracer(bundle, job, time)
     plan = _plan(job)
     aspect = job.width / job.height
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, aspect), aspect)
     before = copy.copy(tracer.counts)
-    shade = PixelTracer(plan, tracer, camera_rays_for(frame, job.width, job.height), chunk=RAYS_PER_CALL)
-    if refine is None:
-        window = trace_rect(plan, rect, shade)
-    else:
-        r0, c0, r1, c1 = rect
-        window = np.zeros((r1 - r0, c1 - c0, 3), dtype=np.float32)
-        trace_tile(plan, Tile(len(plan.passes), 1, *rect), window, shade, refine, at=(r0, c0))
-    rays = RayCounts(**{f.name: getattr(tracer.counts, f.name) - getattr(before, f.name)
-                        for f in dataclasses.fields(RayCounts)})
-    return window, rays, tracer.name
+    rays = RayCounts()
+    yield plan, PixelTracer(plan, tracer, camera_rays_for(frame, job.width, job.height), chunk=RAYS_PER_CALL), rays
+    for f in dataclasses.fields(RayCounts):
+        setattr(rays, f.name, getattr(tracer.counts, f.name) - getattr(before, f.name))
 
 
 def scene_task(bundle: SceneBundle, fn: Callable, args: tuple):
@@ -427,6 +445,7 @@ class _Frame:
     image: np.ndarray
     waiting: int
     refining: bool = False
+    pilot: dict = field(default_factory=dict)  # adaptive sampling: tile rectangle -> tracer.adaptive.PilotTile
     rays: RayCounts = field(default_factory=RayCounts)
 
     @property
@@ -453,10 +472,10 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
     meta: dict = {}
     tasks = distributed.as_completed()
 
-    def submit(frame: _Frame, rect, refine=None):
-        future = client.submit(trace_tile_task, bundle_future, job, frame.time, rect, refine, pure=False,
+    def submit(frame: _Frame, rect, task=trace_tile_task, *more):
+        future = client.submit(task, bundle_future, job, frame.time, rect, *more, pure=False,
                                priority=-frame.index)  # earlier frames first: they are written sooner
-        meta[future.key] = (frame, rect, refine)
+        meta[future.key] = (frame, rect, task is not trace_tile_task)
         tasks.add(future)
 
     for frame in frames:
@@ -466,29 +485,35 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
     backend = ""
     try:
         for future in tasks:
-            frame, rect, refine = meta.pop(future.key)
-            window, rays, backend = _result(future, "a tile")
+            frame, rect, refining = meta.pop(future.key)
             r0, c0, r1, c1 = rect
-            if refine is None:
-                frame.film[r0:r1, c0:c1] = to_8bit(window) if bytes_on_arrival else window
+            if refining:
+                (rows, cols, values), rays, backend = _result(future, "a tile")
+                frame.film[rows, cols] = values
             else:
-                frame.film[r0:r1, c0:c1][refine] = window[refine]
+                window, pilot, rays, backend = _result(future, "a tile")
+                frame.film[r0:r1, c0:c1] = to_8bit(window) if bytes_on_arrival else window
+                if pilot is not None:
+                    frame.pilot[rect] = pilot
             frame.rays.add(rays)
             frame.waiting -= 1
             done += 1
             if on_tile is not None:
                 on_tile(TileUpdate(x0=c0, y0=job.height - r1, x1=c1, y1=job.height - r0, block_size=1,
-                                   pass_index=plan.pass_count - 1 if refine is not None else 0,
+                                   pass_index=plan.pass_count - 1 if refining else 0,
                                    pass_count=plan.pass_count, tiles_done=done, tiles_total=total,
                                    image=frame.image))
             if frame.waiting:
                 continue
             if plan.adaptive and not frame.refining:
+                from .adaptive import refinement
+
                 frame.refining = True
-                mask = plan.refine_mask(frame.film)
+                counts = refinement(plan, frame.film, frame.pilot.values())
                 frame.waiting = len(plan.rects)
                 for r0, c0, r1, c1 in plan.rects:
-                    submit(frame, (r0, c0, r1, c1), np.ascontiguousarray(mask[r0:r1, c0:c1]))
+                    submit(frame, (r0, c0, r1, c1), refine_tile_task,
+                           np.ascontiguousarray(counts[r0:r1, c0:c1]), frame.pilot.pop((r0, c0, r1, c1)))
                 continue
             image, frame.image = frame.image, np.empty((0, 0, 3), np.float32)  # (no finished frame is kept)
             if eight_bit and not bytes_on_arrival:

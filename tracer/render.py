@@ -21,7 +21,6 @@ from .compile import CompiledScene, compile_scene
 from .errors import TracerError
 from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
-from . import sampling
 from .backend import make_tracer
 from .savings import RAY_BUDGET, RaySavings
 from .tiles import DEFAULT_TILE, PixelTracer, Tile, TilePlan, TileRun, camera_rays_for
@@ -95,7 +94,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
            on_tile: Optional[Callable[[TileUpdate], None]] = None,
            cancel: Optional[Callable[[], bool]] = None, backend: str = "auto",
            samples: int = 1, sampling_mode: str = "jittered",
-           threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0,
+           seed: int = 0,
            threads: Optional[int] = None, savings: Optional[RaySavings] = None,
            target_error: Optional[float] = None, error_per_pixel: bool = False, eight_bit: bool = False,
            on_rows: Optional[Callable[[np.ndarray], None]] = None) -> RenderResult:
@@ -122,12 +121,12 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         check_size(width, height)
         plan = None if target_error is not None else TilePlan(
             width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
-            sampling_mode=sampling_mode, threshold=threshold, seed=seed)
+            sampling_mode=sampling_mode, seed=seed)
         if plan is not None and not plan.adaptive:
             return _render_in_bands(scene, plan, on_rows, on_tile, cancel, backend, threads, savings)
         result = render(scene, width, height, block_size=block_size, progressive=progressive, tile=tile,
                         on_tile=on_tile, cancel=cancel, backend=backend, samples=samples,
-                        sampling_mode=sampling_mode, threshold=threshold, seed=seed, threads=threads,
+                        sampling_mode=sampling_mode, seed=seed, threads=threads,
                         savings=savings, target_error=target_error, error_per_pixel=error_per_pixel,
                         eight_bit=True)
         for band in bands_8bit(result.image, release=True):
@@ -142,7 +141,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
             result.image = to_8bit(result.image, out=new_8bit_image(height, width))
         return result
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
-                    sampling_mode=sampling_mode, threshold=threshold, seed=seed)
+                    sampling_mode=sampling_mode, seed=seed)
     started = time.perf_counter()
     compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
@@ -153,7 +152,7 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
     for done, item in enumerate(run.run(plan.items, cancel), 1):
         if on_tile is not None:
             on_tile(_update(plan, item, done, shown))
-    run = None  # (its refinement mask is not kept through the conversion below)
+    run = None  # (adaptive sampling's pilot and refinement are not kept through the conversion below)
     if eight_bit and not bytes_while_tracing:
         shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,

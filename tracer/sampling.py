@@ -4,8 +4,8 @@
 * ``jittered``: the same strata, one random point in each (stratified sampling).  The random numbers are
   a function of (seed, pixel, sample) alone (a counter-based hash, no generator state), so a render is
   repeatable and any cut into tiles, in any order, on any number of machines, gives the same bytes;
-* ``adaptive``: one ray through each pixel centre first; then only pixels that differ from a neighbour by
-  more than a threshold (in any channel) are traced again with ``samples`` jittered rays.
+* ``adaptive``: one ray through each pixel centre first, then jittered rays where an error model says they
+  lower the image's error most, about ``samples`` rays per pixel on average in all (:mod:`tracer.adaptive`).
 
 One sample means one ray through the pixel centre, whatever the mode.
 """
@@ -18,17 +18,14 @@ import numpy as np
 from .errors import TracerError
 
 MODES = ("regular", "jittered", "adaptive")
-DEFAULT_THRESHOLD = 0.05
 MAX_SAMPLES = 1024
 
 
-def check(samples: int, mode: str, threshold: float = DEFAULT_THRESHOLD) -> None:
+def check(samples: int, mode: str) -> None:
     if not 1 <= samples <= MAX_SAMPLES:
         raise TracerError(f"samples must be between 1 and {MAX_SAMPLES}, not {samples}")
     if mode not in MODES:
         raise TracerError(f"unknown sampling mode {mode!r} (use one of {', '.join(MODES)})")
-    if not (math.isfinite(threshold) and threshold >= 0.0):  # NaN would refine nothing, silently
-        raise TracerError(f"the adaptive threshold must be a number 0 or more, not {threshold}")
 
 
 def grid_shape(samples: int) -> tuple[int, int]:
@@ -85,15 +82,3 @@ def pixel_uniforms(rows: np.ndarray, cols: np.ndarray, samples: int, seed: int =
     bits = _mix64(start[:, None] + counters[None, :])  # (count, 2 * samples), wrapping add
     uniforms = (bits >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
     return uniforms[:, :samples], uniforms[:, samples:]
-
-
-def contrast_mask(image: np.ndarray, threshold: float) -> np.ndarray:
-    """Pixels whose colour differs from a 4-neighbour's by more than ``threshold`` in some channel."""
-    mask = np.zeros(image.shape[:2], dtype=bool)
-    vertical = np.abs(np.diff(image, axis=0)).max(axis=2) > threshold
-    horizontal = np.abs(np.diff(image, axis=1)).max(axis=2) > threshold
-    mask[:-1] |= vertical
-    mask[1:] |= vertical
-    mask[:, :-1] |= horizontal
-    mask[:, 1:] |= horizontal
-    return mask

@@ -153,7 +153,7 @@ class ErrorModel:
     """What a pixel's squared error is expected to be, from its centre rays' ``e0`` (:func:`centre_error`):
     ``centre_scale * e0 + centre_floor`` with the centre ray alone, ``(kappa * e0 + floor) / rays^ALPHA``
     with that many jittered rays.  The floors are what ``e0`` does not see (a texture finer than a pixel
-    looks smooth to centre rays); they, kappa and floor are fitted to rays (:func:`_fitted_model`,
+    looks smooth to centre rays); they, kappa and floor are fitted to rays (:func:`fitted_model`,
     :meth:`refit`)."""
 
     kappa: float = KAPPA_START
@@ -198,67 +198,140 @@ def _fit_line(x: np.ndarray, y: np.ndarray, fallback: tuple[float, float]) -> tu
 
 def plan_halves(e0: np.ndarray, model: ErrorModel, squared_budget: float) -> np.ndarray:
     """Rays per half for each pixel (0: its centre ray alone) such that the predicted sum of squared errors
-    is at most ``squared_budget`` for the fewest rays, as far as HALF_LADDER's steps allow.  A pixel is
-    refined only where its rays are predicted to do better than its centre ray.
-
-    Everything the model predicts of a pixel is a function of its e0, so pixels are planned in PLAN_BINS
-    groups of nearly equal e0 (log-spaced; the model is linear in e0, so a group's sums are exact), and every
-    pixel of a group gets the group's rays: the bisection then costs nothing next to the rays."""
-    halves = np.zeros(e0.shape, dtype=np.int64)
-    centre_all = model.centre(e0)
-    if float(centre_all.sum()) <= squared_budget:
-        return halves
-    active = np.flatnonzero(model.difficulty(e0) > 0.0)  # (flat pixels, most of most images, never take rays)
-    if active.size == 0:
-        return halves
-    unchanged = float(centre_all.sum() - centre_all[active].sum())
-    group, count, e0_sum = _groups_by_e0(e0[active])
-    e0_mean = e0_sum / count
-    difficulty = model.kappa * e0_sum + model.floor * count  # each group's sums
-    centre = model.centre_scale * e0_sum + model.centre_floor * count
-    weight = np.power(model.difficulty(e0_mean), 1.0 / (1.0 + ALPHA))
-    # Refine a group where (2h)^ALPHA exceeds this: where its rays beat its centre rays (never where a centre
-    # ray is predicted exact).
-    centre_mean = model.centre(e0_mean)
-    better_at = np.divide(model.difficulty(e0_mean), centre_mean, out=np.full(centre_mean.shape, np.inf),
-                          where=centre_mean > 0.0)
-
-    def halves_at(scale: float) -> np.ndarray:
-        rays = scale * weight
-        step = HALF_LADDER[np.maximum(np.searchsorted(HALF_LADDER, rays / 2.0, side="right") - 1, 0)]
-        return np.where((rays >= 2 * HALF_LADDER[0]) & ((2.0 * step) ** ALPHA > better_at), step, 0)
-
-    def predicted(h: np.ndarray) -> float:
-        return unchanged + float(np.sum(np.where(h > 0, difficulty / np.maximum(2.0 * h, 1.0) ** ALPHA, centre)))
-
-    # The scale runs from where the likeliest pixel just takes the fewest rays to where the least likely
-    # one takes the most; the prediction falls in steps between, found by bisection of its logarithm.
-    low = math.log10(2 * HALF_LADDER[0] / float(weight.max()))
-    high = math.log10(2 * HALF_LADDER[-1] / float(weight.min())) + 1.0
-    for _ in range(PLAN_STEPS):
-        middle = 0.5 * (low + high)
-        if predicted(halves_at(10.0 ** middle)) > squared_budget:
-            low = middle
-        else:
-            high = middle
-    halves[active] = halves_at(10.0 ** high)[group]
-    return halves
+    is at most ``squared_budget`` for the fewest rays, as far as HALF_LADDER's steps allow (see
+    :class:`LagrangePlan`)."""
+    if float(model.centre(e0).sum()) <= squared_budget:
+        return np.zeros(e0.shape, dtype=np.int64)
+    bins = E0Bins.spanning(e0)
+    index = bins.index(e0)
+    bins.add(index, e0)
+    plan = LagrangePlan(bins, model, 2 * HALF_LADDER)
+    return plan.least(lambda rays: plan.predicted(rays) <= squared_budget)[index] // 2
 
 
-def _groups_by_e0(e0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each value's group (PLAN_BINS log-spaced groups between the smallest value above 0 and the largest, and
-    one group of zeros), and each used group's size and sum, the groups numbered 0.. in order."""
-    positive = e0[e0 > 0.0]
-    if positive.size:
-        low, high = math.log(float(positive.min())), math.log(float(positive.max()))
-        width = max(high - low, 1e-12) / PLAN_BINS
-        raw = np.where(e0 > 0.0, 1 + np.minimum((np.log(np.maximum(e0, positive.min())) - low) / width,
-                                                  PLAN_BINS - 1).astype(np.int64), 0)
-    else:
-        raw = np.zeros(e0.shape, dtype=np.int64)
-    used, group = np.unique(raw, return_inverse=True)
-    count = np.bincount(group, minlength=used.size).astype(np.float64)
-    return group, count, np.bincount(group, weights=e0, minlength=used.size)
+def plan_rays(bins: "E0Bins", model: ErrorModel, ray_budget: float, ladder: np.ndarray,
+              minimum: int = 0) -> np.ndarray:
+    """Jittered rays for the pixels of each bin (0: their centre rays alone, else a step of ``ladder``), at
+    least ``minimum`` each, that spend at most ``ray_budget`` rays in all for the lowest predicted sum of
+    squared errors (see :class:`LagrangePlan`): ``--sampling adaptive``'s refinement (tracer.adaptive)."""
+    plan = LagrangePlan(bins, model, ladder)
+    idle = float(bins.count.sum() - plan.count.sum())  # pixels with nothing to gain: the minimum alone
+
+    def affordable(rays: np.ndarray) -> bool:
+        return plan.cost(np.maximum(rays, minimum)) + minimum * idle <= ray_budget
+
+    return np.maximum(plan.most(affordable), minimum)
+
+
+class E0Bins:
+    """Pixels grouped by e0, all that a plan needs to know of them: PLAN_BINS log-spaced bins between the
+    smallest e0 above 0 and the largest (about 1 % apart over 10 decades), and bin 0 for e0 = 0, with each
+    bin's pixels and sum of e0 (the model is linear in e0, so a bin's sums are exact).  Filled all at once
+    or a band of pixels at a time (:meth:`index`, :meth:`add`), so that a big film needs only its bins'
+    numbers, two bytes a pixel."""
+
+    def __init__(self, smallest: float, largest: float):
+        """``smallest`` and ``largest``: the range of the values above 0 (inf and 0 when there are none)."""
+        self.smallest = smallest
+        if math.isfinite(smallest):
+            self.low = math.log(smallest)
+            self.width = max(math.log(largest) - self.low, 1e-12) / PLAN_BINS
+        self.count = np.zeros(PLAN_BINS + 1)
+        self.total = np.zeros(PLAN_BINS + 1)
+
+    @classmethod
+    def spanning(cls, e0: np.ndarray) -> "E0Bins":
+        positive = e0[e0 > 0.0]
+        if positive.size == 0:
+            return cls(math.inf, 0.0)
+        return cls(float(positive.min()), float(positive.max()))
+
+    def index(self, e0: np.ndarray) -> np.ndarray:
+        """Each value's bin (values outside the range go to the nearest bin)."""
+        if not math.isfinite(self.smallest):
+            return np.zeros(e0.shape, dtype=np.int64)
+        place = (np.log(np.maximum(e0, self.smallest)) - self.low) / self.width
+        return np.where(e0 > 0.0, 1 + np.minimum(place, PLAN_BINS - 1).astype(np.int64), 0)
+
+    def add(self, index: np.ndarray, e0: np.ndarray) -> None:
+        self.count += np.bincount(index.ravel(), minlength=PLAN_BINS + 1)
+        self.total += np.bincount(index.ravel(), weights=e0.ravel(), minlength=PLAN_BINS + 1)
+
+
+class LagrangePlan:
+    """The rays each bin of pixels gets at one price of error, for every price: spending the fewest rays for
+    a predicted sum of squared errors (or the lowest sum for so many rays) gives each pixel rays in
+    proportion to ``model.difficulty(e0) ** (1 / (1 + ALPHA))`` (a Lagrange multiplier); ``scale`` is that
+    proportion.  Counts are rounded down to ``ladder`` (rays per pixel, increasing), and a bin is refined
+    only where its rays are predicted to do better than its centre rays.  Every pixel of a bin of
+    :class:`E0Bins` gets the bin's rays, so finding the scale by bisection (:meth:`least`, :meth:`most`)
+    costs nothing next to the rays.  Both return rays per bin (index them with :meth:`E0Bins.index`)."""
+
+    def __init__(self, bins: E0Bins, model: ErrorModel, ladder: np.ndarray):
+        self.ladder = np.asarray(ladder)
+        used = np.flatnonzero(bins.count)
+        used_mean = bins.total[used] / bins.count[used]
+        active = model.difficulty(used_mean) > 0.0  # (flat pixels, most of most images, never take rays)
+        self.bins, idle = used[active], used[~active]
+        self.unchanged = float(np.sum(model.centre_scale * bins.total[idle] + model.centre_floor * bins.count[idle]))
+        self.count, e0_sum = bins.count[self.bins], bins.total[self.bins]
+        e0_mean = used_mean[active]
+        self.difficulty = model.kappa * e0_sum + model.floor * self.count  # each bin's sums
+        self.centre = model.centre_scale * e0_sum + model.centre_floor * self.count
+        self.weight = np.power(model.difficulty(e0_mean), 1.0 / (1.0 + ALPHA))
+        # Refine a bin where rays^ALPHA exceeds this: where its rays beat its centre rays (never where a
+        # centre ray is predicted exact).
+        centre_mean = model.centre(e0_mean)
+        self.better_at = np.divide(model.difficulty(e0_mean), centre_mean,
+                                   out=np.full(centre_mean.shape, np.inf), where=centre_mean > 0.0)
+
+    def rays_at(self, scale: float) -> np.ndarray:
+        """Each refinable bin's rays at ``scale``: a step of the ladder, or 0."""
+        wanted = scale * self.weight
+        step = self.ladder[np.maximum(np.searchsorted(self.ladder, wanted, side="right") - 1, 0)]
+        return np.where((wanted >= self.ladder[0]) & (step.astype(float) ** ALPHA > self.better_at), step, 0)
+
+    def predicted(self, rays: np.ndarray) -> float:
+        """The predicted sum of squared errors of the image with each refinable bin's ``rays``."""
+        return self.unchanged + float(np.sum(np.where(
+            rays > 0, self.difficulty / np.maximum(rays, 1.0) ** ALPHA, self.centre)))
+
+    def cost(self, rays: np.ndarray) -> float:
+        """The jittered rays of the refinable bins' pixels with each bin's ``rays``."""
+        return float(np.sum(rays * self.count))
+
+    def least(self, enough: Callable[[np.ndarray], bool]) -> np.ndarray:
+        """Rays per bin at the smallest scale whose rays are ``enough`` (at most the ladder's top)."""
+        return self._per_bin(self._bisect(enough)[1])
+
+    def most(self, affordable: Callable[[np.ndarray], bool]) -> np.ndarray:
+        """Rays per bin at the largest scale whose rays are ``affordable`` (none, if even the fewest are not)."""
+        scale = self._bisect(lambda rays: not affordable(rays))[0]
+        if not affordable(self.rays_at(scale)):
+            scale = 0.0
+        return self._per_bin(scale)
+
+    def _bisect(self, past: Callable[[np.ndarray], bool]) -> tuple[float, float]:
+        """(low, high) scales either side of where ``past`` (False at small scales, True at large) turns.
+        The scale runs from where the likeliest pixel just takes the fewest rays to where the least likely
+        one takes the most; the bins' rays change in steps between, found by bisection of its logarithm."""
+        if self.bins.size == 0:
+            return 0.0, 0.0
+        low = math.log10(float(self.ladder[0]) / float(self.weight.max()))
+        high = math.log10(float(self.ladder[-1]) / float(self.weight.min())) + 1.0
+        for _ in range(PLAN_STEPS):
+            middle = 0.5 * (low + high)
+            if past(self.rays_at(10.0 ** middle)):
+                high = middle
+            else:
+                low = middle
+        return 10.0 ** low, 10.0 ** high
+
+    def _per_bin(self, scale: float) -> np.ndarray:
+        rays = np.zeros(PLAN_BINS + 1, dtype=np.int64)
+        if self.bins.size:
+            rays[self.bins] = self.rays_at(scale)
+        return rays
 
 
 class _Halves:
@@ -272,9 +345,27 @@ class _Halves:
         return self.sums[:, pixels] / self.count[pixels][None, :, None]
 
     def squared_error(self, pixels: np.ndarray) -> np.ndarray:
-        """Per pixel: (clipped mean of half 0 - clipped mean of half 1)² / 4, mean over channels."""
-        means = np.clip(self.means(pixels), 0.0, 1.0)
-        return ((means[0] - means[1]) ** 2).mean(axis=1) / 4.0
+        return halves_squared_error(self.means(pixels))
+
+
+def halves_squared_error(means: np.ndarray) -> np.ndarray:
+    """Per pixel of (2, pixels, 3) means of two independent halves of its rays: (clipped mean of half 0 -
+    clipped mean of half 1)² / 4, mean over channels, an unbiased estimate of the squared error of the mean
+    of all its rays."""
+    means = np.clip(means, 0.0, 1.0)
+    return ((means[0] - means[1]) ** 2).mean(axis=1) / 4.0
+
+
+def half_seed(seed: int, round_index: int, half: int) -> int:
+    """The seed of one half's jittered rays in one round: independent of the other half's and of the
+    rounds'."""
+    return (int(seed) << 16) + 2 * round_index + half
+
+
+def pilot_pixels(rows: np.ndarray, cols: np.ndarray, seed: int) -> np.ndarray:
+    """Which of the pixels (rows[i], cols[i]) are in the pilot: a random PILOT_FRACTION of all pixels,
+    whatever their colour, each decided by a hash of (seed, pixel) alone (so a tile can tell its own)."""
+    return sampling.pixel_uniforms(rows, cols, 1, seed ^ PILOT_SALT)[0][:, 0] < PILOT_FRACTION
 
 
 def _trace_halves(camera_rays: CameraRays, rays_for, width: int, halves: _Halves, pixels: np.ndarray,
@@ -286,13 +377,13 @@ def _trace_halves(camera_rays: CameraRays, rays_for, width: int, halves: _Halves
         extra = int(extra)
         step = max(1, MAX_RAYS_PER_CALL // extra)
         for half in (0, 1):
-            half_seed = (int(seed) << 16) + 2 * round_index + half
+            seed_of_half = half_seed(seed, round_index, half)
             for start in range(0, group.size, step):
                 if cancel is not None and cancel():
                     raise RenderCancelled("render cancelled")
                 chunk = group[start:start + step]
                 rows, cols = np.divmod(chunk, width)
-                dy, dx = sampling.offsets(extra, True, rows, cols, half_seed)
+                dy, dx = sampling.offsets(extra, True, rows, cols, seed_of_half)
                 origins, directions = rays_for(np.repeat(rows, extra), np.repeat(cols, extra), dy.ravel(),
                                                dx.ravel())
                 colors = np.asarray(camera_rays(origins, directions), dtype=np.float64)
@@ -324,10 +415,10 @@ def sample_image(camera_rays: CameraRays, rays_for, width: int, height: int, tar
     # starting model gives them, at least PILOT_HALF per half.  Their halves measure both the centre rays'
     # true errors (the model for pixels left with their centre ray) and the jittered rays' (the plan's).
     rows, cols = np.divmod(np.arange(pixels), width)
-    pilot = np.flatnonzero(sampling.pixel_uniforms(rows, cols, 1, seed ^ PILOT_SALT)[0][:, 0] < PILOT_FRACTION)
+    pilot = np.flatnonzero(pilot_pixels(rows, cols, seed))
     planned = np.maximum(plan_halves(e0, ErrorModel(), PLAN_AIM * budget)[pilot], PILOT_HALF)
     _trace_halves(camera_rays, rays_for, width, halves, pilot, planned, seed, 0, cancel)
-    model = _fitted_model(film, e0, halves, pilot)
+    model = fitted_model(film[pilot], e0[pilot], halves.means(pilot), 2.0 * halves.count[pilot])
     estimate = _Estimate(e0, halves, model)
     aim = PLAN_AIM * budget
     for round_index in range(1, MAX_ROUNDS):
@@ -360,25 +451,29 @@ def sample_image(camera_rays: CameraRays, rays_for, width: int, height: int, tar
     return film.reshape(height, width, 3), result
 
 
-def _fitted_model(film: np.ndarray, e0: np.ndarray, halves: _Halves, pilot: np.ndarray) -> ErrorModel:
-    """The error model fitted to the pilot: per pilot pixel, its halves' squared error at its rays, and its
-    centre ray's squared error, (centre - halves' mean)² less the halves' own (an unbiased estimate)."""
-    squared = halves.squared_error(pilot)
-    rays = 2.0 * halves.count[pilot]
-    kappa, floor = _fit_line(e0[pilot], squared * rays ** ALPHA, (KAPPA_START, 0.0))
-    mean = np.clip(halves.sums[:, pilot].sum(axis=0) / rays[:, None], 0.0, 1.0)
-    centre_squared = ((np.clip(film[pilot], 0.0, 1.0) - mean) ** 2).mean(axis=1) - squared
+def fitted_model(centre: np.ndarray, e0: np.ndarray, means: np.ndarray, rays: np.ndarray,
+                 floor_significance: float = FLOOR_SIGNIFICANCE) -> ErrorModel:
+    """The error model fitted to a pilot: per pilot pixel, its centre ray's colour ``centre`` (pixels, 3),
+    its ``e0``, the ``means`` (2, pixels, 3) of two independent halves of its jittered rays and how many
+    ``rays`` the two have together.  The halves give their own squared error (:func:`halves_squared_error`)
+    and the centre ray's, (centre - halves' mean)² less theirs (an unbiased estimate).  A floor under the
+    centre rays counts from ``floor_significance`` standard errors above 0."""
+    squared = halves_squared_error(means)
+    kappa, floor = _fit_line(e0, squared * rays ** ALPHA, (KAPPA_START, 0.0))
+    mean = np.clip(0.5 * (means[0] + means[1]), 0.0, 1.0)
+    centre_squared = ((np.clip(centre, 0.0, 1.0) - mean) ** 2).mean(axis=1) - squared
     # e0 stays the centre ray's error where an edge is seen (its h²/12 is what an edge crossing the pixel at
     # random gives; a pilot of a few hundred pixels holds too few edges to scale it down safely).  What
     # centre rays do not see is a floor: the mean excess over e0 of the pilot's lower half by e0 (the upper
-    # half, edges where e0 overstates, would hide it), counted only when it stands FLOOR_SIGNIFICANCE
-    # standard errors above 0 (one stray edge among flat pixels would otherwise set a floor for all).
-    lower = np.argsort(e0[pilot], kind="stable")[:pilot.size // 2]
-    excess = centre_squared[lower] - e0[pilot][lower]
+    # half, edges where e0 overstates, would hide it), counted only when it stands floor_significance
+    # standard errors above 0 (for the target, FLOOR_SIGNIFICANCE: one stray edge among flat pixels would
+    # otherwise set a floor for all, and the estimate with it).
+    lower = np.argsort(e0, kind="stable")[:e0.size // 2]
+    excess = centre_squared[lower] - e0[lower]
     centre_floor = 0.0
     if excess.size >= 2:
         mean, spread = float(excess.mean()), float(excess.std(ddof=1)) / math.sqrt(excess.size)
-        if mean > FLOOR_SIGNIFICANCE * spread:
+        if mean > floor_significance * spread:
             centre_floor = mean
     return ErrorModel(kappa, floor, 1.0, centre_floor)
 

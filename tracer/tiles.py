@@ -4,8 +4,9 @@ The lecture's ``raytrace(scn, blockSize)``: in a pass of stride B one ray is tra
 pixels, through the block's lower-left pixel, and the whole block takes its colour.  Progressive rendering
 runs passes B, B/2, ..., 1 and each pass traces only the pixels that are *new at its stride* (those not on
 the grid of the pass before), so every earlier sample is reused.  With adaptive sampling the block passes
-trace one ray per pixel and a last *refinement* pass traces ``samples`` jittered rays in the pixels whose
-colour differs from a neighbour's by more than a threshold, judged on the whole finished film.
+trace one ray per pixel, a *pilot* pass traces jittered rays in a random 1 in 16 pixels, and a last
+*refinement* pass traces jittered rays where an error model fitted to the pilot says they lower the image's
+error most, judged on the whole finished film (:mod:`tracer.adaptive`).
 
 The image is cut into square tiles whose side is a multiple of every stride, so a tile's passes read and
 write only that tile: the tiles of a pass can be traced in any order, by any number of threads or machines.
@@ -13,7 +14,8 @@ A :class:`TilePlan` holds the passes and tiles; :func:`trace_tile` traces one ti
 (or a window of it) through a :class:`PixelTracer`, which shoots a pixel's rays and averages them.  The
 random sub-pixel offsets depend on (seed, pixel) alone (:func:`tracer.sampling.pixel_uniforms`), so any
 schedule gives identical bytes.  :class:`TileRun` is the one loop that drives tiles: a list of them traced
-into one film in order, with cancelling and the refinement mask, on this thread or on several.
+into one film in order, with cancelling and adaptive sampling's pilot and refinement, on this thread or on
+several.
 
 Used by :func:`tracer.render.render` (the command line: the whole film, or a band of it at a time),
 ``tracer.distributed`` (a Dask cluster: one tile's passes per task, :func:`trace_rect`) and the Blender
@@ -29,15 +31,16 @@ import numpy as np
 
 from . import sampling
 from .errors import RenderCancelled, TracerError
-from .imageio import band_rows, to_8bit
+from .imageio import to_8bit
 
 DEFAULT_TILE = 64
 
 #: ``rays_for(rows, cols, dy, dx) -> (origins, directions)``: the rays through film pixels (row 0 at the
 #: bottom) at (dx, dy) inside each pixel; dy and dx are arrays (one per ray) or the scalar 0.5 (the centre).
 RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]
-#: ``shade(rows, cols, per_pixel) -> (N, channels)``: the mean of ``per_pixel`` rays in each given pixel.
-Shade = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
+#: ``shade(rows, cols, per_pixel, seed=None) -> (N, channels)``: the mean of ``per_pixel`` rays in each given
+#: pixel (jittered with ``seed``, by default the plan's).
+Shade = Callable[..., np.ndarray]
 #: Called between pieces of work; raises RenderCancelled to stop.
 Checkpoint = Callable[[], None]
 
@@ -87,13 +90,13 @@ class TilePlan:
     """The passes and tiles of a ``width`` x ``height`` render, and how its pixels are sampled.
 
     ``items`` lists every tile of every pass in the order a single-threaded render traces them: pass by pass
-    (so that an interactive display refines the whole image coarse to fine), the refinement pass last.
+    (so that an interactive display refines the whole image coarse to fine), adaptive sampling's pilot and
+    refinement passes last.
     """
 
     def __init__(self, width: int, height: int, *, block_size: int = 1, progressive: bool = False,
-                 tile: int = DEFAULT_TILE, samples: int = 1, sampling_mode: str = "jittered",
-                 threshold: float = sampling.DEFAULT_THRESHOLD, seed: int = 0):
-        sampling.check(int(samples), sampling_mode, float(threshold))
+                 tile: int = DEFAULT_TILE, samples: int = 1, sampling_mode: str = "jittered", seed: int = 0):
+        sampling.check(int(samples), sampling_mode)
         self.width, self.height = int(width), int(height)
         # A block larger than the image traces the same single ray as a block of the image's size, and the
         # passes above that size trace nothing new: clamped, so that memory follows the image, not the request
@@ -102,8 +105,7 @@ class TilePlan:
         if block_size > max(self.width, self.height):
             block_size = max(self.width, self.height)
         self.passes = block_passes(block_size, bool(progressive))
-        self.samples, self.sampling_mode = int(samples), sampling_mode
-        self.threshold, self.seed = float(threshold), int(seed)
+        self.samples, self.sampling_mode, self.seed = int(samples), sampling_mode, int(seed)
         self.adaptive = sampling_mode == "adaptive" and self.samples > 1
         top = self.passes[0]
         size = max(int(tile), top)
@@ -112,19 +114,27 @@ class TilePlan:
                       for r in range(0, self.height, self.tile) for c in range(0, self.width, self.tile)]
         self.items = [Tile(p, stride, *rect) for p, stride in enumerate(self.passes) for rect in self.rects]
         if self.adaptive:
-            self.items += [Tile(len(self.passes), 1, *rect) for rect in self.rects]
+            self.items += [Tile(p, 1, *rect) for p in (self.pilot_pass, self.pilot_pass + 1) for rect in self.rects]
 
     @property
     def pass_count(self) -> int:
-        return len(self.passes) + self.adaptive
+        return len(self.passes) + 2 * self.adaptive
 
     @property
     def per_pixel(self) -> int:
-        """Rays per pixel in the block passes (one when a refinement pass adds the rest)."""
+        """Rays per pixel in the block passes (one when adaptive sampling's passes add the rest)."""
         return 1 if self.adaptive else self.samples
 
+    @property
+    def pilot_pass(self) -> int:
+        """The pass index of adaptive sampling's pilot (the refinement's is the next)."""
+        return len(self.passes)
+
+    def is_pilot(self, item: Tile) -> bool:
+        return item.pass_index == self.pilot_pass
+
     def is_refinement(self, item: Tile) -> bool:
-        return item.pass_index >= len(self.passes)
+        return item.pass_index > self.pilot_pass
 
     def pass_items(self, pass_index: int) -> list[Tile]:
         return [item for item in self.items if item.pass_index == pass_index]
@@ -133,71 +143,52 @@ class TilePlan:
         """The block passes' tiles over one rectangle, coarse to fine (a tile traced start to finish)."""
         return [Tile(p, stride, *rect) for p, stride in enumerate(self.passes)]
 
-    def refine_mask(self, film: np.ndarray) -> np.ndarray:
-        """The pixels the refinement pass traces again, judged on the colour of the float film after the
-        block passes (which crosses tile borders, so the whole film is needed).  Judged a band of rows at a
-        time, each with the rows either side of it, so that no full-size float temporary is made."""
-        if film.dtype == np.uint8:
-            raise ValueError("the refinement mask is judged on a float film, not an 8-bit one")
-        height = film.shape[0]
-        mask = np.empty(film.shape[:2], dtype=bool)
-        rows = band_rows(film)
-        for top in range(0, height, rows):
-            bottom = min(top + rows, height)
-            above, below = max(top - 1, 0), min(bottom + 1, height)
-            band = sampling.contrast_mask(film[above:below, :, :3], self.threshold)
-            mask[top:bottom] = band[top - above: bottom - above]
-        return mask
-
-    def sample_positions(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int):
-        """(rows, cols, dy, dx) of every ray of the given pixels, ``per_pixel`` consecutive rays per pixel."""
+    def sample_positions(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int, seed: Optional[int] = None):
+        """(rows, cols, dy, dx) of every ray of the given pixels, ``per_pixel`` consecutive rays per pixel,
+        jittered (unless regular) with ``seed``, by default the plan's."""
         if per_pixel == 1:
             return rows, cols, 0.5, 0.5
-        dy, dx = sampling.offsets(per_pixel, self.sampling_mode != "regular", rows, cols, self.seed)
+        dy, dx = sampling.offsets(per_pixel, self.sampling_mode != "regular", rows, cols,
+                                  self.seed if seed is None else seed)
         return np.repeat(rows, per_pixel), np.repeat(cols, per_pixel), dy.ravel(), dx.ravel()
 
 
-def trace_tile(plan: TilePlan, item: Tile, film: np.ndarray, shade: Shade,
-               refine: Optional[np.ndarray] = None, at: tuple[int, int] = (0, 0)) -> None:
-    """Trace one tile of one pass into ``film`` (rows from the bottom, any number of channels).
+def trace_tile(plan: TilePlan, item: Tile, film: np.ndarray, shade: Shade, at: tuple[int, int] = (0, 0)) -> None:
+    """Trace one tile of one block pass into ``film`` (rows from the bottom, any number of channels).
 
     A float film gets the colours; a uint8 film gets their 8-bit values (:func:`tracer.imageio.to_8bit`),
     the bytes that converting the float film afterwards would give (a later pass copies an earlier pass's
-    sample as its byte, which is the byte of its colour).  ``film`` may be a window of the image whose pixel (0, 0) is image pixel ``at`` (row, column); it must
-    cover the tile.  A refinement tile needs ``refine``, the mask of :meth:`TilePlan.refine_mask`, indexed
-    like ``film``.
+    sample as its byte, which is the byte of its colour).  ``film`` may be a window of the image whose pixel
+    (0, 0) is image pixel ``at`` (row, column); it must cover the tile.  (Adaptive sampling's pilot and
+    refinement tiles are :class:`TileRun`'s: they need the whole film's judgement.)
     """
+    if item.pass_index >= len(plan.passes):
+        raise ValueError("trace_tile traces the block passes; adaptive sampling's are TileRun's")
     r0, c0 = item.r0 - at[0], item.c0 - at[1]
     r1, c1 = item.r1 - at[0], item.c1 - at[1]
-    if plan.is_refinement(item):
-        if refine is None:
-            raise ValueError("a refinement tile needs the refinement mask")
-        rr, cc = np.nonzero(refine[r0:r1, c0:c1])
-        if rr.size:
-            film[rr + r0, cc + c0] = _in_film(shade(rr + item.r0, cc + item.c0, plan.samples), film)
-        return
     if item.stride == 1 and item.pass_index == 0:  # every pixel new: no earlier samples to keep
         rows, cols = np.arange(item.r0, item.r1), np.arange(item.c0, item.c1)
         values = shade(np.repeat(rows, cols.size), np.tile(cols, rows.size), plan.per_pixel)
-        film[r0:r1, c0:c1] = _in_film(values, film).reshape(rows.size, cols.size, -1)
+        film[r0:r1, c0:c1] = in_film(values, film).reshape(rows.size, cols.size, -1)
         return
     grid_r, grid_c, new = item.positions()
     values = film[grid_r - at[0], grid_c - at[1]]  # earlier passes' samples keep their value
     if new.any():
-        values[new] = _in_film(shade(grid_r[new], grid_c[new], plan.per_pixel), film)
+        values[new] = in_film(shade(grid_r[new], grid_c[new], plan.per_pixel), film)
     s = item.stride
     block = np.repeat(np.repeat(values, s, axis=0), s, axis=1)
     film[r0:r1, c0:c1] = block[: r1 - r0, : c1 - c0]
 
 
-def _in_film(colours: np.ndarray, film: np.ndarray) -> np.ndarray:
+def in_film(colours: np.ndarray, film: np.ndarray) -> np.ndarray:
     """Shaded colours as ``film`` keeps them: as they are in a float film, as bytes in an 8-bit one."""
     return to_8bit(colours) if film.dtype == np.uint8 else colours
 
 
 def trace_rect(plan: TilePlan, rect: tuple[int, int, int, int], shade: Shade, channels: int = 3) -> np.ndarray:
     """Every block pass over one rectangle, coarse to fine: the rectangle's film (rows from the bottom,
-    float32).  What a tile is worth to a worker that traces whole tiles (no refinement: see trace_tile)."""
+    float32).  What a tile is worth to a worker that traces whole tiles (adaptive sampling's passes are
+    TileRun's)."""
     r0, c0, r1, c1 = rect
     window = np.zeros((r1 - r0, c1 - c0, channels), dtype=np.float32)
     TileRun(plan, window, lambda checkpoint: shade, at=(r0, c0)).trace_all(plan.rect_items(rect))
@@ -210,27 +201,47 @@ class TileRun:
 
     ``film`` and ``at`` are as for :func:`trace_tile`.  ``shade_for(checkpoint)`` is the Shade of one tile,
     calling ``checkpoint`` (or nothing, when None) between its chunks of rays: the add-on makes one per tile
-    on the thread that traces it; a shade that traces a tile at once can ignore it.  Items come pass by pass:
-    the refinement mask is judged on the film the block passes left, when the first refinement tile is
-    reached, and kept (``refine`` gives it instead, judged elsewhere).
+    on the thread that traces it; a shade that traces a tile at once can ignore it.  Items come pass by pass.
+    Adaptive sampling's pilot tiles leave their rays in ``pilot`` (by tile rectangle); its refinement is
+    judged on the film the block passes left and on the pilot (:func:`tracer.adaptive.refinement`, which
+    needs the whole film: ``at`` (0, 0)) when the first refinement tile is reached, and kept in ``refinement``.
     """
 
     def __init__(self, plan: TilePlan, film: np.ndarray, shade_for: Callable[[Optional[Checkpoint]], Shade], *,
-                 at: tuple[int, int] = (0, 0), refine: Optional[np.ndarray] = None):
+                 at: tuple[int, int] = (0, 0)):
         self.plan, self.film, self.shade_for, self.at = plan, film, shade_for, at
-        self.refine = refine
+        self.pilot: dict = {}  # tile rectangle -> tracer.adaptive.PilotTile
+        self.refinement: Optional[np.ndarray] = None  # rays per pixel, once judged
 
     def trace(self, item: Tile, checkpoint: Optional[Checkpoint] = None) -> Tile:
         """Trace one tile (``checkpoint`` is asked first, then between chunks of rays); returns it."""
         if checkpoint is not None:
             checkpoint()
-        refine = None
-        if self.plan.is_refinement(item):
-            if self.refine is None:
-                self.refine = self.plan.refine_mask(self.film)
-            refine = self.refine
-        trace_tile(self.plan, item, self.film, self.shade_for(checkpoint), refine, self.at)
+        if item.pass_index < len(self.plan.passes):
+            trace_tile(self.plan, item, self.film, self.shade_for(checkpoint), self.at)
+            return item
+        # deferred: adaptive sampling (and the error model of tracer.target) is loaded by the renders that
+        # use it (tests/test_cli.py: what a plain render must not load)
+        from . import adaptive
+
+        if self.plan.is_pilot(item):
+            self.pilot[item.rect] = adaptive.trace_pilot(self.plan, item.rect, self.shade_for(checkpoint))
+            return item
+        self.judge_refinement()
+        r0, c0, r1, c1 = item.rect
+        rows, cols, values = adaptive.trace_refinement(self.plan, item.rect, self.shade_for(checkpoint),
+                                                       self.refinement[r0:r1, c0:c1], self.pilot.get(item.rect))
+        self.film[rows, cols] = in_film(values, self.film)
         return item
+
+    def judge_refinement(self) -> None:
+        """Judge adaptive sampling's refinement, once, on the film as it is now (the block passes done)."""
+        if self.refinement is None:
+            from . import adaptive
+
+            if self.at != (0, 0):
+                raise ValueError("adaptive sampling's refinement is judged on the whole film")
+            self.refinement = adaptive.refinement(self.plan, self.film, self.pilot.values())
 
     def run(self, items: Iterable[Tile], cancel: Optional[Callable[[], bool]] = None) -> Iterator[Tile]:
         """Trace ``items`` one after another on this thread, yielding each when it is done; ``cancel()`` is
@@ -260,8 +271,8 @@ class TileRun:
             try:
                 for _, same_pass in groupby(items, key=lambda item: item.pass_index):
                     same_pass = list(same_pass)
-                    if self.plan.is_refinement(same_pass[0]) and self.refine is None:
-                        self.refine = self.plan.refine_mask(self.film)  # (here, before the threads read it)
+                    if self.plan.is_refinement(same_pass[0]):
+                        self.judge_refinement()  # (here, before the threads read it)
                     pending = {pool.submit(self.trace, item, checkpoint) for item in same_pass}
                     while pending:
                         finished, pending = concurrent.futures.wait(
@@ -297,14 +308,14 @@ class PixelTracer:
         self.alpha = alpha
         self.first_hits = first_hits  # (origins, directions) -> bool per ray; needed with alpha
 
-    def __call__(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int) -> np.ndarray:
+    def __call__(self, rows: np.ndarray, cols: np.ndarray, per_pixel: int, seed: Optional[int] = None) -> np.ndarray:
         out = np.empty((rows.size, 4 if self.alpha else 3), dtype=np.float64)
         step = rows.size if not self.chunk else max(1, self.chunk // per_pixel)
         for start in range(0, rows.size, max(step, 1)):
             if self.checkpoint is not None and start > 0:
                 self.checkpoint()
             stop = min(start + step, rows.size)
-            r, c, dy, dx = self.plan.sample_positions(rows[start:stop], cols[start:stop], per_pixel)
+            r, c, dy, dx = self.plan.sample_positions(rows[start:stop], cols[start:stop], per_pixel, seed)
             origins, directions = self.rays_for(r, c, dy, dx)
             origins = np.ascontiguousarray(origins, dtype=np.float64)
             directions = np.ascontiguousarray(directions, dtype=np.float64)

@@ -44,14 +44,15 @@ def _work_items(plan) -> list:
     """The plan's tiles, pass by pass, except that a coarse pass's tiles are ``stride`` times wider: such a
     pass traces one ray per stride x stride block, so each work item still traces about tile x tile rays
     (at 1080p with block size 8 this is 700 items instead of 2,040, and a second less in Blender 3.4).
-    Sub-pixel offsets depend on the pixel alone, so the image is the same for any tiling."""
+    Sub-pixel offsets depend on the pixel alone, so the image is the same for any tiling.  Adaptive
+    sampling's pilot and refinement tiles are the plan's (the pilot is kept by the plan's tile)."""
     finest = plan.passes[-1]
     items = []
     for p, stride in enumerate(plan.passes):
         side = plan.tile * (stride // finest)
         items += [tiles.Tile(p, stride, r, c, min(r + side, plan.height), min(c + side, plan.width))
                   for r in range(0, plan.height, side) for c in range(0, plan.width, side)]
-    return items + [item for item in plan.items if plan.is_refinement(item)]
+    return items + [item for item in plan.items if item.pass_index >= len(plan.passes)]
 
 
 def _stopping(checkpoint: tiles.Checkpoint) -> Callable[[], bool]:
@@ -74,18 +75,18 @@ class BlockRenderer:
     of film pixels (row 0 at the bottom) at (dx, dy) inside each pixel.
 
     ``samples`` rays per traced pixel placed by ``sampling`` (tracer.sampling's modes); with ``adaptive`` the
-    passes trace one ray per pixel and a last pass traces ``samples`` rays where neighbours differ by more
-    than ``threshold``.  ``threads``: with the C core, its own worker threads (one work item at a time);
+    passes trace one ray per pixel, then a pilot and a refinement pass spend about ``samples`` rays per pixel
+    in all where they lower the error most (tracer.adaptive).  ``threads``: with the C core, its own worker threads (one work item at a time);
     with NumPy, work items traced at once.
     """
 
     def __init__(self, compiled, rays_for: RaysFor, width: int, height: int, *, block_size: int = 1,
                  progressive: bool = False, threads: int = 1, tile: int = DEFAULT_TILE,
                  chunk: Optional[int] = None, alpha: bool = False, backend: str = "auto", samples: int = 1,
-                 sampling: str = "jittered", threshold: float = 0.05, seed: int = 0):
+                 sampling: str = "jittered", seed: int = 0):
         self.plan = tiles.TilePlan(
             int(width), int(height), block_size=int(block_size), progressive=bool(progressive), tile=int(tile),
-            samples=int(samples), sampling_mode=sampling, threshold=float(threshold), seed=int(seed))
+            samples=int(samples), sampling_mode=sampling, seed=int(seed))
         self.compiled = compiled
         self.rays_for = rays_for
         self.width, self.height = self.plan.width, self.plan.height

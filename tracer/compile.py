@@ -24,16 +24,13 @@ from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
-from .geometry.polyhedra import face_planes
 from .intersect import analytic
-from .intersect import mesh as mesh_module
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
 from .lights import LightTable
 from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
-from .textures import TextureSet
 from .transforms import transform_points
 
 
@@ -197,6 +194,8 @@ class Primitive:
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
+            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in MESH_KINDS:
             # Instances of one mesh (the same MeshData) share one BVH, and so do meshes of the same content.
@@ -233,6 +232,8 @@ class Primitive:
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
+            from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
         self.center = table.centers[index] if bounded else None
@@ -286,13 +287,35 @@ class Primitive:
         before any cancellation, as ``first * max|o| + second``."""
         return (float(np.max(np.abs(self.inverse[:3, :3]).sum(axis=1))), float(np.max(np.abs(self.inverse[:3, 3]))))
 
-    def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
-        """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
+    def bound_hits(self, origins, o_generic, d_generic, hits: HitArrays) -> None:
+        """Fill in the bounds of ``hits`` (generic normals still) for world rays from ``origins``: ``error``,
+        the rounding of t (plus the shape's own root error, where it has one), and ``offset``, how far the
+        generic point may be from the surface (the shape's residual over |n|, its first-order distance, plus
+        the line's error; the C core's hit_bounds).  A mesh's triangles report no bend or residual: they keep
+        the unit-curvature floor of the bound and their point is off by the t error along the line.  (The
+        caller ignores floating-point warnings.)"""
         linear, translation = self.inverse_norms
         raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
-        # (plus the shape's own root error, where it has one: the torus)
-        return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
-                                                        self.generic_size, self.rounding)
+        size = self.generic_size
+        error = numerics.point_errors(hits.t, raw_scale, o_generic, d_generic, size, self.rounding)
+        nn = numerics.dot3(hits.normal, hits.normal)
+        length = np.sqrt(nn)
+        mesh = self._mesh is not None
+        if mesh or hits.bend is None:
+            dd = numerics.dot3(d_generic, d_generic)[:, None]
+            hits.bend = 2.0 * length * dd / size
+        hits.error = hits.error + numerics.time_errors(error, hits, d_generic, size, nn, length)
+        if mesh:
+            hits.offset = hits.error * np.sqrt(dd)
+        else:
+            hits.offset = np.where(nn > 0.0, hits.offset / length, hits.offset) + size * error
+        hits.bend = None  # (read; take and the others need not carry it)
+
+    def to_world(self, hits: HitArrays) -> None:
+        """World normals (the C core's sums) and the offsets along them (numerics.world_offsets)."""
+        world = numerics.normal_to_world(hits.normal, self.normal_matrix)
+        hits.offset = numerics.world_offsets(hits.offset, hits.normal, world)
+        hits.normal = world
 
     @cached_property
     def box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
@@ -323,23 +346,23 @@ class Primitive:
         o, d = self.to_generic(origins[idx], directions[idx])
         # Move each generic origin to the line's point nearest the generic centre: every shape's
         # equation then has O(1) coefficients, however far away the ray started.
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             shift = -numerics.dot3(o, d) / numerics.dot3(d, d)
-        shift = np.where(np.isfinite(shift), shift, 0.0)
-        centred = o + shift[:, None] * d
-        local = self.generic_hits(centred, d)
-        if self._normals_agree:
-            analytic.agree_with_crossing(local, d)
-        local.t = local.t + shift[:, None]
-        local.error = self.time_errors(origins[idx], centred, d, local)
-        local.normal = local.normal @ self.normal_matrix
+            shift = np.where(np.isfinite(shift), shift, 0.0)
+            centred = o + shift[:, None] * d
+            local = self.generic_hits(centred, d)
+            if self._normals_agree:
+                analytic.agree_with_crossing(local, d)
+            local.t = local.t + shift[:, None]
+            self.bound_hits(origins[idx], centred, d, local)
+            self.to_world(local)
         local.shape[np.isfinite(local.t)] = self.index
         if self.thin:
             local = sheet_to_pairs(local)
         if idx.size == n:
             return local
         full = HitArrays.empty(n, local.slots)
-        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error"):
+        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error", "offset"):
             getattr(full, name)[idx] = getattr(local, name)
         return full
 
@@ -353,10 +376,11 @@ class Primitive:
         if idx.size:
             o, d = self.to_generic(origins[idx], directions[idx])
             local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
-            local.error = self.time_errors(origins[idx], o, d, local)
-            local.normal = local.normal @ self.normal_matrix
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                self.bound_hits(origins[idx], o, d, local)
+                self.to_world(local)
             local.shape[np.isfinite(local.t)] = self.index
-            for name in ("t", "entering", "normal", "part", "uv", "shape", "error"):
+            for name in ("t", "entering", "normal", "part", "uv", "shape", "error", "offset"):
                 getattr(out, name)[idx] = getattr(local, name)
         return out
 
@@ -1164,6 +1188,8 @@ def _hash_indices(h, array) -> None:
 def shared_triangle_mesh(mesh: MeshData):
     """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after.  The C core
     builds its BVH when it is loaded (the NumPy builder's tree, in a fraction of the time)."""
+    from .intersect import mesh as mesh_module  # deferred: loaded by the first mesh, not by import tracer
+
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
@@ -1466,6 +1492,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
                        uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
+        # deferred: the textures (and the noise tables made as they load) wait for the first textured scene
+        from .textures import TextureSet
         textures = TextureSet(scene, primitives)
     lights = LightTable.of(scene.lights)
     return CompiledScene(

@@ -22,9 +22,6 @@ from ..geometry.polyhedra import face_planes
 from ..intersect import mesh as mesh_module
 from ..intersect.mesh import NODE, MeshArrays
 from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
-from ..textures import image_repeats
-from ..textures.noise import GRADIENTS, PERM
-from ..textures.solid import SOLID_DEFAULTS, with_defaults
 from . import contract
 from .contract import EFFECT_BITS, KIND_CODES, OP_CODES, SceneDesc
 
@@ -363,10 +360,11 @@ class FlatScene:
         indices; the pictures (by address: each is already one contiguous array, no copy); the noise
         tables.  Nothing for a scene without textures.  With ``rows`` (tracer.edit: the pictures and the
         number of materials as they were), only those materials' rows.  Returns the number of pictures."""
-
         a = self.arrays
         if "textures" not in compiled.effects:  # the C core never reads these tables then
             return 0
+        # deferred: the textures (and the noise tables made as they load) wait for the first textured scene
+        from ..textures.noise import GRADIENTS, PERM
         images = getattr(compiled.textures, "images", None) or {}
         numbers = sorted(images)
         materials = compiled.materials.materials
@@ -387,6 +385,10 @@ class FlatScene:
 
     def _texture_rows(self, materials, rows, numbers: list[int]) -> None:
         """The texture tables' rows of these materials (``numbers``: the pictures' texture numbers, in order)."""
+        # deferred: (as in _flatten_textures)
+        from ..textures import image_repeats
+        from ..textures.solid import SOLID_DEFAULTS, with_defaults
+
         a = self.arrays
         texture, image_index = a["mat_texture"], a["mat_tex_image"]
         params = a["mat_tex_param"].reshape(-1, TEX_PARAMS)

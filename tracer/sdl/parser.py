@@ -41,7 +41,6 @@ from ..meshio import read_3vn
 from ..model import (ANALYTIC_KINDS, CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, POLYHEDRON_KINDS, SHAPE_KINDS, Camera, Light,
                      Material, MeshData, Scene, SceneObject, Shape, SourceLocation, TEXTURE_NUMBERS)
 from ..userfiles import read_text
-from . import fastread
 from .lexer import Tokens, to_float, to_floats
 from .lights import LIGHT_USAGE, argument_count, light_of
 # (the writer reads COLOR_MATERIAL and FLOAT_MATERIAL here)
@@ -866,6 +865,7 @@ def parse_sdl(text: str, base_dir: Optional[PathLike] = None, file: Optional[str
     # overflow warning on the way would only repeat that.
     with collector_paused(), np.errstate(over="ignore", invalid="ignore"):
         if fast:
+            from . import fastread  # deferred: the C reader's glue is loaded by the first text big enough for it
             scene = fastread.read(text, file)
             if scene is not None:
                 return scene

@@ -25,8 +25,8 @@ static void *symbol(Library lib, const char *name) { return dlsym(lib, name); }
 #endif
 
 typedef const char *(*DigestFn)(void);
-typedef int64_t (*SizeFn)(void);
-typedef int64_t (*LayoutFn)(int64_t *, int64_t *, int64_t);
+typedef int64_t (*SizeFn)(int64_t);
+typedef int64_t (*LayoutFn)(int64_t, int64_t *, int64_t *, int64_t);
 typedef void *(*CreateFn)(const SceneDesc *, char *, int64_t);
 typedef void (*DestroyFn)(void *);
 typedef int (*TraceFn)(void *, int64_t, const double *, const double *, double *, int64_t *, int64_t, double, int64_t,
@@ -46,8 +46,8 @@ int main(int argc, char **argv)
     if (!lib)
         return fail("the library does not load");
     DigestFn digest = (DigestFn)symbol(lib, "rt_contract_digest");
-    SizeFn size = (SizeFn)symbol(lib, "rt_desc_size");
-    LayoutFn layout = (LayoutFn)symbol(lib, "rt_desc_layout");
+    SizeFn size = (SizeFn)symbol(lib, "rt_struct_size");
+    LayoutFn layout = (LayoutFn)symbol(lib, "rt_struct_layout");
     CreateFn create = (CreateFn)symbol(lib, "rt_create");
     DestroyFn destroy = (DestroyFn)symbol(lib, "rt_destroy");
     TraceFn trace = (TraceFn)symbol(lib, "rt_trace");
@@ -55,13 +55,17 @@ int main(int argc, char **argv)
         return fail("a function is missing from the library");
     if (strcmp(digest(), RT_CONTRACT_DIGEST) != 0)
         return fail("built from another contract");
-    if (size() != (int64_t)sizeof(SceneDesc))
+    enum { SCENE_DESC = 0 }; /* SceneDesc's number in RT_STRUCTS */
+#define COUNT_FIELD(type, name) +1
+    enum { FIELD_COUNT = 0 RT_SCENE_DESC_FIELDS(COUNT_FIELD) };
+#undef COUNT_FIELD
+    if (size(SCENE_DESC) != (int64_t)sizeof(SceneDesc))
         return fail("SceneDesc has another size");
-    int64_t offsets[RT_SCENE_DESC_FIELD_COUNT], sizes[RT_SCENE_DESC_FIELD_COUNT];
-    if (layout(offsets, sizes, RT_SCENE_DESC_FIELD_COUNT) != RT_SCENE_DESC_FIELD_COUNT)
+    int64_t offsets[FIELD_COUNT], sizes[FIELD_COUNT];
+    if (layout(SCENE_DESC, offsets, sizes, FIELD_COUNT) != FIELD_COUNT)
         return fail("SceneDesc has another number of fields");
     int64_t k = 0;
-#define CHECK_FIELD(name)                                                                             \
+#define CHECK_FIELD(type, name)                                                                       \
     if (offsets[k] != (int64_t)offsetof(SceneDesc, name) ||                                           \
         sizes[k] != (int64_t)sizeof(((const SceneDesc *)0)->name))                                    \
         return fail("SceneDesc." #name " is laid out differently");                                   \
@@ -75,16 +79,16 @@ int main(int argc, char **argv)
     static int32_t zeros_i32[16];
     static uint8_t zeros_u8[16];
     static int8_t zeros_i8[16];
-    static const double *no_images[1];
+    static const uint8_t *no_images[1];
     SceneDesc desc;
     memset(&desc, 0, sizeof desc);
-#define POINT_AT_ZEROS(name) _Generic((desc.name),                                                    \
+#define POINT_AT_ZEROS(type, name) _Generic((desc.name),                                                    \
         const int64_t *: (void)(*(const int64_t **)&desc.name = zeros_i64),                            \
         const double *: (void)(*(const double **)&desc.name = zeros_f64),                              \
         const int32_t *: (void)(*(const int32_t **)&desc.name = zeros_i32),                            \
         const uint8_t *: (void)(*(const uint8_t **)&desc.name = zeros_u8),                             \
         const int8_t *: (void)(*(const int8_t **)&desc.name = zeros_i8),                               \
-        const double *const *: (void)(*(const double *const **)&desc.name = no_images),                \
+        const uint8_t *const *: (void)(*(const uint8_t *const **)&desc.name = no_images),                \
         default: (void)0);
     RT_SCENE_DESC_FIELDS(POINT_AT_ZEROS)
 #undef POINT_AT_ZEROS

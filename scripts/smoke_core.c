@@ -27,6 +27,11 @@ static void *symbol(Library lib, const char *name) { return dlsym(lib, name); }
 typedef const char *(*DigestFn)(void);
 typedef int64_t (*SizeFn)(int64_t);
 typedef int64_t (*LayoutFn)(int64_t, int64_t *, int64_t *, int64_t);
+/* SceneDesc is struct 0 of the contract's RT_STRUCTS (rt_struct_size, rt_struct_layout). */
+enum { SCENE_DESC = 0 };
+#define COUNT_FIELD(type, name) +1
+enum { SCENE_DESC_FIELDS = 0 RT_SCENE_DESC_FIELDS(COUNT_FIELD) };
+#undef COUNT_FIELD
 typedef void *(*CreateFn)(const SceneDesc *, char *, int64_t);
 typedef void (*DestroyFn)(void *);
 typedef int (*TraceFn)(void *, int64_t, const double *, const double *, double *, int64_t *, int64_t, double, int64_t,
@@ -55,14 +60,10 @@ int main(int argc, char **argv)
         return fail("a function is missing from the library");
     if (strcmp(digest(), RT_CONTRACT_DIGEST) != 0)
         return fail("built from another contract");
-    enum { SCENE_DESC = 0 }; /* SceneDesc's number in RT_STRUCTS */
-#define COUNT_FIELD(type, name) +1
-    enum { FIELD_COUNT = 0 RT_SCENE_DESC_FIELDS(COUNT_FIELD) };
-#undef COUNT_FIELD
     if (size(SCENE_DESC) != (int64_t)sizeof(SceneDesc))
         return fail("SceneDesc has another size");
-    int64_t offsets[FIELD_COUNT], sizes[FIELD_COUNT];
-    if (layout(SCENE_DESC, offsets, sizes, FIELD_COUNT) != FIELD_COUNT)
+    int64_t offsets[SCENE_DESC_FIELDS], sizes[SCENE_DESC_FIELDS];
+    if (layout(SCENE_DESC, offsets, sizes, SCENE_DESC_FIELDS) != SCENE_DESC_FIELDS)
         return fail("SceneDesc has another number of fields");
     int64_t k = 0;
 #define CHECK_FIELD(type, name)                                                                       \
@@ -79,7 +80,7 @@ int main(int argc, char **argv)
     static int32_t zeros_i32[16];
     static uint8_t zeros_u8[16];
     static int8_t zeros_i8[16];
-    static const uint8_t *no_images[1];
+    static const double *no_images[1];
     SceneDesc desc;
     memset(&desc, 0, sizeof desc);
 #define POINT_AT_ZEROS(type, name) _Generic((desc.name),                                                    \
@@ -88,7 +89,7 @@ int main(int argc, char **argv)
         const int32_t *: (void)(*(const int32_t **)&desc.name = zeros_i32),                            \
         const uint8_t *: (void)(*(const uint8_t **)&desc.name = zeros_u8),                             \
         const int8_t *: (void)(*(const int8_t **)&desc.name = zeros_i8),                               \
-        const uint8_t *const *: (void)(*(const uint8_t *const **)&desc.name = no_images),                \
+        const double *const *: (void)(*(const double *const **)&desc.name = no_images),                \
         default: (void)0);
     RT_SCENE_DESC_FIELDS(POINT_AT_ZEROS)
 #undef POINT_AT_ZEROS

@@ -13,7 +13,7 @@ import pytest
 
 import tracer
 from tracer import native, shapes
-from helpers import Camera, Light, ray_hits, rotation, scaling, scene_of, shape, translation
+from helpers import Camera, Light, assert_closed_and_outward, ray_hits, rotation, scaling, scene_of, shape, translation
 from tracer.compile import compile_scene
 from tracer.intersect.hyperboloid import hyperboloid_mesh, hyperboloid_uv, intersect_hyperboloid
 from tracer.render import render
@@ -171,16 +171,7 @@ def test_tessellation_is_closed_outward_and_on_the_surface(waist):
     k = 1.0 - waist * waist
     wall = np.abs(np.abs(v[:, 2]) - 1.0) > 0  # (the caps' rims are on the wall too)
     assert np.max(np.abs((v[:, 0] ** 2 + v[:, 1] ** 2 - k * v[:, 2] ** 2 - waist * waist)[wall])) < 1e-15
-    edges: dict[tuple[int, int], int] = {}
-    for verts, norms in data.faces:
-        for a, b in zip(verts, verts[1:] + verts[:1]):
-            edges[(a, b)] = edges.get((a, b), 0) + 1
-        # counter-clockwise seen from outside: the face's normal agrees with its vertex normals
-        p = v[list(verts)]
-        face_normal = np.cross(p[1] - p[0], p[2] - p[0])
-        assert np.all(data.normals[list(norms)] @ face_normal > 0)
-    # every directed edge once, and its reverse once: closed and consistently wound
-    assert all(count == 1 and edges.get((b, a)) == 1 for (a, b), count in edges.items())
+    assert_closed_and_outward(data)
     rows = np.zeros((1, shapes.MAX_PARAMETERS))
     rows[0, 0] = waist
     box = shapes.KINDS["hyperboloid"].function("bounds")(rows)[0]

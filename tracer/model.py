@@ -37,7 +37,8 @@ SHAPE_KINDS = shapes.keywords()
 
 @dataclass(frozen=True, slots=True)  # slots: one per shape, 40 bytes less each
 class SourceLocation:
-    """Where something came from, for messages: file (may be None for text), line and column (1-based)."""
+    """Where something came from, for messages: file (may be None for text), line and column (1-based; line 0
+    for a place without lines: a USD stage's prim, whose path the file name carries)."""
 
     file: Optional[str]
     line: int
@@ -45,6 +46,8 @@ class SourceLocation:
 
     def __str__(self) -> str:
         name = self.file or "<sdl>"
+        if not self.line:
+            return name
         return f"{name}:{self.line}:{self.column}" if self.column else f"{name}:{self.line}"
 
 
@@ -224,8 +227,9 @@ class Shape:
         return np.linalg.inv(self.matrix)
 
 
-#: How many parameters each kind's keyword takes.
+#: How many parameters each kind's keyword takes, by keyword and by kind code.
 _ARITY = {e.keyword: len(e.parameters) for e in shapes.REGISTRY}
+_ARITY_OF_CODE = np.array([len(e.parameters) for e in shapes.REGISTRY])
 
 
 def _parameters_of(kind: str, given) -> tuple[float, ...]:
@@ -298,8 +302,7 @@ class ShapeColumns:
                 rows = slice(start, start + _ROWS_AT_ONCE)
                 matrices = matrices_of_affines(self.affines[rows])
                 kinds = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()))
-                values = (map(tuple, map(list.__getitem__, self.parameters[rows].tolist(),
-                                         (slice(_ARITY[k]) for k in kinds))) if with_parameters else repeat(()))
+                values = self._parameter_tuples(rows) if with_parameters else repeat(())
                 for i, (kind, matrix, material, parameters, line, column) in enumerate(zip(
                         kinds, matrices, map(self.materials.__getitem__, self.material_ids[rows].tolist()),
                         values, self.lines[rows].tolist(), self.columns[rows].tolist()), start):
@@ -310,6 +313,16 @@ class ShapeColumns:
     @staticmethod
     def _parameters(kind: str, row: np.ndarray) -> tuple[float, ...]:
         return tuple(row[:_ARITY[kind]].tolist())
+
+    def _parameter_tuples(self, rows: slice) -> list[tuple[float, ...]]:
+        """Shape.parameters of these rows: () for the kinds that take none, the rest a kind's count at a time."""
+        arity = _ARITY_OF_CODE[self.kinds[rows]]
+        out: list[tuple[float, ...]] = [()] * len(arity)
+        for count in np.unique(arity[arity > 0]).tolist():
+            where = np.flatnonzero(arity == count)
+            for j, values in zip(where.tolist(), self.parameters[rows][where, :count].tolist()):
+                out[j] = tuple(values)
+        return out
 
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).

@@ -61,5 +61,5 @@ def error_message(err: BaseException, subject: Optional[str] = None) -> Optional
         from .usd.opening import usd_error_message  # deferred: only a USD error needs the USD modules
 
         where = f"{shown_name(subject)}: " if subject else ""
-        return shortened(f"{where}USD: {usd_error_message(str(err))}")
+        return shortened(f"{where}USD: {usd_error_message(err)}")
     return None

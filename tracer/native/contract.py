@@ -196,7 +196,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mesh_extent", "*f64"),
     F("mesh_constants", "f64", "tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, "
       "PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT", length=5),
-    F("mesh_nodes", "**u8", "per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each"),
+    F("mesh_nodes", "**u8", "per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each"),
     F("mesh_order", "**i32", "per mesh: leaf slot -> triangle"),
     F("mesh_tri_vertex", "**i32", "per mesh: 3 vertex indices per triangle"),
     F("mesh_tri_normal", "**i32", "per mesh: 3 normal indices per triangle (< 0: none), or NULL"),
@@ -406,7 +406,8 @@ FUNCTIONS: tuple[Function, ...] = (
     _f("int", "rt_occluded", "handle scene", "i64 n", "<f64 origins", "<f64 directions", "f64 t_max",
        ">i8 blocked", "i64 threads"),
     _f("i64", "rt_object_hits", "handle scene", "i64 object", "<f64 origin", "<f64 direction", "i64 capacity",
-       ">f64 t", ">i8 entering", ">f64 normal", ">i32 shape", ">i32 part", ">f64 uv", ">i8 inside_at_start"),
+       ">f64 t", ">i8 entering", ">f64 normal", ">i32 shape", ">i32 part", ">f64 uv", ">i8 inside_at_start",
+       ">f64 error", ">f64 offset"),
     _f("int", "rt_texture_colors", "handle scene", "i64 n", "<i32 shape", "<f64 points", "<i32 part",
        "<f64 bary", ">f64 out"),
     _f("i64", "rt_scan_numbers", "str text", "i64 length", ">f64 out", "i64 capacity", ">i64 bad"),

@@ -333,7 +333,7 @@ class Primitive:
             analytic.agree_with_crossing(local, d)
         local.t = local.t + shift[:, None]
         local.error = self.time_errors(origins[idx], centred, d, local)
-        local.normal = local.normal @ self.normal_matrix
+        local.normal = numerics.vectors_times(local.normal, self.normal_matrix)
         local.shape[np.isfinite(local.t)] = self.index
         if self.thin:
             local = sheet_to_pairs(local)
@@ -355,7 +355,7 @@ class Primitive:
             o, d = self.to_generic(origins[idx], directions[idx])
             local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
             local.error = self.time_errors(origins[idx], o, d, local)
-            local.normal = local.normal @ self.normal_matrix
+            local.normal = numerics.vectors_times(local.normal, self.normal_matrix)
             local.shape[np.isfinite(local.t)] = self.index
             for name in ("t", "entering", "normal", "part", "uv", "shape", "error"):
                 getattr(out, name)[idx] = getattr(local, name)
@@ -374,7 +374,7 @@ class Primitive:
         return blocked
 
     def to_generic(self, origins, directions):
-        return transform_points(self.inverse, origins), directions @ self.inverse[:3, :3].T
+        return numerics.affine_points(self.inverse, origins), numerics.linear_vectors(self.inverse, directions)
 
     def may_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Rays whose line passes within the bounding sphere (all rays for unbounded shapes)."""

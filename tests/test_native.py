@@ -285,10 +285,13 @@ def test_hard_case_hits():
     for obj, start, direction in cases:
         compiled, core = _core(scene_of(obj))
         assert_same_hits(compiled, core, start, direction)
-    # Tangent to the torus tube: a double root; both sides agree to the precision such roots have.
+    # Tangent to the torus tube: a double root, not proven real (issue 25), so no touching pair on either side;
+    # 1e-9 inside, two short chords, alike to the precision such roots have.
     compiled, core = _core(scene_of(shape("torus")))
-    got = core.object_hits(0, (-5, 0, 0.2), (1, 0, 0)).t[0]
-    assert got == pytest.approx([4, 4, 6, 6], abs=1e-6)
+    assert core.object_hits(0, (-5, 0, 0.2), (1, 0, 0)).t.size == 0
+    assert compiled.objects[0].intersect(np.array([[-5, 0, 0.2]]), np.array([[1.0, 0, 0]])).trimmed().t.size == 0
+    got = core.object_hits(0, (-5, 0, 0.2 - 1e-9), (1, 0, 0)).t[0]
+    assert got == pytest.approx([4, 4, 6, 6], abs=1e-4)
 
 
 # ------------------------------------------------------------------------------------------------ queries

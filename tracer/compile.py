@@ -287,13 +287,35 @@ class Primitive:
         before any cancellation, as ``first * max|o| + second``."""
         return (float(np.max(np.abs(self.inverse[:3, :3]).sum(axis=1))), float(np.max(np.abs(self.inverse[:3, 3]))))
 
-    def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
-        """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
+    def bound_hits(self, origins, o_generic, d_generic, hits: HitArrays) -> None:
+        """Fill in the bounds of ``hits`` (generic normals still) for world rays from ``origins``: ``error``,
+        the rounding of t (plus the shape's own root error, where it has one), and ``offset``, how far the
+        generic point may be from the surface (the shape's residual over |n|, its first-order distance, plus
+        the line's error; the C core's hit_bounds).  A mesh's triangles report no bend or residual: they keep
+        the unit-curvature floor of the bound and their point is off by the t error along the line.  (The
+        caller ignores floating-point warnings.)"""
         linear, translation = self.inverse_norms
         raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
-        # (plus the shape's own root error, where it has one: the torus)
-        return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
-                                                        self.generic_size, self.rounding)
+        size = self.generic_size
+        error = numerics.point_errors(hits.t, raw_scale, o_generic, d_generic, size, self.rounding)
+        nn = numerics.dot3(hits.normal, hits.normal)
+        length = np.sqrt(nn)
+        mesh = self._mesh is not None
+        if mesh or hits.bend is None:
+            dd = numerics.dot3(d_generic, d_generic)[:, None]
+            hits.bend = 2.0 * length * dd / size
+        hits.error = hits.error + numerics.time_errors(error, hits, d_generic, size, nn, length)
+        if mesh:
+            hits.offset = hits.error * np.sqrt(dd)
+        else:
+            hits.offset = np.where(nn > 0.0, hits.offset / length, hits.offset) + size * error
+        hits.bend = None  # (read; take and the others need not carry it)
+
+    def to_world(self, hits: HitArrays) -> None:
+        """World normals (the C core's sums) and the offsets along them (numerics.world_offsets)."""
+        world = numerics.normal_to_world(hits.normal, self.normal_matrix)
+        hits.offset = numerics.world_offsets(hits.offset, hits.normal, world)
+        hits.normal = world
 
     @cached_property
     def box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
@@ -324,23 +346,23 @@ class Primitive:
         o, d = self.to_generic(origins[idx], directions[idx])
         # Move each generic origin to the line's point nearest the generic centre: every shape's
         # equation then has O(1) coefficients, however far away the ray started.
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             shift = -numerics.dot3(o, d) / numerics.dot3(d, d)
-        shift = np.where(np.isfinite(shift), shift, 0.0)
-        centred = o + shift[:, None] * d
-        local = self.generic_hits(centred, d)
-        if self._normals_agree:
-            analytic.agree_with_crossing(local, d)
-        local.t = local.t + shift[:, None]
-        local.error = self.time_errors(origins[idx], centred, d, local)
-        local.normal = numerics.vectors_times(local.normal, self.normal_matrix)
+            shift = np.where(np.isfinite(shift), shift, 0.0)
+            centred = o + shift[:, None] * d
+            local = self.generic_hits(centred, d)
+            if self._normals_agree:
+                analytic.agree_with_crossing(local, d)
+            local.t = local.t + shift[:, None]
+            self.bound_hits(origins[idx], centred, d, local)
+            self.to_world(local)
         local.shape[np.isfinite(local.t)] = self.index
         if self.thin:
             local = sheet_to_pairs(local)
         if idx.size == n:
             return local
         full = HitArrays.empty(n, local.slots)
-        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error"):
+        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error", "offset"):
             getattr(full, name)[idx] = getattr(local, name)
         return full
 
@@ -354,10 +376,11 @@ class Primitive:
         if idx.size:
             o, d = self.to_generic(origins[idx], directions[idx])
             local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
-            local.error = self.time_errors(origins[idx], o, d, local)
-            local.normal = numerics.vectors_times(local.normal, self.normal_matrix)
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                self.bound_hits(origins[idx], o, d, local)
+                self.to_world(local)
             local.shape[np.isfinite(local.t)] = self.index
-            for name in ("t", "entering", "normal", "part", "uv", "shape", "error"):
+            for name in ("t", "entering", "normal", "part", "uv", "shape", "error", "offset"):
                 getattr(out, name)[idx] = getattr(local, name)
         return out
 

@@ -161,7 +161,7 @@ def _mesh(keyword: str, **flags) -> ShapeKind:
 
 def _tapered(keyword: str, parameters: tuple[Parameter, ...] = (), fixed: tuple[float, ...] = (),
              usd_prim: Optional[str] = None) -> ShapeKind:
-    return ShapeKind(keyword, "TAPERED", parameters=parameters, fixed=fixed,
+    return ShapeKind(keyword, "TAPERED", parameters=parameters, fixed=fixed, budget=("hit_ulps",),
                      intersect="tracer.intersect.analytic:intersect_tapered_cylinder", c_intersect="hits_tapered",
                      bounds="tracer.intersect.analytic:tapered_cylinder_bounds",
                      uv=WALL_AND_DISCS_UV, c_uv="wall_and_discs_uv",

@@ -59,32 +59,61 @@ class SurfaceHits:
     part: np.ndarray
     uv: np.ndarray
     error: np.ndarray  # bound on the rounding error of t (tracer.numerics)
+    offset: np.ndarray  # how far a secondary ray starts from the hit, before the world rounding
 
 
 def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
                t_min: np.ndarray | float = 0.0) -> SurfaceHits:
+    """The first hit of each ray: the nearest, unless another hit lies within the error interval of every hit
+    found (its t at most the least t + error, the *reach*); then, of those, the hit of the object that comes
+    first in the scene, however the two round.  Coplanar faces (a decal on a wall) look the same from any
+    position, on both backends (the C core's scene_first); only rays with such a tie are asked again."""
     n = origins.shape[0]
     t_min = np.broadcast_to(np.asarray(t_min, dtype=float), (n,))
     best = SurfaceHits(hit=np.zeros(n, bool), t=np.full(n, np.inf), normal=np.zeros((n, 3)),
                        entering=np.zeros(n, bool), shape=np.full(n, -1), obj=np.full(n, -1),
-                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n))
+                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n), offset=np.zeros(n))
+    second, reach = np.full(n, np.inf), np.full(n, np.inf)
     for index, obj in enumerate(scene.objects):
-        h = obj.first_hit(origins, directions, t_min, best.t)
-        closer = h.t[:, 0] < best.t
-        if not closer.any():
-            continue
-        best.t = np.where(closer, h.t[:, 0], best.t)
-        best.normal[closer] = h.normal[closer, 0]
-        best.entering[closer] = h.entering[closer, 0]
-        best.shape[closer] = h.shape[closer, 0]
-        best.obj[closer] = index
-        best.part[closer] = h.part[closer, 0]
-        best.uv[closer] = h.uv[closer, 0]
-        best.error[closer] = h.error[closer, 0]
+        h = obj.first_hit(origins, directions, t_min, np.nextafter(reach, np.inf))  # hits up to the reach
+        t = h.t[:, 0]
+        closer = t < best.t
+        second = np.where(closer, np.minimum(second, best.t), np.minimum(second, t))
+        reach = np.minimum(reach, t + h.error[:, 0])
+        if closer.any():
+            rows = np.nonzero(closer)[0]
+            _take(best, rows, h, rows, index)
+    tie = np.nonzero((best.obj >= 0) & (second <= reach))[0]
+    if tie.size:
+        _earliest_in_reach(scene, best, tie, origins, directions, t_min, np.nextafter(reach, np.inf))
     best.hit = np.isfinite(best.t)
     length = np.linalg.norm(best.normal, axis=1, keepdims=True)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
     return best
+
+
+def _take(best: SurfaceHits, rows: np.ndarray, h, source: np.ndarray, index: int) -> None:
+    """Rays ``rows`` of ``best`` take the first hits ``source`` of ``h``, those of object ``index``."""
+    best.t[rows] = h.t[source, 0]
+    best.normal[rows] = h.normal[source, 0]
+    best.entering[rows] = h.entering[source, 0]
+    best.shape[rows] = h.shape[source, 0]
+    best.obj[rows] = index
+    best.part[rows] = h.part[source, 0]
+    best.uv[rows] = h.uv[source, 0]
+    best.error[rows] = h.error[source, 0]
+    best.offset[rows] = h.offset[source, 0]
+
+
+def _earliest_in_reach(scene, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
+    """The rays ``rows`` have a tie: the first object in the scene with a hit before ``limit`` wins it."""
+    for index, obj in enumerate(scene.objects):
+        rows = rows[index < best.obj[rows]]
+        if rows.size == 0:
+            break
+        h = obj.first_hit(origins[rows], directions[rows], t_min[rows], limit[rows])
+        found = np.nonzero(np.isfinite(h.t[:, 0]))[0]
+        _take(best, rows[found], h, found, index)
 
 
 def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
@@ -264,7 +293,7 @@ class Tracer:
         mats = self.scene.materials
         mat = self.material_of[hits.shape[idx]]
         # Secondary rays start off the surface by the bound on the hit point's rounding error.
-        offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
+        offset = numerics.offset_distance(hits.offset[idx], t, o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
             texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx], hits.uv[idx])
@@ -310,7 +339,8 @@ class Tracer:
                 self._physical_light(light, shading, total)
                 continue
             to_light = light_pos - point
-            s = to_light / numerics.norm3(to_light)[:, None]  # (a light at 1e300: |s|^2 overflows)
+            distance = numerics.norm3(to_light)  # (a light at 1e300: |s|^2 overflows)
+            s = to_light / distance[:, None]
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
@@ -320,7 +350,7 @@ class Tracer:
                 lit[rows[skip]] = False
                 rows = rows[~skip]
                 self.counts.shadow += rows.size
-                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos)
+                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos, distance[rows])
                 lit[rows] &= ~occluded(self.scene, feeler_start[rows], to_light, reach)
             rows = np.nonzero(lit)[0]
             if rows.size == 0:

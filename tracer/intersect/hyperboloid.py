@@ -90,6 +90,12 @@ def intersect_hyperboloid(origin: np.ndarray, direction: np.ndarray, waist: floa
             hits.entering[:, column] = hit & (end == 0)
             hits.normal[:, column] = np.where(hit[:, None], normal, 0.0)
             hits.part[:, column] = np.where(hit, part, -1)
+            # G = (x^2 + y^2 - k z^2 - S^2) / 2 bends by a; the residuals are |G| and a cap's |z -+ 1|
+            wall_hit = hit & (part == 0)
+            residual = 0.5 * np.abs(p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1] - k * p[:, 2] * p[:, 2] - w2)
+            hits.bend[:, column] = np.where(wall_hit, a, 0.0)
+            hits.offset[:, column] = np.where(wall_hit, residual,
+                                              np.where(hit, np.abs(p[:, 2] - np.where(part == 1, -1.0, 1.0)), 0.0))
     return hits
 
 

@@ -26,7 +26,7 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
     X(K_CUBE, hits_cube(o, d, out)) \
     X(K_SQUARE, hits_square(o, d, D->tol_square_edge, out)) \
     X(K_PLANE, hits_plane(o, d, out, inside)) \
-    X(K_TAPERED, hits_tapered(o, d, param[0], out)) \
+    X(K_TAPERED, hits_tapered(o, d, param[0], D->tol_hit_ulps, out)) \
     X(K_TORUS, hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out)) \
     X(K_POLYHEDRON, hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out)) \
     X(K_PARABOLOID, hits_paraboloid(o, d, out)) \
@@ -317,7 +317,7 @@ int rt_set_sealed(void *scene, const uint8_t *sealed, int64_t count);
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors, int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget, const int32_t *cancel);
 int rt_first_hits(void *scene, int64_t n, const double *origins, const double *directions, double *t, double *normal, int32_t *shape, int32_t *object, int8_t *entering, int64_t threads);
 int rt_occluded(void *scene, int64_t n, const double *origins, const double *directions, double t_max, int8_t *blocked, int64_t threads);
-int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction, int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape, int32_t *part, double *uv, int8_t *inside_at_start);
+int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction, int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape, int32_t *part, double *uv, int8_t *inside_at_start, double *error, double *offset);
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part, const double *bary, double *out);
 int64_t rt_scan_numbers(const char *text, int64_t length, double *out, int64_t capacity, int64_t *bad);
 int64_t rt_scan3_state_size(void);
@@ -342,6 +342,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "3705aa591ad6fa03"
+#define RT_CONTRACT_DIGEST "643f6b0c907b6cac"
 
 #endif

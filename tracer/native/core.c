@@ -269,6 +269,22 @@ static inline double prim_generic_ray(const double *inv, const double *o, const 
     return shift;
 }
 
+/* A hit's bounds (Primitive.bound_hits): its t's error (plus the shape's own root error, where it has one)
+ * and how far its generic point may be from the surface: the shape's residual over |n| (its first-order
+ * distance) plus the line's error; the shading turns it into a world distance (world_unit_normal).  A
+ * mesh's triangles report no bend or residual: they keep the unit-curvature floor of the bound and their
+ * point is off by the t error along the line. */
+static inline void hit_bounds(const ErrorFrame *frame, const double *dg, int mesh, Hit *h)
+{
+    double error = point_error(frame, h->t);
+    double nn = dot3(h->n, h->n), length = sqrt(nn);
+    if (mesh)
+        h->bend = 2.0 * length * frame->dd / frame->size;
+    h->err += time_error_of(frame, error, dg, h, nn, length);
+    double gap = nn > 0.0 ? h->offset / length : h->offset;
+    h->offset = mesh ? h->err * sqrt(frame->dd) : gap + frame->size * error;
+}
+
 /* All hits of primitive p along the whole world line (Primitive.intersect), into out. */
 static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const double *d, HitList *out)
 {
@@ -298,12 +314,12 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     }
     ErrorFrame frame;
     error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
+    int mesh = D->prim_kind[p] == K_MESH;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
         h->t += shift;
         h->shape = (int32_t)p;
-        /* (plus the shape's own root error, where it has one: the torus) */
-        h->err += time_error(&frame, point_error(&frame, h->t), dg, h->n);
+        hit_bounds(&frame, dg, mesh, h);
     }
     out->n = n;
     return 1;
@@ -329,7 +345,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
             error_frame(o, og, dg, rounding, &frame);
-            out->err = time_error(&frame, point_error(&frame, out->t), dg, out->n);
+            hit_bounds(&frame, dg, 1, out);
         }
         return 1;
     }
@@ -347,16 +363,15 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!(t > t_min && t < t_max))
             continue;
         /* after t_min with its whole error interval (compiled.first_after), compared without square roots */
-        if (solid_analytic(D->prim_kind[p]))
-            agree_with_crossing(&buf[i], dg);
+        double along = solid_analytic(D->prim_kind[p]) ? agree_with_crossing(&buf[i], dg) : dot3(buf[i].n, dg);
         double error = point_error(&frame, t);
-        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n) &&
-            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, buf[i].n))) {
+        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, &buf[i], along) &&
+            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, &buf[i], along))) {
             *out = buf[i];
             out->t = t;
             out->shape = (int32_t)p;
-            if (!feeler)  /* (plus the shape's own root error, where it has one: the torus) */
-                out->err = buf[i].err + time_error(&frame, error, dg, buf[i].n);
+            if (!feeler)
+                hit_bounds(&frame, dg, 0, out);
             return 1;
         }
     }
@@ -433,8 +448,8 @@ static int object_occludes(const Scene *S, Work *w, int64_t ref, const double *o
 }
 
 /* ------------------------------------------------------------------------------------------------------
- * The scene: nearest hit over all objects (ties go to the lower object index, as the reference's loop
- * over objects does) and shadow feelers. */
+ * The scene: the first hit over all objects (trace.first_hits: where hits tie, the object that comes first in
+ * the scene) and shadow feelers. */
 
 /* nextafter(x, INFINITY) for x > 0 finite (a hit's t), without the call. */
 static inline double next_up_positive(double x)
@@ -446,16 +461,30 @@ static inline double next_up_positive(double x)
     return x;
 }
 
-static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d,
-                                   Hit *best, int64_t *best_obj)
+/* The first hits of the objects seen so far (trace.first_hits): the nearest (`best`, ties of t to the lower
+ * index), the second nearest time, and `reach`, the least t + error: every hit up to it lies within the
+ * error interval of every hit found, so none of them is certainly nearer than another. */
+typedef struct {
+    Hit best;
+    int64_t obj;
+    double second, reach;
+} Nearest;
+
+static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d, Nearest *n)
 {
     Hit h;
-    double limit = isfinite(best->t) ? next_up_positive(best->t) : INFINITY;
-    if (object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h) &&
-        (h.t < best->t || (h.t == best->t && obj < *best_obj))) {
-        *best = h;
-        *best_obj = obj;
+    double limit = isfinite(n->reach) ? next_up_positive(n->reach) : INFINITY;  /* hits up to the reach */
+    if (!object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h))
+        return;
+    if (h.t < n->best.t || (h.t == n->best.t && obj < n->obj)) {
+        n->second = n->best.t;
+        n->best = h;
+        n->obj = obj;
+    } else if (h.t < n->second) {
+        n->second = h.t;
     }
+    if (h.t + h.err < n->reach)
+        n->reach = h.t + h.err;
 }
 
 /* The ray against the boxes of the object hierarchy (whose boxes are padded, so the test is conservative).
@@ -497,13 +526,13 @@ static inline int box_hit(const double *lo, const double *hi, const double *o, c
     return near <= far;
 }
 
-/* Which children of p the ray meets with 0 <= t <= far (bit 0: child 0, bit 1: child 1), and where it
+/* Which children of p the ray meets with lo <= t <= far (bit 0: child 0, bit 1: child 1), and where it
  * enters their boxes. */
-static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, double *near_out)
+static inline int pair_hit(const PairNode *p, const RayBoxes *r, double lo, double far, double *near_out)
 {
     if (r->fast) {
 #if defined(__SSE2__)
-        __m128d near = _mm_setzero_pd(), fr = _mm_set1_pd(far);
+        __m128d near = _mm_set1_pd(lo), fr = _mm_set1_pd(far);
         for (int i = 0; i < 3; i++) {
             __m128d o = _mm_set1_pd(r->o[i]), inv = _mm_set1_pd(r->inv[i]);
             int s = r->near_side[i];
@@ -517,7 +546,7 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, dou
 #else
         int mask = 0;
         for (int c = 0; c < 2; c++) {
-            double near = 0.0, fr = far;
+            double near = lo, fr = far;
             for (int i = 0; i < 3; i++) {
                 int s = r->near_side[i];
                 double tn = (p->b[i][s][c] - r->o[i]) * r->inv[i], tf = (p->b[i][1 - s][c] - r->o[i]) * r->inv[i];
@@ -532,20 +561,20 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, dou
     }
     int mask = 0;
     for (int c = 0; c < 2; c++) {
-        double lo[3] = {p->b[0][0][c], p->b[1][0][c], p->b[2][0][c]};
-        double hi[3] = {p->b[0][1][c], p->b[1][1][c], p->b[2][1][c]};
-        near_out[c] = 0.0;  /* (only orders the visit) */
-        mask |= box_hit(lo, hi, r->o, r->inv, 0.0, far) << c;
+        double box_lo[3] = {p->b[0][0][c], p->b[1][0][c], p->b[2][0][c]};
+        double box_hi[3] = {p->b[0][1][c], p->b[1][1][c], p->b[2][1][c]};
+        near_out[c] = lo;  /* (only orders the visit) */
+        mask |= box_hit(box_lo, box_hi, r->o, r->inv, lo, far) << c;
     }
     return mask;
 }
 
 /* The children of p that the ray meets, nearer first: the first into *next, the other onto the stack. */
-static inline int pair_children(const PairNode *p, const RayBoxes *r, double far, TreeEntry *next, TreeEntry *stack,
-                                int64_t *top)
+static inline int pair_children(const PairNode *p, const RayBoxes *r, double lo, double far, TreeEntry *next,
+                                TreeEntry *stack, int64_t *top)
 {
     double near[2];
-    int mask = pair_hit(p, r, far, near);
+    int mask = pair_hit(p, r, lo, far, near);
     if (!mask)
         return 0;
     int first = mask == 2 || (mask == 3 && near[1] < near[0]);
@@ -561,12 +590,15 @@ static inline int pair_children(const PairNode *p, const RayBoxes *r, double far
     return 1;
 }
 
-static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+/* Every object whose box the ray meets for some t in [lo, hi] (the hierarchy's boxes, then the unbounded
+ * objects), each offered to `visit` with the Nearest so far (whose reach may shrink as it goes). */
+typedef void (*ObjectVisit)(const Scene *, Work *, int64_t, const double *, const double *, Nearest *);
+
+static void scene_objects(const Scene *S, Work *w, const double *o, const double *d, double lo, Nearest *n,
+                          ObjectVisit visit)
 {
-    best->t = INFINITY;
-    *best_obj = -1;
     for (int64_t i = 0; i < S->n_unbounded; i++)
-        consider_object(S, w, S->unbounded[i], o, d, best, best_obj);
+        visit(S, w, S->unbounded[i], o, d, n);
     if (S->n_pairs) {
         RayBoxes r;
         ray_boxes(o, d, &r);
@@ -575,21 +607,48 @@ static int scene_first(const Scene *S, Work *w, const double *o, const double *d
         for (;;) {
             if (e.count) {
                 for (int64_t i = e.child; i < (int64_t)e.child + e.count; i++)
-                    consider_object(S, w, S->items[i], o, d, best, best_obj);
-            } else if (pair_children(&S->pairs[e.child], &r, best->t, &e, stack, &top)) {
+                    visit(S, w, S->items[i], o, d, n);
+            } else if (pair_children(&S->pairs[e.child], &r, lo, n->reach, &e, stack, &top)) {
                 continue;
             }
-            /* the next child still in reach (entered no later than the nearest hit so far: ties count) */
+            /* the next child still in reach (entered no later than the reach: ties count) */
             do {
                 if (!top)
-                    return *best_obj >= 0;
+                    return;
                 e = stack[--top];
-            } while (e.near > best->t);
+            } while (e.near > n->reach);
         }
     }
     for (int64_t i = S->root_first; i < (int64_t)S->root_first + S->root_count; i++)
-        consider_object(S, w, S->items[i], o, d, best, best_obj);
-    return *best_obj >= 0;
+        visit(S, w, S->items[i], o, d, n);
+}
+
+/* An object that comes before the tie's winner so far and has a hit within the reach wins it. */
+static void earlier_in_reach(const Scene *S, Work *w, int64_t obj, const double *o, const double *d, Nearest *n)
+{
+    Hit h;
+    if (obj < n->obj && object_first(S, w, S->d.object_ref[obj], o, d, 0.0, next_up_positive(n->reach), &h)) {
+        n->best = h;
+        n->obj = obj;
+    }
+}
+
+/* The first hit: the nearest, unless another hit lies within the error interval of every hit found (t at most
+ * the least t + error, the reach); then, of those, the hit of the object that comes first in the scene
+ * (trace.first_hits), however the two round.  Coplanar faces look the same from any position, on both
+ * backends.  The second pass, over the boxes that hold [nearest t, reach], is taken only on such a tie. */
+static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+{
+    Nearest n;
+    n.best.t = INFINITY;
+    n.obj = -1;
+    n.second = n.reach = INFINITY;
+    scene_objects(S, w, o, d, 0.0, &n, consider_object);
+    if (n.obj >= 0 && n.second <= n.reach)
+        scene_objects(S, w, o, d, n.best.t, &n, earlier_in_reach);
+    *best = n.best;
+    *best_obj = n.obj;
+    return n.obj >= 0;
 }
 
 /* Is any object on o + t d, 0 < t < t_max?  `cache` (may be NULL) remembers the last object that blocked a
@@ -619,7 +678,7 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
                         if (cache) *cache = S->items[i];
                         return 1;
                     }
-            } else if (pair_children(&S->pairs[e.child], &r, t_max, &e, stack, &top)) {
+            } else if (pair_children(&S->pairs[e.child], &r, 0.0, t_max, &e, stack, &top)) {
                 continue;
             }
             if (!top)
@@ -635,11 +694,14 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
     return 0;
 }
 
-/* The hit's unit world normal (zero if degenerate), as first_hits normalises it. */
-static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
+/* The hit's unit world normal (zero if degenerate), as first_hits normalises it; returns how far along it
+ * the world hit point may be from the surface (SurfaceHits.offset): the hit's generic distance maps to the
+ * world along the gradient n by |n| / |n M^-1|, exactly for a plane (tracer.numerics.world_offsets). */
+static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
 {
     normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, n);
-    double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    double squared = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    double length = sqrt(squared);
     if (length > 0.0) {
         n[0] /= length;
         n[1] /= length;
@@ -647,6 +709,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     } else {
         n[0] = n[1] = n[2] = 0.0;
     }
+    return h->offset * sqrt(dot3(h->n, h->n) / squared);
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -1619,11 +1682,12 @@ int rt_occluded(void *scene, int64_t n, const double *origins, const double *dir
     return run_job(&job, threads, NULL);
 }
 
-/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, as
- * the reference's obj.intersect(); returns the number of hits (only `capacity` are written) or -1. */
+/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, with
+ * their error bounds and offsets, as the reference's obj.intersect(); returns the number of hits (only
+ * `capacity` are written) or -1. */
 int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction,
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
-                       int32_t *part, double *uv, int8_t *inside_at_start)
+                       int32_t *part, double *uv, int8_t *inside_at_start, double *error, double *offset)
 {
     const Scene *S = (const Scene *)scene;
     if (object < 0 || object >= S->d.n_objects)
@@ -1638,11 +1702,14 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
         const Hit *h = &top->h[i];
         t[i] = h->t;
         entering[i] = (int8_t)h->entering;
+        double unit[3];
+        offset[i] = world_unit_normal(S, h, unit);
         normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, normal + 3 * i);
         shape[i] = h->shape;
         part[i] = h->part;
         uv[2 * i] = h->uv[0];
         uv[2 * i + 1] = h->uv[1];
+        error[i] = h->err;
     }
     if (n >= 0)
         *inside_at_start = (int8_t)top->inside;

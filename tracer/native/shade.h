@@ -154,7 +154,7 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
                 continue;
             w->counts[RAY_SHADOW]++;
             double to_light[3];
-            double reach = feeler_to(p->feeler, lp, to_light);
+            double reach = feeler_to_known(p->feeler, lp, sl, to_light);
             if (scene_occluded(S, w, p->feeler, to_light, reach, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
                 continue;
         }
@@ -345,7 +345,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     ShadePoint p;
     for (int i = 0; i < 3; i++)
         p.point[i] = o[i] + h.t * d[i];
-    world_unit_normal(S, &h, p.facing);
+    double gap = world_unit_normal(S, &h, p.facing);
     if (dot3(p.facing, d) > 0.0) {  /* shade the side the ray arrives on */
         p.facing[0] = -p.facing[0];
         p.facing[1] = -p.facing[1];
@@ -354,7 +354,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     p.mat = D->prim_material[h.shape];
     p.inside_of = h.entering ? -1 : obj;
     /* secondary rays start off the surface by the bound on the hit point's rounding error */
-    double offset = offset_distance(h.t, h.err, o, d, D->tol_offset_ulps);
+    double offset = offset_distance(gap, h.t, o, d, D->tol_offset_ulps);
     const double *ambient = D->mat_ambient + 3 * p.mat, *emissive = D->mat_emissive + 3 * p.mat;
     p.diffuse = D->mat_diffuse + 3 * p.mat;
     double textured_ambient[3], textured_diffuse[3];

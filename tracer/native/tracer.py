@@ -235,7 +235,7 @@ class NativeTracer:
 
     def object_hits(self, index: int, origin, direction) -> HitArrays:
         """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``
-        (world normals, not unit; only finite hits, so K is the number of hits)."""
+        (world normals, not unit, error bounds and offsets; only finite hits, so K is the number of hits)."""
         o, d = _rays(origin, direction)
         capacity = 64
         while True:
@@ -246,11 +246,13 @@ class NativeTracer:
             part = np.empty(capacity, np.int32)
             uv = np.empty((capacity, 2))
             inside = np.zeros(1, np.int8)
+            error, offset = np.empty(capacity), np.empty(capacity)
             n = library._lib.rt_object_hits(self._handle, int(index), _ptr(o, ctypes.c_double),
                                             _ptr(d, ctypes.c_double), capacity, _ptr(t, ctypes.c_double),
                                             _ptr(entering, ctypes.c_int8), _ptr(normal, ctypes.c_double),
                                             _ptr(shape, ctypes.c_int32), _ptr(part, ctypes.c_int32),
-                                            _ptr(uv, ctypes.c_double), _ptr(inside, ctypes.c_int8))
+                                            _ptr(uv, ctypes.c_double), _ptr(inside, ctypes.c_int8),
+                                            _ptr(error, ctypes.c_double), _ptr(offset, ctypes.c_double))
             if n < 0:
                 raise MemoryError("the C core ran out of memory (or the object index is out of range)")
             if n <= capacity:
@@ -258,4 +260,4 @@ class NativeTracer:
             capacity = int(n)
         return HitArrays(t=t[None, :n].copy(), entering=entering[None, :n].astype(bool), normal=normal[None, :n].copy(),
                          part=part[None, :n].copy(), uv=uv[None, :n].copy(), inside_at_start=inside.astype(bool),
-                         shape=shape[None, :n].copy())
+                         shape=shape[None, :n].copy(), error=error[None, :n].copy(), offset=offset[None, :n].copy())

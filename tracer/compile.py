@@ -397,7 +397,7 @@ class Primitive:
         return blocked
 
     def to_generic(self, origins, directions):
-        return transform_points(self.inverse, origins), directions @ self.inverse[:3, :3].T
+        return numerics.affine_points(self.inverse, origins), numerics.linear_vectors(self.inverse, directions)
 
     def may_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Rays whose line passes within the bounding sphere (all rays for unbounded shapes)."""

@@ -471,7 +471,7 @@ class _Reader:
         try:
             self.scene.lights.append(read_light(self, prim, type_name, color))
         except (*_BAD_VALUE, SceneError) as err:
-            self.problem(prim, f"{type_name} with {err}")
+            self.problem(prim, f"{type_name}: {err}")
 
     def _camera(self, prim) -> None:
         if self.scene.camera is not None:

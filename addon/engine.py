@@ -27,7 +27,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import object_cache
+from . import live_scene, object_cache
 from .importer import CAM_EXACT, CAM_SHOWN
 from .pure import blocks, convert, passes, raycam
 from .scene_build import SceneBuilder, flat, matrix_np
@@ -37,8 +37,12 @@ from .tracer.errors import TracerError
 from .tracer.model import Camera
 
 ENGINE_ID = "SDL_RAYTRACER"
-#: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled.
+#: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled; "scene":
+#: how its scene was made ("full": built; "edit": the kept scene edited; "none": the kept scene as it was).
 LAST_RENDER: dict = {}
+#: The viewport's last change: seconds from view_update to the first block drawn ("first_block"), of which
+#: making the scene ("sync", "scene" as in LAST_RENDER), and when it was drawn ("drawn_at", time.perf_counter).
+LAST_VIEW: dict = {}
 #: Seconds of tracing per viewport redraw.
 VIEWPORT_SLICE = 0.08
 #: Shortest pause between two updates of the render result during a final render.
@@ -216,16 +220,22 @@ class SDLRenderEngine(bpy.types.RenderEngine):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        self._start()
+
+    def _start(self) -> None:
+        """The engine's own state (the tests drive view_update and view_draw on stand-ins that start so)."""
         self._view = None  # viewport state
         self._view_dirty = True
         self._view_scene = None
         self._geometry = object_cache.ObjectCache()  # what each object's geometry became, between builds
-        self._kept = None  # the last final render's compiled scene, with Persistent Data on
+        # the compiled scene, edited as Blender's updates say (the viewport's; F12's with Persistent Data)
+        self._live = live_scene.LiveScene(self._geometry)
+        self._changed_at: Optional[float] = None  # when the viewport was told of a change not yet drawn
 
     def update(self, data, depsgraph):
         """Before each final render: what changed since the last one (everything, unless Persistent Data
         kept this engine and its depsgraph)."""
-        self._geometry.apply_updates(depsgraph)
+        self._live.take_updates(depsgraph)
 
     # -- final render ---------------------------------------------------------------------------------
 
@@ -260,14 +270,19 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 matrix = None
             params = camera_params(cam_obj, matrix)
             self.update_stats("", "SDL Ray Tracer | building the scene")
-            tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
+            if render.use_persistent_data and not self.is_preview:
+                # Blender keeps this engine for the next render: the scene is kept, and edited as it changes
+                compiled, warnings = self._live.compiled(depsgraph, "RENDER")
+                tracer_scene = self._live.editable.scene
+                LAST_RENDER["scene"] = self._live.last_sync[0]
+            else:
+                tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
+                compiled = compile_scene(tracer_scene)
+                self._live.clear()
+                self._geometry.clear()
+                LAST_RENDER["scene"] = "full"
             for message in warnings:
                 self.report({"WARNING"}, message)
-            compiled = compile_scene(tracer_scene)
-            # Kept for the next render only where Blender keeps this engine for it (Persistent Data).
-            self._kept = compiled if render.use_persistent_data else None
-            if not render.use_persistent_data:
-                self._geometry.clear()
             aspx, aspy = render.pixel_aspect_x, render.pixel_aspect_y
 
             rays_for = camera_rays(cam_obj, matrix, params, winx, winy, x0, y0, aspx, aspy)
@@ -348,9 +363,11 @@ class SDLRenderEngine(bpy.types.RenderEngine):
     # -- viewport -------------------------------------------------------------------------------------
 
     def view_update(self, context, depsgraph):
-        self._geometry.apply_updates(depsgraph)
+        self._live.take_updates(depsgraph)
         self._view_dirty = True
         self._view = None
+        if self._changed_at is None:
+            self._changed_at = time.perf_counter()
 
     def view_draw(self, context, depsgraph):
         region = context.region
@@ -362,9 +379,7 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         key = (width, height, persp.tobytes())
         try:
             if self._view_dirty or self._view_scene is None:
-                tracer_scene, _ = build_scene(depsgraph, "VIEWPORT", self._geometry)
-                # (the scene compiled before stays alive until this one is made: its BVHs are found again)
-                self._view_scene = compile_scene(tracer_scene)
+                self._view_scene, _ = self._live.compiled(depsgraph, "VIEWPORT")
                 self._view_dirty = False
                 self._view = None
             if self._view is None or self._view[0] != key:
@@ -378,16 +393,25 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 self._view = (key, renderer)
             renderer = self._view[1]
             if not renderer.finished:
-                # at least as long as drawing takes (slow on software OpenGL), so tracing keeps half the time
-                renderer.run_for(max(VIEWPORT_SLICE, self._draw_seconds))
+                # After a change, one work item (the first block of the coarsest pass) is drawn at once; then
+                # slices at least as long as drawing takes (slow on software OpenGL), so that tracing keeps
+                # half the time.
+                renderer.run_for(0.0 if renderer.done == 0 else max(VIEWPORT_SLICE, self._draw_seconds))
         except Exception as exc:  # noqa: BLE001
             self.update_stats("", f"SDL Ray Tracer: {exc}")
             return
         started = time.perf_counter()
         self._draw(depsgraph.scene, renderer.rgba(), width, height)
-        self._draw_seconds = time.perf_counter() - started
-        self.update_stats("", "SDL Ray Tracer | " + ("done" if renderer.finished else
-                                                     f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
+        drawn = time.perf_counter()
+        self._draw_seconds = drawn - started
+        if self._changed_at is not None:  # the first block since Blender said the scene changed
+            what, seconds = self._live.last_sync
+            LAST_VIEW.update({"first_block": drawn - self._changed_at, "sync": seconds, "scene": what,
+                              "drawn_at": drawn})
+            self._changed_at = None
+        first = f" | first block {LAST_VIEW['first_block']:.3f} s after the change" if LAST_VIEW else ""
+        self.update_stats("", "SDL Ray Tracer" + first + " | " + (
+            "done" if renderer.finished else f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
         if not renderer.finished:
             self.tag_redraw()
             if not bpy.app.timers.is_registered(_redraw_rendered_viewports):

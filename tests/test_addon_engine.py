@@ -307,7 +307,7 @@ def test_viewport_refines_while_the_user_waits(monkeypatch):
 
         def __init__(self):
             self.redraws, self.frames = 0, []
-            self._geometry = object_cache.ObjectCache()
+            engine.SDLRenderEngine._start(self)
 
         def tag_redraw(self):
             self.redraws += 1

@@ -365,7 +365,6 @@ class SDLRenderEngine(bpy.types.RenderEngine):
     def view_update(self, context, depsgraph):
         self._live.take_updates(depsgraph)
         self._view_dirty = True
-        self._view = None
         if self._changed_at is None:
             self._changed_at = time.perf_counter()
 
@@ -381,7 +380,10 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             if self._view_dirty or self._view_scene is None:
                 self._view_scene, _ = self._live.compiled(depsgraph, "VIEWPORT")
                 self._view_dirty = False
-                self._view = None
+                if self._live.changed:  # (else the image being refined is still the scene's)
+                    self._view = None
+                else:
+                    self._changed_at = None
             if self._view is None or self._view[0] != key:
                 settings = render_settings(depsgraph.scene)
                 settings["progressive"] = True  # the viewport always refines while the user waits

@@ -68,6 +68,8 @@ class LiveScene:
         self._data_users: dict[int, set[int]] = {}  # data pointer -> pointers of the objects built from it
         self._lights: dict[int, tuple] = {}  # light object pointer -> (sort key, original)
         self._instanced = False  # the scene has instances: every sync builds it all
+        self._edits = 0  # edits the editable scene had made at the last sync
+        self.changed = True
 
     def clear(self) -> None:
         """Build everything again at the next sync."""
@@ -78,11 +80,12 @@ class LiveScene:
     def take_updates(self, depsgraph) -> None:
         """Note what ``depsgraph.updates`` says changed (call it where Blender offers them: view_update,
         RenderEngine.update); the object cache drops the geometry they invalidate."""
-        self.cache.apply_updates(depsgraph)
+        updates = list(depsgraph.updates)  # (each reading looks through every datablock the depsgraph has)
+        self.cache.apply_updates(updates)
         if self.editable is None:  # (the next sync builds everything: a first render lists every datablock)
             return
         pending = self._pending
-        for update in depsgraph.updates:
+        for update in updates:
             datablock = update.id
             original = getattr(datablock, "original", None) or datablock
             if isinstance(datablock, bpy.types.Object):
@@ -117,6 +120,10 @@ class LiveScene:
                 what = "full"
         self._pending = _Pending()
         self.last_sync = (what, time.perf_counter() - started)
+        edits = sum(self.editable.done.values())
+        #: whether the scene changed since the last call (built, or edited: a selection, say, changes nothing)
+        self.changed = what == "full" or edits != self._edits
+        self._edits = edits
         return self.editable.compiled, list(self.warnings)
 
     def _build(self, depsgraph, mode: str) -> None:

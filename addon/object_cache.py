@@ -68,10 +68,10 @@ class ObjectCache:
 
     # -- what changed ---------------------------------------------------------------------------------
 
-    def apply_updates(self, depsgraph) -> None:
-        """Drop the entries that ``depsgraph.updates`` says are out of date (call it where Blender offers the
-        updates: view_update, RenderEngine.update)."""
-        for update in depsgraph.updates:
+    def apply_updates(self, updates) -> None:
+        """Drop the entries that ``updates`` (a ``depsgraph.updates``, read where Blender offers it: view_update,
+        RenderEngine.update) says are out of date."""
+        for update in updates:
             if not update.is_updated_geometry:
                 continue
             datablock = update.id

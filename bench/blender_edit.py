@@ -144,10 +144,11 @@ def child_view(blend: str, sdl: str, repeat: int) -> dict:
         view.view_draw(context, bpy.context.evaluated_depsgraph_get())
     edits = []
     for i in range(repeat):
-        moved = time.perf_counter()
+        moved, moved_cpu = time.perf_counter(), time.process_time()
         spheres[len(spheres) // 2].location.x += 0.05
         view.view_draw(context, bpy.context.evaluated_depsgraph_get())  # (evaluating calls view_update)
         edits.append({"from_move": round(engine.LAST_VIEW["drawn_at"] - moved, 4),
+                      "cpu_from_move": round(time.process_time() - moved_cpu, 4),
                       "from_view_update": round(engine.LAST_VIEW["first_block"], 4),
                       "sync": round(engine.LAST_VIEW["sync"], 4), "scene": engine.LAST_VIEW["scene"]})
         while "done" not in view.info:
@@ -165,6 +166,11 @@ def child_gui(blend: str, sdl: str, repeat: int) -> None:
     results, state = [], {"phase": "settle", "since": time.perf_counter(), "moves": 0}
     space.region_3d.view_perspective = "CAMERA"
     space.shading.type = "RENDERED"
+    if "--whole-window" not in sys.argv:  # the viewport alone, as Ctrl Alt Space shows it: no other editor to draw
+        with bpy.context.temp_override(window=window, area=area):
+            bpy.ops.screen.screen_full_area(use_hide_panels=True)
+    if "--overlays" not in sys.argv:  # (Blender's overlays draw every object's origin: software OpenGL's time)
+        space.overlay.show_overlays = False
 
     def tick():
         now = time.perf_counter()
@@ -177,6 +183,7 @@ def child_gui(blend: str, sdl: str, repeat: int) -> None:
         if last > state["moved"]:
             results.append({"from_move": round(last - state["moved"], 4),
                             "from_view_update": round(engine.LAST_VIEW["first_block"], 4),
+                            "until_view_draw": round(engine.LAST_VIEW["until_view_draw"], 4),
                             "sync": round(engine.LAST_VIEW["sync"], 4), "scene": engine.LAST_VIEW["scene"]})
             state["moves"] += 1
             if state["moves"] >= repeat:
@@ -257,9 +264,10 @@ def main() -> None:
         if "animation" in kinds:
             medians["animation_made_after_frame_1"] = kinds["animation"]["made_after_frame_1"]
         if "view" in kinds and kinds["view"]["after_move"]:
-            medians["first_block_from_move"] = statistics.median(m["from_move"] for m in kinds["view"]["after_move"])
-            medians["first_block_from_view_update"] = statistics.median(
-                m["from_view_update"] for m in kinds["view"]["after_move"])
+            for name in ("from_move", "cpu_from_move", "from_view_update", "until_view_draw"):
+                values = [m[name] for m in kinds["view"]["after_move"] if name in m]
+                if values:
+                    medians[f"first_block_{name}"] = statistics.median(values)
         summary["median"][key] = medians
     if blender:
         summary["blender"] = subprocess.run([blender, "--version"], capture_output=True,

@@ -19,8 +19,6 @@ from . import props
 from .pure import light_units
 from .tracer.model import Light
 
-#: What an SDL light's colour 1 1 1 is in Blender: a point, spot or area light of this many watts.
-LIGHT_WATTS = props.LIGHT_WATTS
 #: An SDL point light made from a Blender sun (an imported light whose type was changed to Sun) is put this
 #: far from the scene's origin, against its direction.
 SUN_DISTANCE = 1.0e6

@@ -18,7 +18,6 @@ compiled scene is kept too, so that the meshes' BVHs, found again by content, ar
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import traceback
@@ -262,91 +261,20 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         try:
             layer = result.layers[0].passes["Combined"]
-            cam_obj = self.camera_override or scene.camera
-            if cam_obj is None:
-                raise ValueError("the scene has no camera")
-            cam_obj = cam_obj.evaluated_get(depsgraph)
-            try:
-                matrix = matrix_np(self.camera_model_matrix(cam_obj))
-            except (AttributeError, TypeError):
-                matrix = None
-            params = camera_params(cam_obj, matrix)
-            self.update_stats("", "SDL Ray Tracer | building the scene")
-            if render.use_persistent_data and not self.is_preview:
-                # Blender keeps this engine for the next render: the scene is kept, and edited as it changes
-                compiled, warnings = self._live.compiled(depsgraph, "RENDER")
-                tracer_scene = self._live.editable.scene
-                LAST_RENDER["scene"] = self._live.last_sync[0]
-            else:
-                tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
-                compiled = compile_scene(tracer_scene)
-                self._live.clear()
-                self._geometry.clear()
-                LAST_RENDER["scene"] = "full"
-            for message in warnings:
-                self.report({"WARNING"}, message)
-            aspx, aspy = render.pixel_aspect_x, render.pixel_aspect_y
-
-            rays_for = camera_rays(cam_obj, matrix, params, winx, winy, x0, y0, aspx, aspy)
-
-            settings = render_settings(scene)
-            if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
-                settings.update(block_size=1, progressive=False, samples=1)
-            elif not settings["progressive"] and settings["block_size"] > 1:
-                warnings.append(blocky_warning(settings["block_size"]))
-                self.report({"WARNING"}, warnings[-1])
-            if settings["progressive"] and not displayed():
-                # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
-                # the same rays either way, so the image is the same without them.
-                settings["block_size"] = 1
+            cam_obj, matrix, params = self._camera(depsgraph)
+            tracer_scene, compiled, warnings = self._compiled(depsgraph)
+            rays_for = camera_rays(cam_obj, matrix, params, winx, winy, x0, y0, render.pixel_aspect_x,
+                                   render.pixel_aspect_y)
             tracer = blocks.BlockRenderer(compiled, rays_for, width, height, alpha=render.film_transparent,
-                                          seed=scene.frame_current, **settings)
-            shown = FilmUpdates(lambda: (write_pass(layer, tracer.rgba()), self.update_result(result)),
-                                enabled=displayed())
-
-            status_shown = [0.0]
-
-            def on_item(item):
-                pass_done = tracer.done == len(tracer.items) or \
-                    tracer.items[min(tracer.done, len(tracer.items) - 1)].pass_index != item.pass_index
-                shown.offer(pass_done)
-                now = time.perf_counter()
-                if pass_done or now - status_shown[0] >= STATUS_INTERVAL:  # (blender -b prints each one)
-                    status_shown[0] = now
-                    self.update_progress(tracer.fraction)
-                    self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
-                                          f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
-
-            target = 0.0 if self.is_preview else float(scene.sdl_render.target_error)
-            estimate = None
-            try:
-                if target > 0.0:
-                    self.update_stats("", f"SDL Ray Tracer | sampling to an error of {target:g}")
-                    estimate = tracer.run_to_error(target, cancel=self.cancelled)
-                else:
-                    tracer.run(cancel=self.cancelled, on_item=on_item)
-            except blocks.Cancelled:
-                LAST_RENDER["cancelled"] = True
+                                          seed=scene.frame_current, **self._settings(scene, warnings))
+            estimate = self._trace(tracer, scene, layer, result)
             write_pass(layer, tracer.rgba())
             wanted = passes.enabled(depsgraph.view_layer)
             if wanted and not LAST_RENDER["cancelled"]:
                 self.update_stats("", "SDL Ray Tracer | passes")
                 write_first_hit_passes(result.layers[0], wanted, tracer, compiled, rays_for, params, scene)
             LAST_RENDER["passes_written"] = wanted if not LAST_RENDER["cancelled"] else []
-            counts = tracer.counts().as_dict()
-            LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
-                                "tiles_done": tracer.done, "tiles_total": len(tracer.items),
-                                "backend": tracer.backend_name, "objects": len(tracer_scene.objects),
-                                "lights": len(tracer_scene.lights), "warnings": list(warnings)})
-            total = sum(counts.values())
-            reached = ""
-            if estimate is not None:
-                LAST_RENDER["error_estimate"] = estimate.as_dict()
-                reached = (f" | estimated error {estimate.rms:.3g} (worst pixel {estimate.worst:.3g}, "
-                           f"{estimate.samples_mean:.1f} samples per pixel)")
-                self.report({"INFO"}, "SDL Ray Tracer:" + reached[2:])
-            self.update_stats("", f"SDL Ray Tracer | {total} rays in {tracer.seconds:.2f} s" + reached
-                                  + (" | cancelled" if LAST_RENDER["cancelled"] else ""))
+            self._report_render(tracer, tracer_scene, warnings, estimate)
         except Exception as exc:  # noqa: BLE001 - a render must end with a message, not a traceback
             LAST_RENDER["error"] = str(exc)
             self.report({"ERROR"}, f"SDL Ray Tracer: {exc}")
@@ -354,6 +282,98 @@ class SDLRenderEngine(bpy.types.RenderEngine):
                 traceback.print_exc()  # (the scene's own problems are said in one line; a bug shows where)
         finally:
             self.end_result(result)
+
+    def _camera(self, depsgraph):
+        """The final render's camera object (evaluated), its model matrix and its CameraParams."""
+        scene = depsgraph.scene
+        cam_obj = self.camera_override or scene.camera
+        if cam_obj is None:
+            raise ValueError("the scene has no camera")
+        cam_obj = cam_obj.evaluated_get(depsgraph)
+        try:
+            matrix = matrix_np(self.camera_model_matrix(cam_obj))
+        except (AttributeError, TypeError):
+            matrix = None
+        return cam_obj, matrix, camera_params(cam_obj, matrix)
+
+    def _compiled(self, depsgraph):
+        """(tracer scene, compiled scene, warnings) of the final render: the live scene, kept and edited, where
+        Blender keeps this engine for the next render (Persistent Data); else built anew."""
+        render = depsgraph.scene.render
+        self.update_stats("", "SDL Ray Tracer | building the scene")
+        if render.use_persistent_data and not self.is_preview:
+            # Blender keeps this engine for the next render: the scene is kept, and edited as it changes
+            compiled, warnings = self._live.compiled(depsgraph, "RENDER")
+            tracer_scene = self._live.editable.scene
+            LAST_RENDER["scene"] = self._live.last_sync[0]
+        else:
+            tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
+            compiled = compile_scene(tracer_scene)
+            self._live.clear()
+            self._geometry.clear()
+            LAST_RENDER["scene"] = "full"
+        for message in warnings:
+            self.report({"WARNING"}, message)
+        return tracer_scene, compiled, warnings
+
+    def _settings(self, scene, warnings: list) -> dict:
+        """The BlockRenderer settings of a final render (a preview's, or the panel's), warning of blocks."""
+        settings = render_settings(scene)
+        if self.is_preview:  # a material or light preview: one pass, one ray per pixel, at once
+            settings.update(block_size=1, progressive=False, samples=1)
+        elif not settings["progressive"] and settings["block_size"] > 1:
+            warnings.append(blocky_warning(settings["block_size"]))
+            self.report({"WARNING"}, warnings[-1])
+        if settings["progressive"] and not displayed():
+            # Coarse passes only show the image sharpening, and nothing is shown here; every pixel gets
+            # the same rays either way, so the image is the same without them.
+            settings["block_size"] = 1
+        return settings
+
+    def _trace(self, tracer: blocks.BlockRenderer, scene, layer, result):
+        """Trace the film (to the panel's error target when it sets one: then its ErrorEstimate is returned),
+        showing it and the progress as it goes; Esc stops it (LAST_RENDER["cancelled"])."""
+        shown = FilmUpdates(lambda: (write_pass(layer, tracer.rgba()), self.update_result(result)),
+                            enabled=displayed())
+        status_shown = [0.0]
+
+        def on_item(item):
+            pass_done = tracer.done == len(tracer.items) or \
+                tracer.items[min(tracer.done, len(tracer.items) - 1)].pass_index != item.pass_index
+            shown.offer(pass_done)
+            now = time.perf_counter()
+            if pass_done or now - status_shown[0] >= STATUS_INTERVAL:  # (blender -b prints each one)
+                status_shown[0] = now
+                self.update_progress(tracer.fraction)
+                self.update_stats("", f"SDL Ray Tracer | pass {item.pass_index + 1}/{tracer.pass_count} "
+                                      f"(block {item.stride}) | tile {tracer.done}/{len(tracer.items)}")
+
+        target = 0.0 if self.is_preview else float(scene.sdl_render.target_error)
+        try:
+            if target > 0.0:
+                self.update_stats("", f"SDL Ray Tracer | sampling to an error of {target:g}")
+                return tracer.run_to_error(target, cancel=self.cancelled)
+            tracer.run(cancel=self.cancelled, on_item=on_item)
+        except blocks.Cancelled:
+            LAST_RENDER["cancelled"] = True
+        return None
+
+    def _report_render(self, tracer: blocks.BlockRenderer, tracer_scene, warnings: list, estimate) -> None:
+        """What the render did, in LAST_RENDER and Blender's status line."""
+        counts = tracer.counts().as_dict()
+        LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
+                            "tiles_done": tracer.done, "tiles_total": len(tracer.items),
+                            "backend": tracer.backend_name, "objects": len(tracer_scene.objects),
+                            "lights": len(tracer_scene.lights), "warnings": list(warnings)})
+        total = sum(counts.values())
+        reached = ""
+        if estimate is not None:
+            LAST_RENDER["error_estimate"] = estimate.as_dict()
+            reached = (f" | estimated error {estimate.rms:.3g} (worst pixel {estimate.worst:.3g}, "
+                       f"{estimate.samples_mean:.1f} samples per pixel)")
+            self.report({"INFO"}, "SDL Ray Tracer:" + reached[2:])
+        self.update_stats("", f"SDL Ray Tracer | {total} rays in {tracer.seconds:.2f} s" + reached
+                              + (" | cancelled" if LAST_RENDER["cancelled"] else ""))
 
     def update_render_passes(self, scene=None, renderlayer=None):
         """The passes this engine writes, for the Render Layers node and the render result."""

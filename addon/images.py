@@ -21,6 +21,7 @@ import bpy
 import numpy as np
 
 from .tracer import errors
+from .tracer.imageio import save_image
 from .tracer.textures import images as limits
 
 
@@ -122,8 +123,6 @@ def linear_copy(path: str) -> str:
     if made is not None and os.path.isfile(made):
         return made
     import tempfile
-
-    from .tracer.imageio import save_image
 
     if _linear_folder is None:
         _linear_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import meshes, object_cache, props, scene_build
+from . import blender_lights, meshes, object_cache, props, scene_build
 from .engine import ENGINE_ID
 
 
@@ -94,8 +94,6 @@ class SDL_PT_light(_PropertiesPanel, bpy.types.Panel):
         return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
 
     def draw(self, context):
-        from . import blender_lights
-
         layout = self.layout
         layout.use_property_split = True
         light = context.light

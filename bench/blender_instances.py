@@ -82,11 +82,16 @@ def _steps(traced: bool) -> dict:
         before_rss, before_cpu = _rss(), time.process_time()
         if traced:
             tracemalloc.start()
+            before = tracemalloc.take_snapshot()
         kept[name] = work()
         entry = {"seconds_cpu": round(time.process_time() - before_cpu, 2), "rss_growth": _rss() - before_rss}
         if traced:
             entry["python_allocated"] = tracemalloc.get_traced_memory()[0]
+            growth = tracemalloc.take_snapshot().compare_to(before, "lineno")
             tracemalloc.stop()
+            # where it went: the lines that kept the most, per instance
+            entry["where"] = {str(stat.traceback[0]).replace(str(ROOT) + "/", ""): stat.size_diff
+                              for stat in growth[:8]}
         out[name] = entry
 
     step("build", lambda: engine.build_scene(depsgraph, "RENDER")[0])
@@ -96,20 +101,26 @@ def _steps(traced: bool) -> dict:
     return out, kept
 
 
-def _mesh_once(scene) -> int:
-    """The bytes of the one mesh and its BVH (a scene of one instance of it, compiled)."""
+def _mesh_once() -> dict:
+    """The bytes of the one mesh, its arrays and its BVH: a scene of one instance of it, compiled first (the
+    mesh's BVH is built then, and found again by content by the compile of all the instances)."""
+    import bpy
+
+    from addon import engine
     from addon.tracer.compile import compile_scene
     from addon.tracer.model import Scene
 
-    mesh = scene.objects[0].mesh
+    built, _ = engine.build_scene(bpy.context.evaluated_depsgraph_get(), "RENDER")
+    mesh = built.objects[0].mesh
     arrays = sum(a.nbytes for a in (mesh.vertices, mesh.normals) + tuple(mesh.faces.arrays()))
     before = _rss()
     tracemalloc.start()
-    single = compile_scene(Scene(objects=[scene.objects[0]], lights=scene.lights, settings=scene.settings))
+    compiled = compile_scene(Scene(objects=built.objects[:1], lights=built.lights, settings=built.settings))
     python = tracemalloc.get_traced_memory()[0]
     tracemalloc.stop()
-    del single
-    return {"arrays": int(arrays), "compiled_python_allocated": int(python), "rss_growth": _rss() - before}
+    _mesh_once.kept = (compiled, built)  # (alive while the instances are compiled: their BVH is this one)
+    return {"triangles": int(len(mesh.faces)), "arrays": int(arrays), "compiled_python_allocated": int(python),
+            "rss_growth": _rss() - before}
 
 
 def main() -> None:
@@ -124,17 +135,19 @@ def main() -> None:
     import addon.tracer.native  # noqa: F401  (the C core built before anything is measured)
 
     triangles, points = _scene(args.instances, args.triangles)
+    mesh = _mesh_once()
     timed, kept = _steps(traced=False)
-    mesh = _mesh_once(kept["build"])
     del kept
     traced, _ = _steps(traced=True)
+    steps = ("build", "compile")
     result = {"instances": points, "mesh_polygons": triangles, "blender": bpy.app.version_string,
-              "timed": timed, "python_allocated": {k: v.get("python_allocated") for k, v in traced.items()
-                                                   if isinstance(v, dict)}, "mesh_once": mesh}
-    total = timed["build"]["rss_growth"] + timed["compile"]["rss_growth"]
-    result["bytes_per_instance_rss"] = round((total - mesh["rss_growth"]) / points, 1)
-    result["bytes_per_instance_python"] = round(
-        (sum(v for v in result["python_allocated"].values()) - mesh["compiled_python_allocated"]) / points, 1)
+              "timed": timed, "python_allocated": {k: traced[k]["python_allocated"] for k in steps},
+              "mesh_once": mesh,
+              "where_per_instance": {k: {line: round(size / points, 1) for line, size in traced[k]["where"].items()}
+                                     for k in steps}}
+    # (the mesh's BVH was built by _mesh_once and is found again: what build and compile add is per instance)
+    result["bytes_per_instance_rss"] = round(sum(timed[k]["rss_growth"] for k in steps) / points, 1)
+    result["bytes_per_instance_python"] = round(sum(result["python_allocated"].values()) / points, 1)
     if args.render != "none":
         from blender_scripts.addon_env import set_resolution
 

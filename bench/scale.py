@@ -124,7 +124,7 @@ def primary_ray_throughput(compiled, width: int, height: int, threads: int) -> d
     """Camera rays per second, closest hit only: the C core's first_hits and (if installed) Embree's, on
     the mesh alone (without the floor), the same rays."""
     from tracer.camera import CameraFrame, scene_camera
-    from tracer.native import NativeTracer
+    from tracer.native.tracer import NativeTracer
 
     from dataclasses import replace
 

@@ -25,11 +25,17 @@ static void *symbol(Library lib, const char *name) { return dlsym(lib, name); }
 #endif
 
 typedef const char *(*DigestFn)(void);
-typedef int64_t (*SizeFn)(void);
-typedef int64_t (*LayoutFn)(int64_t *, int64_t *, int64_t);
+typedef int64_t (*SizeFn)(int64_t);
+typedef int64_t (*LayoutFn)(int64_t, int64_t *, int64_t *, int64_t);
+/* SceneDesc is struct 0 of the contract's RT_STRUCTS (rt_struct_size, rt_struct_layout). */
+enum { SCENE_DESC = 0 };
+#define COUNT_FIELD(type, name) +1
+enum { SCENE_DESC_FIELDS = 0 RT_SCENE_DESC_FIELDS(COUNT_FIELD) };
+#undef COUNT_FIELD
 typedef void *(*CreateFn)(const SceneDesc *, char *, int64_t);
 typedef void (*DestroyFn)(void *);
-typedef int (*TraceFn)(void *, int64_t, const double *, const double *, double *, int64_t *, int64_t);
+typedef int (*TraceFn)(void *, int64_t, const double *, const double *, double *, int64_t *, int64_t, double, int64_t,
+                       int64_t, const int32_t *);
 
 static int fail(const char *what)
 {
@@ -45,8 +51,8 @@ int main(int argc, char **argv)
     if (!lib)
         return fail("the library does not load");
     DigestFn digest = (DigestFn)symbol(lib, "rt_contract_digest");
-    SizeFn size = (SizeFn)symbol(lib, "rt_desc_size");
-    LayoutFn layout = (LayoutFn)symbol(lib, "rt_desc_layout");
+    SizeFn size = (SizeFn)symbol(lib, "rt_struct_size");
+    LayoutFn layout = (LayoutFn)symbol(lib, "rt_struct_layout");
     CreateFn create = (CreateFn)symbol(lib, "rt_create");
     DestroyFn destroy = (DestroyFn)symbol(lib, "rt_destroy");
     TraceFn trace = (TraceFn)symbol(lib, "rt_trace");
@@ -54,13 +60,13 @@ int main(int argc, char **argv)
         return fail("a function is missing from the library");
     if (strcmp(digest(), RT_CONTRACT_DIGEST) != 0)
         return fail("built from another contract");
-    if (size() != (int64_t)sizeof(SceneDesc))
+    if (size(SCENE_DESC) != (int64_t)sizeof(SceneDesc))
         return fail("SceneDesc has another size");
-    int64_t offsets[RT_SCENE_DESC_FIELD_COUNT], sizes[RT_SCENE_DESC_FIELD_COUNT];
-    if (layout(offsets, sizes, RT_SCENE_DESC_FIELD_COUNT) != RT_SCENE_DESC_FIELD_COUNT)
+    int64_t offsets[SCENE_DESC_FIELDS], sizes[SCENE_DESC_FIELDS];
+    if (layout(SCENE_DESC, offsets, sizes, SCENE_DESC_FIELDS) != SCENE_DESC_FIELDS)
         return fail("SceneDesc has another number of fields");
     int64_t k = 0;
-#define CHECK_FIELD(name)                                                                             \
+#define CHECK_FIELD(type, name)                                                                       \
     if (offsets[k] != (int64_t)offsetof(SceneDesc, name) ||                                           \
         sizes[k] != (int64_t)sizeof(((const SceneDesc *)0)->name))                                    \
         return fail("SceneDesc." #name " is laid out differently");                                   \
@@ -77,7 +83,7 @@ int main(int argc, char **argv)
     static const double *no_images[1];
     SceneDesc desc;
     memset(&desc, 0, sizeof desc);
-#define POINT_AT_ZEROS(name) _Generic((desc.name),                                                    \
+#define POINT_AT_ZEROS(type, name) _Generic((desc.name),                                                    \
         const int64_t *: (void)(*(const int64_t **)&desc.name = zeros_i64),                            \
         const double *: (void)(*(const double **)&desc.name = zeros_f64),                              \
         const int32_t *: (void)(*(const int32_t **)&desc.name = zeros_i32),                            \
@@ -106,7 +112,7 @@ int main(int argc, char **argv)
         directions[3 * i + 1] = 1.0;
         directions[3 * i + 2] = -1.0;
     }
-    int status = trace(scene, N, origins, directions, colors, counts, 2);
+    int status = trace(scene, N, origins, directions, colors, counts, 2, 0.0, 0, RAY_BUDGET, NULL);
     destroy(scene);
     if (status != 0)
         return fail("rt_trace failed");

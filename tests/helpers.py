@@ -27,7 +27,7 @@ def hits_on(backend: str, scene, start, direction) -> list:
 
     if backend == "numpy":
         return tracer.hits(scene, start, direction)
-    from tracer.native import NativeTracer
+    from tracer.native.tracer import NativeTracer
 
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     core = NativeTracer(compiled, threads=1)
@@ -56,3 +56,17 @@ def scaled(backend: str, width: int, height: int) -> tuple[int, int]:
     if backend == "numpy":
         return max(16, width // 2), max(16, height // 2)
     return width, height
+
+
+def assert_closed_and_outward(data) -> None:
+    """A tessellation (MeshData) is closed and wound counter-clockwise seen from outside: every directed edge
+    once and its reverse once, and each face's normal agrees with its corners' normals."""
+    v = np.asarray(data.vertices)
+    edges: dict[tuple[int, int], int] = {}
+    for verts, norms in data.faces:
+        for a, b in zip(verts, verts[1:] + verts[:1]):
+            edges[(a, b)] = edges.get((a, b), 0) + 1
+        p = v[list(verts)]
+        face_normal = np.cross(p[1] - p[0], p[2] - p[0])
+        assert np.all(np.asarray(data.normals)[list(norms)] @ face_normal > 0)
+    assert all(count == 1 and edges.get((b, a)) == 1 for (a, b), count in edges.items())

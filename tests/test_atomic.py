@@ -7,7 +7,7 @@ import stat
 import numpy as np
 import pytest
 
-from tracer.atomic import replacing
+from tracer.atomic import replacing, writing
 from tracer.imageio import save_image
 
 
@@ -49,3 +49,62 @@ def test_a_missing_folder_is_named_not_the_temporary(tmp_path):
     with pytest.raises(TracerError, match=r"x\.sdl: folder .*nowhere.* does not exist"):
         with replacing(tmp_path / "nowhere" / "x.sdl"):
             pass
+
+
+def test_a_name_of_any_valid_length_can_be_written(tmp_path):
+    """A temporary name adds some 30 characters: a target already near the limit on a name (255 bytes) gets
+    a temporary file whose name is cut short, never a "File name too long"."""
+    limit = os.pathconf(tmp_path, "PC_NAME_MAX")
+    for name in ("a" * (limit - 4) + ".png", "é" * ((limit - 4) // 2) + ".png"):
+        target = tmp_path / name
+        save_image(np.zeros((2, 2, 3)), target)
+        with replacing(target, ".usda") as temp:
+            assert len(os.fsencode(temp.name)) <= limit
+            temp.write_text("usd")
+        assert target.read_text() == "usd"
+    assert len(list(tmp_path.iterdir())) == 2
+
+
+def test_a_file_being_written_has_no_name_until_it_is_complete(tmp_path):
+    target = tmp_path / "mesh.3vn"
+    with writing(target, "w") as handle:
+        handle.write("0 0 0\n")
+        handle.flush()
+        assert list(tmp_path.iterdir()) == []  # (on Linux: O_TMPFILE; elsewhere a named temporary file)
+    assert target.read_text() == "0 0 0\n"
+    assert list(tmp_path.iterdir()) == [target]
+
+
+def test_a_killed_writers_temporary_file_is_removed_by_the_next_write(tmp_path):
+    """A run killed between creating its named temporary file and renaming it leaves the file: the next write
+    of the same target removes it (its process is gone), and leaves a live process's alone."""
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    target = tmp_path / "scene.usda"
+    with replacing(target, ".usda") as temp:
+        host = temp.name.split("@")[1]  # (this host's tag, and the suffix)
+        temp.write_text("new")
+    stale = tmp_path / f".scene.usda.0badf00d-{dead_pid}@{host}"
+    live = tmp_path / f".scene.usda.0badf00d-{os.getppid()}@{host}"
+    foreign = tmp_path / f".scene.usda.0badf00d-{dead_pid}@ffffff.usda"  # (another host's: its pid means nothing here)
+    for path in (stale, live, foreign):
+        path.write_text("half")
+    with replacing(target, ".usda") as temp:
+        temp.write_text("newer")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([target.name, live.name, foreign.name])
+    assert target.read_text() == "newer"
+
+
+def test_write_errors_name_the_file_written(tmp_path):
+    from tracer.reporting import error_message
+
+    target = tmp_path / "out.png"
+    with pytest.raises(OSError) as caught:
+        with writing(target) as handle:
+            handle.write(b"x")
+            raise OSError(28, "No space left on device")
+    assert error_message(caught.value, "scene.sdl") == f"{target}: no space left on the device"
+    assert list(tmp_path.iterdir()) == []

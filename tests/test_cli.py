@@ -397,3 +397,17 @@ def test_info_whose_reader_stops_early_ends_quietly(tmp_path):
     proc.stdout.close()
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 141 and err.decode() == ""
+
+
+def test_info_shows_light_kinds_and_names(tmp_path):
+    scene = tmp_path / "lights.sdl"
+    scene.write_text("! name: Key Light\nlight 1 2 3 1 1 1\nsunLight 0 -1 0 0.5 0.5 0.5 1 4\nsphere\n",
+                     encoding="utf-8")
+    proc = run("info", scene)
+    assert proc.returncode == 0, proc.stderr
+    assert "  at (1, 2, 3) colour (1, 1, 1) 'Key Light'" in proc.stdout
+    assert "  sun towards (0, -1, 0) colour (0.5, 0.5, 0.5)" in proc.stdout
+    assert "physical-lights" in proc.stdout.split("live effects:")[1]
+    key, sun = json.loads(run("info", scene, "--json").stdout)["lights"]
+    assert key == {"position": [1.0, 2.0, 3.0], "color": [1.0, 1.0, 1.0], "name": "Key Light"}
+    assert (sun["kind"], sun["direction"], sun["angle"], sun["samples"]) == ("sun", [0.0, -1.0, 0.0], 1.0, 4)

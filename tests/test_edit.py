@@ -112,7 +112,7 @@ def assert_renders_alike(editable: EditableScene, backend: str) -> None:
         h0, h1 = first_hits(editable.compiled, origins, directions), first_hits(fresh, origins, directions)
         pairs = [(h0.t, h1.t), (h0.normal, h1.normal), (h0.shape, h1.shape), (h0.obj, h1.obj)]
     else:
-        from tracer.native import NativeTracer
+        from tracer.native.tracer import NativeTracer
         h0 = NativeTracer(editable.compiled, threads=2).first_hits(origins, directions)
         h1 = NativeTracer(fresh, threads=2).first_hits(origins, directions)
         pairs = [(h0[k], h1[k]) for k in ("t", "normal", "shape", "obj", "entering")]
@@ -293,13 +293,15 @@ def _pair_boxes(tracer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def assert_hierarchy_holds_every_object(editable: EditableScene) -> None:
     """Every pair's child box holds the boxes of the objects below it (what a refit must keep true)."""
-    from tracer.native import NativeTracer
+    from tracer.native.tracer import NativeTracer
     tracer = NativeTracer(editable.compiled, threads=1)
     boxes, child, count, items = _pair_boxes(tracer)
     flat = editable.compiled._flat_cache[1]
     object_box = flat.arrays["object_box"].reshape(-1, 6)
 
     def objects_below(p: int, c: int) -> list[int]:
+        if count[p, c] < 0:  # (a leaf whose objects were all removed)
+            return []
         if count[p, c]:
             return items[child[p, c]:child[p, c] + count[p, c]].tolist()
         return objects_below(child[p, c], 0) + objects_below(child[p, c], 1)
@@ -486,3 +488,116 @@ def test_a_key_whose_parts_change_in_number_is_replaced_whole(backend):
     assert_renders_alike(editable, backend)
     editable.replace_objects("mesh object", parts[1:])
     assert_renders_alike(editable, backend)
+
+
+def test_adding_and_removing_among_many_objects_keeps_the_hierarchy(backend):
+    editable = EditableScene(many_spheres(300))
+    render(editable.compiled, 8, 6, backend="c")
+    core = editable.compiled._flat_cache[1].core
+    for k in (0, 17, 18, 150, 299):  # (the hierarchy renumbered, the leaves that lost them refitted)
+        editable.remove_objects(k)
+    for k in range(12):  # (added outside the hierarchy)
+        editable.add_objects(("new", k), [Shape("sphere", translation(k / 3 - 2, 2.5, 1) @ scaling(0.2, 0.2, 0.2), RED)])
+    editable.set_transform(("new", 3), translation(0, -2, 2) @ scaling(0.3, 0.3, 0.3))  # (moved while outside)
+    editable.set_transform(5, translation(2, -2, 2) @ scaling(0.3, 0.3, 0.3))  # (refitted in its renumbered leaf)
+    assert editable.done["restructure"] == 17 and editable.done["rebuild"] == 0
+    assert editable.compiled._flat_cache[1].core is core
+    assert_hierarchy_holds_every_object(editable)
+    assert_renders_alike(editable, backend)
+    with editable.batch():  # (more than are kept outside: built again)
+        for k in range(70):
+            editable.add_objects(("more", k), [Shape("sphere", translation(k / 20 - 2, -3, 0) @ scaling(0.1, 0.1, 0.1),
+                                                     MIRROR)])
+    assert_hierarchy_holds_every_object(editable)
+    assert_renders_alike(editable, backend)
+
+
+def test_removing_many_objects_one_by_one_empties_leaves_safely():
+    """Leaves lose all their objects (they then list none) while others are added and moved; the image stays
+    the rebuilt scene's."""
+    rng = np.random.default_rng(7)
+    editable = EditableScene(many_spheres(240))
+    render(editable.compiled, 8, 6, backend="c")
+    for step in range(150):
+        keys = editable.keys()
+        editable.remove_objects(keys[int(rng.integers(len(keys) - 1))])  # (never the plane, last)
+        if step % 5 == 0:
+            editable.add_objects(("new", step), [Shape("sphere", translation(*rng.uniform(-3, 3, 3)) @
+                                                       scaling(0.2, 0.2, 0.2), RED)])
+        if step % 7 == 0:
+            key = keys[int(rng.integers(len(keys) - 1))]
+            if key in editable:
+                editable.set_transform(key, translation(*rng.uniform(-3, 3, 3)) @ scaling(0.25, 0.25, 0.25))
+        if step % 50 == 49:
+            assert_hierarchy_holds_every_object(editable)
+            assert_renders_alike(editable, "c")
+    assert editable.done["restructure"] >= 150
+
+
+def test_settings_edited_in_place_render_as_from_scratch(backend):
+    scene, keys = mixed_scene()
+    editable = EditableScene(scene, keys)
+    render(editable.compiled, 8, 6, backend=backend)
+    editable.set_settings(Settings(background=(0.3, 0.2, 0.1), global_ambient=(0.3, 0.3, 0.3), max_recursion_depth=2))
+    assert_renders_alike(editable, backend)
+    editable.set_settings(Settings(min_reflectivity=0.9, min_transparency=0.9, max_recursion_depth=3))
+    assert "reflection" not in editable.compiled.effects and "refraction" not in editable.compiled.effects
+    assert_renders_alike(editable, backend)
+    editable.set_settings(Settings(max_recursion_depth=0))
+    assert_renders_alike(editable, backend)
+
+
+def test_pictures_swapped_in_place_render_as_from_scratch(backend):
+    editable = EditableScene(plain_scene())
+    render(editable.compiled, 8, 6, backend=backend)
+    editable.set_lights([Light((3, 4, 5), (1, 1, 1))])
+    editable.set_material(0, Material(diffuse=(1, 1, 1), texture=1))
+    editable.set_pixmaps({1: str(ROOT / "scenes" / "images" / "uvgrid.bmp")})
+    assert_renders_alike(editable, backend)
+    with pytest.raises(TracerError, match="texture 1 is used"):
+        editable.set_pixmaps({2: str(BRICKS)})
+    assert editable.scene.pixmaps == {1: str(ROOT / "scenes" / "images" / "uvgrid.bmp")}
+
+
+def test_a_picture_on_a_mesh_with_texture_coordinates_follows_mesh_and_material_edits(backend):
+    vertices = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    quad = MeshData(vertices, np.array([[0.0, 0.0, 1.0]]), [((0, 1, 2, 3), (0, 0, 0, 0))], "quad",
+                    corner_uvs=np.array([(0.0, 1.0), (0.0, 0.0), (1.0, 0.0), (1.0, 1.0)]))
+    plain_quad = MeshData(vertices, np.array([[0.0, 0.0, 1.0]]), [((0, 1, 2, 3), (0, 0, 0, 0))], "quad")
+    scene = plain_scene()
+    scene.objects.append(Shape("mesh", translation(0, 1.5, 0), PLAIN, mesh=quad))
+    editable = EditableScene(scene)
+    render(editable.compiled, 8, 6, backend=backend)
+    editable.set_lights([Light((3, 4, 5), (1, 1, 1))])
+    editable.set_material(3, Material(ambient=(1, 1, 1), diffuse=(0.5, 0.5, 0.5), texture=1))
+    assert "mesh-uv" in editable.compiled.effects
+    assert_renders_alike(editable, backend)
+    editable.replace_mesh(3, plain_quad)
+    assert "mesh-uv" not in editable.compiled.effects
+    assert_renders_alike(editable, backend)
+    editable.replace_mesh(3, quad)
+    editable.set_transform(3, translation(0.5, 1.5, 0.5))
+    assert "mesh-uv" in editable.compiled.effects
+    assert_renders_alike(editable, backend)
+
+
+def test_a_c_tracer_made_before_an_edit_traces_the_edited_scene():
+    """The C core reads the edited rows where they lie, and gets the sealed-lights table again: a tracer made
+    before an edit shades and skips as one made after it."""
+    from tracer.native.tracer import NativeTracer
+    scene, keys = mixed_scene()
+    editable = EditableScene(scene, keys)
+    before = NativeTracer(editable.compiled, threads=2)
+    before.camera_rays(*_grid_rays(5))  # (the sealed-lights table sent)
+    editable.set_transform("glass", translation(-5, 3, 2) @ scaling(1.5, 1.5, 1.5))  # (a light inside it now)
+    editable.set_transform("oct2", translation(-0.5, 1.3, -0.5) @ scaling(0.7, 0.7, 0.7))
+    editable.remove_objects("red")
+    editable.add_objects("ball", [Shape("sphere", translation(1.5, 0.5, 0) @ scaling(0.5, 0.5, 0.5), GLASS)])
+    before.counts = type(before.counts)()
+    origins, _ = _grid_rays(15)
+    targets = np.array([-5.0, 3.0, 2.0]) + 0.1 * (origins - origins.mean(axis=0))  # (the glass, round a light now)
+    directions = targets - origins
+    colours = before.camera_rays(origins, directions)  # (before any tracer made after the edits)
+    after = NativeTracer(editable.compiled, threads=2)
+    assert np.array_equal(colours, after.camera_rays(origins, directions))
+    assert before.counts == after.counts

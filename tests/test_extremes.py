@@ -34,6 +34,10 @@ ROUND_TWO = [
     "light in the floor plane",
     "light in the floor plane: moved by +1e5",
     "light at 1e300",
+    "coplanar faces: moved by +1e5",
+    "coplanar faces: scaled by 1e-6",
+    "cone apex: span 1e-4",
+    "cone apex: span 1e-6",
 ]
 
 

@@ -117,8 +117,13 @@ def test_torus_through_hole_and_across(backend):
 
 
 def test_torus_tangent_to_tube_top(backend):
-    hits = ray_hits(scene_of(shape("torus")), (-5, 0, 0.2), (1, 0, 0), backend)
-    assert [t for t, _ in hits] == pytest.approx([4, 4, 6, 6], abs=1e-6)
+    # Exactly tangent, the touching pairs are not proven real (the quartic's minimum is zero within its
+    # rounding) and count not (issue 25: on both backends alike); 1e-9 inside, each is a chord about x = -1 and
+    # x = 1 of half length sqrt(2 r 1e-9) = 2e-5.
+    assert ray_hits(scene_of(shape("torus")), (-5, 0, 0.2), (1, 0, 0), backend) == []
+    hits = ray_hits(scene_of(shape("torus")), (-5, 0, 0.2 - 1e-9), (1, 0, 0), backend)
+    assert [t for t, _ in hits] == pytest.approx([4, 4, 6, 6], abs=1e-4)
+    assert [e for _, e in hits] == [True, False, True, False]
 
 
 @pytest.mark.parametrize("distance", [1e3, 1e6, 1e9])

@@ -124,6 +124,40 @@ def test_ellipse_light_of_small_size_is_a_point_light_of_its_area(backend):
     np.testing.assert_allclose(colour[0, :, 0], expected, rtol=1e-3)  # (its finite size: ~(d/r)^2)
 
 
+#: Cycles' direct light (bpy 4.5: Cycles, 256 samples, no bounces, Standard view, a white Diffuse BSDF floor 2
+#: units below each light, the linear value straight below it), as docs/tracer.md gives them.
+CYCLES_BELOW = [("point 100 W", 0.6332, dict(kind="sphere", color=100 / (4 * math.pi ** 2))),
+                ("point 100 W radius 0.5", 0.5960, dict(kind="sphere", radius=0.5, color=100 / (4 * math.pi ** 2))),
+                ("point 100 W radius 1", 0.5066, dict(kind="sphere", radius=1.0, color=100 / (4 * math.pi ** 2))),
+                ("point 100 W radius 1.5", 0.4053, dict(kind="sphere", radius=1.5, color=100 / (4 * math.pi ** 2))),
+                ("sun 1", 0.3183, dict(kind="sun", color=1 / math.pi)),
+                ("area 100 W 0.1 square", 2.5308, dict(kind="area", size=(0.1, 0.1), color=100 / (math.pi ** 2 * 0.01))),
+                ("area 100 W 1 square", 2.3386, dict(kind="area", size=(1.0, 1.0), color=100 / math.pi ** 2))]
+
+
+@pytest.mark.parametrize("what, cycles, light", CYCLES_BELOW, ids=[c[0] for c in CYCLES_BELOW])
+def test_blender_lights_in_the_documented_units_light_as_cycles_does(backend, what, cycles, light):
+    light = dict(light)  # (the parameters are shared by both backends' runs)
+    grey = light.pop("color")
+    light = Light((0.0, 2.0, 0.0), (grey, grey, grey), direction=(0.0, -1.0, 0.0), samples=256, **light)
+    colour, _ = shade_down(backend, lit(light), [0.0])
+    assert colour[0, 0, 0] == pytest.approx(cycles, rel=2e-3)
+
+
+#: Cycles' 100 W spot 2 units above the floor pointing down (as above), at floor points seen at angle alpha from
+#: its axis: (alpha, spot size, blend, value).
+CYCLES_SPOT = [(25.0, 60.0, 0.5, 0.30631), (20.0, 60.0, 0.5, 0.52545), (28.0, 60.0, 0.5, 0.06956),
+               (10.0, 45.0, 0.0, 0.60482)]
+
+
+@pytest.mark.parametrize("alpha, size, blend, cycles", CYCLES_SPOT)
+def test_spot_lights_as_cycles_does(backend, alpha, size, blend, cycles):
+    spot = Light((0.0, 2.0, 0.0), (100 / (4 * math.pi ** 2),) * 3, kind="spot", direction=(0.0, -1.0, 0.0),
+                 spot_size=size, spot_blend=blend)
+    colour, _ = shade_down(backend, lit(spot), [2.0 * math.tan(math.radians(alpha))])
+    assert colour[0, 0, 0] == pytest.approx(cycles, rel=3e-3)  # (Cycles averaged a pixel 0.0025 wide)
+
+
 # ------------------------------------------------------------------------------------------------ penumbrae
 
 

@@ -268,7 +268,7 @@ def _tree(mesh: TriangleMesh) -> dict:
 
 @pytest.mark.parametrize("shape", ["random", "duplicates", "grid", "icosphere"])
 @pytest.mark.parametrize("leaf_size, bins", [(1, 2), (2, 4), (8, 16), (4, 64)])
-def test_c_builder_builds_the_numpy_builders_tree(monkeypatch, shape, leaf_size, bins):
+def test_c_builder_builds_the_numpy_builders_tree(shape, leaf_size, bins):
     """bvh_build.h promises the reference builder's tree, node for node and bit for bit."""
     native = pytest.importorskip("tracer.native")
     if native.load_error is not None:
@@ -282,8 +282,7 @@ def test_c_builder_builds_the_numpy_builders_tree(monkeypatch, shape, leaf_size,
                   "duplicates": lambda: np.tile(rng.normal(size=(3, 3)), (count, 1)),
                   "grid": lambda: rng.integers(0, 3, size=(count * 3, 3)).astype(float)}[shape]()
         data = MeshData(points, np.zeros((0, 3)), [((3 * i, 3 * i + 1, 3 * i + 2), ()) for i in range(count)])
-    in_c = TriangleMesh(data, leaf_size=leaf_size, bins=bins)
-    monkeypatch.setattr(mesh_module, "_native_builder", lambda: None)
+    in_c = TriangleMesh(data, leaf_size=leaf_size, bins=bins, builder=native.build_mesh_bvh)
     in_numpy = TriangleMesh(data, leaf_size=leaf_size, bins=bins)
     a, b = _tree(in_c), _tree(in_numpy)
     for name in a:

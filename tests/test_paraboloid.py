@@ -9,7 +9,7 @@ import pytest
 
 import tracer
 from tracer import native
-from helpers import Camera, Light, ray_hits, rotation, scaling, scene_of, shape, translation
+from helpers import Camera, Light, assert_closed_and_outward, ray_hits, rotation, scaling, scene_of, shape, translation
 from tracer.compile import compile_scene
 from tracer.intersect.paraboloid import intersect_paraboloid, paraboloid_mesh
 from tracer.render import render
@@ -109,16 +109,7 @@ def test_tessellation_is_closed_outward_and_on_the_surface():
     data = paraboloid_mesh()
     v = data.vertices
     assert np.max(np.abs(v[:, 0] ** 2 + v[:, 1] ** 2 - v[:, 2])) < 1e-15
-    edges: dict[tuple[int, int], int] = {}
-    for verts, norms in data.faces:
-        for a, b in zip(verts, verts[1:] + verts[:1]):
-            edges[(a, b)] = edges.get((a, b), 0) + 1
-        # counter-clockwise seen from outside: the face's normal agrees with its vertex normals
-        p = v[list(verts)]
-        face_normal = np.cross(p[1] - p[0], p[2] - p[0])
-        assert np.all(data.normals[list(norms)] @ face_normal > 0)
-    # every directed edge once, and its reverse once: closed and consistently wound
-    assert all(count == 1 and edges.get((b, a)) == 1 for (a, b), count in edges.items())
+    assert_closed_and_outward(data)
 
 
 def test_blender_adds_exports_and_draws_it_from_the_registry(tmp_path):

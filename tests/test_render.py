@@ -12,8 +12,8 @@ from tracer.camera import CameraFrame, framing_camera
 from tracer.compile import compile_scene
 from tracer.errors import RenderCancelled, TracerError
 from tracer.imageio import to_8bit
-from tracer.render import block_passes, render
-from tracer.tiles import TilePlan
+from tracer.render import render
+from tracer.tiles import TilePlan, block_passes
 from tracer.backend import make_tracer
 
 

@@ -15,7 +15,8 @@ from tracer import native
 from tracer.cli import main
 from tracer.compile import compile_scene
 from tracer.render import render
-from tracer.savings import SKIP_REASONS, RaySavings, sealed_lights
+from tracer.savings import SKIP_REASONS, RaySavings
+from tracer.skippable import sealed_lights
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = sorted((ROOT / "scenes").glob("*.sdl"))
@@ -133,3 +134,62 @@ def test_cli_stats_count_skipped_rays_and_all_rays_skips_none(tmp_path, capsys):
     assert sum(every["rays"].values()) > sum(saved["rays"].values())
     assert main(["render", glass, "-o", out, "--cutoff", "-1", "-q"]) == 2
     assert "error: --cutoff" in capsys.readouterr().err
+
+
+def _facing_mirrors(reflect: float, transmit: float, depth: int = 64):
+    """Two glass walls facing each other, reflecting and transmitting: without a budget the tree doubles at
+    every level (2^64 rays at depth 64)."""
+    glass = dict(reflectivity=reflect, transparency=transmit, speed_of_light=0.8, diffuse=(0.2, 0.3, 0.4))
+    return scene_of(shape("cube", translation(0, 0, -1.2) @ scaling(100, 100, 0.1), **glass),
+                    shape("cube", translation(0, 0, 1.2) @ scaling(100, 100, 0.1), **glass),
+                    camera=Camera((0, 0, 0), (0.1, 0.05, -1), (0, 1, 0), 40), max_recursion_depth=depth,
+                    min_reflectivity=0.0, min_transparency=0.0)
+
+
+@pytest.mark.parametrize("budget", [1, 2, 7, 40, 300])
+@requires_core
+def test_the_ray_budget_cuts_the_same_rays_in_both_backends(budget):
+    """The budget is shared down the tree by one rule in both backends: the same rays traced and cut, to the
+    ray, and the same image."""
+    scene = _facing_mirrors(0.95, 0.95)
+    limited = replace(RaySavings(), ray_budget=budget)
+    c = render(scene, 6, 4, backend="c", savings=limited)
+    n = render(scene, 6, 4, backend="numpy", savings=limited)
+    assert c.rays == n.rays
+    assert c.rays.skipped_budget > 0
+    assert c.rays.reflection + c.rays.refraction <= budget * 24
+    assert np.abs(c.image - n.image).max() <= 1 / 255
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_ray_budget_bounds_the_tree_of_each_camera_ray(backend):
+    scene = _facing_mirrors(0.95, 0.95)
+    result = render(scene, 4, 3, backend=backend, savings=RaySavings.none())
+    secondary = result.rays.reflection + result.rays.refraction
+    assert secondary <= RaySavings().ray_budget * 12  # (12 camera rays; the depth limit alone allows 2^64 each)
+    assert result.rays.skipped_budget > 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_tree_within_the_budget_is_traced_whole(backend):
+    """Reflectivity and transparency that add up to 1: the cutoff ends the tree long before the budget."""
+    scene = _facing_mirrors(0.6, 0.4)
+    within = render(scene, 4, 3, backend=backend)
+    unlimited = render(scene, 4, 3, backend=backend, savings=replace(RaySavings(), ray_budget=10**9))
+    assert within.rays == unlimited.rays and within.rays.skipped_budget == 0
+    assert np.array_equal(within.image, unlimited.image)
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
+def test_no_bundled_scene_meets_the_budget(path):
+    assert render(tracer.load(path), 64, 48, savings=RaySavings.none()).rays.skipped_budget == 0
+
+
+def test_the_command_line_says_once_that_the_budget_cut_rays(tmp_path, capsys):
+    scene = tmp_path / "glass.sdl"
+    scene.write_text("camera 0 0 6  0 0 0  0 1 0  40\nlight 2 3 4  1 1 1\n"
+                     "maxRecursionDepth 64 minReflectivity 0 minTransparency 0\n"
+                     "transparency 0.95 reflectivity 0.95 speedOfLight 0.7\nsphere\npush scale 0.5 0.5 0.5 sphere pop\n")
+    assert main(["render", str(scene), "-o", str(tmp_path / "g.png"), "--width", "16", "--height", "12", "-q"]) == 0
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"warning: {scene}:") and "4,096" in lines[0], lines

@@ -192,8 +192,7 @@ def test_every_statement_of_the_subset():
 
 
 def test_every_shape_keyword_of_the_registry():
-    text = " ".join(f"translate 1 0 0 {kind}" + (" 0.5" if kind == "taperedCylinder" else "")
-                    for kind in SHAPE_WORDS)
+    text = " ".join(f"translate 1 0 0 {kind}" + " 0.5" * len(shapes.KINDS[kind].parameters) for kind in SHAPE_WORDS)
     scene = assert_read_fast(text)
     assert len(scene.objects) == len(SHAPE_WORDS)
 
@@ -259,7 +258,7 @@ def test_texts_of_the_writer():
         kind = SHAPE_WORDS[index % len(SHAPE_WORDS)]
         material = Material(diffuse=tuple(rng.uniform(0, 1, 3)), reflectivity=float(rng.uniform(0, 1)),
                             parameters=tuple(rng.uniform(0, 1, index % 4)), texture=-(index % 3))
-        objects.append(Shape(kind, matrix, material, parameters=(0.5,) if kind == "taperedCylinder" else (),
+        objects.append(Shape(kind, matrix, material, parameters=(0.5,) * len(shapes.KINDS[kind].parameters),
                              mesh=parser.builtin_mesh(kind) if kind in parser.POLYHEDRON_KINDS + ("teapot",)
                              else None, name=f"object {index}" if index % 2 else None))
     scene = Scene(objects=objects, lights=[Light((1.0, 2.0, 3.0), (1.0, 1.0, 1.0))],
@@ -315,7 +314,7 @@ def random_statement(rng: random.Random) -> str:
     if choice == 13:
         return f"maxRecursionDepth {rng.randrange(0, 65)}"
     kind = rng.choice(SHAPE_WORDS)
-    return kind + (f" {number()}" if kind == "taperedCylinder" else "")
+    return " ".join([kind] + [number() for _ in shapes.KINDS[kind].parameters])
 
 
 @pytest.mark.parametrize("seed", range(40))

@@ -12,7 +12,7 @@ from helpers import Light, scene_of, shape, translation
 from tracer.compile import compile_scene
 from tracer.errors import TracerError
 from tracer.sdl.parser import load as load_sdl
-from tracer.textures.images import sample_bilinear
+from tracer.textures.images import load_image, sample_bilinear
 from tracer.textures.mapping import surface_uv
 from tracer.textures.noise import noise, turbulence
 from tracer.textures.solid import checkerboard, marble, wood
@@ -155,7 +155,7 @@ def test_a_file_that_is_no_picture_is_named_at_its_makepixmap(tmp_path):
         compile_scene(scene)
     message = str(raised.value)
     assert message.startswith(f"{scene_file}:3:1: makePixmap 1: ")  # the makePixmap, not the sphere on line 5
-    assert message.endswith("binary.sdl: not a picture format Pillow reads")
+    assert message.endswith("binary.sdl: not a picture textures may use (PNG, JPEG, BMP, PPM, TIFF)")
     assert " object at 0x" not in message
 
 
@@ -188,3 +188,25 @@ def test_fallback_decoder_floats_become_the_files_bytes(monkeypatch, tmp_path):
     monkeypatch.setattr(images, "_fallback_decoder", lambda path: (texels / 255.0).astype(np.float32))
     loaded = images.load_image(tmp_path / "any.png")
     assert loaded.dtype == np.uint8 and np.array_equal(loaded, texels)
+
+
+def test_only_the_five_picture_formats_are_read(tmp_path):
+    """A picture Pillow reads in a format textures do not use (GIF, here) is refused before it is decoded."""
+    Image.new("RGB", (4, 4), (10, 20, 30)).save(tmp_path / "swatch.gif")
+    with pytest.raises(TracerError, match=r"swatch\.gif: not a picture textures may use \(PNG, JPEG, BMP, PPM, TIFF\)"):
+        load_image(tmp_path / "swatch.gif")
+    for fmt in ("png", "jpg", "bmp", "ppm", "tif"):
+        Image.new("RGB", (4, 4), (10, 20, 30)).save(tmp_path / f"swatch.{fmt}")
+        assert load_image(tmp_path / f"swatch.{fmt}").shape == (4, 4, 3)
+
+
+def test_stored_pixels_the_file_cannot_hold_are_refused_before_decoding(tmp_path):
+    import struct
+
+    path = tmp_path / "wide.bmp"
+    Image.new("RGB", (4, 1)).save(path)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<i", data, 18, 1 << 24)  # 16,777,216 x 1 pixels in a 66-byte file
+    path.write_bytes(bytes(data))
+    with pytest.raises(TracerError, match=r"wide\.bmp: the picture declares 16777216 x 1 pixels, which need .* bytes; the file holds 66"):
+        load_image(path)

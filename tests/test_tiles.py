@@ -113,6 +113,48 @@ def test_the_addon_traces_the_same_pixels_as_the_command_line(compiled):
     assert np.array_equal(renderer.color, expected[::-1])
 
 
+@pytest.mark.parametrize("sampling_mode", ["jittered", "adaptive"])
+def test_the_addon_on_threads_traces_the_same_pixels(compiled, sampling_mode):
+    """With the NumPy path the add-on traces the work items of a pass three at a time (TileRun.run_on_threads),
+    the refinement pass after every block pass: the command line's bytes, and the items reported pass by pass
+    on the calling thread."""
+    from addon.pure import blocks
+
+    frame = CameraFrame.from_camera(compiled.scene.camera, 24 / 18)
+    options = dict(block_size=4, progressive=True, tile=8, samples=4, seed=7, backend="numpy")
+    renderer = blocks.BlockRenderer(compiled, tiles.camera_rays_for(frame, 24, 18), 24, 18, threads=3,
+                                    sampling=sampling_mode, threshold=0.02, **options)
+    assert renderer.item_threads == 3
+    reported = []
+    renderer.run(on_item=reported.append)
+    expected = tracer.render(compiled, 24, 18, sampling_mode=sampling_mode, threshold=0.02, **options).image
+    assert np.array_equal(renderer.color, expected[::-1])
+    assert sorted(map(renderer.items.index, reported)) == list(range(len(renderer.items)))  # each once
+    assert [item.pass_index for item in reported] == sorted(item.pass_index for item in reported)
+    assert renderer.finished and renderer.pass_count == 3 + (sampling_mode == "adaptive")
+    with pytest.raises(blocks.Cancelled):
+        blocks.BlockRenderer(compiled, tiles.camera_rays_for(frame, 24, 18), 24, 18, threads=3,
+                             **options).run(cancel=lambda: True)
+
+
+def test_a_tile_run_keeps_its_refinement_mask(compiled):
+    """TileRun judges the refinement mask once, on the film the block passes left: tiles traced one at a time
+    (the viewport's slices), after earlier refinement tiles changed the film, give the whole render's bytes."""
+    plan = tiles.TilePlan(WIDTH, HEIGHT, block_size=2, progressive=True, tile=16, samples=4,
+                          sampling_mode="adaptive", threshold=0.02)
+    film = np.zeros((HEIGHT, WIDTH, 3), dtype=np.float32)
+    shade = _shade(compiled, plan)
+    run = tiles.TileRun(plan, film, lambda checkpoint: shade)
+    for item in plan.items:
+        if plan.is_refinement(item) and run.refine is None:
+            after_the_block_passes = plan.refine_mask(film)
+        run.trace(item)
+    assert after_the_block_passes.any() and np.array_equal(run.refine, after_the_block_passes)
+    expected = tracer.render(compiled, WIDTH, HEIGHT, block_size=2, progressive=True, tile=16, samples=4,
+                             sampling_mode="adaptive", threshold=0.02).image
+    assert np.array_equal(film, expected[::-1])
+
+
 @pytest.mark.parametrize("rows_a_band", [1, 2, 5, HEIGHT])
 def test_refinement_mask_judged_in_bands_is_the_whole_film_mask(monkeypatch, rows_a_band):
     """The mask is judged a band of rows at a time (no full-size float temporaries): bands of any height,

@@ -806,3 +806,94 @@ def test_our_file_referenced_into_another_stage_keeps_its_settings(written, tmp_
     assert back.settings.max_recursion_depth == scene.settings.max_recursion_depth
     assert back.settings.min_transparency == scene.settings.min_transparency
     assert len(back.shapes()) == len(scene.shapes())
+
+
+# --- reliability: every bad stage is one error naming the file; writing and reading agree --------------------
+
+def _lecture_stage(tmp_path) -> Path:
+    path = tmp_path / "lecture.usda"
+    save_usd(tracer.load(ROOT / "scenes" / "lecture.sdl"), path)
+    return path
+
+
+def test_a_byte_that_is_not_utf8_is_named_with_its_place(tmp_path):
+    text = _lecture_stage(tmp_path).read_bytes()
+    at = text.index(b"def Xform")
+    bad = tmp_path / "latin1.usda"
+    bad.write_bytes(text[:at] + b"# caf\xe9\n" + text[at:])
+    line = text[:at].count(b"\n") + 1
+    with pytest.raises(TracerError, match=rf"latin1\.usda:{line}:6: byte 0xe9 is not UTF-8 text"):
+        load_usd(bad)
+
+
+@pytest.mark.parametrize("authored", ["custom double sdl:maxRecursionDepth = inf", "custom double sdl:texture = inf",
+                                      "custom double sdl:texture = 1.5"])
+def test_a_number_that_is_no_whole_number_where_one_belongs_is_an_error_naming_the_file(tmp_path, authored):
+    name = authored.split()[2]
+    text = _lecture_stage(tmp_path).read_text()
+    original = "custom int sdl:maxRecursionDepth = 3" if "Depth" in name else "custom int sdl:texture = 0"
+    bad = tmp_path / "inf.usda"
+    bad.write_text(text.replace(original, authored, 1))
+    with pytest.raises(TracerError, match=rf"inf\.usda: <.*>: .*{name} = .* is not a whole number"):
+        load_usd(bad)
+    scene = load_usd(bad, strict=False)  # lenient: the defaults, or the prim left out, with a warning
+    assert any(name in w for w in scene.warnings)
+
+
+def test_an_inherit_cycle_is_named_without_usd_s_anonymous_layers(tmp_path):
+    path = tmp_path / "cycle.usda"
+    path.write_text('#usda 1.0\n(\n    defaultPrim = "A"\n)\ndef Xform "A" (\n    inherits = </B>\n)\n{\n}\n'
+                    'def Xform "B" (\n    inherits = </A>\n)\n{\n}\n')
+    with pytest.raises(TracerError) as raised:
+        load_usd(path)
+    message = str(raised.value)
+    assert message.startswith(f"{path}: ") and "Cycle" in message and "anon:" not in message, message
+
+
+def test_booleans_nested_too_deep_in_a_stage_are_an_error_naming_the_file(tmp_path):
+    depth = 2001
+    text = "light 1 2 3 1 1 1\n" + "union " * depth + "sphere " * (depth + 1) + "\n"
+    stage = tmp_path / "deep.usda"
+    save_usd(tracer.parse_sdl(text), stage)
+    with pytest.raises(TracerError, match=r"deep\.usda<.*>: union: booleans nested 2001 deep"):
+        tracer.render(load_usd(stage), 8, 6)
+
+
+def test_deep_booleans_are_written_flat_and_read_back_as_they_were(tmp_path):
+    """A tree nested deeper than the writer's CHAIN_DEPTH is written as a chain (USD's costs grow with a
+    prim's depth): every boolean, side, operation and def group comes back."""
+    from tracer.usd.writer import CHAIN_DEPTH
+
+    rng = np.random.default_rng(5)
+    text = "sphere"
+    for level in range(300):  # a spine of mixed booleans, its other operands on either side
+        op = ("union", "intersection", "difference")[rng.integers(3)]
+        other = ("cube", "translate 1 0 0 sphere", "union cube sphere")[rng.integers(3)]
+        text = f"{op} {text} {other}" if rng.random() < 0.5 else f"{op} {other} {text}"
+    scene = tracer.parse_sdl(f"light 1 2 3 1 1 1\ndef spine {{ {text} }}\nuse spine\n{text}\n")
+    for suffix in (".usda", ".usdc"):
+        path = tmp_path / f"chain{suffix}"
+        save_usd(scene, path)
+        assert_same_scene(scene, load_usd(path))
+        stage = Usd.Stage.Open(str(path))
+        assert max(prim.GetPath().pathElementCount for prim in stage.Traverse()) <= CHAIN_DEPTH + 4
+
+
+def test_a_stage_may_hold_more_prims_than_composition_may_add(tmp_path):
+    """Reading bounds what references add (MAX_USD_PRIMS beyond the prims the layers define), not what a
+    file holds: a stage the writer made of more prims than that reads back."""
+    from tracer.usd.budget import check_prim_budget
+
+    scene = tracer.parse_sdl("".join(f"push translate {k} 0 0 sphere pop\n" for k in range(300)))
+    path = tmp_path / "many.usda"
+    save_usd(scene, path)
+    check_prim_budget(str(path), budget=100)  # 300 spheres (and their materials) defined: fine
+    parts = tmp_path / "parts.usda"
+    parts.write_text('#usda 1.0\n(\n    defaultPrim = "P"\n)\ndef Xform "P"\n{\n'
+                     + "".join(f'    def Sphere "s{k}"\n    {{\n    }}\n' for k in range(20)) + "}\n")
+    many = tmp_path / "refs.usda"
+    many.write_text("#usda 1.0\n" + "".join(f'def Xform "r{k}" (\n    references = @./parts.usda@\n)\n{{\n}}\n'
+                                            for k in range(10)))
+    with pytest.raises(TracerError, match=r"refs\.usda: the stage composes to more than 100 prims beyond"):
+        check_prim_budget(str(many), budget=100)  # 10 x 21 prims from 21 defined
+    check_prim_budget(str(many), budget=200)

@@ -8,6 +8,9 @@
 from . import startup as _startup
 
 if _startup.started_as_the_program():  # (before NumPy is imported: see tracer/startup.py)
+    from . import signals as _signals
+
+    _signals.install_at_start()  # SIGINT and SIGTERM end the program at once until its command starts
     _startup.prepare_the_program()
 
 from .errors import RenderCancelled, SDLError, TracerError

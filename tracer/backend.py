@@ -12,20 +12,12 @@ from __future__ import annotations
 import warnings
 from typing import Optional
 
-from .compile import CompiledScene, boolean_depth
+from .compile import MAX_CSG_DEPTH, CompiledScene, boolean_depth
 from .errors import FallbackWarning, TracerError
-
 from .savings import RaySavings
 from .trace import Tracer
 
 BACKENDS = ("auto", "c", "numpy")
-
-#: The deepest nesting of booleans any backend traces.  The C core evaluates a boolean tree recursively,
-#: about 100 bytes of a worker's stack per level; the NumPy path walks it iteratively but its time grows with
-#: pixels x depth (5,000 levels at 64x48: 48 s), so a deeper tree (only ever seen in generated or hostile
-#: files) is refused up front rather than traced for hours.
-MAX_CSG_DEPTH = 2000
-
 
 def check_boolean_depth(compiled: CompiledScene) -> None:
     """Raise a TracerError naming the first top-level boolean nested more than MAX_CSG_DEPTH deep.  (Read from
@@ -44,7 +36,8 @@ def load_core(backend: str = "auto") -> None:
     timing a render does not count a one-off compile as render time.  Problems surface later, in make_tracer."""
     if backend in ("auto", "c"):
         try:
-            from . import native  # noqa: F401  (importing loads or builds the library)
+            # deferred: importing loads (in a checkout: builds) the library, which only a C render wants
+            from . import native  # noqa: F401
         except ImportError:
             pass
 
@@ -60,7 +53,7 @@ def make_tracer(compiled: CompiledScene, backend: str = "auto", threads: Optiona
     check_boolean_depth(compiled)
     if backend in ("auto", "c"):
         try:
-            from .native import NativeTracer
+            from .native.tracer import NativeTracer  # deferred: (loads the C core, as in load_core)
         except ImportError:  # no C core in this source tree at all: NumPy is simply the backend
             if backend == "c":
                 raise TracerError("the C core is not part of this installation") from None

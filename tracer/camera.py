@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -121,3 +122,15 @@ def framing_camera(compiled, aspect: float = 4 / 3) -> Camera:
 
 def scene_camera(scene: Scene, compiled, aspect: float) -> Camera:
     return scene.camera if scene.camera is not None else framing_camera(compiled, aspect)
+
+
+def camera_problem(eye: Sequence[float], look: Sequence[float], up: Sequence[float], angle: float) -> Optional[str]:
+    """Why a camera statement's numbers make no camera, or None if they do."""
+    forward = np.subtract(look, eye)
+    if not np.any(forward):
+        return "camera eye and look-at point are the same"
+    if np.linalg.norm(np.cross(forward, up)) <= 1e-12 * np.linalg.norm(forward) * np.linalg.norm(up):
+        return "camera up vector is zero or points along the view direction"
+    if not 0.0 < angle < 180.0:
+        return "camera view angle must be between 0 and 180 degrees"
+    return None

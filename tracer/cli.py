@@ -8,18 +8,29 @@ import argparse
 import contextlib
 import math
 import os
-import signal
 import sys
 from dataclasses import replace
 from typing import Optional, Sequence
 
 import numpy as np
 
-from . import sampling
-from .bulk import one_blas_thread
+# (Everything the tracer package itself imports (tracer/__init__.py: the reader, compiling, rendering) is
+# imported here as usual: the program has loaded it anyway.  What only some commands use is imported by them.)
+from . import sampling, signals
+from .backend import load_core
+from .bulk import collector_paused, one_blas_thread
+from .compile import compile_scene, fold_tree
 from .errors import RenderCancelled, TracerError, warnings_as_lines
-from .model import MAX_RECURSION_DEPTH, traced_depth
+from .imageio import output_format, png_rows, save_image
+from .model import MAX_RECURSION_DEPTH, ShapeTable, traced_depth
+from .render import budget_note, check_size, render
 from .reporting import error_message
+from .savings import RaySavings
+from .sdl.parser import load
+from .shapes import REGISTRY
+from .textures import drop_unreadable_textures
+from .tiles import DEFAULT_TILE
+from .trace import RayCounts
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -127,7 +138,7 @@ SDL_EXTENSIONS = (".sdl", ".dat")
 
 def _scene_format(path: str, role: str) -> str:
     """'sdl' or 'usd' from a file name's extension (a scene to read may have any other extension: SDL)."""
-    from .usd.common import USD_EXTENSIONS
+    from .usd.common import USD_EXTENSIONS  # deferred: the USD package is loaded only for USD files
 
     suffix = os.path.splitext(path)[1].lower()
     if suffix in USD_EXTENSIONS:
@@ -140,9 +151,8 @@ def _scene_format(path: str, role: str) -> str:
 
 def _read_scene(path: str, lenient: bool, role: str = "scene"):
     if _scene_format(path, role) == "usd":
-        from .usd import load_usd
+        from .usd import load_usd  # deferred: (as above)
         return load_usd(path, strict=not lenient)
-    from .sdl.parser import load
     return load(path, strict=not lenient)
 
 
@@ -160,13 +170,20 @@ def _convert(args) -> int:
         print(f"warning: {message}", file=sys.stderr)
     try:
         if target == "usd":
-            from .usd import save_usd
+            from .usd import save_usd  # deferred: (the USD package, as above)
             save_usd(scene, args.destination)
         else:
-            from .sdl.writer import save_sdl
+            from .sdl.writer import save_sdl  # deferred: only convert writes SDL
             save_sdl(scene, args.destination)
+    except TracerError:
+        raise
     except ValueError as err:  # something SDL (or USD) cannot express
         raise TracerError(f"{args.destination}: {err}") from None
+    except Exception as err:  # noqa: BLE001 — a problem writing (usd-core's, the system's): about the destination
+        message = error_message(err, args.destination)
+        if message is None:
+            raise
+        raise TracerError(message) from None
     return 0
 
 
@@ -191,8 +208,6 @@ class _Progress:
 
 def _savings(args):
     """The RaySavings that --all-rays and --cutoff ask for."""
-    from .savings import RaySavings
-
     savings = RaySavings.none() if args.all_rays else RaySavings()
     if args.cutoff is not None:
         if not (math.isfinite(args.cutoff) and 0.0 <= args.cutoff <= 1.0):
@@ -214,10 +229,6 @@ def _replaced_options_given(args) -> list[str]:
 
 
 def _render(args) -> int:
-    from .backend import load_core
-    from .imageio import output_format, png_rows, save_image
-    from .render import check_size, render
-
     image_format = output_format(args.output)  # (an unknown extension, or no Pillow, is found before tracing)
     if args.scheduler is not None or args.frames is not None:
         if args.target_error is not None:  # rounds over the whole image: not cut into independent tiles
@@ -232,8 +243,6 @@ def _render(args) -> int:
                   file=sys.stderr)
     scene = _load(args)
     if args.lenient:
-        from .textures import drop_unreadable_textures
-
         for message in drop_unreadable_textures(scene):
             print(f"warning: {message}", file=sys.stderr)
     if args.max_depth is not None:
@@ -261,8 +270,9 @@ def _render(args) -> int:
         progress.close()
     if result.image is not None:
         save_image(result.image, args.output, release=True)  # (its rows go back to the system as Pillow takes them)
+    _warn_about_budget(args.scene, result.rays)
     if result.error_estimate is not None and not args.quiet:
-        from .target import MAX_SAMPLES
+        from .target import MAX_SAMPLES  # deferred: only renders to an error target load tracer.target
         e = result.error_estimate
         goal = "every pixel" if e.kind == "pixel" else "the image's RMSE"
         print(f"estimated error: {e.rms:.3g} RMS, worst pixel {e.worst:.3g} (target {e.target:g} for {goal}); "
@@ -275,16 +285,18 @@ def _render(args) -> int:
     return 0
 
 
+def _warn_about_budget(scene_file: str, rays) -> None:
+    note = budget_note(rays)
+    if note is not None:
+        print(f"warning: {scene_file}: {note}", file=sys.stderr)
+
+
 def _render_job(args) -> int:
     """``render --scheduler`` (tiles on a Dask cluster) and ``render --frames`` (a USD stage's frames)."""
     import dataclasses
     import time
 
-    from . import distributed as dist
-    from .backend import load_core
-    from .imageio import save_image
-    from .render import check_size, render
-    from .trace import RayCounts
+    from . import distributed as dist  # deferred: only cluster and frame renders load it (and Dask)
 
     if args.scheduler is not None:
         dist.parse_address(args.scheduler)
@@ -299,7 +311,6 @@ def _render_job(args) -> int:
         print(f"warning: {message}", file=sys.stderr)
     if args.tile is not None and args.tile < 1:
         raise TracerError(f"--tile must be 1 or more, not {args.tile}")
-    from .tiles import DEFAULT_TILE
     tile = args.tile or (dist.CLUSTER_TILE if args.scheduler is not None else DEFAULT_TILE)
     job = dist.Job(args.width, args.height, block_size=args.block_size, progressive=args.progressive,
                    tile=tile, samples=args.samples, sampling_mode=args.sampling, threshold=args.threshold,
@@ -336,6 +347,7 @@ def _render_job(args) -> int:
                                    progress, eight_bit=True)
     finally:
         progress.close()
+    _warn_about_budget(args.scene, rays)
     if args.stats:
         import json
 
@@ -348,10 +360,6 @@ def _render_job(args) -> int:
 
 def describe(scene) -> dict:
     """What ``info`` prints: objects, lights, camera, settings and live effects."""
-    from .bulk import collector_paused
-    from .compile import compile_scene, fold_tree
-    from .model import ShapeTable
-
     def shape_info(shape):
         info = {"shape": shape.kind, "position": [round(x, 6) for x in shape.matrix[:3, 3].tolist()],
                 "groups": list(shape.groups)}
@@ -407,8 +415,6 @@ def _rows_info(rows) -> list[dict]:
     """describe()'s objects for a ShapeTable's columns (tracer.model.ShapeColumns), the same as for its
     Shapes without making them (a big file's shapes stay columns): each row is a shape with no groups and
     no mesh file, at the last column of its affine."""
-    from .shapes import REGISTRY
-
     keywords = [entry.keyword for entry in REGISTRY]
     positions = _round_decimals(rows.affines[:, 3::4], 6).tolist()
     objects = [{"shape": keywords[kind], "position": position, "groups": []}
@@ -485,9 +491,8 @@ def _info(args) -> int:
 def _bench(args) -> int:
     from pathlib import Path
 
+    # deferred: the accuracy bench (and scikit-image, SciPy, matplotlib) is loaded by its command only
     from .accuracy import BenchConfig, measure, plot_targets, write_report
-    from .render import check_size
-    from .sdl.parser import load
 
     check_size(args.width, args.height)
     if min(args.width, args.height) < 7:  # scikit-image's SSIM window
@@ -508,7 +513,7 @@ def _bench(args) -> int:
     if args.scheduler is None:
         summaries = [measure(scene, name, out, config, progress=progress) for _, name, scene in scenes]
     else:
-        from . import distributed as dist
+        from . import distributed as dist  # deferred: (as in _render_job)
 
         dist.parse_address(args.scheduler)
         dist.require_dask()
@@ -521,24 +526,6 @@ def _bench(args) -> int:
     plot_targets(summaries, out / "target_error.png")
     write_report(summaries, out / "report.md")
     return 0
-
-
-@contextlib.contextmanager
-def _terminate_like_interrupt():
-    """Meanwhile SIGTERM ends a run as Ctrl-C does: KeyboardInterrupt unwinds, so a half-written file is
-    removed.  (Signal handlers belong to the main thread; elsewhere nothing changes.)"""
-    try:
-        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
-        installed = True
-    except ValueError:  # not the main thread (told this way, without loading the threading module)
-        installed = False
-    if not installed:
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _output_closed() -> bool:
@@ -560,14 +547,72 @@ def _output_closed() -> bool:
     return closed
 
 
+def _final_output(args) -> Optional[str]:
+    """The file whose completion ends the command's work (after it, a signal changes nothing)."""
+    if args.command == "convert":
+        return args.destination
+    if args.command == "render" and args.frames is None:
+        return args.output
+    return None
+
+
+class _NamedOutput:
+    """Standard output whose write errors (a full disk, ``> /dev/full``) name it: left alone, they would be
+    reported as the scene's (an OSError without a file name), or by Python's complaint at exit."""
+
+    NAME = "standard output"
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        return self._named(self._stream.write, text)
+
+    def flush(self):
+        return self._named(self._stream.flush)
+
+    def _named(self, call, *args):
+        try:
+            return call(*args)
+        except BrokenPipeError:  # (main tells a reader that went away from a real error)
+            raise
+        except OSError as err:
+            raise type(err)(err.errno, err.strerror or str(err), self.NAME) from None
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _stdout_named():
+    """sys.stdout is a :class:`_NamedOutput` meanwhile, written out before the block ends."""
+    stream = sys.stdout
+    if stream is None:
+        yield
+        return
+    sys.stdout = _NamedOutput(stream)
+    try:
+        yield
+        sys.stdout.flush()
+    finally:
+        sys.stdout = stream
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
-        with _terminate_like_interrupt(), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
-                one_blas_thread():
+        with signals.working(_final_output(args)), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \
+                one_blas_thread(), _stdout_named():
+            load_core(getattr(args, "backend", "auto"))  # (its signal handler and watchdog: tracer.signals)
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
+    except signals.Interrupted as err:
+        print("\ninterrupted", file=sys.stderr)
+        return err.status
     except RenderCancelled:  # (a TracerError: caught first)
+        if signals.heard():  # the C core stopped for a signal, before Python's handler could say so
+            print("\ninterrupted", file=sys.stderr)
+            return 128 + signals.heard()
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError as err:  # (an OSError: caught before the input's errors)

@@ -22,14 +22,15 @@ import numpy as np
 
 from . import numerics, shapes
 from .bulk import collector_paused, one_blas_thread
-from .errors import TracerError
+from .errors import SceneError, TracerError
+from .geometry import builtin_mesh
 from .intersect import analytic
 from .intersect.csg import combine, sheet_to_pairs
 from .intersect.hits import HitArrays
+from .lights import LightTable
 from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, Material, MaterialRows, MeshData, Scene,
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
-from .lights import LightTable
 from .transforms import transform_points
 
 
@@ -193,6 +194,7 @@ class Primitive:
         self._mesh = None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
             from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         elif shape.kind in MESH_KINDS:
@@ -230,6 +232,7 @@ class Primitive:
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
+            # deferred: the polyhedra's tables are loaded by the first scene with one, not by import tracer
             from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
@@ -284,13 +287,35 @@ class Primitive:
         before any cancellation, as ``first * max|o| + second``."""
         return (float(np.max(np.abs(self.inverse[:3, :3]).sum(axis=1))), float(np.max(np.abs(self.inverse[:3, 3]))))
 
-    def time_errors(self, origins, o_generic, d_generic, hits: HitArrays) -> np.ndarray:
-        """Bounds on the rounding of ``hits.t`` (generic normals still) for world rays from ``origins``."""
+    def bound_hits(self, origins, o_generic, d_generic, hits: HitArrays) -> None:
+        """Fill in the bounds of ``hits`` (generic normals still) for world rays from ``origins``: ``error``,
+        the rounding of t (plus the shape's own root error, where it has one), and ``offset``, how far the
+        generic point may be from the surface (the shape's residual over |n|, its first-order distance, plus
+        the line's error; the C core's hit_bounds).  A mesh's triangles report no bend or residual: they keep
+        the unit-curvature floor of the bound and their point is off by the t error along the line.  (The
+        caller ignores floating-point warnings.)"""
         linear, translation = self.inverse_norms
         raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
-        # (plus the shape's own root error, where it has one: the torus)
-        return hits.error + numerics.generic_time_error(hits.t, raw_scale, o_generic, d_generic, hits.normal,
-                                                        self.generic_size, self.rounding)
+        size = self.generic_size
+        error = numerics.point_errors(hits.t, raw_scale, o_generic, d_generic, size, self.rounding)
+        nn = numerics.dot3(hits.normal, hits.normal)
+        length = np.sqrt(nn)
+        mesh = self._mesh is not None
+        if mesh or hits.bend is None:
+            dd = numerics.dot3(d_generic, d_generic)[:, None]
+            hits.bend = 2.0 * length * dd / size
+        hits.error = hits.error + numerics.time_errors(error, hits, d_generic, size, nn, length)
+        if mesh:
+            hits.offset = hits.error * np.sqrt(dd)
+        else:
+            hits.offset = np.where(nn > 0.0, hits.offset / length, hits.offset) + size * error
+        hits.bend = None  # (read; take and the others need not carry it)
+
+    def to_world(self, hits: HitArrays) -> None:
+        """World normals (the C core's sums) and the offsets along them (numerics.world_offsets)."""
+        world = numerics.normal_to_world(hits.normal, self.normal_matrix)
+        hits.offset = numerics.world_offsets(hits.offset, hits.normal, world)
+        hits.normal = world
 
     @cached_property
     def box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
@@ -321,23 +346,23 @@ class Primitive:
         o, d = self.to_generic(origins[idx], directions[idx])
         # Move each generic origin to the line's point nearest the generic centre: every shape's
         # equation then has O(1) coefficients, however far away the ray started.
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             shift = -numerics.dot3(o, d) / numerics.dot3(d, d)
-        shift = np.where(np.isfinite(shift), shift, 0.0)
-        centred = o + shift[:, None] * d
-        local = self.generic_hits(centred, d)
-        if self._normals_agree:
-            analytic.agree_with_crossing(local, d)
-        local.t = local.t + shift[:, None]
-        local.error = self.time_errors(origins[idx], centred, d, local)
-        local.normal = local.normal @ self.normal_matrix
+            shift = np.where(np.isfinite(shift), shift, 0.0)
+            centred = o + shift[:, None] * d
+            local = self.generic_hits(centred, d)
+            if self._normals_agree:
+                analytic.agree_with_crossing(local, d)
+            local.t = local.t + shift[:, None]
+            self.bound_hits(origins[idx], centred, d, local)
+            self.to_world(local)
         local.shape[np.isfinite(local.t)] = self.index
         if self.thin:
             local = sheet_to_pairs(local)
         if idx.size == n:
             return local
         full = HitArrays.empty(n, local.slots)
-        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error"):
+        for name in ("t", "entering", "normal", "part", "uv", "shape", "inside_at_start", "error", "offset"):
             getattr(full, name)[idx] = getattr(local, name)
         return full
 
@@ -351,10 +376,11 @@ class Primitive:
         if idx.size:
             o, d = self.to_generic(origins[idx], directions[idx])
             local = self._mesh.closest_hits(o, d, t_min[idx], t_max[idx])
-            local.error = self.time_errors(origins[idx], o, d, local)
-            local.normal = local.normal @ self.normal_matrix
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                self.bound_hits(origins[idx], o, d, local)
+                self.to_world(local)
             local.shape[np.isfinite(local.t)] = self.index
-            for name in ("t", "entering", "normal", "part", "uv", "shape", "error"):
+            for name in ("t", "entering", "normal", "part", "uv", "shape", "error", "offset"):
                 getattr(out, name)[idx] = getattr(local, name)
         return out
 
@@ -371,7 +397,7 @@ class Primitive:
         return blocked
 
     def to_generic(self, origins, directions):
-        return transform_points(self.inverse, origins), directions @ self.inverse[:3, :3].T
+        return numerics.affine_points(self.inverse, origins), numerics.linear_vectors(self.inverse, directions)
 
     def may_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Rays whose line passes within the bounding sphere (all rays for unbounded shapes)."""
@@ -455,6 +481,13 @@ def fold_tree(root, leaf: Callable, join: Callable):
         else:
             todo += ((node, True), (node.right, False), (node.left, False))
     return values[0]
+
+
+#: The deepest nesting of booleans any backend traces (tracer.backend refuses deeper trees, for every backend).
+#: The C core evaluates a boolean tree recursively, about 100 bytes of a worker's stack per level; the NumPy
+#: path walks it iteratively but its time grows with pixels x depth (5,000 levels at 64x48: 48 s), so a deeper
+#: tree (only ever seen in generated or hostile files) is refused up front rather than traced for hours.
+MAX_CSG_DEPTH = 2000
 
 
 def boolean_depth(root) -> int:
@@ -586,11 +619,12 @@ class PrimitiveTable:
     ``inverses`` (N, 4, 4); ``inverse_error`` (N,) (numerics.inverse_rounding); ``inverse_norms`` (N, 2)
     (Primitive.inverse_norms); ``generic_size`` (N,); ``spheres`` (N, 4), the world bounding spheres'
     centres and radii (radius inf and centre 0 for unbounded shapes; ``centers`` and ``radii`` are views of
-    it); ``boxes`` (N, 6), world boxes (lo, hi) of the points the spheres are made from (the generic box's
-    corners, a mesh's vertices; not padded, meaningless for unbounded shapes); ``material_ids`` (N,);
+    it); ``boxes`` (N, 6), world boxes (lo, hi) the spheres are made round (of the generic box's corners, a
+    polyhedron's vertices; for a mesh, MeshBound.world_box, which holds its vertices exactly; not padded,
+    meaningless for unbounded shapes); ``material_ids`` (N,);
     ``kind`` (N,), the index of the shape's kind in shapes.REGISTRY; ``parameters`` (N,
-    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: a tapered cylinder's
-    top radius, 1 for a cylinder...; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
+    shapes.MAX_PARAMETERS), the values each kind's intersection takes (ShapeKind.traced: its parameters, or
+    its fixed values; 0 after them); ``meshes``: the TriangleMesh of each mesh by the id of
     its MeshData.  The matrices themselves are the shapes' own (not kept twice)."""
 
     def __init__(self, shapes: Sequence[Shape], kind: np.ndarray, parameters: np.ndarray,
@@ -804,16 +838,32 @@ class PrimitiveTable:
                 vertex_rows.setdefault(id(mesh), (mesh, []))[1].append(i)
             vertex_rows = [(mesh, np.array(members, dtype=np.int64)) for mesh, members in vertex_rows.values()]
         for mesh, rows in vertex_rows:
+            if len(rows) and self.kind[rows[0]] in _MESH_CODES:  # (a mesh: bounded from its own box and sphere)
+                self._bound_mesh_instances(mesh, rows)
+                continue
             vertices = np.asarray(mesh.vertices, dtype=np.float64)
             # (polyhedra read elsewhere may each have a MeshData of their own: the same vertices, grouped by
             # their bytes)
-            key = id(mesh) if len(rows) and self.kind[rows[0]] in _MESH_CODES else vertices.tobytes()
-            groups.setdefault(key, (vertices, []))[1].append(rows)
+            groups.setdefault(vertices.tobytes(), (vertices, []))[1].append(rows)
         for vertices, rows in [(vertices, np.sort(np.concatenate(rows))) for vertices, rows in groups.values()]:
             self.generic_size[rows] = float(np.max(np.abs(vertices))) if vertices.size else 1.0
-            per_chunk = max(1, _CHUNK // max(1, len(vertices)))
+            # (a mesh without vertices has no surface: its bounds are a point at its origin)
+            points = vertices.reshape(-1, 3) if vertices.size else np.zeros((1, 3))
+            per_chunk = max(1, _CHUNK // max(1, len(points)))
             for start in range(0, len(rows), per_chunk):
-                self._bound(rows[start:start + per_chunk], vertices)
+                self._bound(rows[start:start + per_chunk], points)
+
+    def _bound_mesh_instances(self, mesh: MeshData, rows: np.ndarray) -> None:
+        """generic_size, world boxes and bounding spheres of the instances of one mesh (``rows``) from the
+        mesh's generic box and bounding sphere (MeshBound, made once per mesh content): a few numbers per
+        instance, however many vertices the mesh has (carrying every vertex to the world took 23 CPU seconds
+        for 10^5 instances of a 10^4-triangle mesh)."""
+        bound = mesh_bound(mesh, self.meshes.get(id(mesh)))
+        self.generic_size[rows] = bound.generic_size
+        for part in row_chunks(len(rows)):
+            m = self.matrix_rows(rows[part])
+            lo, hi = bound.world_box(m[:, :3, :3], m[:, :3, 3])
+            self._keep_bounds(rows[part], lo, hi)
 
     def _bound_generic_boxes(self, rows, matrix: np.ndarray) -> None:
         """generic_size, world boxes and bounding spheres of the chunk's rows whose kind has a fixed generic
@@ -1136,15 +1186,87 @@ def _hash_indices(h, array) -> None:
 
 
 def shared_triangle_mesh(mesh: MeshData):
-    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after."""
-    from .intersect import mesh as mesh_module
+    """The TriangleMesh (BVH and triangle tables) of a mesh: built once per content, shared after.  The C core
+    builds its BVH when it is loaded (the NumPy builder's tree, in a fraction of the time)."""
+    from .intersect import mesh as mesh_module  # deferred: loaded by the first mesh, not by import tracer
 
     key = (mesh_digest(mesh), mesh_module.BOX_PADDING)  # (the one build constant a test may change)
     built = _TRIANGLE_MESHES.get(key)
     if built is None:
-        built = mesh_module.TriangleMesh(mesh)
+        problem = mesh.coordinate_problem()  # (the readers check; a mesh made in a program may not be)
+        if problem is not None:
+            raise SceneError(f"{mesh.origin or 'mesh'}: {problem}")
+        built = mesh_module.TriangleMesh(mesh, builder=c_bvh_builder())
         _TRIANGLE_MESHES[key] = built
     return built
+
+
+class MeshBound:
+    """What bounds every instance of one mesh, from its vertices once: their generic box (``lo``, ``hi``,
+    exact), a sphere round them (``center``, the box's; ``radius``, rounded outward) and ``generic_size`` (the
+    largest |coordinate|, 1 without vertices).  An instance's world box (:meth:`world_box`) is where both
+    carried to the world overlap: the box's image is tight for an axis-aligned instance, the sphere's for a
+    rotated round one."""
+
+    def __init__(self, vertices: np.ndarray):
+        vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        self.generic_size = float(np.max(np.abs(vertices))) if vertices.size else 1.0
+        if not len(vertices):  # (no surface: bounded as a point at the origin)
+            vertices = np.zeros((1, 3))
+        self.lo, self.hi = vertices.min(axis=0), vertices.max(axis=0)
+        self.center = 0.5 * (self.lo + self.hi)
+        offsets = vertices - self.center
+        # (computed norms are within a few roundings of the true ones: 8 cover them, and the step up)
+        radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", offsets, offsets)))) * (1 + _BOUND_SLACK)
+        self.radius = float(np.nextafter(radius, np.inf))
+
+    def world_box(self, linear: np.ndarray, translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), each (k, 3): world boxes of the instances under ``linear`` (k, 3, 3) and ``translation``
+        (k, 3) that hold every vertex carried there in exact arithmetic.  Each bound is computed in floating
+        point and then widened by that computation's rounding (at most gamma_4 of the sum of its terms'
+        magnitudes, Higham's bound for a dot product of four terms) and a last step outward."""
+        at_lo, at_hi = linear * self.lo, linear * self.hi  # [i, r, j] = linear[i, r, j] * corner j
+        low, high = np.minimum(at_lo, at_hi), np.maximum(at_lo, at_hi)
+        size = np.maximum(np.abs(at_lo), np.abs(at_hi)).sum(axis=2) + np.abs(translation)
+        slack = size * _BOUND_SLACK
+        box_lo = low.sum(axis=2) + translation - slack
+        box_hi = high.sum(axis=2) + translation + slack
+        at_center = linear * self.center
+        center = at_center.sum(axis=2) + translation
+        # (a ball of radius R carried by the linear part reaches R * |row r| along world axis r)
+        reach = self.radius * np.sqrt(np.einsum("irj,irj->ir", linear, linear))
+        reach = (reach + (np.abs(at_center).sum(axis=2) + np.abs(translation)) * _BOUND_SLACK) * (1 + _BOUND_SLACK)
+        lo = np.maximum(box_lo, center - reach)
+        hi = np.minimum(box_hi, center + reach)
+        return np.nextafter(lo, -np.inf), np.nextafter(hi, np.inf)
+
+
+#: Relative slack that covers the roundings of a bound's computation (gamma_8: twice the roundings there are).
+_BOUND_SLACK = numerics.gamma(8)
+#: Each built mesh's MeshBound, while the mesh is kept.
+_MESH_BOUNDS: "weakref.WeakKeyDictionary[object, MeshBound]" = weakref.WeakKeyDictionary()
+
+
+def mesh_bound(mesh: MeshData, built=None) -> MeshBound:
+    """The MeshBound of a mesh, made once per built mesh (``built``, its shared TriangleMesh, which stands for
+    its content), or anew when it is not built."""
+    if built is None:
+        return MeshBound(mesh.vertices)
+    bound = _MESH_BOUNDS.get(built)
+    if bound is None:
+        bound = _MESH_BOUNDS[built] = MeshBound(mesh.vertices)
+    return bound
+
+
+def c_bvh_builder():
+    """tracer.native.build_mesh_bvh when the C core is loaded, else None (TriangleMesh builds in NumPy)."""
+    try:
+        # deferred: the C core is loaded (in a checkout: compiled) by the first mesh or render that wants it,
+        # not by importing the tracer
+        from . import native
+    except ImportError:  # no C core in this installation
+        return None
+    return native.build_mesh_bvh if native.load_error is None else None
 
 
 def content_key(scene: Scene) -> tuple:
@@ -1207,7 +1329,6 @@ class _RowShapes(Sequence):
         """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
         kind = _KEYWORDS[self.columns.kinds[index]]
         if shapes.KINDS[kind].builtin_mesh:
-            from .geometry import builtin_mesh
             return builtin_mesh(kind)
         return None
 
@@ -1371,6 +1492,7 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
                        uv_textured=uv_textured_of(table, material_table.texture))
     textures = None
     if "textures" in effects:
+        # deferred: the textures (and the noise tables made as they load) wait for the first textured scene
         from .textures import TextureSet
         textures = TextureSet(scene, primitives)
     lights = LightTable.of(scene.lights)

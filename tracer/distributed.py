@@ -36,10 +36,17 @@ from typing import Callable, Iterator, Optional, Sequence
 
 import numpy as np
 
-from .errors import TracerError
+from .backend import make_tracer
+from .camera import CameraFrame, scene_camera
+from .compile import compile_scene
+from .errors import SDLError, TracerError
+from .imageio import new_8bit_image, to_8bit
 from .model import Scene, ShapeTable
+from .render import TileUpdate
 from .savings import RaySavings
+from .sdl.parser import load
 from .threads import default_threads
+from .tiles import PixelTracer, Tile, TilePlan, camera_rays_for, trace_rect, trace_tile
 from .trace import RayCounts
 
 INSTALL_HINT = "pip install 'sdl-raytracer[distributed]' (or: pip install distributed)"
@@ -88,7 +95,7 @@ def scene_files(path: str | os.PathLike, scene: Scene) -> list[Path]:
         # (a table's rows read no mesh file: not made into a million Shapes to find that out)
         files += [path.parent / shape.mesh_file for shape in scene.shapes() if shape.mesh_file]
     if path.suffix.lower() in (".usd", ".usda", ".usdc"):
-        from .usd.common import pxr
+        from .usd.common import pxr  # deferred: the USD package, for USD stages only
         pxr()  # (a TracerError saying how to install usd-core, where it is missing)
         from pxr import UsdUtils
         layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(os.fspath(path))
@@ -138,14 +145,13 @@ class SceneBundle:
 
 def read_scene(path: str | os.PathLike, lenient: bool = False, time: Optional[float] = None) -> Scene:
     """SDL or USD by extension (USD at time code ``time``)."""
-    from .usd.common import USD_EXTENSIONS
+    from .usd.common import USD_EXTENSIONS  # deferred: (the USD package, as in scene_files)
 
     if Path(path).suffix.lower() in USD_EXTENSIONS:
-        from .usd import load_usd
+        from .usd import load_usd  # deferred: (as above)
         return load_usd(path, strict=not lenient, time=time)
     if time is not None:
         raise TracerError(f"{path}: frames need a USD stage with time samples (an SDL file has no time)")
-    from .sdl.parser import load
     return load(path, strict=not lenient)
 
 
@@ -171,7 +177,6 @@ class Job:
     savings: Optional[RaySavings] = None  # rays not cast (None: tracer.savings' defaults)
 
     def plan(self):
-        from .tiles import TilePlan
         return TilePlan(self.width, self.height, block_size=self.block_size, progressive=self.progressive,
                         tile=self.tile, samples=self.samples, sampling_mode=self.sampling_mode,
                         threshold=self.threshold, seed=self.seed)
@@ -225,8 +230,6 @@ def _unpacked(bundle: SceneBundle) -> str:
 def _as_the_user_knows_it(bundle: SceneBundle, folder: str) -> Iterator[None]:
     """A scene's failure on a worker as one line naming the worker and the file as the user knows it, not
     the worker's copy."""
-    from .errors import SDLError
-
     try:
         yield
     except (SDLError, TracerError, OSError, ValueError) as err:
@@ -235,8 +238,6 @@ def _as_the_user_knows_it(bundle: SceneBundle, folder: str) -> Iterator[None]:
 
 def _compiled(bundle: SceneBundle, time: Optional[float], max_depth: Optional[int]):
     """The compiled scene of a bundle at a time: read and compiled once per worker process."""
-    from .compile import compile_scene
-
     key = (bundle.digest, time, max_depth)
     with _lock:
         if key in _scenes:
@@ -266,8 +267,6 @@ def _worker_core_threads() -> int:
 
 
 def _tracer(bundle: SceneBundle, job: Job, time: Optional[float]):
-    from .backend import make_tracer
-
     compiled = _compiled(bundle, time, job.max_depth)
     key = (bundle.digest, time, job.max_depth, job.backend, job.threads, job.savings)
     kept = getattr(_local, "kept", None)
@@ -288,9 +287,6 @@ def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: 
                     refine: Optional[np.ndarray] = None):
     """A task: every block pass of one tile (or, given its window of the refinement mask, the refinement
     pass).  Returns (the tile's film, bottom row first; the rays it cast; the backend's name)."""
-    from .camera import CameraFrame, scene_camera
-    from .tiles import PixelTracer, Tile, camera_rays_for, trace_rect, trace_tile
-
     compiled, tracer = _tracer(bundle, job, time)
     plan = _plan(job)
     aspect = job.width / job.height
@@ -447,9 +443,6 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
     ``eight_bit``: as for :func:`tracer.render.render`, keep only the 8-bit values (each tile converted as it
     arrives, unless adaptive sampling needs the float film) and hand uint8 images to ``on_frame``."""
     distributed = require_dask()
-    from .imageio import new_8bit_image, to_8bit
-    from .render import TileUpdate
-
     plan = job.plan()
     bytes_on_arrival = eight_bit and not plan.adaptive
     [bundle_future] = client.scatter([bundle], broadcast=True, hash=False)

@@ -21,37 +21,39 @@ What each edit recomputes (docs/tracer.md, "Editing a compiled scene", has the t
   the rows of the shapes that use it;
 * ``add_objects`` / ``remove_objects`` / ``replace_objects`` with another structure: their own rows, the
   FlatScene made anew, a rebuild of the object hierarchy (on the tracer's threads);
-* ``set_lights``: the light rows.
+* ``set_lights``: the light rows; ``set_settings``: the materials' traits; ``set_pixmaps``: the pictures
+  whose file changed.
 
 An edit that changes which *live effects* the scene has (the first reflective material, the first texture,
 the last light) recomputes what depends on the effects (the effect set, textures, the shading variant);
-the ray savings of tracer.savings (sealed lights, dark materials) follow every edit.  Edits must not run
+the ray savings (tracer.skippable: sealed lights, dark materials) follow every edit.  Edits must not run
 while a render of the same scene is tracing.
 """
 from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Hashable, Iterable, Sequence
+import os
+from collections import Counter
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Optional
 
 import numpy as np
 
-from collections import Counter
-
 from .bulk import one_blas_thread
 from .compile import CompiledObjects, CompiledScene, CSGNode, compile_scene, delete_positions, fold_tree
 from .edit_ledger import MaterialLedger
 from .errors import TracerError
-from .model import CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Shape, ShapeTable
-from .native import flatten
-from .threads import default_threads
+from .model import (CSG, MESH_KINDS, SHAPE_KINDS, Light, Material, MeshData, Scene, SceneObject, Settings, Shape,
+                    ShapeTable)
 from .lights import LightTable
-from .savings import sealed_lights
+from .native import flatten
+from .skippable import sealed_lights
 from .textures import TextureSet
 from .textures.images import load_image
 from .textures.solid import SOLID_TEXTURES
+from .threads import default_threads
 
 
 def _edit(method):
@@ -85,10 +87,10 @@ class EditableScene:
         for serial, key in enumerate(keys):
             self._serials_of.setdefault(key, []).append(serial)
         self._serial = np.arange(n, dtype=np.int64)  # by position
+        self._position = np.arange(n, dtype=np.int64)  # by serial (-1: removed)
         # Shapes this scene made (by id; each in the scene once): a later move or material edit changes them
         # in place instead of making another (an animation frame makes no new Shape after the first)
         self._owned: set[int] = set()
-        self._position = np.arange(n, dtype=np.int64)  # by serial (-1: removed)
         self.compiled: CompiledScene = compile_scene(scene)
         compiled = self.compiled
         self._materials = MaterialLedger(compiled)
@@ -97,6 +99,7 @@ class EditableScene:
             self._leaf_counts[k] = sum(1 for _ in obj.leaves())
         self._starts = np.concatenate([[0], np.cumsum(self._leaf_counts)])
         self._images = dict(getattr(compiled.textures, "images", None) or {})
+        self._stamps = {number: _stamp(scene.pixmaps[number]) for number in self._images}
         # what the C core has not been told yet (see _sync): objects whose boxes changed, and how
         self._batch_depth = 0
         self._pending_objects: set[int] = set()
@@ -104,8 +107,9 @@ class EditableScene:
         self._refitted = 0  # objects refitted since the hierarchy was last built
         # material rows the FlatScene has not read yet (written in place, or added)
         self._rows_written: set[int] = set()
-        #: what the last edits did, for the tests and the bench: "rows", "materials", "effects", "textures",
-        #: "refit", "rebuild", "flat" (the FlatScene made anew), counted since the scene was made editable
+        #: what the edits did, for the tests and the bench: "rows", "materials", "effects", "textures",
+        #: "refit", "rebuild", "restructure" (objects added or removed in the C core's scene), "flat" (the
+        #: FlatScene made anew), counted since the scene was made editable
         self.done: Counter = Counter()
 
     # -- keys ---------------------------------------------------------------------------------------------
@@ -247,6 +251,33 @@ class EditableScene:
         self._take_edit(_NONE, [], materials_touched=False, lights=True)
 
     @_edit
+    def set_settings(self, settings: Settings) -> None:
+        """The scene's settings become ``settings`` (background, ambient light, the reflectivity and
+        transparency thresholds, recursion depth, smooth terminator): no row but the materials' traits."""
+        self.scene.settings = dataclasses.replace(settings)
+        self._materials.retrait()
+        self._take_edit(_NONE, [], materials_touched=True, lights=False, scene_wide=True)
+
+    @_edit
+    def set_pixmaps(self, pixmaps: Mapping[int, str]) -> None:
+        """The scene's pictures (``makePixmap`` number -> file) become ``pixmaps``; a picture in use whose file
+        changed (another path, or the file written again) is loaded again.  Refused, changing nothing, when a
+        material in use names a number that ``pixmaps`` lacks."""
+        pixmaps = dict(pixmaps)
+        in_use = self._materials.pictures_in_use()
+        missing = sorted(in_use - set(pixmaps))
+        if missing:
+            raise TracerError(f"texture {missing[0]} is used but the new pictures have no 'makePixmap {missing[0]}'")
+        fresh = {number: load_image(pixmaps[number]) for number in sorted(in_use)
+                 if _stamp(pixmaps[number]) != self._stamps.get(number)}
+        self.scene.pixmaps = pixmaps
+        for number in [k for k in self._images if k not in pixmaps or _stamp(pixmaps[k]) != self._stamps.get(k)]:
+            del self._images[number]
+        for number, picture in fresh.items():
+            self._keep_image(number, picture)
+        self._take_edit(_NONE, [], materials_touched=True, lights=False, scene_wide=True)
+
+    @_edit
     def rebuild_hierarchy(self) -> None:
         """Build the C core's object hierarchy anew (refits keep it valid, but many large moves can make it
         slower to traverse than a fresh build)."""
@@ -282,25 +313,28 @@ class EditableScene:
         material_ids = before if same_materials else np.array([self._material_row(leaf.material) for leaf in leaves],
                                                               dtype=np.int32)
         scene_objects = self.scene.objects
+        meshes_before = [table.shapes[i].mesh for i in rows.tolist()]
         for p, obj in zip(positions, objects):
             old = scene_objects[p]
             if old is not obj and self._owned:  # (shapes replaced by others leave the scene)
                 kept = set(map(id, _leaves(obj)))
                 self._disown(leaf for leaf in _leaves(old) if id(leaf) not in kept)
             scene_objects[p] = obj
+        meshes_touched = any(a is not b.mesh for a, b in zip(meshes_before, leaves))
         table.refill(rows, leaves)
         table.material_ids[rows] = material_ids
         self._materials.reassign(before, material_ids)
         self._renew_nodes(rows, positions)
         self._update_sealed(positions)
         touched = bool(self._rows_written) or not np.array_equal(before, material_ids)
-        self._take_edit(rows, positions, materials_touched=touched, lights=False)
+        self._take_edit(rows, positions, materials_touched=touched, lights=False, meshes_touched=meshes_touched)
 
-    def _take_edit(self, rows: np.ndarray, positions: list[int], materials_touched: bool, lights: bool) -> None:
+    def _take_edit(self, rows: np.ndarray, positions: list[int], materials_touched: bool, lights: bool,
+                   meshes_touched: bool = False, scene_wide: bool = False) -> None:
         """After the compiled rows of an in-place edit are done: the effects (and pictures) again, the FlatScene's
         rows of these primitives, objects and materials, and the C core told (now, or at the batch's end)."""
         compiled = self.compiled
-        refreshed = self._refresh_effects(materials_touched)
+        refreshed = self._refresh_effects(materials_touched, meshes_touched)
         self.done["rows"] += 1
         flat = _flat_of(compiled)
         if flat is not None:
@@ -310,7 +344,7 @@ class EditableScene:
                                lights=lights)
             self._pending_meshes |= meshes
             self._pending_objects.update(positions)
-            self._pending_flat |= lights
+            self._pending_flat |= lights or scene_wide
         self._rows_written = set()
         self._sync()
 
@@ -367,8 +401,12 @@ class EditableScene:
 
     def _restructure(self, removed: list[int], key: Hashable, added: list[SceneObject]) -> None:
         """Remove the objects at ``removed`` and append ``added`` under ``key``: their own rows, then the
-        FlatScene made anew and the object hierarchy rebuilt."""
+        FlatScene made anew, and the C core's hierarchy renumbered (the added objects outside it until there
+        are many: then it is built again)."""
         compiled, table = self.compiled, self.compiled.table
+        incremental = not self._pending_rebuild
+        if incremental:
+            self._sync(force=True)  # (moves not yet sent name objects by their positions before this edit)
         n = len(self._serial)
         keep = np.ones(n, dtype=bool)
         keep[removed] = False
@@ -398,7 +436,7 @@ class EditableScene:
         compiled.objects = CompiledObjects(compiled.primitives, index, {})
         for p in np.flatnonzero(index < 0).tolist():
             compiled.objects.booleans[p] = self._boolean_node(p)
-        self._refresh_effects(True)
+        self._refresh_effects(True, True)
         self._rows_written = set()  # (the new FlatScene reads them all)
         sealed = compiled.__dict__.get(_SEALED)
         if sealed is not None:
@@ -406,21 +444,30 @@ class EditableScene:
             compiled.__dict__[_SEALED] = np.concatenate([sealed[kept], fresh])
         self.done["rows"] += 1
         old = _flat_of(compiled)
-        if old is not None:  # (a new flat scene; the C core's scene moves over to it)
-            flat = flatten.FlatScene(compiled)
-            flat.core = getattr(old, "core", None)
-            compiled._flat_cache = (compiled._flat_cache[0], flat)
+        if old is None:
+            return
+        flat = flatten.FlatScene(compiled)  # (a new flat scene; the C core's scene moves over to it)
+        core = flat.core = getattr(old, "core", None)
+        compiled._flat_cache = (compiled._flat_cache[0], flat)
+        self.done["flat"] += 1
+        if core is not None and incremental:
+            had_sealed = core.sealed_sent
+            core.edit(flat, None, meshes=True, rebuild=False, threads=default_threads(),
+                      removed=np.asarray(removed, dtype=np.int64))
+            self._resend_sealed(core, had_sealed)
+            self.done["restructure"] += 1
+        else:
             self._pending_flat = self._pending_meshes = self._pending_rebuild = True
-            self.done["flat"] += 1
-        self._sync()
+            self._sync()
 
     # -- what depends on many rows ------------------------------------------------------------------------
 
-    def _refresh_effects(self, materials_touched: bool) -> bool:
+    def _refresh_effects(self, materials_touched: bool, meshes_touched: bool = False) -> bool:
         """The live effects again (from the ledger's counts: no pass over the materials), and the pictures
         where the materials in use may have changed (each picture loaded once).  Whether either changed."""
         compiled = self.compiled
-        effects = self._materials.effects(compiled.table.kinds_present(), bool(compiled.objects.booleans))
+        effects = self._materials.effects(compiled.table.kinds_present(), bool(compiled.objects.booleans),
+                                          materials_touched or meshes_touched)
         changed = effects != compiled.effects
         if changed:
             compiled.effects = effects
@@ -432,7 +479,7 @@ class EditableScene:
             return False
         numbers = self._materials.pictures_in_use()
         for number in numbers - set(self._images):
-            self._images[number] = load_image(self.scene.pixmaps[number])  # (checked with the material)
+            self._keep_image(number, load_image(self.scene.pixmaps[number]))  # (checked with the material)
         images = {k: self._images[k] for k in sorted(numbers)}
         current = getattr(compiled.textures, "images", None)
         if current is None or current.keys() != images.keys() or any(current[k] is not images[k] for k in images):
@@ -454,11 +501,11 @@ class EditableScene:
 
     # -- the C core ---------------------------------------------------------------------------------------
 
-    def _sync(self) -> None:
-        """Tell the C core's scene (when there is one) what the edits since the last time changed: a refit of
-        the hierarchy to the objects that moved, or a rebuild (objects added or removed, or more than
-        REBUILD_SHARE of the objects refitted since the last build)."""
-        if self._batch_depth:
+    def _sync(self, force: bool = False) -> None:
+        """Tell the C core's scene (when there is one) what the edits since the last time changed (at the end
+        of a batch, unless ``force``): a refit of the hierarchy to the objects that moved, or a rebuild
+        (asked for, or more than REBUILD_SHARE of the objects refitted since the last build)."""
+        if self._batch_depth and not force:
             return
         flat = _flat_of(self.compiled)
         core = getattr(flat, "core", None) if flat is not None else None
@@ -470,13 +517,22 @@ class EditableScene:
             return
         self._refitted += objects.size
         rebuild = self._pending_rebuild or self._refitted > REBUILD_SHARE * max(1, len(self._serial))
+        had_sealed = core.sealed_sent
         core.edit(flat, objects, meshes=self._pending_meshes, rebuild=rebuild, threads=default_threads())
+        self._resend_sealed(core, had_sealed)
         if rebuild:
             self._refitted = 0
             self.done["rebuild"] += 1
         elif objects.size:
             self.done["refit"] += 1
         self._pending_meshes = self._pending_rebuild = self._pending_flat = False
+
+    def _resend_sealed(self, core, had: bool) -> None:
+        """The C core's sealed-lights table as the compiled scene's is now, where a tracer had sent one: a tracer
+        made before the edit then skips the feelers one made after it skips (none while the table is not
+        known again, after a light edit)."""
+        if had:
+            core.send_sealed(self.compiled.__dict__.get(_SEALED))
 
     # -- checks -------------------------------------------------------------------------------------------
 
@@ -499,7 +555,11 @@ class EditableScene:
         if number > 0 and number not in self._images:
             if number not in self.scene.pixmaps:
                 raise TracerError(f"{where}: texture {number} is used but the scene has no 'makePixmap {number} file'")
-            self._images[number] = load_image(self.scene.pixmaps[number])
+            self._keep_image(number, load_image(self.scene.pixmaps[number]))
+
+    def _keep_image(self, number: int, picture: np.ndarray) -> None:
+        self._images[number] = picture
+        self._stamps[number] = _stamp(self.scene.pixmaps[number])
 
     def _where(self, key: Hashable) -> list[int]:
         try:
@@ -513,7 +573,16 @@ class EditableScene:
 #: build: refitted boxes of objects moved far apart overlap more and more.
 REBUILD_SHARE = 0.5
 _NONE = np.zeros(0, dtype=np.int64)
-_SEALED = "_sealed_lights"  # (where tracer.savings.sealed_table keeps its table)
+_SEALED = "_sealed_lights"  # (where tracer.skippable.sealed_table keeps its table)
+
+
+def _stamp(path: str) -> tuple:
+    """What tells a picture file's content apart: its path, size and modification time (as compile_scene's key)."""
+    try:
+        stat = os.stat(path)
+        return str(path), stat.st_size, stat.st_mtime_ns
+    except (OSError, ValueError):
+        return str(path), None, None
 
 
 def _flat_of(compiled: CompiledScene):

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .compile import CompiledScene, effects_of_traits, material_traits, uv_textured_of
+from typing import Optional
+
+from .compile import TRAITS, CompiledScene, effects_of_traits, material_traits, uv_textured_of
 from .model import Material
 
 
@@ -27,6 +29,7 @@ class MaterialLedger:
         ids = compiled.table.material_ids
         self.users = np.bincount(ids, minlength=len(self.traits)).astype(np.int64)
         self.counts = (self.users[:, None] * self.traits).sum(axis=0)
+        self._uv_textured: Optional[bool] = None  # (effects: not looked at yet)
 
     def row(self, material: Material) -> tuple[int, bool]:
         """The row of this Material object, and whether it is new (appended to the table)."""
@@ -55,15 +58,25 @@ class MaterialLedger:
         np.add.at(self.users, after, 1)
         self.counts += self.traits[after].sum(axis=0) - self.traits[before].sum(axis=0)
 
+    def retrait(self) -> None:
+        """Every material's traits again (the settings' thresholds changed)."""
+        self.traits = material_traits(self.compiled.materials, self.compiled.settings)
+        self.counts = (self.users[:, None] * self.traits).sum(axis=0)
+
     def present(self) -> np.ndarray:
         """Per trait, whether some primitive's material has it."""
         return self.counts > 0
 
-    def effects(self, kinds: set[str], any_boolean: bool) -> frozenset[str]:
-        """The compiled scene's live effects as they are now (shapes of ``kinds``)."""
+    def effects(self, kinds: set[str], any_boolean: bool, meshes_or_materials_changed: bool) -> frozenset[str]:
+        """The compiled scene's live effects as they are now (shapes of ``kinds``).  Whether a picture lies on a
+        mesh with texture coordinates (a walk over the meshes) is looked at again only where a picture is in
+        use and ``meshes_or_materials_changed`` (some primitive's mesh or material) since it was."""
         compiled = self.compiled
-        return effects_of_traits(compiled.scene, kinds, self.present(), any_boolean,
-                                 uv_textured_of(compiled.table, compiled.materials.texture))
+        if not self.present()[TRAITS.index("textured")] or not self.pictures_in_use():
+            self._uv_textured = False
+        elif meshes_or_materials_changed or self._uv_textured is None:
+            self._uv_textured = uv_textured_of(compiled.table, compiled.materials.texture)
+        return effects_of_traits(compiled.scene, kinds, self.present(), any_boolean, self._uv_textured)
 
     def pictures_in_use(self) -> set[int]:
         """The image texture numbers (> 0) of the materials in use."""

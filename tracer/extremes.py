@@ -19,8 +19,11 @@ from typing import Callable
 
 import numpy as np
 
+from .compile import compile_scene
 from .model import CSG, Camera, Light, Material, Scene, SceneObject, Settings, Shape
 from .render import render
+from .sdl.parser import load
+from .transforms import rotation, scaling, translation
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 #: How far back the telephoto reference stands: far enough that the remaining perspective is < 0.1 pixel.
@@ -72,8 +75,6 @@ def telephoto(scene: Scene, farther: float) -> Scene:
 
 def glass_pane(thickness: float = 1e-5) -> Scene:
     """A thin glass pane at the origin in front of three coloured blocks on a floor, lit from above."""
-    from .transforms import scaling, translation
-
     glass = Material(ambient=(0, 0, 0), diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9),
                      specular_exponent=120, transparency=0.9, speed_of_light=0.67, reflectivity=0.1)
     floor = Shape("plane", translation(0, -1, 0) @ np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0],
@@ -100,8 +101,6 @@ _MATT = {"specular": (0.0, 0.0, 0.0)}
 
 def _room_shapes() -> list[Shape]:
     """A floor, a cube turned 30 degrees and a sphere: the hosts of the lights on surfaces."""
-    from .transforms import rotation, scaling, translation
-
     floor = Shape("plane", _FLOOR, Material(diffuse=(0.6, 0.6, 0.6), **_MATT))
     cube = Shape("cube", translation(-1.2, 0.55, -0.6) @ rotation(30, 0, 1, 0) @ scaling(0.5, 0.5, 0.5),
                  Material(diffuse=(0.9, 0.25, 0.2), **_MATT))
@@ -141,9 +140,49 @@ def far_light(distance: float) -> Scene:
                  settings=Settings(global_ambient=(0.1, 0.1, 0.1), background=(0.1, 0.1, 0.15)))
 
 
-def bundled(name: str) -> Scene:
-    from . import load
+def coplanar_faces() -> Scene:
+    """Squares lying exactly on the faces of a turned cube and, overlapping, on the floor (decals): each square
+    comes before its cube and floor in the scene, so where their hits tie (their error intervals overlap,
+    docs/tracer.md) it is the square that is seen."""
+    cube_matrix = translation(0.2, 0.7, -0.5) @ rotation(35, 0, 1, 0) @ rotation(20, 1, 0, 0) @ scaling(0.7, 0.7, 0.7)
+    decals = []
+    for face, color in (((0.0, 0.0, 1.0), (0.95, 0.9, 0.2)), ((1.0, 0.0, 0.0), (0.2, 0.8, 0.9)),
+                        ((0.0, 1.0, 0.0), (0.9, 0.3, 0.8))):
+        # the generic square (z = 0) turned onto the face of the cube whose normal is `face`
+        turn = {(0.0, 0.0, 1.0): np.eye(4), (1.0, 0.0, 0.0): rotation(90, 0, 1, 0),
+                (0.0, 1.0, 0.0): rotation(-90, 1, 0, 0)}[face]
+        on_face = cube_matrix @ translation(*face) @ turn @ scaling(0.6, 0.6, 1.0)
+        decals.append(Shape("square", on_face, Material(diffuse=color, **_MATT)))
+    floor_decal = Shape("square", _FLOOR @ translation(-1.6, 0.4, 0.0) @ scaling(0.9, 0.6, 1.0),
+                        Material(diffuse=(0.9, 0.5, 0.1), **_MATT))
+    cube = Shape("cube", cube_matrix, Material(diffuse=(0.8, 0.2, 0.2), **_MATT))
+    floor = Shape("plane", _FLOOR, Material(diffuse=(0.6, 0.6, 0.6), **_MATT))
+    return Scene(objects=[*decals, floor_decal, cube, floor], lights=[Light((3, 6, 5), (0.9, 0.9, 0.9))],
+                 camera=Camera((2.6, 2.4, 2.8), (-0.4, 0.4, -0.5), (0, 1, 0), 45),
+                 settings=Settings(global_ambient=(0.15, 0.15, 0.15), background=(0.1, 0.1, 0.15)))
 
+
+def cone_apex(span: float) -> Scene:
+    """A cone standing on its base, its apex seen from 3 units away through a window ``span`` wide, lit from
+    the eye (every point seen faces the light, and a convex solid cannot shadow itself: any shadow on it is
+    a feeler finding again the surface it left)."""
+    cone = Shape("cone", rotation(-90, 1, 0, 0), Material(diffuse=(0.85, 0.6, 0.2), **_MATT))
+    apex = np.asarray(_point(cone.matrix, (0.0, 0.0, 1.0)))
+    view = np.array([0.3, 0.5, 1.0]) / np.linalg.norm([0.3, 0.5, 1.0])
+    eye = tuple((apex + 3.0 * view).tolist())
+    angle = 2.0 * math.degrees(math.atan(span / 2.0 / 3.0))
+    return Scene(objects=[cone], lights=[Light(eye, (0.9, 0.9, 0.9))],
+                 camera=Camera(eye, tuple(apex.tolist()), (0, 1, 0), angle),
+                 settings=Settings(global_ambient=(0.1, 0.1, 0.1), background=(0.1, 0.1, 0.15)))
+
+
+def without_shadows(scene: Scene):
+    """The scene compiled with its shadow feelers turned off (a twin for scenes that should have no shadow)."""
+    compiled = compile_scene(scene)
+    return replace(compiled, effects=compiled.effects - {"shadows"})
+
+
+def bundled(name: str) -> Scene:
     return load(SCENES / f"{name}.sdl")
 
 
@@ -171,6 +210,11 @@ CASES: dict[str, Callable[[], tuple[Scene, Scene]]] = {
     "light in the floor plane: moved by +1e5": lambda: (light_on_surface("floor", LIGHT_OFF),
                                                         moved(light_on_surface("floor"), (1e5, 1e5, 1e5))),
     "light at 1e300": lambda: (far_light(1e12), far_light(1e300)),
+    "coplanar faces: moved by +1e5": lambda: (coplanar_faces(), moved(coplanar_faces(), (1e5, 1e5, 1e5))),
+    "coplanar faces: scaled by 1e-6": lambda: (coplanar_faces(), scaled(coplanar_faces(), 1e-6)),
+    "cone apex: span 1e-4": lambda: (without_shadows(cone_apex(1e-4)), cone_apex(1e-4)),
+    "cone apex: span 1e-6": lambda: (without_shadows(cone_apex(1e-6)), cone_apex(1e-6)),
+    "cone apex: span 1e-8": lambda: (without_shadows(cone_apex(1e-8)), cone_apex(1e-8)),
 }
 
 

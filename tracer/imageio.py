@@ -20,7 +20,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .atomic import replacing
+from .atomic import writing
 from .errors import TracerError
 from .png import PngWriter, write_png
 
@@ -160,11 +160,11 @@ def save_image(image: np.ndarray, path: str | os.PathLike, release: bool = False
     uint8 values of :func:`to_8bit`; the format follows the file extension (png, bmp, ppm, jpg, tif).
     ``release``: as for :func:`bands_8bit` (for an image that is not needed afterwards).
 
-    The file appears complete or not at all: it is written beside the target and renamed over it.
+    The file appears complete or not at all (see :mod:`tracer.atomic`).
     """
     path = Path(path)
     image_format = output_format(path)
-    with replacing(path) as temp, open(temp, "wb") as handle:
+    with writing(path) as handle:
         if image_format == "PNG":
             bands = bands_8bit(image, release)
             write_png(handle, image.shape[1], image.shape[0], bands, level=PNG_LEVEL)
@@ -180,7 +180,7 @@ def png_rows(path: str | os.PathLike, width: int, height: int) -> Iterator[Calla
     one :func:`save_image` writes from the whole image, and, as there, appears complete or not at all (a
     block that raises leaves no file)."""
     path = Path(path)
-    with replacing(path) as temp, open(temp, "wb") as handle:
+    with writing(path) as handle:
         writer = PngWriter(handle, width, height, level=PNG_LEVEL)
         yield writer.add_rows
         writer.finish()

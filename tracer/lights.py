@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import LIGHT_KINDS, Light
+from .numerics import norm3
 
 #: Each kind's code in the tables (the C core's LIGHT_* codes).
 LIGHT_CODES = {kind: code for code, kind in enumerate(LIGHT_KINDS)}
@@ -61,7 +62,7 @@ class LightTable:
 
 def _unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=float)
-    return v / np.sqrt(v @ v)
+    return v / norm3(v)  # (no overflow or underflow: a direction may be given as 1e-300 or 1e300 long)
 
 
 def _frame(light: Light) -> np.ndarray:

@@ -15,7 +15,7 @@ from typing import BinaryIO, Iterator, Optional, Union
 
 import numpy as np
 
-from .atomic import replacing
+from .atomic import writing
 from .errors import SDLError, WriteError
 from .model import FaceList, MeshData
 from .sdl.lexer import to_float
@@ -33,15 +33,19 @@ def read_3vn(path: PathLike) -> MeshData:
     try:
         with open_regular(path, "mesh file") as handle:
             mesh = _read_in_bulk(handle, name)
-            if mesh is not None:
-                return mesh
-            handle.seek(0)
-            data = handle.read()
+            if mesh is None:
+                handle.seek(0)
+                data = handle.read()
     except OSError as exc:
         raise SDLError(f"cannot read mesh file: {exc.strerror or exc}", file=name) from exc
-    # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number (as
-    # userfiles.read_text decodes: a byte-order mark dropped).
-    return _read_words(data.decode("utf-8-sig", errors="replace"), name)
+    if mesh is None:
+        # Course files are sometimes saved with odd encodings; a bad byte just becomes a bad number (as
+        # userfiles.read_text decodes: a byte-order mark dropped).
+        mesh = _read_words(data.decode("utf-8-sig", errors="replace"), name)
+    problem = mesh.coordinate_problem()
+    if problem is not None:
+        raise SDLError(problem, file=name)
+    return mesh
 
 
 #: Counts beyond this are certainly corrupt, and would exhaust memory before the check.
@@ -144,7 +148,7 @@ def _bulk_numbers(data: bytes) -> Optional[np.ndarray]:
 def _native():
     """tracer.native when the C core is built, else None."""
     try:
-        from . import native
+        from . import native  # deferred: the C core is loaded (in a checkout: compiled) by the first mesh file
     except ImportError:
         return None
     return native if native.load_error is None else None
@@ -277,8 +281,8 @@ def write_3vn(mesh: MeshData, path: PathLike) -> None:
 
 def write_text_atomic(path: PathLike, text: str) -> None:
     """Write ``text`` (UTF-8, LF line ends) so that ``path`` holds either all of it or what it held
-    before (see :func:`tracer.atomic.replacing`)."""
-    with replacing(path) as temp, open(temp, "w", encoding="utf-8", newline="\n") as out:
+    before (see :func:`tracer.atomic.writing`)."""
+    with writing(path, "w", encoding="utf-8", newline="\n") as out:
         out.write(text)
         out.flush()
         os.fsync(out.fileno())

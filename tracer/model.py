@@ -15,7 +15,10 @@ from typing import Optional, Union
 import numpy as np
 
 from . import shapes
+from .bulk import collector_paused
 from .errors import SceneError
+from .geometry import builtin_mesh
+from .meshdata import FaceList, MeshData
 from .shapes import TORUS_TUBE_RADIUS  # noqa: F401 - part of the model's vocabulary
 
 Color = tuple[float, float, float]
@@ -27,12 +30,15 @@ ANALYTIC_KINDS = shapes.keywords("analytic")
 POLYHEDRON_KINDS = shapes.keywords("polyhedron")
 #: Shapes made of triangles.
 MESH_KINDS = shapes.keywords("mesh")
+#: Kinds whose shapes hold the kind's own mesh (tracer.geometry.builtin_mesh): the polyhedra and the teapot.
+BUILTIN_MESH_KINDS = tuple(e.keyword for e in shapes.REGISTRY if e.builtin_mesh)
 SHAPE_KINDS = shapes.keywords()
 
 
 @dataclass(frozen=True, slots=True)  # slots: one per shape, 40 bytes less each
 class SourceLocation:
-    """Where something came from, for messages: file (may be None for text), line and column (1-based)."""
+    """Where something came from, for messages: file (may be None for text), line and column (1-based; line 0
+    for a place without lines: a USD stage's prim, whose path the file name carries)."""
 
     file: Optional[str]
     line: int
@@ -40,6 +46,8 @@ class SourceLocation:
 
     def __str__(self) -> str:
         name = self.file or "<sdl>"
+        if not self.line:
+            return name
         return f"{name}:{self.line}:{self.column}" if self.column else f"{name}:{self.line}"
 
 
@@ -170,160 +178,6 @@ class MaterialRows(Sequence):
         return MaterialRows, (self.rows,)
 
 
-class FaceList(Sequence):
-    """Polygons kept as three flat arrays instead of a list of tuples (how big meshes are read: a million
-    faces as tuples would take ~300 MB and seconds to make).  It reads like the list: item k is
-    ``(vertex indices, normal indices)`` of face k, as tuples of ints.
-
-    ``sizes`` (F,) corners per face; ``vertex_index`` (sum of sizes,) every face's vertex indices, face
-    after face; ``normal_index`` the same for normals, or None when no face has normals (or the very same
-    array as ``vertex_index`` when corner k of every face uses normal k of its vertex: one array, not two).
-    Faces that all have one size (a triangle or quad mesh) keep only that size: ``sizes`` and ``offsets``
-    are then made when asked for.
-    """
-
-    def __init__(self, sizes, vertex_index, normal_index=None):
-        shared = normal_index is not None and normal_index is vertex_index
-        self.vertex_index = np.asarray(vertex_index).reshape(-1)
-        self.normal_index = (None if normal_index is None else self.vertex_index if shared
-                             else np.asarray(normal_index).reshape(-1))
-        sizes = np.asarray(sizes, dtype=np.int64).reshape(-1)
-        self._count = len(sizes)
-        self._uniform = int(sizes[0]) if len(sizes) and (sizes == sizes[0]).all() else None
-        self._sizes = None if self._uniform is not None else sizes
-        self._offsets = None if self._uniform is not None else np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        total = self._count * self._uniform if self._uniform is not None else self._offsets[-1]
-        if total != len(self.vertex_index) or (
-                self.normal_index is not None and len(self.normal_index) != len(self.vertex_index)):
-            raise ValueError("face sizes do not match the number of indices")
-
-    @property
-    def sizes(self) -> np.ndarray:
-        return np.full(self._count, self._uniform, dtype=np.int64) if self._sizes is None else self._sizes
-
-    @property
-    def offsets(self) -> np.ndarray:
-        """(F + 1,) where each face's indices start, and the total."""
-        if self._offsets is None:
-            return np.arange(self._count + 1, dtype=np.int64) * self._uniform
-        return self._offsets
-
-    @property
-    def uniform_size(self) -> Optional[int]:
-        """The corner count of every face when they all have the same, else None."""
-        return self._uniform
-
-    def all_triangles(self) -> bool:
-        return self._count == 0 or self._uniform == 3
-
-    def arrays(self) -> list[np.ndarray]:
-        """The arrays this list keeps (each once)."""
-        kept = [self.vertex_index] + [a for a in (self._sizes, self._offsets) if a is not None]
-        return kept + ([] if self.normal_index is None or self.normal_index is self.vertex_index
-                       else [self.normal_index])
-
-    def __len__(self) -> int:
-        return self._count
-
-    def __getitem__(self, k):
-        if isinstance(k, slice):
-            return [self[i] for i in range(*k.indices(len(self)))]
-        k = range(len(self))[k]  # negative indices, IndexError
-        if self._uniform is not None:
-            a, b = k * self._uniform, (k + 1) * self._uniform
-        else:
-            a, b = int(self._offsets[k]), int(self._offsets[k + 1])
-        verts = tuple(self.vertex_index[a:b].tolist())
-        return verts, (() if self.normal_index is None else tuple(self.normal_index[a:b].tolist()))
-
-    def __iter__(self):
-        verts = self.vertex_index.tolist()
-        norms = None if self.normal_index is None else self.normal_index.tolist()
-        bounds = self.offsets.tolist()
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            yield tuple(verts[a:b]), (() if norms is None else tuple(norms[a:b]))
-
-    def __eq__(self, other) -> bool:
-        if isinstance(other, FaceList):
-            return (np.array_equal(self.sizes, other.sizes) and np.array_equal(self.vertex_index, other.vertex_index)
-                    and (self.normal_index is None) == (other.normal_index is None)
-                    and (self.normal_index is None or np.array_equal(self.normal_index, other.normal_index)))
-        try:
-            return len(self) == len(other) and all(a == tuple(map(tuple, b)) for a, b in zip(self, other))
-        except TypeError:
-            return NotImplemented
-
-    __hash__ = None
-
-    def triangle_corners(self) -> np.ndarray:
-        """(T, 3) the corners (indices into ``vertex_index``: face after face) of the fan triangles of
-        :meth:`triangles`, in its order."""
-        fans = np.maximum(self.sizes - 2, 0)
-        face = np.repeat(np.arange(len(self.sizes)), fans)
-        k = np.arange(len(face)) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. size - 2 in each face
-        start = self.offsets[:-1][face]
-        return np.stack([start, start + k, start + k + 1], axis=1)
-
-    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """MeshData.triangles() for these faces, without a Python loop over them."""
-        corners = self.triangle_corners()
-        tri_v = self.vertex_index[corners].astype(np.int64)
-        tri_n = (np.full(tri_v.shape, -1, dtype=np.int64) if self.normal_index is None
-                 else self.normal_index[corners].astype(np.int64))
-        return tri_v.reshape(-1, 3), tri_n.reshape(-1, 3)
-
-
-@dataclass
-class MeshData:
-    """A polygon mesh in generic coordinates.
-
-    ``faces`` holds, per polygon, its vertex indices and its normal indices (same length, 0-based),
-    as the ``.3vn`` format does.  ``normals`` may be empty: then flat face normals are used.
-    """
-
-    vertices: np.ndarray  # (V, 3) float64
-    normals: np.ndarray  # (N, 3) float64
-    faces: Union[list[tuple[tuple[int, ...], tuple[int, ...]]], FaceList]
-    #: Where the data came from (a file path, or e.g. "built-in:icosahedron").
-    origin: str = ""
-    #: Texture coordinates per face corner, (C, 2) float64, or None: the corners of face 0, then of face 1,
-    #: ... (C = the sum of the faces' sizes; Blender's loop UVs).  An image texture on a mesh that has them is
-    #: looked up at the (u, v) interpolated at the hit, instead of the shape's own mapping.
-    corner_uvs: Optional[np.ndarray] = None
-
-    def triangle_corners(self) -> np.ndarray:
-        """(T, 3) int64: for each triangle of :meth:`triangles`, its corners' places among all the faces'
-        corners (face after face: the rows of ``corner_uvs``)."""
-        if isinstance(self.faces, FaceList):
-            return self.faces.triangle_corners()
-        out: list[tuple[int, int, int]] = []
-        start = 0
-        for verts, _ in self.faces:
-            out += [(start, start + k, start + k + 1) for k in range(1, len(verts) - 1)]
-            start += len(verts)
-        return np.asarray(out, dtype=np.int64).reshape(-1, 3)
-
-    def corner_count(self) -> int:
-        """How many face corners there are (the rows ``corner_uvs`` must have)."""
-        if isinstance(self.faces, FaceList):
-            return len(self.faces.vertex_index)
-        return sum(len(verts) for verts, _ in self.faces)
-
-    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
-        """Fan-triangulate: (T, 3) vertex indices and (T, 3) normal indices (-1 where the face has none)."""
-        if isinstance(self.faces, FaceList):
-            return self.faces.triangles()
-        tri_v: list[tuple[int, int, int]] = []
-        tri_n: list[tuple[int, int, int]] = []
-        for verts, norms in self.faces:
-            norms = tuple(norms) if len(norms) == len(verts) else (-1,) * len(verts)
-            for k in range(1, len(verts) - 1):
-                tri_v.append((verts[0], verts[k], verts[k + 1]))
-                tri_n.append((norms[0], norms[k], norms[k + 1]))
-        return (np.asarray(tri_v, dtype=np.int64).reshape(-1, 3),
-                np.asarray(tri_n, dtype=np.int64).reshape(-1, 3))
-
-
 @dataclass(slots=True)  # slots: a scene may hold 10^6 shapes, and a __dict__ each would add 160 bytes to each
 class Shape:
     """One generic shape placed in the world.
@@ -373,8 +227,9 @@ class Shape:
         return np.linalg.inv(self.matrix)
 
 
-#: How many parameters each kind's keyword takes.
+#: How many parameters each kind's keyword takes, by keyword and by kind code.
 _ARITY = {e.keyword: len(e.parameters) for e in shapes.REGISTRY}
+_ARITY_OF_CODE = np.array([len(e.parameters) for e in shapes.REGISTRY])
 
 
 def _parameters_of(kind: str, given) -> tuple[float, ...]:
@@ -428,8 +283,7 @@ class ShapeColumns:
         kind = _KEYWORD_OF_CODE[self.kinds[i]]
         matrix = matrices_of_affines(self.affines[i:i + 1])[0]
         mesh = None
-        if kind in POLYHEDRON_KINDS or kind == "teapot":
-            from .geometry import builtin_mesh
+        if kind in BUILTIN_MESH_KINDS:
             mesh = builtin_mesh(kind)
         return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]), mesh,
                      None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
@@ -438,10 +292,8 @@ class ShapeColumns:
     def shapes(self) -> list[Shape]:
         """Every row's Shape, in order (as shape() makes them; a chunk of rows' matrices at a time, with the
         collector paused: a million new objects would otherwise run it hundreds of times)."""
-        from .bulk import collector_paused
-        from .geometry import builtin_mesh
         used = set(np.unique(self.kinds).tolist())
-        meshes = {kind: builtin_mesh(kind) for kind in POLYHEDRON_KINDS + ("teapot",) if _KIND_CODE[kind] in used}
+        meshes = {kind: builtin_mesh(kind) for kind in BUILTIN_MESH_KINDS if _KIND_CODE[kind] in used}
         names = self.names or {}
         with_parameters = any(_ARITY[_KEYWORD_OF_CODE[code]] for code in used)
         out: list[Shape] = []
@@ -450,8 +302,7 @@ class ShapeColumns:
                 rows = slice(start, start + _ROWS_AT_ONCE)
                 matrices = matrices_of_affines(self.affines[rows])
                 kinds = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()))
-                values = (map(tuple, map(list.__getitem__, self.parameters[rows].tolist(),
-                                         (slice(_ARITY[k]) for k in kinds))) if with_parameters else repeat(()))
+                values = self._parameter_tuples(rows) if with_parameters else repeat(())
                 for i, (kind, matrix, material, parameters, line, column) in enumerate(zip(
                         kinds, matrices, map(self.materials.__getitem__, self.material_ids[rows].tolist()),
                         values, self.lines[rows].tolist(), self.columns[rows].tolist()), start):
@@ -462,6 +313,16 @@ class ShapeColumns:
     @staticmethod
     def _parameters(kind: str, row: np.ndarray) -> tuple[float, ...]:
         return tuple(row[:_ARITY[kind]].tolist())
+
+    def _parameter_tuples(self, rows: slice) -> list[tuple[float, ...]]:
+        """Shape.parameters of these rows: () for the kinds that take none, the rest a kind's count at a time."""
+        arity = _ARITY_OF_CODE[self.kinds[rows]]
+        out: list[tuple[float, ...]] = [()] * len(arity)
+        for count in np.unique(arity[arity > 0]).tolist():
+            where = np.flatnonzero(arity == count)
+            for j, values in zip(where.tolist(), self.parameters[rows][where, :count].tolist()):
+                out[j] = tuple(values)
+        return out
 
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
@@ -554,12 +415,11 @@ class ShapeTable(MutableSequence):
         """The table of these shapes' columns (shapes sharing a material object share its id).  Each must be
         a row a table can hold: no groups, no mesh file, its kind's built-in mesh or none, and all from one
         file; a ValueError says which is not."""
-        from .geometry import builtin_mesh
         n = len(shapes)
         files = {s.source.file for s in shapes if isinstance(s, Shape) and s.source is not None}
         for i, s in enumerate(shapes):
             if not isinstance(s, Shape) or s.groups or s.mesh_file is not None or s.source is None or (
-                    s.mesh is not (builtin_mesh(s.kind) if s.kind in POLYHEDRON_KINDS + ("teapot",) else None)) or (
+                    s.mesh is not (builtin_mesh(s.kind) if s.kind in BUILTIN_MESH_KINDS else None)) or (
                     np.asarray(s.matrix)[3].tolist() != [0.0, 0.0, 0.0, 1.0]):
                 raise ValueError(f"ShapeTable.of_shapes: object {i} cannot be a row of a table")
         if len(files) > 1:
@@ -792,6 +652,8 @@ class Camera:
 #: a warning: each level adds at most 1/2^level-ish light in any physical scene, while an unbounded depth lets
 #: one file run a thread out of stack (the C core recurses about 1 KB per level) or for ever.
 MAX_RECURSION_DEPTH = 64
+#: How many nested transparent objects a ray remembers being inside (both tracers: a fixed-size stack per ray).
+MEDIA_DEPTH = 8
 
 
 def traced_depth(depth: int) -> int:

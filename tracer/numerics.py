@@ -33,6 +33,21 @@ def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
+def affine_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``matrix`` (4 x 4, the last row 0 0 0 1) applied to (..., 3) points, each coordinate summed left to
+    right as the C core's affine_point: a matrix product goes through BLAS, whose kernels group the terms
+    their own way and may fuse a product into a sum.  Where the result decides a hit (a generic ray's origin
+    9e15 from the shape, a ray through an edge shared by two faces), both backends must round alike."""
+    return np.stack([points[..., 0] * matrix[i, 0] + points[..., 1] * matrix[i, 1] + points[..., 2] * matrix[i, 2]
+                     + matrix[i, 3] for i in range(3)], axis=-1)
+
+
+def linear_vectors(matrix: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """The 3 x 3 part of ``matrix`` applied to (..., 3) vectors, as affine_points (the C core's affine_vector)."""
+    return np.stack([vectors[..., 0] * matrix[i, 0] + vectors[..., 1] * matrix[i, 1] + vectors[..., 2] * matrix[i, 2]
+                     for i in range(3)], axis=-1)
+
+
 #: Vectors whose squared length might leave the normal range are scaled by a power of two first (norm3).
 _SQUARE_LO, _SQUARE_HI = 2.0 ** -900, 2.0 ** 900
 #: A shadow feeler longer than this (max |component|) is scaled to one of at most this length (feeler_to).
@@ -56,14 +71,19 @@ def norm3(v: np.ndarray) -> np.ndarray:
     return np.where(plain, np.sqrt(squared), np.where(largest == 0.0, 0.0, rescaled))
 
 
-def feeler_to(starts: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def feeler_to(starts: np.ndarray, targets: np.ndarray,
+              lengths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Shadow feelers from ``starts`` (N, 3) to ``targets``: directions and the parameter t_max (N,) at which
-    each reaches its target.  Normally the direction is ``target - start`` and t_max 1; a feeler longer than
-    FEELER_REACH is scaled by a power of two (exactly, so t_max is that power), so that no length, dot
-    product or hit time along it overflows (a light at 1e300)."""
+    each reaches its target.  Normally the direction is ``target - start`` and t_max 1; a feeler whose
+    largest component exceeds FEELER_REACH is scaled by a power of two (exactly, so t_max is that power), so
+    that no length, dot product or hit time along it overflows (a light at 1e300).  ``lengths``, where the
+    caller knows them (the distances to the targets from the hit points the feelers start near), spare the
+    look at the components below FEELER_REACH (the C core's feeler_to_known)."""
     directions = targets - starts
     largest = np.max(np.abs(directions), axis=1)
     far = (largest > FEELER_REACH) & np.isfinite(largest)
+    if lengths is not None:
+        far &= lengths > FEELER_REACH
     t_max = np.ones(len(starts))
     if far.any():
         _, exponent = np.frexp(np.where(far, largest, 1.0))
@@ -113,42 +133,72 @@ def inverse_rounding(inverses: np.ndarray, matrices: np.ndarray) -> np.ndarray:
     return relative.reshape(len(relative), -1).max(axis=1) if len(relative) else np.zeros(0)
 
 
-def generic_time_error(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray, direction: np.ndarray,
-                       normal: np.ndarray, size: float, rounding: float) -> np.ndarray:
-    """Bound on the rounding error of hit times (N, K) found in a shape's generic frame.
+def crossing_shift(delta: np.ndarray, slope: np.ndarray, bend: np.ndarray) -> np.ndarray:
+    """How far (in t) a crossing of a line with a surface G = 0 can move when G along the line is off by
+    ``delta``, where the line crosses at rate ``slope`` (|dG/dt|) and G bends by ``bend`` (|d^2G/dt^2|): the
+    root of slope s + bend s^2 / 2 = delta nearest 0, 2 delta / (slope + sqrt(slope^2 - 2 bend delta)), is at
+    most delta slope / (slope^2 - bend delta) (as 1 - x <= sqrt(1 - x): no square root), which is delta /
+    slope on a flat face and at most 2 delta / slope; where the pair of roots may be a double one it is at
+    most sqrt(2 delta / bend).
+
+    No curvature is assumed (the first bound took unit curvature near tangency: a flat face at grazing
+    incidence exceeded it by 10^6, a cone near its apex by 10^5).  (Its callers ignore floating-point
+    warnings: a zero slope or bend divides by zero where the other form is taken.)"""
+    squared = slope * slope
+    shift = np.where(squared > 2.0 * bend * delta, delta * slope / (squared - bend * delta), np.sqrt(2.0 * delta / bend))
+    return np.where(delta > 0.0, shift, 0.0)
+
+
+def point_errors(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray, direction: np.ndarray, size: float,
+                 rounding: float) -> np.ndarray:
+    """Bound (N, K) on how far the generic points of hits at times t (N, K) lie off the exact generic line,
+    relative to the shape's ``size``: E = rounding / size * S, where S is the size of the coordinates involved.
 
     ``raw_scale`` (N,) bounds the transformed origin's size before cancellation (``|inverse| max|o|`` plus
-    the translation's size); ``origin`` (N, 3) and ``direction`` (N, 3) are the generic
-    ray the shape solved (origin at the line's point nearest the centre), ``normal`` (N, K, 3) the generic
-    normals; ``size`` is the generic shape's extent and ``rounding`` the error of its hit points in units of
-    the coordinates involved (gamma of the hit ulps plus the inverse matrix's own rounding).
-
-    A point error E across the line moves a crossing at angle phi to the normal by E / cos(phi) along it;
-    near tangency (cos(phi) < sqrt(E)) the move is at most about sqrt(E) on a unit-curvature surface.
-    """
+    the translation's size); ``origin`` (N, 3) and ``direction`` (N, 3) are the generic ray the shape solved
+    (origin at the line's point nearest the centre); ``rounding`` is the error of the generic line in units
+    of the coordinates involved (gamma of the hit ulps plus the inverse matrix's own rounding)."""
     reach = np.abs(np.where(np.isfinite(t), t, 0.0)) * np.max(np.abs(direction), axis=1)[:, None]
     # (summed in the C core's order: with a 1e30 vertex the size dominates and the order moves the last bit)
     scale = raw_scale[:, None] + np.max(np.abs(origin), axis=1)[:, None] + size + reach
-    error = rounding / size * scale
-    # (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2, |d|^2 E |n|^2)):
-    # one square root, one division; a zero normal counts as grazing.
-    along = dot3(normal, direction[:, None, :])
-    nn = dot3(normal, normal)
+    return rounding / size * scale
+
+
+def time_errors(error: np.ndarray, hits, direction: np.ndarray, size: float, nn: np.ndarray,
+                length: np.ndarray) -> np.ndarray:
+    """Bound (N, K) on the rounding of hit times beyond the shape's own root error, from their point errors E
+    (point_errors) and the shape's ``hits`` (generic normals, of squared length ``nn`` and length ``length``,
+    and their bend, tracer.intersect.hits).
+
+    G along the line is off by |n| size E (the line's error across the surface), and its crossing moves by
+    crossing_shift of that; a zero normal counts as grazing.  (numeric.h's time_error_of; the caller ignores
+    floating-point warnings.)"""
+    along = np.abs(dot3(hits.normal, direction[:, None, :]))
     dd = dot3(direction, direction)[:, None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        crossing, grazing = along * along, dd * error * nn
-        bound = size * error * np.sqrt(nn / np.where(crossing > grazing, crossing, grazing))
-        return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
+    bound = crossing_shift(length * (size * error), along, np.abs(hits.bend))
+    return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
 
 
-def offset_distance(t: np.ndarray, t_error: np.ndarray, origins: np.ndarray, directions: np.ndarray,
+def normal_to_world(normal: np.ndarray, normal_matrix: np.ndarray) -> np.ndarray:
+    """Generic normals (..., 3) through the inverse-transpose, n M^-1 with M^-1's linear part
+    ``normal_matrix``, summed as the C core's normal_to_world."""
+    return normal[..., 0:1] * normal_matrix[0] + normal[..., 1:2] * normal_matrix[1] + normal[..., 2:3] * normal_matrix[2]
+
+
+def world_offsets(gap: np.ndarray, normal: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """How far (N, K) along the unit world normal the world hit point can be from the surface: a generic
+    distance ``gap`` (the point's own distance from the surface plus the line's error) along the gradient
+    ``normal`` (N, K, 3) maps to the world along its world normal ``world`` by |n| / |world| (exactly for a
+    plane; the C core's world_unit_normal; the caller ignores floating-point warnings)."""
+    return gap * np.sqrt(dot3(normal, normal) / dot3(world, world))
+
+
+def offset_distance(offset: np.ndarray, t: np.ndarray, origins: np.ndarray, directions: np.ndarray,
                     tolerances: Tolerances) -> np.ndarray:
-    """How far (N,) a secondary ray starts from a hit, along the unit normal: the hit point's error bound.
-
-    The point o + t d is off the surface by at most the time error times |d| and by its own rounding;
-    the offset origin's rounding is covered by the same gamma term.
+    """How far (N,) a secondary ray starts from a hit, along the unit normal: the hit's ``offset`` (its
+    point's distance from the surface, bounded by the scene: HitArrays.offset) plus the rounding of the
+    world point o + t d and of the offset origin.
     """
-    speed = np.sqrt(dot3(directions, directions))
     rounding = gamma(tolerances.offset_ulps) * (np.max(np.abs(origins), axis=1)
                                                 + np.abs(t) * np.max(np.abs(directions), axis=1))
-    return t_error * speed + rounding
+    return offset + rounding

@@ -18,13 +18,13 @@ import numpy as np
 
 from .camera import CameraFrame, scene_camera
 from .compile import CompiledScene, compile_scene
-from .errors import RenderCancelled, TracerError
+from .errors import TracerError
 from .imageio import bands_8bit, new_8bit_image, to_8bit
 from .model import Scene
 from . import sampling
 from .backend import make_tracer
-from .savings import RaySavings
-from .tiles import DEFAULT_TILE, PixelTracer, TilePlan, block_passes, camera_rays_for, trace_tile
+from .savings import RAY_BUDGET, RaySavings
+from .tiles import DEFAULT_TILE, PixelTracer, Tile, TilePlan, TileRun, camera_rays_for
 from .trace import RayCounts
 
 #: Width/height limit: a 16k x 16k float image is already 3 GiB.
@@ -73,6 +73,15 @@ class RenderResult:
         if self.error_estimate is not None:
             out["error"] = self.error_estimate.as_dict()
         return out
+
+
+def budget_note(rays: RayCounts) -> Optional[str]:
+    """What to tell a user when the ray budget cut rays (tracer.savings: RAY_BUDGET), else None."""
+    if not rays.skipped_budget:
+        return None
+    return (f"{rays.skipped_budget:,} reflected or transmitted rays were not traced: a camera ray's tree traces "
+            f"at most {RAY_BUDGET:,} (its rays double at every level: reflectivity and transparency that add up "
+            f"to more than 1, or minReflectivity/minTransparency 0 with a deep maxRecursionDepth)")
 
 
 def check_size(width: int, height: int) -> None:
@@ -127,48 +136,66 @@ def render(scene: Union[Scene, CompiledScene], width: int, height: int, *, block
         return result
     check_size(width, height)
     if target_error is not None:
-        from .target import check, render_to_error
-        check(target_error)
-        compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
-        result = render_to_error(compiled, width, height, target_error, backend=backend, threads=threads,
-                                 seed=seed, savings=savings, cancel=cancel, per_pixel=error_per_pixel)
+        result = _render_to_error(scene, width, height, target_error, error_per_pixel, backend, threads, seed,
+                                  savings, cancel)
         if eight_bit:
             result.image = to_8bit(result.image, out=new_8bit_image(height, width))
         return result
     plan = TilePlan(width, height, block_size=block_size, progressive=progressive, tile=tile, samples=samples,
                     sampling_mode=sampling_mode, threshold=threshold, seed=seed)
     started = time.perf_counter()
-    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     # The image is kept row 0 at the top, as files and callers want it; the tiles are traced into a view of it
     # that counts rows from the bottom, as the lecture does (so no flipped copy is ever made).
     bytes_while_tracing = eight_bit and not plan.adaptive
     shown = new_8bit_image(height, width) if bytes_while_tracing else np.zeros((height, width, 3), np.float32)
-    film = shown[::-1]
-    refine = None
-    for done, item in enumerate(plan.items, 1):
-        if cancel is not None and cancel():
-            raise RenderCancelled("render cancelled")
-        if plan.is_refinement(item) and refine is None:
-            refine = plan.refine_mask(film)
-        trace_tile(plan, item, film, shade, refine)
+    run = TileRun(plan, shown[::-1], lambda checkpoint: shade)  # (a tile at once: no chunks to check between)
+    for done, item in enumerate(run.run(plan.items, cancel), 1):
         if on_tile is not None:
-            on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
-                               block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
-                               tiles_done=done, tiles_total=len(plan.items), image=shown))
-    refine = None  # (the mask is not kept through the conversion below)
+            on_tile(_update(plan, item, done, shown))
+    run = None  # (its refinement mask is not kept through the conversion below)
     if eight_bit and not bytes_while_tracing:
         shown = to_8bit(shown, out=new_8bit_image(height, width))
     return RenderResult(image=shown, rays=tracer.counts,
                         seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects)
 
 
+def _render_to_error(scene: Union[Scene, CompiledScene], width: int, height: int, target: float, per_pixel: bool,
+                     backend: str, threads: Optional[int], seed: int, savings: Optional[RaySavings],
+                     cancel: Optional[Callable[[], bool]]) -> RenderResult:
+    """render(..., target_error=...): sampled by tracer.target, with the result's ``error_estimate``."""
+    # deferred: sampling to an error target (and the SciPy it uses) is loaded only by the renders that ask
+    # for it (tests/test_cli.py: what a plain render must not load)
+    from .target import check, sample_to_error
+
+    check(target)
+    compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
+    started = time.perf_counter()
+    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
+    tracer = make_tracer(compiled, backend, threads, savings)
+    film, estimate = sample_to_error(tracer.camera_rays, camera_rays_for(frame, width, height), width, height,
+                                     target, seed, cancel, per_pixel)
+    return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
+                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
+                        error_estimate=estimate)
+
+
+def _update(plan: TilePlan, item: Tile, done: int, image: Optional[np.ndarray]) -> TileUpdate:
+    """The TileUpdate of a finished tile (in image coordinates, row 0 at the top)."""
+    return TileUpdate(x0=item.c0, y0=plan.height - item.r1, x1=item.c1, y1=plan.height - item.r0,
+                      block_size=item.stride, pass_index=item.pass_index, pass_count=plan.pass_count,
+                      tiles_done=done, tiles_total=len(plan.items), image=image)
+
+
 def _prepare(scene: Union[Scene, CompiledScene], plan: TilePlan, backend: str, threads: Optional[int],
-             savings: Optional[RaySavings]) -> tuple[CompiledScene, object, PixelTracer]:
+             savings: Optional[RaySavings],
+             cancel: Optional[Callable[[], bool]] = None) -> tuple[CompiledScene, object, PixelTracer]:
     """The compiled scene, the backend's tracer and the pixel tracer of a render."""
     width, height = plan.width, plan.height
     compiled = scene if isinstance(scene, CompiledScene) else compile_scene(scene)
     frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
     tracer = make_tracer(compiled, backend, threads, savings)
+    tracer.cancel = cancel  # (asked while a batch is traced too, so that a long ray tree stops at once)
     return compiled, tracer, PixelTracer(plan, tracer, camera_rays_for(frame, width, height))
 
 
@@ -179,7 +206,7 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     time, from the top of the image, every pass of a tile before the next tile, into one band of 8-bit
     rows that goes to ``on_rows`` when its tiles are done."""
     started = time.perf_counter()
-    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings)
+    compiled, tracer, shade = _prepare(scene, plan, backend, threads, savings, cancel)
     width, height = plan.width, plan.height
     band = np.zeros((min(plan.tile, height), width, 3), dtype=np.uint8)  # row 0 at the top, as files want
     rects_from = {}  # each band's tiles, by their first row
@@ -189,18 +216,12 @@ def _render_in_bands(scene: Union[Scene, CompiledScene], plan: TilePlan, on_rows
     for r0 in sorted(rects_from, reverse=True):  # (tile rows are counted from the bottom)
         r1 = min(r0 + plan.tile, height)
         rows = band[:r1 - r0]
-        window = rows[::-1]  # the band as tiles are traced: rows from the bottom, image row r0 first
-        for rect in rects_from[r0]:
-            for item in plan.rect_items(rect):
-                if cancel is not None and cancel():
-                    raise RenderCancelled("render cancelled")
-                trace_tile(plan, item, window, shade, at=(r0, 0))
-                done += 1
-                if on_tile is not None:
-                    on_tile(TileUpdate(x0=item.c0, y0=height - item.r1, x1=item.c1, y1=height - item.r0,
-                                       block_size=item.stride, pass_index=item.pass_index,
-                                       pass_count=plan.pass_count, tiles_done=done, tiles_total=len(plan.items),
-                                       image=None))
+        # the band as tiles are traced: rows from the bottom, image row r0 first
+        run = TileRun(plan, rows[::-1], lambda checkpoint: shade, at=(r0, 0))
+        for item in run.run((item for rect in rects_from[r0] for item in plan.rect_items(rect)), cancel):
+            done += 1
+            if on_tile is not None:
+                on_tile(_update(plan, item, done, None))
         on_rows(rows)
     return RenderResult(image=None, rays=tracer.counts, seconds=time.perf_counter() - started,
                         backend=tracer.name, effects=compiled.effects, size=(width, height))

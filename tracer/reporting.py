@@ -10,22 +10,19 @@ Warnings become ``warning:`` lines through tracer.errors.warnings_as_lines.
 from __future__ import annotations
 
 import errno
-import re
 from typing import Optional
 
+from .atomic import user_file
 from .errors import TracerError
 from .userfiles import shown_name
 
 #: A message longer than this is cut in the middle (a 1 MB token must not become a 1 MB line).
 MAX_MESSAGE = 600
-# The name atomic.replacing gives its temporary file: ".NAME.<8 hex>.tmp" (or another suffix).
-_TEMPORARY = re.compile(r"(?P<folder>.*?)\.(?P<name>[^/]+)\.[0-9a-f]{8}(?P<suffix>\.[A-Za-z0-9]+)$")
 
 
 def user_path(name: str) -> str:
     """The file a user named, for a path that may be the temporary file of an atomic write."""
-    found = _TEMPORARY.fullmatch(name)
-    return found["folder"] + found["name"] if found else name
+    return user_file(name)
 
 
 def shortened(text: str, limit: int = MAX_MESSAGE) -> str:
@@ -61,8 +58,8 @@ def error_message(err: BaseException, subject: Optional[str] = None) -> Optional
     if type(err).__name__ == "ErrorException" and type(err).__module__.startswith("pxr"):
         # usd-core refusing a value while reading or writing (an asset path with a control character, say):
         # its own words, which name what was wrong, after the file being worked on.
-        from .usd.opening import usd_error_message
+        from .usd.opening import usd_error_message  # deferred: only a USD error needs the USD modules
 
         where = f"{shown_name(subject)}: " if subject else ""
-        return shortened(f"{where}USD: {usd_error_message(str(err))}")
+        return shortened(f"{where}USD: {usd_error_message(err)}")
     return None

@@ -161,7 +161,7 @@ def _mesh(keyword: str, **flags) -> ShapeKind:
 
 def _tapered(keyword: str, parameters: tuple[Parameter, ...] = (), fixed: tuple[float, ...] = (),
              usd_prim: Optional[str] = None) -> ShapeKind:
-    return ShapeKind(keyword, "TAPERED", parameters=parameters, fixed=fixed,
+    return ShapeKind(keyword, "TAPERED", parameters=parameters, fixed=fixed, budget=("hit_ulps",),
                      intersect="tracer.intersect.analytic:intersect_tapered_cylinder", c_intersect="hits_tapered",
                      bounds="tracer.intersect.analytic:tapered_cylinder_bounds",
                      uv=WALL_AND_DISCS_UV, c_uv="wall_and_discs_uv",
@@ -172,6 +172,10 @@ def _tapered(keyword: str, parameters: tuple[Parameter, ...] = (), fixed: tuple[
 #: taperedCylinder's one parameter: the radius of its top (its base has radius 1).
 SMALL_RADIUS = Parameter("small_radius", "s", 1.0, "sdl:smallRadius", "Top Radius", "Top radius of a tapered cylinder",
                          0.5)
+
+#: The hyperboloid's one parameter: the radius of its waist (its ends have radius 1).
+WAIST = Parameter("waist", "S", 0.5, "sdl:waistRadius", "Waist Radius", "Radius of a hyperboloid's waist (z = 0)",
+                  0.5)
 
 #: Every kind, in the order of SDL's documentation; C kind codes follow the first appearance of each c_kind.
 REGISTRY: tuple[ShapeKind, ...] = (
@@ -204,6 +208,11 @@ REGISTRY: tuple[ShapeKind, ...] = (
               intersect="tracer.intersect.paraboloid:intersect_paraboloid", c_intersect="hits_paraboloid",
               uv=WALL_AND_DISCS_UV, c_uv="wall_and_discs_uv",
               tessellate="tracer.intersect.paraboloid:paraboloid_mesh", extension=True),
+    ShapeKind("hyperboloid", "HYPERBOLOID", parameters=(WAIST,),
+              intersect="tracer.intersect.hyperboloid:intersect_hyperboloid", c_intersect="hits_hyperboloid",
+              bounds="tracer.intersect.hyperboloid:hyperboloid_bounds",
+              uv="tracer.intersect.hyperboloid:hyperboloid_uv", c_uv="hyperboloid_uv",
+              tessellate="tracer.intersect.hyperboloid:hyperboloid_mesh", extension=True),
 )
 
 #: SDL keyword -> entry.

@@ -17,20 +17,25 @@ The image target works in rounds:
    :func:`centre_error` takes, per pixel, the larger over the two axes of that second difference squared,
    over 12 (mean over the channels), as the centre ray's squared error ``e0``.  For smooth shading it is a
    generous bound: the midpoint rule's error there is the second difference over 24.
-2. **A plan.**  A pixel refined to n jittered rays is expected to keep a squared error of kappa e0 / n^ALPHA.
-   Spending the fewest rays for a predicted sum of squared errors of at most P E² (P pixels) gives n
-   proportional to (kappa e0)^(1 / (1 + ALPHA)) (a Lagrange multiplier, found by bisection); counts are
-   rounded down to a ladder, and a pixel whose n comes out below 4 keeps its centre ray alone.
-3. **Two halves.**  A refined pixel's rays come in two halves, jittered independently; the squared difference
-   of the two halves' clipped means, over 4, is an unbiased estimate of the squared error of their mean.  The
-   centre ray of a refined pixel is not used in its colour.  Which pixels get how many rays depends only on
-   the centre rays and on sums over the whole image, never on a pixel's own halves, so the estimate carries
-   no selection bias (stopping a pixel because its own estimate happened to come out low would).
-4. **Rounds.**  The image estimate is the halves' estimates of the refined pixels plus ``e0`` of the others.
-   After each round kappa is fitted to the halves (the rays so far against what the plan expected), and the
-   plan is redone for the part of the target the estimate still misses.  The first round aims at twice the
-   target's squared error, as kappa is not known yet.  It ends when the estimate is at most E, or when no
-   pixel can take more rays.
+2. **A pilot.**  A random PILOT_FRACTION of all pixels, whatever their e0, gets jittered rays (the plan's
+   for it, at least PILOT_HALF per half).  From them an :class:`ErrorModel` is fitted: a pixel refined to n
+   jittered rays keeps a squared error of (kappa e0 + floor) / n^ALPHA, and a pixel left with its centre
+   ray has e0 plus a floor for what centre rays do not see (a texture finer than a pixel looks smooth to
+   them), counted only where the pilot shows it significantly.
+3. **A plan.**  Spending the fewest rays for a predicted sum of squared errors of PLAN_AIM x P E² (P
+   pixels) gives n proportional to (kappa e0 + floor)^(1 / (1 + ALPHA)) (a Lagrange multiplier, found by
+   bisection over groups of pixels of nearly equal e0); counts are rounded down to a ladder, and a pixel
+   whose rays are not predicted to beat its centre ray keeps it alone.
+4. **Two halves.**  A refined pixel's rays come in two halves, jittered independently; the squared difference
+   of the two halves' clipped means, over 4, is an unbiased estimate of the squared error of their mean (and
+   (centre - their mean)² less it one of the centre ray's, which the pilot uses).  The centre ray of a
+   refined pixel is not used in its colour.  Which pixels get how many rays depends only on the centre rays
+   and on sums over the whole image, never on a pixel's own halves, so the estimate carries no selection
+   bias (stopping a pixel because its own estimate happened to come out low would).
+5. **Rounds.**  The image estimate is the halves' estimates of the refined pixels plus the model's for the
+   others.  While it is above E, kappa and floor are refitted to every refined pixel and the plan is redone
+   for the part of the target still missing.  It ends when the estimate is at most E, or when no pixel can
+   take more rays.
 
 ALPHA = 1.25 is how fast the halves' estimate falls with rays on the bundled scenes.  Stratified rays beat
 1/n (the bench's jittered slopes, -0.72 to -0.80 in RMSE, are 1.44 to 1.6 in squared error), but two
@@ -44,7 +49,6 @@ the estimate does not see either.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -76,6 +80,10 @@ PILOT_SALT = 0x5EED_C0DE
 #: errors up.
 FLOOR_SIGNIFICANCE = 2.0
 MAX_ROUNDS = 16
+#: Image target: bisection steps of a plan's scale (its logarithm's range, about 10, is then cut to 1e-8),
+#: and the groups of nearly equal e0 a plan is made for (about 1 % apart over 10 decades).
+PLAN_STEPS = 32
+PLAN_BINS = 2048
 
 #: Pixel target: every pixel's first batch of rays (enough for a variance, one 4 x 4 grid of strata).
 FIRST_BATCH = 16
@@ -191,30 +199,66 @@ def _fit_line(x: np.ndarray, y: np.ndarray, fallback: tuple[float, float]) -> tu
 def plan_halves(e0: np.ndarray, model: ErrorModel, squared_budget: float) -> np.ndarray:
     """Rays per half for each pixel (0: its centre ray alone) such that the predicted sum of squared errors
     is at most ``squared_budget`` for the fewest rays, as far as HALF_LADDER's steps allow.  A pixel is
-    refined only where its rays are predicted to do better than its centre ray."""
-    difficulty, centre = model.difficulty(e0), model.centre(e0)
-    weight = np.power(difficulty, 1.0 / (1.0 + ALPHA))
+    refined only where its rays are predicted to do better than its centre ray.
+
+    Everything the model predicts of a pixel is a function of its e0, so pixels are planned in PLAN_BINS
+    groups of nearly equal e0 (log-spaced; the model is linear in e0, so a group's sums are exact), and every
+    pixel of a group gets the group's rays: the bisection then costs nothing next to the rays."""
+    halves = np.zeros(e0.shape, dtype=np.int64)
+    centre_all = model.centre(e0)
+    if float(centre_all.sum()) <= squared_budget:
+        return halves
+    active = np.flatnonzero(model.difficulty(e0) > 0.0)  # (flat pixels, most of most images, never take rays)
+    if active.size == 0:
+        return halves
+    unchanged = float(centre_all.sum() - centre_all[active].sum())
+    group, count, e0_sum = _groups_by_e0(e0[active])
+    e0_mean = e0_sum / count
+    difficulty = model.kappa * e0_sum + model.floor * count  # each group's sums
+    centre = model.centre_scale * e0_sum + model.centre_floor * count
+    weight = np.power(model.difficulty(e0_mean), 1.0 / (1.0 + ALPHA))
+    # Refine a group where (2h)^ALPHA exceeds this: where its rays beat its centre rays (never where a centre
+    # ray is predicted exact).
+    centre_mean = model.centre(e0_mean)
+    better_at = np.divide(model.difficulty(e0_mean), centre_mean, out=np.full(centre_mean.shape, np.inf),
+                          where=centre_mean > 0.0)
 
     def halves_at(scale: float) -> np.ndarray:
         rays = scale * weight
-        step = np.searchsorted(HALF_LADDER, rays / 2.0, side="right") - 1
-        halves = HALF_LADDER[np.maximum(step, 0)]
-        better = difficulty / (2.0 * halves) ** ALPHA < centre
-        return np.where((rays >= 2 * HALF_LADDER[0]) & better, halves, 0)
+        step = HALF_LADDER[np.maximum(np.searchsorted(HALF_LADDER, rays / 2.0, side="right") - 1, 0)]
+        return np.where((rays >= 2 * HALF_LADDER[0]) & ((2.0 * step) ** ALPHA > better_at), step, 0)
 
-    def predicted(halves: np.ndarray) -> float:
-        return float(np.sum(np.where(halves > 0, difficulty / np.maximum(2.0 * halves, 1.0) ** ALPHA, centre)))
+    def predicted(h: np.ndarray) -> float:
+        return unchanged + float(np.sum(np.where(h > 0, difficulty / np.maximum(2.0 * h, 1.0) ** ALPHA, centre)))
 
-    if predicted(np.zeros(e0.shape, dtype=np.int64)) <= squared_budget:
-        return np.zeros(e0.shape, dtype=np.int64)
-    low, high = -30.0, 30.0  # log10 of the scale
-    for _ in range(48):
+    # The scale runs from where the likeliest pixel just takes the fewest rays to where the least likely
+    # one takes the most; the prediction falls in steps between, found by bisection of its logarithm.
+    low = math.log10(2 * HALF_LADDER[0] / float(weight.max()))
+    high = math.log10(2 * HALF_LADDER[-1] / float(weight.min())) + 1.0
+    for _ in range(PLAN_STEPS):
         middle = 0.5 * (low + high)
         if predicted(halves_at(10.0 ** middle)) > squared_budget:
             low = middle
         else:
             high = middle
-    return halves_at(10.0 ** high).astype(np.int64)
+    halves[active] = halves_at(10.0 ** high)[group]
+    return halves
+
+
+def _groups_by_e0(e0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each value's group (PLAN_BINS log-spaced groups between the smallest value above 0 and the largest, and
+    one group of zeros), and each used group's size and sum, the groups numbered 0.. in order."""
+    positive = e0[e0 > 0.0]
+    if positive.size:
+        low, high = math.log(float(positive.min())), math.log(float(positive.max()))
+        width = max(high - low, 1e-12) / PLAN_BINS
+        raw = np.where(e0 > 0.0, 1 + np.minimum((np.log(np.maximum(e0, positive.min())) - low) / width,
+                                                  PLAN_BINS - 1).astype(np.int64), 0)
+    else:
+        raw = np.zeros(e0.shape, dtype=np.int64)
+    used, group = np.unique(raw, return_inverse=True)
+    count = np.bincount(group, minlength=used.size).astype(np.float64)
+    return group, count, np.bincount(group, weights=e0, minlength=used.size)
 
 
 class _Halves:
@@ -432,24 +476,3 @@ def sample_each_pixel(camera_rays: CameraRays, rays_for, width: int, height: int
                            per_pixel=_shown(estimate, width, height), samples=_shown(count, width, height),
                            kind="pixel")
     return film.reshape(height, width, 3), result
-
-
-# ---------------------------------------------------------------------------------------------------------
-
-def render_to_error(compiled, width: int, height: int, target: float, *, backend: str = "auto",
-                    threads: Optional[int] = None, seed: int = 0, savings=None,
-                    cancel: Optional[Callable[[], bool]] = None, per_pixel: bool = False):
-    """tracer.render.render with ``target_error``: a RenderResult whose ``error_estimate`` is filled in."""
-    from .backend import make_tracer
-    from .camera import CameraFrame, scene_camera
-    from .render import RenderResult
-    from .tiles import camera_rays_for
-
-    started = time.perf_counter()
-    frame = CameraFrame.from_camera(scene_camera(compiled.scene, compiled, width / height), width / height)
-    tracer = make_tracer(compiled, backend, threads, savings)
-    film, estimate = sample_to_error(tracer.camera_rays, camera_rays_for(frame, width, height), width, height,
-                                     target, seed, cancel, per_pixel)
-    return RenderResult(image=np.ascontiguousarray(film[::-1]), rays=tracer.counts,
-                        seconds=time.perf_counter() - started, backend=tracer.name, effects=compiled.effects,
-                        error_estimate=estimate)

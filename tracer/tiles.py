@@ -12,20 +12,23 @@ write only that tile: the tiles of a pass can be traced in any order, by any num
 A :class:`TilePlan` holds the passes and tiles; :func:`trace_tile` traces one tile of one pass into a film
 (or a window of it) through a :class:`PixelTracer`, which shoots a pixel's rays and averages them.  The
 random sub-pixel offsets depend on (seed, pixel) alone (:func:`tracer.sampling.pixel_uniforms`), so any
-schedule gives identical bytes.
+schedule gives identical bytes.  :class:`TileRun` is the one loop that drives tiles: a list of them traced
+into one film in order, with cancelling and the refinement mask, on this thread or on several.
 
-Used by :func:`tracer.render.render` (the command line), ``tracer.distributed`` (a Dask cluster) and the
-Blender add-on (``addon/pure/blocks.py``).  Films are stored bottom row first, as the lecture counts rows.
+Used by :func:`tracer.render.render` (the command line: the whole film, or a band of it at a time),
+``tracer.distributed`` (a Dask cluster: one tile's passes per task, :func:`trace_rect`) and the Blender
+add-on (``addon/pure/blocks.py``).  Films are stored bottom row first, as the lecture counts rows.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Optional
+from itertools import groupby
+from typing import Callable, Iterable, Iterator, Optional
 
 import numpy as np
 
 from . import sampling
-from .errors import TracerError
+from .errors import RenderCancelled, TracerError
 from .imageio import band_rows, to_8bit
 
 DEFAULT_TILE = 64
@@ -35,6 +38,8 @@ DEFAULT_TILE = 64
 RaysFor = Callable[..., tuple[np.ndarray, np.ndarray]]
 #: ``shade(rows, cols, per_pixel) -> (N, channels)``: the mean of ``per_pixel`` rays in each given pixel.
 Shade = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
+#: Called between pieces of work; raises RenderCancelled to stop.
+Checkpoint = Callable[[], None]
 
 
 def block_passes(block_size: int, progressive: bool) -> list[int]:
@@ -195,15 +200,92 @@ def trace_rect(plan: TilePlan, rect: tuple[int, int, int, int], shade: Shade, ch
     float32).  What a tile is worth to a worker that traces whole tiles (no refinement: see trace_tile)."""
     r0, c0, r1, c1 = rect
     window = np.zeros((r1 - r0, c1 - c0, channels), dtype=np.float32)
-    for item in plan.rect_items(rect):
-        trace_tile(plan, item, window, shade, at=(r0, c0))
+    TileRun(plan, window, lambda checkpoint: shade, at=(r0, c0)).trace_all(plan.rect_items(rect))
     return window
+
+
+class TileRun:
+    """Tiles of a plan traced into one film, in the order given: the loop that drives tiles, for every way of
+    rendering (tracer.render's whole film or one band of it, a cluster worker's tile, the add-on's blocks).
+
+    ``film`` and ``at`` are as for :func:`trace_tile`.  ``shade_for(checkpoint)`` is the Shade of one tile,
+    calling ``checkpoint`` (or nothing, when None) between its chunks of rays: the add-on makes one per tile
+    on the thread that traces it; a shade that traces a tile at once can ignore it.  Items come pass by pass:
+    the refinement mask is judged on the film the block passes left, when the first refinement tile is
+    reached, and kept (``refine`` gives it instead, judged elsewhere).
+    """
+
+    def __init__(self, plan: TilePlan, film: np.ndarray, shade_for: Callable[[Optional[Checkpoint]], Shade], *,
+                 at: tuple[int, int] = (0, 0), refine: Optional[np.ndarray] = None):
+        self.plan, self.film, self.shade_for, self.at = plan, film, shade_for, at
+        self.refine = refine
+
+    def trace(self, item: Tile, checkpoint: Optional[Checkpoint] = None) -> Tile:
+        """Trace one tile (``checkpoint`` is asked first, then between chunks of rays); returns it."""
+        if checkpoint is not None:
+            checkpoint()
+        refine = None
+        if self.plan.is_refinement(item):
+            if self.refine is None:
+                self.refine = self.plan.refine_mask(self.film)
+            refine = self.refine
+        trace_tile(self.plan, item, self.film, self.shade_for(checkpoint), refine, self.at)
+        return item
+
+    def run(self, items: Iterable[Tile], cancel: Optional[Callable[[], bool]] = None) -> Iterator[Tile]:
+        """Trace ``items`` one after another on this thread, yielding each when it is done; ``cancel()`` is
+        asked before each tile and between its chunks of rays (True: RenderCancelled)."""
+        checkpoint = None if cancel is None else _checkpoint(cancel)
+        for item in items:
+            yield self.trace(item, checkpoint)
+
+    def trace_all(self, items: Iterable[Tile], cancel: Optional[Callable[[], bool]] = None) -> None:
+        for _ in self.run(items, cancel):
+            pass
+
+    def run_on_threads(self, items: Iterable[Tile], threads: int, cancel: Optional[Callable[[], bool]] = None,
+                       poll: float = 0.05) -> Iterator[Tile]:
+        """:meth:`run` with the tiles of one pass traced ``threads`` at a time (a pass reuses the samples of
+        the one before, so passes still go one after another).  ``cancel()`` is asked, and the tiles yielded,
+        on this thread only (Blender's API wants that), every ``poll`` seconds; the tracing threads see a
+        cancellation between their chunks of rays."""
+        # deferred: threads are for the add-on's NumPy renders; a command-line render loads no threading
+        # (tests/test_cli.py's import set)
+        import concurrent.futures
+        import threading
+
+        stop = threading.Event()
+        checkpoint = _checkpoint(stop.is_set)
+        with concurrent.futures.ThreadPoolExecutor(max_workers=threads, thread_name_prefix="sdl-trace") as pool:
+            try:
+                for _, same_pass in groupby(items, key=lambda item: item.pass_index):
+                    same_pass = list(same_pass)
+                    if self.plan.is_refinement(same_pass[0]) and self.refine is None:
+                        self.refine = self.plan.refine_mask(self.film)  # (here, before the threads read it)
+                    pending = {pool.submit(self.trace, item, checkpoint) for item in same_pass}
+                    while pending:
+                        finished, pending = concurrent.futures.wait(
+                            pending, timeout=poll, return_when=concurrent.futures.FIRST_COMPLETED)
+                        for future in finished:
+                            yield future.result()
+                        if cancel is not None and cancel():
+                            raise RenderCancelled("render cancelled")
+            except BaseException:
+                stop.set()
+                raise
+
+
+def _checkpoint(stopped: Callable[[], bool]) -> Checkpoint:
+    def checkpoint() -> None:
+        if stopped():
+            raise RenderCancelled("render cancelled")
+    return checkpoint
 
 
 class PixelTracer:
     """Traces pixels of a plan with a backend tracer (``camera_rays(origins, directions)``): the mean colour
-    of each pixel's rays.  Rays go ``chunk`` at a time with ``checkpoint()`` called before each chunk (it
-    raises to stop); ``alpha`` adds a fourth channel, the share of each pixel's rays that hit something (and
+    of each pixel's rays.  Rays go ``chunk`` at a time with ``checkpoint()`` called between chunks (it
+    raises to stop; TileRun asks it before the first); ``alpha`` adds a fourth channel, the share of each pixel's rays that hit something (and
     the rays that miss count as black)."""
 
     def __init__(self, plan: TilePlan, tracer, rays_for: RaysFor, *, chunk: Optional[int] = None,
@@ -219,7 +301,7 @@ class PixelTracer:
         out = np.empty((rows.size, 4 if self.alpha else 3), dtype=np.float64)
         step = rows.size if not self.chunk else max(1, self.chunk // per_pixel)
         for start in range(0, rows.size, max(step, 1)):
-            if self.checkpoint is not None:
+            if self.checkpoint is not None and start > 0:
                 self.checkpoint()
             stop = min(start + step, rows.size)
             r, c, dy, dx = self.plan.sample_positions(rows[start:stop], cols[start:stop], per_pixel)

@@ -6,18 +6,19 @@ Each effect runs only if the compiled scene says it is live, and every ray cast 
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 from .compile import CompiledScene
+from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
-from .model import traced_depth
-from .savings import SKIP_REASONS, RaySavings, dark_materials, sealed_table
+from .model import MEDIA_DEPTH, traced_depth
+from .savings import SKIP_REASONS, RaySavings
+from .skippable import dark_materials, sealed_table
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
-#: How many nested transparent objects a ray remembers being inside.
-MEDIA_DEPTH = 8
 
 
 @dataclass
@@ -32,6 +33,7 @@ class RayCounts:
     skipped_inside_shadow: int = 0
     skipped_shared_tir: int = 0
     skipped_dark_material: int = 0
+    skipped_budget: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return {k: int(getattr(self, k)) for k in RAY_KINDS}
@@ -57,32 +59,61 @@ class SurfaceHits:
     part: np.ndarray
     uv: np.ndarray
     error: np.ndarray  # bound on the rounding error of t (tracer.numerics)
+    offset: np.ndarray  # how far a secondary ray starts from the hit, before the world rounding
 
 
 def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
                t_min: np.ndarray | float = 0.0) -> SurfaceHits:
+    """The first hit of each ray: the nearest, unless another hit lies within the error interval of every hit
+    found (its t at most the least t + error, the *reach*); then, of those, the hit of the object that comes
+    first in the scene, however the two round.  Coplanar faces (a decal on a wall) look the same from any
+    position, on both backends (the C core's scene_first); only rays with such a tie are asked again."""
     n = origins.shape[0]
     t_min = np.broadcast_to(np.asarray(t_min, dtype=float), (n,))
     best = SurfaceHits(hit=np.zeros(n, bool), t=np.full(n, np.inf), normal=np.zeros((n, 3)),
                        entering=np.zeros(n, bool), shape=np.full(n, -1), obj=np.full(n, -1),
-                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n))
+                       part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n), offset=np.zeros(n))
+    second, reach = np.full(n, np.inf), np.full(n, np.inf)
     for index, obj in enumerate(scene.objects):
-        h = obj.first_hit(origins, directions, t_min, best.t)
-        closer = h.t[:, 0] < best.t
-        if not closer.any():
-            continue
-        best.t = np.where(closer, h.t[:, 0], best.t)
-        best.normal[closer] = h.normal[closer, 0]
-        best.entering[closer] = h.entering[closer, 0]
-        best.shape[closer] = h.shape[closer, 0]
-        best.obj[closer] = index
-        best.part[closer] = h.part[closer, 0]
-        best.uv[closer] = h.uv[closer, 0]
-        best.error[closer] = h.error[closer, 0]
+        h = obj.first_hit(origins, directions, t_min, np.nextafter(reach, np.inf))  # hits up to the reach
+        t = h.t[:, 0]
+        closer = t < best.t
+        second = np.where(closer, np.minimum(second, best.t), np.minimum(second, t))
+        reach = np.minimum(reach, t + h.error[:, 0])
+        if closer.any():
+            rows = np.nonzero(closer)[0]
+            _take(best, rows, h, rows, index)
+    tie = np.nonzero((best.obj >= 0) & (second <= reach))[0]
+    if tie.size:
+        _earliest_in_reach(scene, best, tie, origins, directions, t_min, np.nextafter(reach, np.inf))
     best.hit = np.isfinite(best.t)
     length = np.linalg.norm(best.normal, axis=1, keepdims=True)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
     return best
+
+
+def _take(best: SurfaceHits, rows: np.ndarray, h, source: np.ndarray, index: int) -> None:
+    """Rays ``rows`` of ``best`` take the first hits ``source`` of ``h``, those of object ``index``."""
+    best.t[rows] = h.t[source, 0]
+    best.normal[rows] = h.normal[source, 0]
+    best.entering[rows] = h.entering[source, 0]
+    best.shape[rows] = h.shape[source, 0]
+    best.obj[rows] = index
+    best.part[rows] = h.part[source, 0]
+    best.uv[rows] = h.uv[source, 0]
+    best.error[rows] = h.error[source, 0]
+    best.offset[rows] = h.offset[source, 0]
+
+
+def _earliest_in_reach(scene, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
+    """The rays ``rows`` have a tie: the first object in the scene with a hit before ``limit`` wins it."""
+    for index, obj in enumerate(scene.objects):
+        rows = rows[index < best.obj[rows]]
+        if rows.size == 0:
+            break
+        h = obj.first_hit(origins[rows], directions[rows], t_min[rows], limit[rows])
+        found = np.nonzero(np.isfinite(h.t[:, 0]))[0]
+        _take(best, rows[found], h, found, index)
 
 
 def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
@@ -223,6 +254,10 @@ class Tracer:
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
         self.dark = dark_materials(scene)
         self.sealed = sealed_table(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
+        #: ``cancel() -> bool``, asked now and then while a batch is traced: True stops it (RenderCancelled).
+        self.cancel = None
+        self._next_cancel_check = 0.0
+        self._rays_used = np.zeros(0, dtype=np.int64)  # per camera ray of the batch: secondary rays traced
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         n = origins.shape[0]
@@ -230,11 +265,18 @@ class Tracer:
         return self.shade(origins, directions, 0, Media.air(n), np.ones(n))
 
     def shade(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media,
-              weight: np.ndarray | None = None) -> np.ndarray:
+              weight: np.ndarray | None = None, roots: np.ndarray | None = None,
+              limit: np.ndarray | None = None) -> np.ndarray:
         """Colours of the rays; ``weight``: each ray's share of its pixel (for the contribution cutoff;
-        default 1)."""
+        default 1).  ``roots``: each ray's camera ray (an index into the batch's ray budget, see
+        :meth:`_take_rays`), and ``limit`` how far its descendants may bring that camera ray's count of
+        secondary rays; by default each ray is a camera ray of a new batch."""
         n = origins.shape[0]
         weight = np.ones(n) if weight is None else weight
+        if roots is None:
+            self._rays_used = np.zeros(n, dtype=np.int64)
+            roots, limit = np.arange(n), np.full(n, self.savings.ray_budget, dtype=np.int64)
+        self._check_cancel()
         color = np.broadcast_to(self.background, (n, 3)).copy()
         if n == 0:
             return color
@@ -251,7 +293,7 @@ class Tracer:
         mats = self.scene.materials
         mat = self.material_of[hits.shape[idx]]
         # Secondary rays start off the surface by the bound on the hit point's rounding error.
-        offset = numerics.offset_distance(t, hits.error[idx], o, d, self.scene.tolerances)[:, None]
+        offset = numerics.offset_distance(hits.offset[idx], t, o, d, self.scene.tolerances)[:, None]
         ambient, diffuse = mats.ambient[mat], mats.diffuse[mat]
         if "textures" in self.effects:
             texture = self.scene.textures.colors(hits.shape[idx], point, hits.part[idx], hits.uv[idx])
@@ -267,7 +309,8 @@ class Tracer:
         color[idx] = local
         if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
             reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
-                                                     hits.entering[idx], hits.obj[idx], weight[idx])
+                                                     hits.entering[idx], hits.obj[idx], weight[idx], roots[idx],
+                                                     limit[idx])
             color[idx] += reflected
             color[idx] += transmitted
         return color
@@ -296,7 +339,8 @@ class Tracer:
                 self._physical_light(light, shading, total)
                 continue
             to_light = light_pos - point
-            s = to_light / numerics.norm3(to_light)[:, None]  # (a light at 1e300: |s|^2 overflows)
+            distance = numerics.norm3(to_light)  # (a light at 1e300: |s|^2 overflows)
+            s = to_light / distance[:, None]
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
@@ -306,7 +350,7 @@ class Tracer:
                 lit[rows[skip]] = False
                 rows = rows[~skip]
                 self.counts.shadow += rows.size
-                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos)
+                to_light, reach = numerics.feeler_to(feeler_start[rows], light_pos, distance[rows])
                 lit[rows] &= ~occluded(self.scene, feeler_start[rows], to_light, reach)
             rows = np.nonzero(lit)[0]
             if rows.size == 0:
@@ -348,14 +392,16 @@ class Tracer:
             to_light = table.position[light] - at.point
             distance2 = numerics.dot3(to_light, to_light)
             s = to_light / np.sqrt(distance2)[:, None]
-            scale = 1.0 / distance2
+            radius = table.param[light, 0]
+            falloff = distance2 + radius * radius  # (Cycles': a disk of the radius facing the point)
+            scale = 1.0 / falloff
         lambert = numerics.dot3(s, at.normal)
         lit = lambert > 0.0
         if kind == lights.SPOT:
             _, cos_half, blend_width, _ = table.param[light]
             factor = lights.spot_factor(-numerics.dot3(s, table.frame[light, :3]), cos_half, blend_width)
             lit &= factor > 0.0
-            scale = factor / distance2
+            scale = factor / falloff
         rows = np.nonzero(lit)[0]
         visible = np.ones(rows.size)
         if "shadows" in self.effects and rows.size:
@@ -436,13 +482,48 @@ class Tracer:
             response = self._response(lambert[lit], s[lit], at.normal[r], at.to_eye[r], at.mat[r], at.diffuse[r])
             total[r] += (response * table.color[light]) * (cos_light[lit] * share / distance2[lit])[:, None]
 
+    def _check_cancel(self) -> None:
+        """RenderCancelled if ``self.cancel`` says stop (asked at most every 50 ms: it may be slow)."""
+        if self.cancel is None:
+            return
+        now = time.monotonic()
+        if now >= self._next_cancel_check:
+            self._next_cancel_check = now + 0.05
+            if self.cancel():
+                raise RenderCancelled("render cancelled")
+
     def _worth_tracing(self, wanted: np.ndarray, weight: np.ndarray) -> np.ndarray:
-        """The rows of ``wanted`` whose weight reaches the contribution cutoff (the others are counted)."""
+        """Which of ``wanted`` have a weight that reaches the contribution cutoff (the others are counted)."""
         keep = wanted & (weight >= self.savings.cutoff)
         self.counts.skipped_cutoff += int(np.count_nonzero(wanted & ~keep))
-        return np.nonzero(keep)[0]
+        return keep
 
-    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight):
+    def _take_rays(self, wanted: np.ndarray, roots: np.ndarray, limit: np.ndarray, weight: np.ndarray,
+                   sibling_weight: np.ndarray | None, chain: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ray budget (take_ray in tracer/native/shade.h: the same rule and arithmetic): of the rows
+        ``wanted``, those whose camera ray may still trace a secondary ray under its row's ``limit`` (the others
+        are counted as skipped for the budget), and for each of them the limit its descendants get.  Where a
+        second child is wanted too (``sibling_weight`` not None and a row's second child wanted), this first
+        child's descendants get a part of what is left after both rays in proportion to its ``weight``, but
+        at least a chain of ``chain`` rays; otherwise everything left.  The rows of a batch belong to
+        different camera rays, so the counts are updated all at once."""
+        rows = np.nonzero(wanted)[0]
+        left = limit[rows] - self._rays_used[roots[rows]]
+        over = left <= 0
+        self.counts.skipped_budget += int(np.count_nonzero(over))
+        rows, left = rows[~over], left[~over]
+        share = left - 1
+        if sibling_weight is not None:
+            both = sibling_weight[rows] >= 0  # (rows whose second child is not wanted carry -1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratio = weight[rows] / (weight[rows] + sibling_weight[rows])
+            ratio = np.where((ratio >= 0.0) & (ratio <= 1.0), ratio, 0.5)  # (weights of 0 or infinity: even)
+            by_weight = np.floor((left - 2).astype(np.float64) * ratio).astype(np.int64)
+            share = np.where(both, np.maximum(by_weight, np.minimum(left - 2, chain)), share)
+        self._rays_used[roots[rows]] += 1
+        return rows, self._rays_used[roots[rows]] + np.maximum(share, 0)
+
+    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight, roots, limit):
         """The reflected and the transmitted colour, each already times its coefficient."""
         settings = self.scene.settings
         mats = self.scene.materials
@@ -473,25 +554,33 @@ class Tracer:
         tir[rows] = total_internal
         shared = tir & reflects if self.savings.shared_tir else np.zeros(n, dtype=bool)
         self.counts.skipped_shared_tir += int(shared.sum())
-        # The mirror ray, weighted by both coefficients where it also stands for the internal reflection.
+        # Which rays are wanted (the cutoff), decided before any is traced: they share the ray budget.
+        # The mirror ray is weighted by both coefficients where it also stands for the internal reflection.
         mirror_weight = weight * np.where(shared, kr_max + kt, kr_max)
-        mirror = self._worth_tracing(reflects, mirror_weight)
+        through_weight = weight * kt
+        want_mirror = self._worth_tracing(reflects, mirror_weight)
+        want_through = self._worth_tracing(transmits & ~shared, through_weight)
+        chain = traced_depth(settings.max_recursion_depth) - level
+        mirror, mirror_limit = self._take_rays(want_mirror, roots, limit, mirror_weight,
+                                               np.where(want_through, through_weight, -1.0), chain)
         if mirror.size:
             reflected[mirror] = self._reflected(point[mirror], normal[mirror], direction[mirror], offset[mirror],
-                                                level, media.subset(mirror), mirror_weight[mirror])
+                                                level, media.subset(mirror), mirror_weight[mirror], roots[mirror],
+                                                mirror_limit)
         transmitted[shared] = reflected[shared]
-        go = np.zeros(n, dtype=bool)
-        go[rows[~total_internal]] = True
-        go = self._worth_tracing(go, weight * kt)
+        taken, taken_limit = self._take_rays(want_through, roots, limit, through_weight, None, chain)
+        refracted = ~tir[taken]
+        go, go_limit = taken[refracted], taken_limit[refracted]
         if go.size:
             self.counts.refraction += go.size
             local = np.searchsorted(rows, go)
             transmitted[go] = self.shade(point[go] - offset[go] * normal[go], through[local], level + 1,
-                                         after.subset(local), weight[go] * kt[go])
-        bounce = self._worth_tracing(tir & ~shared, weight * kt)
+                                         after.subset(local), through_weight[go], roots[go], go_limit)
+        bounce, bounce_limit = taken[~refracted], taken_limit[~refracted]
         if bounce.size:  # total internal reflection: the light stays in the medium it came from
             transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
-                                                  level, media.subset(bounce), weight[bounce] * kt[bounce])
+                                                  level, media.subset(bounce), through_weight[bounce],
+                                                  roots[bounce], bounce_limit)
         return kr_color * reflected, kt[:, None] * transmitted
 
     def _fresnel_weights(self, direction, normal, mat, media, entering, obj, kr, kt, rows_wanted):
@@ -520,7 +609,7 @@ class Tracer:
             kt[glass] = kt[glass] * (1.0 - reflectance)
         return kr_color, kt
 
-    def _reflected(self, point, normal, direction, offset, level, media, weight) -> np.ndarray:
+    def _reflected(self, point, normal, direction, offset, level, media, weight, roots, limit) -> np.ndarray:
         r = reflect(direction, normal)
         self.counts.reflection += point.shape[0]
-        return self.shade(point + offset * normal, r, level + 1, media, weight)
+        return self.shade(point + offset * normal, r, level + 1, media, weight, roots, limit)

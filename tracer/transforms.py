@@ -25,8 +25,14 @@ def rotation(angle_degrees: float, ux: float, uy: float, uz: float) -> np.ndarra
     # The length summed left to right (np.linalg.norm's order depends on the build): the C core's SDL reader
     # (native/sdl_read.h) repeats these operations and must get the same bits.
     length = math.sqrt(ux * ux + uy * uy + uz * uz)
-    if length == 0.0 or not math.isfinite(length):
-        raise SceneError("rotation axis must be a non-zero finite vector")
+    if not (length > 0.0 and math.isfinite(length)):
+        # The squares overflowed (an axis of 1e200) or underflowed (1e-200): the same direction, scaled by its
+        # largest component first.  (Only here: a plain axis keeps the operations above, bit for bit.)
+        largest = max(abs(ux), abs(uy), abs(uz))
+        if not (largest > 0.0 and math.isfinite(largest)):
+            raise SceneError("rotation axis must be a non-zero finite vector")
+        ux, uy, uz = ux / largest, uy / largest, uz / largest
+        length = math.sqrt(ux * ux + uy * uy + uz * uz)
     x, y, z = ux / length, uy / length, uz / length
     a = math.radians(angle_degrees)
     c, s = math.cos(a), math.sin(a)

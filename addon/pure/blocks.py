@@ -1,17 +1,17 @@
 """Tracing an image in blocks, coarse to fine, for the render engine and the viewport (no bpy).
 
-The passes, tiles, new-at-this-stride rule and pixel sampling are the tracer's own (``tracer.tiles``, the
-same scheduler the command line and a Dask cluster use), so the add-on's image is the command line's.
-What differs here is where the rays come from (any function of pixel rows and columns, so that Blender's
-camera and viewport can be matched exactly), and how the work is driven: a tile of a pass is one work
-item; items are traced in chunks of rays with a cancel check between chunks (so Esc is honoured *within*
-a block), by several threads at once, or a time slice at a time for the viewport.
+The passes, tiles, new-at-this-stride rule and pixel sampling are the tracer's own, and so is the loop that
+drives the tiles (``tracer.tiles``: the scheduler and TileRun the command line and a Dask cluster use), so
+the add-on's image is the command line's.  What differs here is where the rays come from (any function of
+pixel rows and columns, so that Blender's camera and viewport can be matched exactly), and how the work is
+cut: a tile of a pass is one work item; items are traced in chunks of rays with a cancel check between
+chunks (so Esc is honoured *within* a block), by several threads at once, or a time slice at a time for the
+viewport.
 
 The film is stored bottom row first, as Blender's render results and textures are.
 """
 from __future__ import annotations
 
-import concurrent.futures
 import threading
 import time
 from typing import Callable, Iterator, Optional
@@ -52,6 +52,17 @@ def _work_items(plan) -> list:
         items += [tiles.Tile(p, stride, r, c, min(r + side, plan.height), min(c + side, plan.width))
                   for r in range(0, plan.height, side) for c in range(0, plan.width, side)]
     return items + [item for item in plan.items if plan.is_refinement(item)]
+
+
+def _stopping(checkpoint: tiles.Checkpoint) -> Callable[[], bool]:
+    """A tile's checkpoint (which raises RenderCancelled to stop) as the backend tracer's ``cancel()``."""
+    def stop() -> bool:
+        try:
+            checkpoint()
+        except RenderCancelled:
+            return True
+        return False
+    return stop
 
 
 class Cancelled(Exception):
@@ -98,7 +109,7 @@ class BlockRenderer:
         self._local = threading.local()
         self._tracers = []
         self._lock = threading.Lock()
-        self._refine: Optional[np.ndarray] = None
+        self._tiles = tiles.TileRun(self.plan, self._traced, self._shade)
         self.backend_name = ""
 
     def restart(self) -> None:
@@ -142,26 +153,14 @@ class BlockRenderer:
             return np.isfinite(tracer.first_hits(origins, directions)["t"])
         return first_hits(self.compiled, origins, directions).hit
 
-    def _refine_mask(self) -> np.ndarray:
-        with self._lock:  # judged once, on the film every block pass has finished
-            if self._refine is None:
-                self._refine = self.plan.refine_mask(self.color)
-            return self._refine
-
-    def trace_item(self, item, cancel: Optional[Callable[[], bool]] = None):
-        """Trace one tile of one pass (a ``tracer.tiles.Tile``) into the film, asking ``cancel`` between
-        chunks of rays."""
-        def checkpoint() -> None:
-            if cancel is not None and cancel():
-                raise Cancelled()
-
+    def _shade(self, checkpoint: Optional[tiles.Checkpoint]) -> tiles.PixelTracer:
+        """The pixel tracer of one work item, with the calling thread's backend tracer."""
         tracer = self._tracer()
-        shade = tiles.PixelTracer(
-            self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint, alpha=self.want_alpha,
-            first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
-        refine = self._refine_mask() if self.plan.is_refinement(item) else None
-        tiles.trace_tile(self.plan, item, self._traced, shade, refine)
-        return item
+        # (asked while a chunk is traced too: a deep ray tree stops within 50 ms of a cancel)
+        tracer.cancel = None if checkpoint is None else _stopping(checkpoint)
+        return tiles.PixelTracer(self.plan, tracer, self.rays_for, chunk=self.chunk, checkpoint=checkpoint,
+                                 alpha=self.want_alpha,
+                                 first_hits=lambda origins, directions: self._hits(tracer, origins, directions))
 
     def pass_items(self, pass_index: int) -> list[tiles.Tile]:
         return [item for item in self.items if item.pass_index == pass_index]
@@ -169,39 +168,19 @@ class BlockRenderer:
     def run(self, cancel: Optional[Callable[[], bool]] = None,
             on_item: Optional[Callable[[tiles.Tile], None]] = None, poll: float = 0.05) -> None:
         """Trace everything.  ``cancel`` and ``on_item`` are only ever called on the calling thread (Blender's
-        API wants that); worker threads see cancellation through an event checked between chunks."""
+        API wants that); worker threads see cancellation between chunks (tracer.tiles.TileRun)."""
         started = time.perf_counter()
-        stop = threading.Event()
-
-        def stopped() -> bool:
-            return stop.is_set()
-
         try:
             if self.item_threads == 1:
-                for item in self.items:
-                    self.trace_item(item, cancel)
-                    self.done += 1
-                    if on_item is not None:
-                        on_item(item)
-                return
-            with concurrent.futures.ThreadPoolExecutor(max_workers=self.item_threads,
-                                                       thread_name_prefix="sdl-trace") as pool:
-                try:
-                    for p in range(self.pass_count):  # a pass reuses the samples of the one before
-                        pending = {pool.submit(self.trace_item, item, stopped) for item in self.pass_items(p)}
-                        while pending:
-                            finished, pending = concurrent.futures.wait(
-                                pending, timeout=poll, return_when=concurrent.futures.FIRST_COMPLETED)
-                            for future in finished:
-                                item = future.result()
-                                self.done += 1
-                                if on_item is not None:
-                                    on_item(item)
-                            if cancel is not None and cancel():
-                                raise Cancelled()
-                except BaseException:
-                    stop.set()
-                    raise
+                traced = self._tiles.run(self.items, cancel)
+            else:
+                traced = self._tiles.run_on_threads(self.items, self.item_threads, cancel, poll)
+            for item in traced:
+                self.done += 1
+                if on_item is not None:
+                    on_item(item)
+        except RenderCancelled:
+            raise Cancelled() from None
         finally:
             self.seconds += time.perf_counter() - started
 
@@ -226,7 +205,7 @@ class BlockRenderer:
         while self.done < len(self.items):
             item = self.items[self.done]
             started = time.perf_counter()
-            self.trace_item(item)
+            self._tiles.trace(item)
             self.seconds += time.perf_counter() - started
             self.done += 1
             yield item

@@ -33,7 +33,12 @@ WORDS = ("sphere", "cube", "plane", "square", "cone", "cylinder", "torus", "teap
          "mesh /dev/zero", "mesh .", "light 1e308 0 0 1 1 1", "camera 0 0 0 0 0 0 0 1 0 45",
          "camera 1e308 1e308 1e308 0 0 0 0 1 0 179.9999", "{", "}", "def", "use", "!", "parameters 10",
          "globalAmbient 1e308 1e308 1e308", "background -1 -1 -1", "specularExponent 1e308",
-         "surfaceRoughness 0 specularFraction 1")
+         "surfaceRoughness 0 specularFraction 1",
+         # the extensions for Blender scenes (docs/sdl.md)
+         "sphereLight 1e308 0 0 1 1 1 1e308 4", "areaLight 0 3 0 0 -1 0 1 0 0 1 1 1 2 1 16",
+         "ellipseLight 0 1e300 0 0 -1 0 0 0 1 1 1 1 1e-300 1e-300 4", "sunLight 1e-300 -1 0 1 1 1 179 8",
+         "spotLight 0 3 0 0 -1 0 1 1 1 180 1 0.5 4", "fresnel dielectric", "fresnel metal fresnelTint 1 0.5 0",
+         "smoothTerminator 1")
 
 
 @dataclass

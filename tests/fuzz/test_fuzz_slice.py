@@ -85,9 +85,9 @@ def test_a_picture_is_refused_from_its_header_before_decoding(tmp_path):
 
 
 def test_the_translation_names_the_users_file():
-    assert user_path("/out/.frame.png.0a1b2c3d.tmp") == "/out/frame.png"
+    assert user_path("/out/.frame.png.0a1b2c3d-4711@a1b2c3.tmp") == "/out/frame.png"
     assert user_path("/out/frame.png") == "/out/frame.png"
-    too_big = OSError(errno.EFBIG, "File too large", "/out/.frame.png.0a1b2c3d.tmp")
+    too_big = OSError(errno.EFBIG, "File too large", "/out/.frame.png.0a1b2c3d-4711@a1b2c3.tmp")
     assert error_message(too_big) == "/out/frame.png: file too large (the process' file size limit, ulimit -f, " \
                                      "was reached)"
     assert error_message(MemoryError(), "scene.sdl").startswith("scene.sdl: not enough memory")

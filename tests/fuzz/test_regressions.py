@@ -158,3 +158,27 @@ def test_sigterm_cleans_up_like_sigint(tmp_path):
     assert "Traceback" not in err
     assert not out.exists()
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_a_write_error_on_standard_output_names_it_not_the_scene(tmp_path):
+    scene = _scene(tmp_path)
+    with open("/dev/full", "w") as full:
+        run = subprocess.run([sys.executable, "-m", "tracer", "info", str(scene)], stdout=full, stderr=subprocess.PIPE,
+                             text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=120)
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines() == ["error: standard output: no space left on the device"], run.stderr
+
+
+@pytest.mark.skipif(SANITIZED, reason="under make sanitize: usd-core's C++ exceptions abort with ASan's runtime")
+@pytest.mark.parametrize("destination", ["out.usda", "out.sdl"])
+def test_convert_past_the_file_size_limit_names_the_destination(tmp_path, destination):
+    source = _scene(tmp_path, "".join(f"push translate {k} 0 0 sphere pop\n" for k in range(300)))
+    out = tmp_path / destination
+    run = subprocess.run(
+        ["bash", "-c", f"ulimit -f 4; exec {shlex.quote(sys.executable)} -m tracer convert "
+                       f"{shlex.quote(str(source))} {shlex.quote(str(out))}"],
+        capture_output=True, text=True, cwd=REPO, timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {out}:"), run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.sdl"]

@@ -45,7 +45,10 @@ from itertools import combinations
 import numpy as np
 
 from ..errors import SceneError
-from ..model import POLYHEDRON_KINDS, MeshData
+from ..meshdata import MeshData
+from ..shapes import keywords
+
+POLYHEDRON_KINDS = keywords("polyhedron")
 
 _PHI = (1.0 + 5.0 ** 0.5) / 2.0
 

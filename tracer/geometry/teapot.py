@@ -42,7 +42,7 @@ from itertools import product
 import numpy as np
 
 from ..errors import SceneError
-from ..model import MeshData
+from ..meshdata import MeshData
 
 #: GLUT's teapot control points (x, y, z), data frame (z up).
 CONTROL_POINTS: tuple[tuple[float, float, float], ...] = (

@@ -9,7 +9,8 @@ import math
 
 import numpy as np
 
-from ..model import TORUS_TUBE_RADIUS, MeshData
+from ..meshdata import MeshData
+from ..shapes import TORUS_TUBE_RADIUS
 
 #: Segments around the z axis (tapered cylinder, torus ring) and around the torus tube.
 AROUND = 48

@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..numerics import TOLERANCES, Tolerances
+from ..numerics import TOLERANCES, Tolerances, crossing_shift, dot3, gamma
 from .hits import HitArrays
 from .quadratic import solve_quadratic
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("ij,ij->i", a, b)
+    return dot3(a, b)  # (summed as the C core sums)
 
 
 def _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit) -> HitArrays:
@@ -55,7 +55,12 @@ def intersect_sphere(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     t_hi = np.where(hit, mid + half, np.nan)
     p_lo = origin + np.nan_to_num(t_lo)[:, None] * direction
     p_hi = origin + np.nan_to_num(t_hi)[:, None] * direction
-    return _two_hits(t_lo, t_hi, p_lo, p_hi, 0, 0, hit)
+    out = _two_hits(t_lo, t_hi, p_lo, p_hi, 0, 0, hit)
+    # G = (|p|^2 - 1) / 2: the normal p is its gradient, G'' = |d|^2
+    out.bend[:] = np.where(hit, a, 0.0)[:, None]
+    for slot, p in enumerate((p_lo, p_hi)):
+        out.offset[:, slot] = np.where(hit, 0.5 * np.abs(dot3(p, p) - 1.0), 0.0)
+    return out
 
 
 def agree_with_crossing(hits: HitArrays, direction: np.ndarray) -> None:
@@ -65,10 +70,10 @@ def agree_with_crossing(hits: HitArrays, direction: np.ndarray) -> None:
     normal can lean, by rounding, to the wrong side of the ray; its component along the ray is then
     removed, which is the least change that makes it a normal of a grazing crossing.
     """
-    along = np.einsum("nkj,nj->nk", hits.normal, direction)
+    along = dot3(hits.normal, direction[:, None, :])  # (summed as the C core sums)
     wrong = np.isfinite(hits.t) & np.where(hits.entering, along > 0.0, along < 0.0)
     if wrong.any():
-        speed2 = np.einsum("nj,nj->n", direction, direction)
+        speed2 = dot3(direction, direction)
         hits.normal -= np.where(wrong, along / speed2[:, None], 0.0)[..., None] * direction[:, None, :]
 
 
@@ -100,7 +105,11 @@ def intersect_cube(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     # Faces numbered 2*axis + (1 on the + side): the entering face is on the - side when d > 0.
     part_in = 2 * axis_in + (sign[rows, axis_in] < 0)
     part_out = 2 * axis_out + (sign[rows, axis_out] > 0)
-    return _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit)
+    out = _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit)
+    for slot, (t, axis) in enumerate(((t_in, axis_in), (t_out, axis_out))):  # its distance from its face's plane
+        gap = np.abs(np.abs(origin[rows, axis] + np.where(hit, t, 0.0) * direction[rows, axis]) - 1.0)
+        out.offset[:, slot] = np.where(hit, gap, 0.0)
+    return out
 
 
 def _z_plane_crossing(origin: np.ndarray, direction: np.ndarray, z: float = 0.0):
@@ -128,6 +137,7 @@ def intersect_square(origin: np.ndarray, direction: np.ndarray, tol: Tolerances 
     hit = crosses & (np.abs(p[:, 0]) <= limit) & (np.abs(p[:, 1]) <= limit)
     out = _one_hit(t, hit, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(hit[:, None], p[:, :2], 0.0)
+    out.offset[:, 0] = np.where(hit, np.abs(p[:, 2]), 0.0)
     return out
 
 
@@ -135,6 +145,7 @@ def intersect_plane(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     t, crosses, p = _z_plane_crossing(origin, direction)
     out = _one_hit(t, crosses, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(crosses[:, None], p[:, :2], 0.0)
+    out.offset[:, 0] = np.where(crosses, np.abs(p[:, 2]), 0.0)
     # The half-space z <= 0 holds the line at t = -inf when it rises, or when it runs inside, parallel.
     dz = direction[:, 2]
     out.inside_at_start = (dz > 0.0) | ((dz == 0.0) & (origin[:, 2] < 0.0))
@@ -154,14 +165,56 @@ def _convex_hits(candidates_t: np.ndarray, candidates_n: np.ndarray, valid: np.n
 
 
 def tapered_cylinder_normal(points: np.ndarray, small_radius: float) -> np.ndarray:
-    """Outward normal of the wall at (N, 3) points: the gradient of x^2 + y^2 - (1 + k z)^2."""
+    """Outward normal of the wall at the azimuth of (N, 3) points, scaled by their distance rho from the axis:
+    (x, y, -k rho), the gradient of G = (x^2 + y^2 - (1 + k z)^2) / 2 at the wall point of that azimuth and
+    height.  Every point of a generator has the same normal, so it is known however far the point is off
+    the wall along it (near a cone's apex 1 - z cancels); on the axis itself the axis is the only sensible
+    direction."""
     k = small_radius - 1.0
-    radius = 1.0 + k * points[:, 2]
-    normal = np.stack([points[:, 0], points[:, 1], -k * radius], axis=1)
-    # At a cone's apex the gradient vanishes; the axis is the only sensible direction there.
-    degenerate = np.einsum("ij,ij->i", normal, normal) < 1e-300
+    rho = np.sqrt(points[:, 0] * points[:, 0] + points[:, 1] * points[:, 1])
+    normal = np.stack([points[:, 0], points[:, 1], -k * rho], axis=1)
+    degenerate = dot3(normal, normal) < 1e-300
     normal[degenerate] = (0.0, 0.0, 1.0)
     return normal
+
+
+def wall_term_sizes(origin: np.ndarray, direction: np.ndarray, k: float):
+    """The sizes of the terms of G = (x^2 + y^2 - (1 + k z)^2) / 2 along the lines, which is (a t^2 + 2 b t +
+    c) / 2 with a, b, c computed from the origin: G's rounding at t is gamma times :func:`wall_terms_at`
+    (shapes.h's wall_term_sizes).  (w = 1 + k z at the origin is off by its terms' size times the rounding,
+    which near the apex is not small.)"""
+    ox, oy, oz = origin.T
+    dx, dy, dz = direction.T
+    w0, terms = np.abs(1.0 + k * oz), 1.0 + np.abs(k * oz)
+    return (dx * dx + dy * dy + k * k * dz * dz,
+            np.abs(ox * dx) + np.abs(oy * dy) + np.abs(k * dz) * (w0 + terms),
+            ox * ox + oy * oy + w0 * (w0 + 2.0 * terms))
+
+
+def wall_terms_at(sizes, t: np.ndarray) -> np.ndarray:
+    am, bm, cm = sizes
+    at = np.abs(t)
+    return 0.5 * ((am * at + 2.0 * bm) * at + cm)
+
+
+def wall_error_terms(origin: np.ndarray, direction: np.ndarray, k: float, a: np.ndarray, b: np.ndarray,
+                     t: np.ndarray, sizes, rounding: float):
+    """(bend, own root error, residual) of wall hits at local times t (shapes.h's wall_hit).
+
+    G bends by a; the root's own error is how far G's rounding moves it (crossing_shift of ``rounding``
+    times its terms, which near a cone's apex, where |grad G| is as small as the distance to the apex, the
+    point error no longer covers).  The residual is the point's distance from the wall times |n| =
+    rho sqrt(1 + k^2): that of (rho, z) from the line rho = 1 + k z in the plane through the axis, or, where
+    its foot (rho, z) - (rho - w) (1, -k) / (1 + k^2) is past a cone's apex, its distance from the apex."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        own = crossing_shift(rounding * wall_terms_at(sizes, t), np.abs(a * t + b), np.abs(a))
+    p = origin + t[:, None] * direction
+    rho = np.sqrt(p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1])
+    w = 1.0 + k * p[:, 2]
+    apex = k if k != 0.0 else 1.0  # (a cylinder has no apex: its foot is never past it)
+    residual = np.where(rho * k * k + w >= 0.0, np.abs(rho - w) * rho,
+                        np.sqrt(rho * rho + (w / apex) * (w / apex)) * rho * np.sqrt(1.0 + k * k))
+    return a, own, residual
 
 
 def _wall_interval(a, b, c, slab_lo, slab_hi):
@@ -197,9 +250,27 @@ def _wall_interval(a, b, c, slab_lo, slab_hi):
     return np.where(empty, np.nan, start), np.where(empty, np.nan, end)
 
 
-def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_radius: float) -> HitArrays:
-    """Parts: 0 wall, 1 base disc (z = 0), 2 cap disc (z = 1)."""
+def apex_shift(origin: np.ndarray, direction: np.ndarray, k: float) -> np.ndarray:
+    """How far (N,) along each line its point nearest the apex (0, 0, -1/k) of a tapered cylinder lies, where
+    the apex is within two units of the base (0 elsewhere, and for lines that have none)."""
+    if not abs(k) >= 0.5:
+        return np.zeros(origin.shape[0])
+    apart = origin + np.array([0.0, 0.0, 1.0 / k])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        along = -dot3(apart, direction) / dot3(direction, direction)
+    return np.where(np.isfinite(along), along, 0.0)
+
+
+def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_radius: float,
+                               tol: Tolerances = TOLERANCES) -> HitArrays:
+    """Parts: 0 wall, 1 base disc (z = 0), 2 cap disc (z = 1).
+
+    Where the apex is within two units of the base, the line is taken from its point nearest the apex
+    (apex_shift): near the apex the wall's function is as small as the distance to it, and computed from a
+    far origin its roots lost as many digits (10^-8 from the apex: half of them)."""
     k = small_radius - 1.0
+    shift = apex_shift(origin, direction, k)
+    origin = origin + shift[:, None] * direction if abs(k) >= 0.5 else origin
     ox, oy, oz = origin.T
     dx, dy, dz = direction.T
     r0 = 1.0 + k * oz
@@ -222,6 +293,13 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
     cap_out = t_out >= slab_hi
     part_in = np.where(cap_in, np.where(rising, 1, 2), 0)
     part_out = np.where(cap_out, np.where(rising, 2, 1), 0)
+    # A pair with a wall crossing, between the wall's roots, counts only where the line is provably inside
+    # between its ends (the tangent line's touching pair, a line through a cone's apex).
+    rounding = gamma(tol.hit_ulps)
+    sizes = wall_term_sizes(origin, direction, k)
+    mid = np.where(hit, 0.5 * (t_in + t_out), 0.0)
+    proven = 0.5 * ((a * mid + 2.0 * b) * mid + c) < -rounding * wall_terms_at(sizes, mid)
+    hit &= ~(((part_in == 0) | (part_out == 0)) & (a >= 0.0)) | proven
     cap_normal = {1: np.array([0.0, 0.0, -1.0]), 2: np.array([0.0, 0.0, 1.0])}
 
     def normal_at(t, part):
@@ -229,14 +307,27 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
         wall = tapered_cylinder_normal(p, small_radius)
         return np.where((part == 1)[:, None], cap_normal[1], np.where((part == 2)[:, None], cap_normal[2], wall))
 
-    return _two_hits(t_in, t_out, normal_at(t_in, part_in), normal_at(t_out, part_out), part_in, part_out, hit)
+    out = _two_hits(t_in, t_out, normal_at(t_in, part_in), normal_at(t_out, part_out), part_in, part_out, hit)
+    for slot, (t, part) in enumerate(((t_in, part_in), (t_out, part_out))):
+        t = np.where(hit, t, 0.0)
+        bend, own, gap = wall_error_terms(origin, direction, k, a, b, t, sizes, rounding)
+        wall = hit & (part == 0)
+        cap_gap = np.abs(oz + t * dz - np.where(part == 1, 0.0, 1.0))  # the point's distance from the cap's plane
+        out.bend[:, slot] = np.where(wall, bend, 0.0)
+        out.error[:, slot] = np.where(wall, own, 0.0)
+        out.offset[:, slot] = np.where(wall, gap, np.where(hit, cap_gap, 0.0))
+    out.t = out.t + shift[:, None]
+    return out
 
 
 def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
                                 plane_normals: np.ndarray, plane_offsets: np.ndarray) -> HitArrays:
     """Cyrus–Beck: the line is inside where it is on the inner side of every face plane."""
-    num = plane_offsets[None, :] - origin @ plane_normals.T  # (N, F): > 0 means origin inside that plane
-    den = direction @ plane_normals.T
+    # (N, F): > 0 means origin inside that plane.  Summed as the C core does (dot3), not by a matrix
+    # product: a ray through an edge two faces share meets both at one t, and which face it enters by must not
+    # hang on the last bit.
+    num = plane_offsets[None, :] - dot3(origin[:, None, :], plane_normals[None, :, :])
+    den = dot3(direction[:, None, :], plane_normals[None, :, :])
     with np.errstate(divide="ignore", invalid="ignore"):
         t = num / den
     entering_face = den < 0.0
@@ -250,7 +341,11 @@ def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
     t_out = t_out_each[rows, i_out]
     outside_parallel = ((den == 0.0) & (num < 0.0)).any(axis=1)
     hit = ~outside_parallel & np.isfinite(t_in) & np.isfinite(t_out) & (t_in <= t_out)
-    return _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)
+    out = _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)
+    for slot, (t, face) in enumerate(((t_in, i_in), (t_out, i_out))):  # the point's distance from its face's plane
+        p = origin + np.where(hit, t, 0.0)[:, None] * direction
+        out.offset[:, slot] = np.where(hit, np.abs(dot3(p, plane_normals[face]) - plane_offsets[face]), 0.0)
+    return out
 
 
 #: The corners of the squares round a tapered cylinder's base (z = 0) and top (z = 1) discs, for a top radius

@@ -53,6 +53,7 @@ def combine(op: str, left: HitArrays, right: HitArrays) -> HitArrays:
     uv = np.concatenate([left.uv, right.uv], axis=1)[rows, order]
     shape = np.concatenate([left.shape, right.shape], axis=1)[rows, order]
     error = np.concatenate([left.error, right.error], axis=1)[rows, order]
+    offset = np.concatenate([left.offset, right.offset], axis=1)[rows, order]
 
     finite = np.isfinite(t)
     # A slot ends its group when the next slot's error interval does not overlap its own (or is absent).
@@ -99,6 +100,7 @@ def combine(op: str, left: HitArrays, right: HitArrays) -> HitArrays:
             out.uv[idx, slot] = uv[idx, r[idx]]
             out.shape[idx, slot] = shape[idx, r[idx]]
             out.error[idx, slot] = error[idx, r[idx]]
+            out.offset[idx, slot] = offset[idx, r[idx]]
         # The next group starts from here.
         for child in (0, 1):
             before[child] = np.where(done, state[child], before[child])

@@ -25,8 +25,15 @@ class HitArrays:
       plane's half-space, can say True).
     * ``shape`` (N, K) int32: which primitive of the compiled scene was hit (-1 for none); shape routines
       leave it -1 and the scene fills it in.
-    * ``error`` (N, K): a bound on the rounding error of ``t`` (tracer.numerics); shape routines leave it 0
-      and the scene fills it in.
+    * ``error`` (N, K): a bound on the rounding error of ``t`` (tracer.numerics); shape routines put their
+      own root's error there (the torus's, or 0) and the scene adds the rest.
+    * ``bend`` (N, K): from a shape routine to the error bound (None after it, and in what ``take`` and the
+      others make): with the normal the gradient of the shape's function G on the surface, G's second
+      derivative along the generic direction (0 for a flat face).
+    * ``offset`` (N, K): shape routines: the residual of the computed hit point, |G| to first order (so
+      that |G| / |n| is its distance from the surface); the scene turns it into how far a secondary ray
+      starts from the hit along the unit world normal (before the world rounding,
+      tracer.numerics.offset_distance).
     """
 
     t: np.ndarray
@@ -37,12 +44,15 @@ class HitArrays:
     inside_at_start: np.ndarray
     shape: Optional[np.ndarray] = None
     error: Optional[np.ndarray] = None
+    bend: Optional[np.ndarray] = None
+    offset: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.shape is None:
             self.shape = np.full(self.t.shape, -1, dtype=np.int32)
-        if self.error is None:
-            self.error = np.zeros(self.t.shape)
+        for name in ("error", "offset"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros(self.t.shape))
 
     @property
     def count(self) -> int:
@@ -59,7 +69,8 @@ class HitArrays:
                    normal=np.zeros((n, k, 3)),
                    part=np.full((n, k), -1, dtype=np.int32),
                    uv=np.zeros((n, k, 2)),
-                   inside_at_start=np.zeros(n, dtype=bool))
+                   inside_at_start=np.zeros(n, dtype=bool),
+                   bend=np.zeros((n, k)))
 
     def sorted(self) -> "HitArrays":
         """The same hits with each row sorted by t (stable, so equal times keep their order)."""
@@ -72,13 +83,13 @@ class HitArrays:
         return HitArrays(t=self.t[rows, order], entering=self.entering[rows, order],
                          normal=self.normal[rows, order], part=self.part[rows, order],
                          uv=self.uv[rows, order], inside_at_start=self.inside_at_start.copy(),
-                         shape=self.shape[rows, order], error=self.error[rows, order])
+                         shape=self.shape[rows, order], error=self.error[rows, order], offset=self.offset[rows, order])
 
     def subset(self, rows: np.ndarray) -> "HitArrays":
         """Only some rays (a boolean mask or index array over N)."""
         return HitArrays(t=self.t[rows], entering=self.entering[rows], normal=self.normal[rows],
                          part=self.part[rows], uv=self.uv[rows], inside_at_start=self.inside_at_start[rows],
-                         shape=self.shape[rows], error=self.error[rows])
+                         shape=self.shape[rows], error=self.error[rows], offset=self.offset[rows])
 
     def trimmed(self) -> "HitArrays":
         """Drop trailing slots that no ray uses."""
@@ -96,4 +107,5 @@ def concatenate(a: HitArrays, b: HitArrays) -> HitArrays:
                      uv=np.concatenate([a.uv, b.uv], axis=1),
                      inside_at_start=a.inside_at_start | b.inside_at_start,
                      shape=np.concatenate([a.shape, b.shape], axis=1),
-                     error=np.concatenate([a.error, b.error], axis=1))
+                     error=np.concatenate([a.error, b.error], axis=1),
+                     offset=np.concatenate([a.offset, b.offset], axis=1))

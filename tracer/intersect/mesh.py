@@ -13,6 +13,7 @@ which is what makes coherent batches fast.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -56,6 +57,9 @@ BOX_PADDING = 1e-9
 NODE = np.dtype({"names": ["lo", "hi", "offset", "count", "axis", "pad"],
                  "formats": [("<f4", (3,)), ("<f4", (3,)), "<i4", "<u2", "i1", "u1"],
                  "offsets": [0, 12, 24, 28, 30, 31], "itemsize": 32})
+#: A BVH builder that can stand in for the NumPy one (TriangleMesh's ``builder``): (vertices (V, 3), triangles'
+#: vertex indices (T, 3) int32, leaf size, bins, box padding) -> (NODE records, leaf order int32).
+BvhBuilder = Callable[[np.ndarray, np.ndarray, int, int, float], tuple[np.ndarray, np.ndarray]]
 #: A leaf's triangle count must fit the node's 16 bits; indices and offsets are int32.
 MAX_LEAF_SIZE = 2**16 - 1
 MAX_INDEX = 2**31 - 1
@@ -108,9 +112,13 @@ class TriangleMesh:
     BVH: binned surface-area heuristic (``bins`` buckets along the longest axis of the centroids),
     split until a node holds at most ``leaf_size`` triangles.  Node 0 is the root, each inner node's
     children are allocated together; a leaf's triangles are ``tri_order[offset : offset + count]``.
+    ``builder(vertices, tri_vertex, leaf_size, bins, pad) -> (nodes, tri_order)`` builds it instead of
+    the NumPy builder here: it must build the very same tree (tracer.compile hands over the C core's,
+    tracer.native.build_mesh_bvh, which does).
     """
 
-    def __init__(self, mesh: MeshData, leaf_size: int = 8, bins: int = 16) -> None:
+    def __init__(self, mesh: MeshData, leaf_size: int = 8, bins: int = 16, builder: Optional[BvhBuilder] = None
+                 ) -> None:
         if not 1 <= leaf_size <= MAX_LEAF_SIZE or bins < 2:
             raise ValueError(f"leaf_size must be in 1..{MAX_LEAF_SIZE} and bins at least 2")
         vertices, normals = _rows_of_three(mesh.vertices), _rows_of_three(mesh.normals)
@@ -139,18 +147,16 @@ class TriangleMesh:
             self.bounds = np.zeros((2, 3))
         self.extent = float(np.max(self.bounds[1] - self.bounds[0], initial=0.0)) or 1.0
         self._magnitude = float(np.max(np.abs(self.bounds), initial=0.0))
-        self._build_bvh(leaf_size, bins)
+        self._build_bvh(leaf_size, bins, builder)
 
     # ------------------------------------------------------------------ BVH construction
 
-    def _build_bvh(self, leaf_size: int, bins: int) -> None:
-        """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids): built by
-        the C core when it is there (the same tree, in a fraction of the time, reading the boxes and
-        centroids from the vertices as it goes), else in NumPy."""
+    def _build_bvh(self, leaf_size: int, bins: int, builder: Optional[BvhBuilder]) -> None:
+        """Binned-SAH BVH over the triangles' bounding boxes (split candidates from the centroids): by
+        ``builder`` when given, else in NumPy."""
         pad = BOX_PADDING * (self.extent + self._magnitude)
-        native = _native_builder() if bins <= 64 else None
-        if native is not None:
-            self.nodes, self.tri_order = native(self.vertices, self.tri_vertex, leaf_size, bins, pad)
+        if builder is not None:
+            self.nodes, self.tri_order = builder(self.vertices, self.tri_vertex, leaf_size, bins, pad)
         else:
             self.nodes, self.tri_order = _build_bvh_numpy(*self._boxes_and_centroids(), leaf_size, bins, pad)
         # Column views for the NumPy traversal.
@@ -509,10 +515,8 @@ def _choose_split(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, 
     c_lo, c_hi = centroid.min(axis=0), centroid.max(axis=0)
     axis = int(np.argmax(c_hi - c_lo))
     width = c_hi[axis] - c_lo[axis]
-    if not width > 0:
-        goes_left = np.zeros(n, dtype=bool)
-        goes_left[: n // 2] = True
-        return axis, goes_left
+    if not (width > 0 and np.isfinite(width) and np.isfinite(bins / width)):
+        return axis, _halves(n)
 
     bucket = np.minimum(((centroid[:, axis] - c_lo[axis]) * (bins / width)).astype(np.int64), bins - 1)
     # Per-bucket boxes: sort by bucket, then reduce each non-empty run (bucket 0 and bins-1 are
@@ -541,7 +545,16 @@ def _choose_split(tri_lo: np.ndarray, tri_hi: np.ndarray, centroid: np.ndarray, 
     cost = left_area * left_count + right_area * right_count
     cost[(left_count == 0) | (right_count == 0)] = np.inf
     best = int(np.argmin(cost))
-    return axis, bucket <= best
+    goes_left = bucket <= best
+    count = int(goes_left.sum())
+    return axis, (goes_left if 0 < count < n else _halves(n))  # (an empty side would never end)
+
+
+def _halves(n: int) -> np.ndarray:
+    """The split of a range into its first and second half (the first half goes left)."""
+    goes_left = np.zeros(n, dtype=bool)
+    goes_left[: n // 2] = True
+    return goes_left
 
 
 
@@ -613,15 +626,6 @@ def _as_int32(index: np.ndarray) -> np.ndarray:
     if index.dtype != np.int32:
         index = np.clip(index, -1, MAX_INDEX).astype(np.int32)
     return np.ascontiguousarray(index)
-
-
-def _native_builder():
-    """tracer.native.build_mesh_bvh when the C core is built, else None."""
-    try:
-        from .. import native
-    except ImportError:
-        return None
-    return native.build_mesh_bvh if native.load_error is None else None
 
 
 class _Rays:

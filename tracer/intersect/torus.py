@@ -7,10 +7,12 @@ form (Ferrari) lose many digits for nearly double roots, so we:
 2. write the quartic in the arc length ``s`` from the point of the line closest to the centre (the
    caller already moved the origin there), so coefficients are O(1) however far away the eye is;
 3. take the eigenvalues of its companion matrix (backward stable; NumPy batches them);
-4. keep the real ones and polish each with Newton steps on the quartic itself.  A complex pair is a
-   near-double root: it counts (as two roots, or one touching pair) only where the quartic's extremum
-   next to it is zero within the rounding bound of evaluating the quartic there; and a real pair that the
-   quartic does not go below zero between is a rounding artefact of a miss and is dropped.  The bound,
+4. keep the real ones and polish each with Newton steps on the quartic itself.  A pair of roots counts
+   only where the quartic's sign between them is proven, beyond the rounding bound of evaluating it, to be
+   the one the pair implies: negative inside the tube between an entry and its exit, positive between an
+   exit and the next entry (else the two chords are one).  A complex pair is a near-double root: it counts,
+   as two roots, only where the quartic's extremum next to it is provably below zero.  So a line tangent
+   to the tube within rounding has no touching pair, on either backend.  The bound,
    ``Tolerances.torus_residual_ulps`` machine epsilons (the coefficients take up to 6 operations each and
    Horner's rule 8 more) times the quartic's terms taken in absolute value, scales with
    the coefficients, so the test is as tight at 1e-8 as at 1e8.
@@ -102,11 +104,13 @@ def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> n
     centre = _minimum_near(roots.real.copy(), col, steps)
     depth = quartic_at(centre, col)
     curvature = (12.0 * centre + 6.0 * col[0]) * centre + 2.0 * col[1]
-    # Only a double root within rounding (|p| at the extremum below the bound): a deep minimum is one
-    # between two real roots, which Newton can wander to from a far complex pair.  (Pairs far from the real
-    # axis are not searched: Tolerances.torus_pair_shortcut.)
+    # Only a proven pair of real roots (p at the extremum below minus the bound) that the eigenvalues took for
+    # a complex one, split by no more than twice the imaginary part (p'' / 2 (2 im)^2 = 2 p'' im^2); not a
+    # deep minimum, which is one between two real roots that Newton can wander to from a far complex pair.
+    # (Pairs far from the real axis are not searched: Tolerances.torus_pair_shortcut.)
     near_double = (~real & (np.abs(roots.imag) <= tol.torus_pair_shortcut * (1.0 + np.abs(roots.real)))
-                   & (np.abs(depth) <= residual_bound(centre, mag, ulps)) & (curvature > 0.0))
+                   & (depth < -residual_bound(centre, mag, ulps)) & (-depth <= 2.0 * curvature * roots.imag * roots.imag)
+                   & (curvature > 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         half = np.sqrt(np.maximum(-depth, 0.0) / (0.5 * curvature))
     split = np.where(roots.imag > 0.0, centre - half, centre + half)
@@ -114,19 +118,26 @@ def _accepted_roots(roots: np.ndarray, coeffs, magnitudes, tol: Tolerances) -> n
     s = np.where(real | near_double, s, np.inf)
     s.sort(axis=1)
     # Between an entry and its exit the quartic is negative (inside the tube), between an exit and the
-    # next entry positive: a pair for which it is not, beyond rounding, is no crossing at all.
+    # next entry positive: a pair for which that is not proven beyond rounding is no crossing at all.
     finite = np.isfinite(s)
     for first, second, inside in ((0, 1, True), (2, 3, True), (1, 2, False)):
         both = finite[:, first] & finite[:, second]
         mid = 0.5 * (np.where(both, s[:, first], 0.0) + np.where(both, s[:, second], 0.0))
         value = quartic_at(mid[:, None], col)[:, 0]
         bound = residual_bound(mid[:, None], mag, ulps)[:, 0]
-        wrong = both & ((value > bound) if inside else (value < -bound))
+        wrong = both & (~(value < -bound) if inside else ~(value > bound))
         s[wrong, first] = np.inf
         s[wrong, second] = np.inf
         finite = np.isfinite(s)
     s.sort(axis=1)
     return s
+
+
+def torus_value(points: np.ndarray, tube: float = TORUS_TUBE_RADIUS) -> np.ndarray:
+    """The torus function (|p|^2 + R^2 - r^2)^2 - 4 R^2 (x^2 + y^2) at (..., 3) points (shapes.h's sums)."""
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    k = x * x + y * y + z * z + RING_RADIUS * RING_RADIUS - tube * tube
+    return k * k - 4.0 * RING_RADIUS * RING_RADIUS * (x * x + y * y)
 
 
 def torus_normal(points: np.ndarray, tube: float = TORUS_TUBE_RADIUS) -> np.ndarray:
@@ -174,6 +185,11 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances =
     hits.entering[idx] = np.isfinite(t) & (np.arange(4) % 2 == 0)
     hits.part[idx] = np.where(np.isfinite(t), 0, -1)
     hits.error[idx] = np.where(np.isfinite(t), root_error(s, coeffs, magnitudes, tol) / speed[idx, None], 0.0)
+    # G is the quartic itself (the normal its gradient): it bends by speed^2 times its curvature in s
+    x = np.where(np.isfinite(s), s, 0.0)
+    curvature = np.abs((12.0 * x + 6.0 * coeffs[0][:, None]) * x + 2.0 * coeffs[1][:, None])
+    hits.bend[idx] = np.where(np.isfinite(t), curvature * speed[idx, None] * speed[idx, None], 0.0)
+    hits.offset[idx] = np.where(np.isfinite(t), np.abs(torus_value(points)), 0.0)
     return hits
 
 

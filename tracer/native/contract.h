@@ -6,7 +6,7 @@
 #include <stdint.h>
 
 enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TORUS = 5, K_POLYHEDRON = 6,
-       K_MESH = 7, K_PARABOLOID = 8 };
+       K_MESH = 7, K_PARABOLOID = 8, K_HYPERBOLOID = 9 };
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
@@ -14,10 +14,11 @@ enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
-enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7 };
+enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7,
+       SKIP_BUDGET = 8 };
 enum { SAVE_INSIDE_SHADOWS = 1, SAVE_SHARED_TIR = 2, SAVE_DARK_MATERIALS = 4 };
-enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
-#define K_COUNT 9
+enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
+#define K_COUNT 10
 /* Every kind's generic hits, as a call in analytic_hits' names (tracer/shapes.py: c_intersect with its
  * parameters, face planes and error budget; meshes are traced by the BVH instead). */
 #define RT_SHAPE_HITS(X) \
@@ -25,10 +26,11 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
     X(K_CUBE, hits_cube(o, d, out)) \
     X(K_SQUARE, hits_square(o, d, D->tol_square_edge, out)) \
     X(K_PLANE, hits_plane(o, d, out, inside)) \
-    X(K_TAPERED, hits_tapered(o, d, param[0], out)) \
+    X(K_TAPERED, hits_tapered(o, d, param[0], D->tol_hit_ulps, out)) \
     X(K_TORUS, hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out)) \
     X(K_POLYHEDRON, hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out)) \
-    X(K_PARABOLOID, hits_paraboloid(o, d, out))
+    X(K_PARABOLOID, hits_paraboloid(o, d, out)) \
+    X(K_HYPERBOLOID, hits_hyperboloid(o, d, param[0], out))
 /* Every kind's texture mapping (ShapeKind.c_uv). */
 #define RT_SHAPE_UV(X) \
     X(K_SPHERE, sphere_uv) \
@@ -39,9 +41,10 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
     X(K_TORUS, torus_uv) \
     X(K_POLYHEDRON, direction_uv) \
     X(K_MESH, direction_uv) \
-    X(K_PARABOLOID, wall_and_discs_uv)
+    X(K_PARABOLOID, wall_and_discs_uv) \
+    X(K_HYPERBOLOID, hyperboloid_uv)
 /* Closed kinds: normals agree with entering flags (ShapeKind.normals_agree). */
-#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID)
+#define RT_NORMALS_AGREE(kind) ((kind) == K_SPHERE || (kind) == K_CUBE || (kind) == K_TAPERED || (kind) == K_TORUS || (kind) == K_POLYHEDRON || (kind) == K_PARABOLOID || (kind) == K_HYPERBOLOID)
 /* Kinds made of triangles, traced by their BVH (the mesh family). */
 #define RT_IS_MESH(kind) ((kind) == K_MESH)
 /* The C SDL reader's actions (sdl_read.h), in code order: a statement's action code is its index
@@ -49,18 +52,20 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2 };
 #define RT_SDL_ACTIONS(X) X(0, sdl_light) X(1, sdl_global_ambient) X(2, sdl_background) X(3, sdl_min_reflectivity) X(4, sdl_min_transparency) X(5, sdl_max_recursion_depth) X(6, sdl_camera) X(7, sdl_color_material) X(8, sdl_float_material) X(9, sdl_texture) X(10, sdl_parameters) X(11, sdl_default_materials) X(12, sdl_translate) X(13, sdl_scale) X(14, sdl_rotate) X(15, sdl_push) X(16, sdl_pop) X(17, sdl_identity) X(18, sdl_shape)
 #define RT_SDL_ACTION_COUNT 19
 #define RAY_KIND_COUNT 4
-#define N_COUNTS 8  /* rays cast per kind, then skipped per reason */
+#define N_COUNTS 9  /* rays cast per kind, then skipped per reason */
 
 /* the generic torus' ring radius (tracer.intersect.torus:RING_RADIUS) */
 #define TORUS_RING 1.0
 /* the generic torus' tube radius (tracer.model:TORUS_TUBE_RADIUS) */
 #define TORUS_TUBE 0.2
-/* nested transparent media a ray keeps track of (tracer.trace:MEDIA_DEPTH) */
+/* nested transparent media a ray keeps track of (tracer.model:MEDIA_DEPTH) */
 #define MEDIA_DEPTH 8
 /* most octaves of turbulence summed (marble); a larger count is read as this one (tracer.textures.noise:MAX_OCTAVES) */
 #define MAX_OCTAVES 32
 /* deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack) (tracer.model:MAX_RECURSION_DEPTH) */
 #define MAX_RECURSION_DEPTH 64
+/* reflected and transmitted rays one camera ray's tree may trace, unless rt_trace is given another (tracer.savings:RAY_BUDGET) */
+#define RAY_BUDGET 4096
 /* parameter slots per primitive in prim_param (the most any kind's intersection takes) (tracer.shapes:MAX_PARAMETERS) */
 #define PRIM_PARAMS 1
 /* parameter slots per material in mat_tex_param (the longest defaults: marble) (tracer.textures.solid:MAX_PARAMETERS) */
@@ -88,7 +93,7 @@ typedef struct {
     const int64_t *mesh_info;                /* 4 per mesh: node, triangle, vertex and normal counts */
     const double *mesh_extent;
     double mesh_constants[5];                /* tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT */
-    const uint8_t *const *mesh_nodes;        /* per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each */
+    const uint8_t *const *mesh_nodes;        /* per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each */
     const int32_t *const *mesh_order;        /* per mesh: leaf slot -> triangle */
     const int32_t *const *mesh_tri_vertex;   /* per mesh: 3 vertex indices per triangle */
     const int32_t *const *mesh_tri_normal;   /* per mesh: 3 normal indices per triangle (< 0: none), or NULL */
@@ -308,10 +313,11 @@ int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *
 void rt_destroy(void *scene);
 int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads, char *error, int64_t capacity);
 int rt_set_sealed(void *scene, const uint8_t *sealed, int64_t count);
-int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors, int64_t *counts, int64_t threads, double cutoff, int64_t savings);
+/* 0; -1 out of memory; -2 stopped by `cancel` (polled at every ray; may be NULL) or a signal */
+int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors, int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget, const int32_t *cancel);
 int rt_first_hits(void *scene, int64_t n, const double *origins, const double *directions, double *t, double *normal, int32_t *shape, int32_t *object, int8_t *entering, int64_t threads);
 int rt_occluded(void *scene, int64_t n, const double *origins, const double *directions, double t_max, int8_t *blocked, int64_t threads);
-int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction, int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape, int32_t *part, double *uv, int8_t *inside_at_start);
+int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction, int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape, int32_t *part, double *uv, int8_t *inside_at_start, double *error, double *offset);
 int rt_texture_colors(void *scene, int64_t n, const int32_t *shape, const double *points, const int32_t *part, const double *bary, double *out);
 int64_t rt_scan_numbers(const char *text, int64_t length, double *out, int64_t capacity, int64_t *bad);
 int64_t rt_scan3_state_size(void);
@@ -322,10 +328,20 @@ void rt_free(void *buffer);
 SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int64_t words_length, const int32_t *codes, int64_t count, const double *defaults, int64_t shared_libm);
 void rt_sdl_free(SdlResult *res);
 const char *rt_sdl_decline_names(void);
+/* interrupt.h: the C handler and its watchdog; 0 on success */
+int rt_interrupt_install(int64_t grace_ms);
+void rt_interrupt_uninstall(void);
+void rt_interrupt_disarm(void);
+/* the signal heard since rt_interrupt_clear(), or 0 */
+int rt_interrupt_heard(void);
+void rt_interrupt_clear(void);
+/* the watchdog removes it if it ends the process; slot or -1 */
+int rt_interrupt_hold_file(const char *path);
+void rt_interrupt_release_file(int slot);
 int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "357b0360b9ef139a"
+#define RT_CONTRACT_DIGEST "643f6b0c907b6cac"
 
 #endif

@@ -54,8 +54,9 @@ RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 #: RaySavings.flags() (SAVE_*), which switch the skips other than the cutoff.
 SKIP_REASONS = _savings.SKIP_REASONS
 SAVINGS_SWITCHES = _savings.SWITCHES
-#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew.
-EDIT_FLAGS = ("meshes", "rebuild")
+#: The bits of rt_edit's flags (EDIT_*): the meshes may have changed; build the object hierarchy anew; objects
+#: were removed (those listed) and added (at the end).
+EDIT_FLAGS = ("meshes", "rebuild", "objects")
 
 
 def c_name(name: str) -> str:
@@ -94,11 +95,13 @@ class Constant:
 CONSTANTS = (
     Constant("TORUS_RING", "tracer.intersect.torus:RING_RADIUS", "double", "the generic torus' ring radius"),
     Constant("TORUS_TUBE", "tracer.model:TORUS_TUBE_RADIUS", "double", "the generic torus' tube radius"),
-    Constant("MEDIA_DEPTH", "tracer.trace:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
+    Constant("MEDIA_DEPTH", "tracer.model:MEDIA_DEPTH", "int", "nested transparent media a ray keeps track of"),
     Constant("MAX_OCTAVES", "tracer.textures.noise:MAX_OCTAVES", "int",
              "most octaves of turbulence summed (marble); a larger count is read as this one"),
     Constant("MAX_RECURSION_DEPTH", "tracer.model:MAX_RECURSION_DEPTH", "int",
              "deepest reflection/refraction recursion traced, whatever max_depth says (bounds the stack)"),
+    Constant("RAY_BUDGET", "tracer.savings:RAY_BUDGET", "int",
+             "reflected and transmitted rays one camera ray's tree may trace, unless rt_trace is given another"),
     Constant("PRIM_PARAMS", "tracer.shapes:MAX_PARAMETERS", "int",
              "parameter slots per primitive in prim_param (the most any kind's intersection takes)"),
     Constant("TEX_PARAMS", "tracer.textures.solid:MAX_PARAMETERS", "int",
@@ -193,7 +196,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("mesh_extent", "*f64"),
     F("mesh_constants", "f64", "tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, "
       "PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT", length=5),
-    F("mesh_nodes", "**u8", "per mesh: its MeshNode records (mesh.h; tracer.intersect.mesh.NODE), 32 bytes each"),
+    F("mesh_nodes", "**u8", "per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each"),
     F("mesh_order", "**i32", "per mesh: leaf slot -> triangle"),
     F("mesh_tri_vertex", "**i32", "per mesh: 3 vertex indices per triangle"),
     F("mesh_tri_normal", "**i32", "per mesh: 3 normal indices per triangle (< 0: none), or NULL"),
@@ -396,13 +399,15 @@ FUNCTIONS: tuple[Function, ...] = (
        ">str error", "i64 capacity"),
     _f("int", "rt_set_sealed", "handle scene", "<u8 sealed", "i64 count"),
     _f("int", "rt_trace", "handle scene", "i64 n", "<f64 origins", "<f64 directions", ">f64 colors", ">i64 counts",
-       "i64 threads", "f64 cutoff", "i64 savings"),
+       "i64 threads", "f64 cutoff", "i64 savings", "i64 ray_budget", "<i32 cancel",
+       doc="0; -1 out of memory; -2 stopped by `cancel` (polled at every ray; may be NULL) or a signal"),
     _f("int", "rt_first_hits", "handle scene", "i64 n", "<f64 origins", "<f64 directions", ">f64 t", ">f64 normal",
        ">i32 shape", ">i32 object", ">i8 entering", "i64 threads"),
     _f("int", "rt_occluded", "handle scene", "i64 n", "<f64 origins", "<f64 directions", "f64 t_max",
        ">i8 blocked", "i64 threads"),
     _f("i64", "rt_object_hits", "handle scene", "i64 object", "<f64 origin", "<f64 direction", "i64 capacity",
-       ">f64 t", ">i8 entering", ">f64 normal", ">i32 shape", ">i32 part", ">f64 uv", ">i8 inside_at_start"),
+       ">f64 t", ">i8 entering", ">f64 normal", ">i32 shape", ">i32 part", ">f64 uv", ">i8 inside_at_start",
+       ">f64 error", ">f64 offset"),
     _f("int", "rt_texture_colors", "handle scene", "i64 n", "<i32 shape", "<f64 points", "<i32 part",
        "<f64 bary", ">f64 out"),
     _f("i64", "rt_scan_numbers", "str text", "i64 length", ">f64 out", "i64 capacity", ">i64 bad"),
@@ -417,6 +422,13 @@ FUNCTIONS: tuple[Function, ...] = (
        "i64 count", "<f64 defaults", "i64 shared_libm"),
     _f("void", "rt_sdl_free", "result res"),
     _f("str", "rt_sdl_decline_names"),
+    _f("int", "rt_interrupt_install", "i64 grace_ms", doc="interrupt.h: the C handler and its watchdog; 0 on success"),
+    _f("void", "rt_interrupt_uninstall"),
+    _f("void", "rt_interrupt_disarm"),
+    _f("int", "rt_interrupt_heard", doc="the signal heard since rt_interrupt_clear(), or 0"),
+    _f("void", "rt_interrupt_clear"),
+    _f("int", "rt_interrupt_hold_file", "str path", doc="the watchdog removes it if it ends the process; slot or -1"),
+    _f("void", "rt_interrupt_release_file", "int slot"),
     _f("i64", "rt_sdl_material_width"),
 )
 del _f

@@ -19,6 +19,7 @@
 #endif
 
 #include "core.h"
+#include "interrupt.h"
 #include "numeric.h"
 #include "shapes.h"
 #include "mesh.h"
@@ -77,7 +78,7 @@ const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 typedef struct {
     double b[3][2][2];    /* [axis][0: lo, 1: hi][child] */
     int32_t child[2];     /* inner: pair index; leaf: first item */
-    int32_t count[2];     /* leaf: items (> 0); inner: 0 */
+    int32_t count[2];     /* leaf: items (> 0; -1: none left after removals); inner: 0 */
 } PairNode;
 
 typedef struct {
@@ -88,14 +89,16 @@ typedef struct {
 typedef struct {
     SceneDesc d;
     MeshView *meshes;
-    TopNode *nodes;       /* only while building */
+    BvhNode *nodes;       /* only while building */
     int64_t n_nodes, tree_depth;
     PairNode *pairs;      /* none when the whole hierarchy is one leaf */
     int64_t n_pairs;
     int32_t root_first, root_count;  /* the root when it is a leaf */
-    int64_t *items;       /* bounded objects in leaf order */
-    int64_t *unbounded;
-    int64_t n_unbounded;
+    int64_t *items;       /* bounded objects in leaf order (after removals, a leaf may list one twice) */
+    int64_t n_items;
+    int64_t *unbounded;   /* the objects outside the hierarchy, each tried by every ray: the unbounded ones, */
+    int64_t n_unbounded;  /* and those added since it was built (n_loose of them) */
+    int64_t n_loose;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
     int64_t n_mesh_views;
@@ -103,7 +106,8 @@ typedef struct {
      * NULL: none known).  Which savings a trace uses is the trace's own (rt_trace's cutoff and flags). */
     uint8_t *sealed;
     /* for refitting the hierarchy (made when first needed, dropped when it is built again): per object, its
-     * leaf as 2 * pair + child (-1: unbounded, or in a root leaf), and per pair its parent as 2 * pair + child */
+     * leaf as 2 * pair + child (< 0: outside the hierarchy, or in a root leaf), and per pair its parent as
+     * 2 * pair + child */
     int64_t *leaf_of, *parent_of;
 } Scene;
 
@@ -125,8 +129,19 @@ typedef struct {
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
     double cutoff;        /* tracer.savings: a secondary ray of smaller cumulative weight is not traced */
     int64_t savings;      /* SAVE_* bits: the other savings this trace makes */
+    int64_t ray_budget;   /* most reflected and transmitted rays one camera ray's tree may trace (see shade.h) */
+    int64_t rays_used;    /* reflected and transmitted rays traced for the current camera ray */
+    int64_t ray_limit;    /* ...which the current ray's descendants may bring up to this (shade.h) */
+    const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_trace's flag); may be NULL */
     int oom;
+    int stopped;          /* stop_requested() was seen: the colours are not to be used */
 } Work;
+
+/* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
+static inline int stop_requested(const Work *w)
+{
+    return rt_interrupt_heard() != 0 || (w->cancel != NULL && *w->cancel != 0);
+}
 
 static int work_init(Work *w, const Scene *S)
 {
@@ -254,6 +269,22 @@ static inline double prim_generic_ray(const double *inv, const double *o, const 
     return shift;
 }
 
+/* A hit's bounds (Primitive.bound_hits): its t's error (plus the shape's own root error, where it has one)
+ * and how far its generic point may be from the surface: the shape's residual over |n| (its first-order
+ * distance) plus the line's error; the shading turns it into a world distance (world_unit_normal).  A
+ * mesh's triangles report no bend or residual: they keep the unit-curvature floor of the bound and their
+ * point is off by the t error along the line. */
+static inline void hit_bounds(const ErrorFrame *frame, const double *dg, int mesh, Hit *h)
+{
+    double error = point_error(frame, h->t);
+    double nn = dot3(h->n, h->n), length = sqrt(nn);
+    if (mesh)
+        h->bend = 2.0 * length * frame->dd / frame->size;
+    h->err += time_error_of(frame, error, dg, h, nn, length);
+    double gap = nn > 0.0 ? h->offset / length : h->offset;
+    h->offset = mesh ? h->err * sqrt(frame->dd) : gap + frame->size * error;
+}
+
 /* All hits of primitive p along the whole world line (Primitive.intersect), into out. */
 static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const double *d, HitList *out)
 {
@@ -283,12 +314,12 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     }
     ErrorFrame frame;
     error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
+    int mesh = D->prim_kind[p] == K_MESH;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
         h->t += shift;
         h->shape = (int32_t)p;
-        /* (plus the shape's own root error, where it has one: the torus) */
-        h->err += time_error(&frame, point_error(&frame, h->t), dg, h->n);
+        hit_bounds(&frame, dg, mesh, h);
     }
     out->n = n;
     return 1;
@@ -314,7 +345,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
             error_frame(o, og, dg, rounding, &frame);
-            out->err = time_error(&frame, point_error(&frame, out->t), dg, out->n);
+            hit_bounds(&frame, dg, 1, out);
         }
         return 1;
     }
@@ -332,16 +363,15 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!(t > t_min && t < t_max))
             continue;
         /* after t_min with its whole error interval (compiled.first_after), compared without square roots */
-        if (solid_analytic(D->prim_kind[p]))
-            agree_with_crossing(&buf[i], dg);
+        double along = solid_analytic(D->prim_kind[p]) ? agree_with_crossing(&buf[i], dg) : dot3(buf[i].n, dg);
         double error = point_error(&frame, t);
-        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, buf[i].n) &&
-            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, buf[i].n))) {
+        if (exceeds_time_error(&frame, t - t_min - buf[i].err, error, dg, &buf[i], along) &&
+            (!feeler || exceeds_time_error(&frame, t_max - t - buf[i].err, error, dg, &buf[i], along))) {
             *out = buf[i];
             out->t = t;
             out->shape = (int32_t)p;
-            if (!feeler)  /* (plus the shape's own root error, where it has one: the torus) */
-                out->err = buf[i].err + time_error(&frame, error, dg, buf[i].n);
+            if (!feeler)
+                hit_bounds(&frame, dg, 0, out);
             return 1;
         }
     }
@@ -418,8 +448,8 @@ static int object_occludes(const Scene *S, Work *w, int64_t ref, const double *o
 }
 
 /* ------------------------------------------------------------------------------------------------------
- * The scene: nearest hit over all objects (ties go to the lower object index, as the reference's loop
- * over objects does) and shadow feelers. */
+ * The scene: the first hit over all objects (trace.first_hits: where hits tie, the object that comes first in
+ * the scene) and shadow feelers. */
 
 /* nextafter(x, INFINITY) for x > 0 finite (a hit's t), without the call. */
 static inline double next_up_positive(double x)
@@ -431,16 +461,30 @@ static inline double next_up_positive(double x)
     return x;
 }
 
-static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d,
-                                   Hit *best, int64_t *best_obj)
+/* The first hits of the objects seen so far (trace.first_hits): the nearest (`best`, ties of t to the lower
+ * index), the second nearest time, and `reach`, the least t + error: every hit up to it lies within the
+ * error interval of every hit found, so none of them is certainly nearer than another. */
+typedef struct {
+    Hit best;
+    int64_t obj;
+    double second, reach;
+} Nearest;
+
+static inline void consider_object(const Scene *S, Work *w, int64_t obj, const double *o, const double *d, Nearest *n)
 {
     Hit h;
-    double limit = isfinite(best->t) ? next_up_positive(best->t) : INFINITY;
-    if (object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h) &&
-        (h.t < best->t || (h.t == best->t && obj < *best_obj))) {
-        *best = h;
-        *best_obj = obj;
+    double limit = isfinite(n->reach) ? next_up_positive(n->reach) : INFINITY;  /* hits up to the reach */
+    if (!object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h))
+        return;
+    if (h.t < n->best.t || (h.t == n->best.t && obj < n->obj)) {
+        n->second = n->best.t;
+        n->best = h;
+        n->obj = obj;
+    } else if (h.t < n->second) {
+        n->second = h.t;
     }
+    if (h.t + h.err < n->reach)
+        n->reach = h.t + h.err;
 }
 
 /* The ray against the boxes of the object hierarchy (whose boxes are padded, so the test is conservative).
@@ -482,13 +526,13 @@ static inline int box_hit(const double *lo, const double *hi, const double *o, c
     return near <= far;
 }
 
-/* Which children of p the ray meets with 0 <= t <= far (bit 0: child 0, bit 1: child 1), and where it
+/* Which children of p the ray meets with lo <= t <= far (bit 0: child 0, bit 1: child 1), and where it
  * enters their boxes. */
-static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, double *near_out)
+static inline int pair_hit(const PairNode *p, const RayBoxes *r, double lo, double far, double *near_out)
 {
     if (r->fast) {
 #if defined(__SSE2__)
-        __m128d near = _mm_setzero_pd(), fr = _mm_set1_pd(far);
+        __m128d near = _mm_set1_pd(lo), fr = _mm_set1_pd(far);
         for (int i = 0; i < 3; i++) {
             __m128d o = _mm_set1_pd(r->o[i]), inv = _mm_set1_pd(r->inv[i]);
             int s = r->near_side[i];
@@ -502,7 +546,7 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, dou
 #else
         int mask = 0;
         for (int c = 0; c < 2; c++) {
-            double near = 0.0, fr = far;
+            double near = lo, fr = far;
             for (int i = 0; i < 3; i++) {
                 int s = r->near_side[i];
                 double tn = (p->b[i][s][c] - r->o[i]) * r->inv[i], tf = (p->b[i][1 - s][c] - r->o[i]) * r->inv[i];
@@ -517,20 +561,20 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double far, dou
     }
     int mask = 0;
     for (int c = 0; c < 2; c++) {
-        double lo[3] = {p->b[0][0][c], p->b[1][0][c], p->b[2][0][c]};
-        double hi[3] = {p->b[0][1][c], p->b[1][1][c], p->b[2][1][c]};
-        near_out[c] = 0.0;  /* (only orders the visit) */
-        mask |= box_hit(lo, hi, r->o, r->inv, 0.0, far) << c;
+        double box_lo[3] = {p->b[0][0][c], p->b[1][0][c], p->b[2][0][c]};
+        double box_hi[3] = {p->b[0][1][c], p->b[1][1][c], p->b[2][1][c]};
+        near_out[c] = lo;  /* (only orders the visit) */
+        mask |= box_hit(box_lo, box_hi, r->o, r->inv, lo, far) << c;
     }
     return mask;
 }
 
 /* The children of p that the ray meets, nearer first: the first into *next, the other onto the stack. */
-static inline int pair_children(const PairNode *p, const RayBoxes *r, double far, TreeEntry *next, TreeEntry *stack,
-                                int64_t *top)
+static inline int pair_children(const PairNode *p, const RayBoxes *r, double lo, double far, TreeEntry *next,
+                                TreeEntry *stack, int64_t *top)
 {
     double near[2];
-    int mask = pair_hit(p, r, far, near);
+    int mask = pair_hit(p, r, lo, far, near);
     if (!mask)
         return 0;
     int first = mask == 2 || (mask == 3 && near[1] < near[0]);
@@ -546,12 +590,15 @@ static inline int pair_children(const PairNode *p, const RayBoxes *r, double far
     return 1;
 }
 
-static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+/* Every object whose box the ray meets for some t in [lo, hi] (the hierarchy's boxes, then the unbounded
+ * objects), each offered to `visit` with the Nearest so far (whose reach may shrink as it goes). */
+typedef void (*ObjectVisit)(const Scene *, Work *, int64_t, const double *, const double *, Nearest *);
+
+static void scene_objects(const Scene *S, Work *w, const double *o, const double *d, double lo, Nearest *n,
+                          ObjectVisit visit)
 {
-    best->t = INFINITY;
-    *best_obj = -1;
     for (int64_t i = 0; i < S->n_unbounded; i++)
-        consider_object(S, w, S->unbounded[i], o, d, best, best_obj);
+        visit(S, w, S->unbounded[i], o, d, n);
     if (S->n_pairs) {
         RayBoxes r;
         ray_boxes(o, d, &r);
@@ -560,21 +607,48 @@ static int scene_first(const Scene *S, Work *w, const double *o, const double *d
         for (;;) {
             if (e.count) {
                 for (int64_t i = e.child; i < (int64_t)e.child + e.count; i++)
-                    consider_object(S, w, S->items[i], o, d, best, best_obj);
-            } else if (pair_children(&S->pairs[e.child], &r, best->t, &e, stack, &top)) {
+                    visit(S, w, S->items[i], o, d, n);
+            } else if (pair_children(&S->pairs[e.child], &r, lo, n->reach, &e, stack, &top)) {
                 continue;
             }
-            /* the next child still in reach (entered no later than the nearest hit so far: ties count) */
+            /* the next child still in reach (entered no later than the reach: ties count) */
             do {
                 if (!top)
-                    return *best_obj >= 0;
+                    return;
                 e = stack[--top];
-            } while (e.near > best->t);
+            } while (e.near > n->reach);
         }
     }
     for (int64_t i = S->root_first; i < (int64_t)S->root_first + S->root_count; i++)
-        consider_object(S, w, S->items[i], o, d, best, best_obj);
-    return *best_obj >= 0;
+        visit(S, w, S->items[i], o, d, n);
+}
+
+/* An object that comes before the tie's winner so far and has a hit within the reach wins it. */
+static void earlier_in_reach(const Scene *S, Work *w, int64_t obj, const double *o, const double *d, Nearest *n)
+{
+    Hit h;
+    if (obj < n->obj && object_first(S, w, S->d.object_ref[obj], o, d, 0.0, next_up_positive(n->reach), &h)) {
+        n->best = h;
+        n->obj = obj;
+    }
+}
+
+/* The first hit: the nearest, unless another hit lies within the error interval of every hit found (t at most
+ * the least t + error, the reach); then, of those, the hit of the object that comes first in the scene
+ * (trace.first_hits), however the two round.  Coplanar faces look the same from any position, on both
+ * backends.  The second pass, over the boxes that hold [nearest t, reach], is taken only on such a tie. */
+static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
+{
+    Nearest n;
+    n.best.t = INFINITY;
+    n.obj = -1;
+    n.second = n.reach = INFINITY;
+    scene_objects(S, w, o, d, 0.0, &n, consider_object);
+    if (n.obj >= 0 && n.second <= n.reach)
+        scene_objects(S, w, o, d, n.best.t, &n, earlier_in_reach);
+    *best = n.best;
+    *best_obj = n.obj;
+    return n.obj >= 0;
 }
 
 /* Is any object on o + t d, 0 < t < t_max?  `cache` (may be NULL) remembers the last object that blocked a
@@ -604,7 +678,7 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
                         if (cache) *cache = S->items[i];
                         return 1;
                     }
-            } else if (pair_children(&S->pairs[e.child], &r, t_max, &e, stack, &top)) {
+            } else if (pair_children(&S->pairs[e.child], &r, 0.0, t_max, &e, stack, &top)) {
                 continue;
             }
             if (!top)
@@ -620,11 +694,14 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
     return 0;
 }
 
-/* The hit's unit world normal (zero if degenerate), as first_hits normalises it. */
-static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
+/* The hit's unit world normal (zero if degenerate), as first_hits normalises it; returns how far along it
+ * the world hit point may be from the surface (SurfaceHits.offset): the hit's generic distance maps to the
+ * world along the gradient n by |n| / |n M^-1|, exactly for a plane (tracer.numerics.world_offsets). */
+static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
 {
     normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, n);
-    double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    double squared = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    double length = sqrt(squared);
     if (length > 0.0) {
         n[0] /= length;
         n[1] /= length;
@@ -632,6 +709,7 @@ static inline void world_unit_normal(const Scene *S, const Hit *h, double *n)
     } else {
         n[0] = n[1] = n[2] = 0.0;
     }
+    return h->offset * sqrt(dot3(h->n, h->n) / squared);
 }
 
 /* ------------------------------------------------------------------------------------------------------
@@ -717,17 +795,17 @@ static ShadeFn pick_shade(int64_t effects)
 /* ------------------------------------------------------------------------------------------------------
  * Building the scene: checks, mesh views, the top-level BVH */
 
-/* The built tree as PairNodes (see scene_first); frees the TopNodes. */
+/* The built tree as PairNodes (see scene_first); frees the BvhNodes. */
 static int pair_tree(Scene *S)
 {
-    const TopNode *nodes = S->nodes;
+    const BvhNode *nodes = S->nodes;
     S->n_pairs = 0;
     S->root_first = S->root_count = 0;
     if (S->n_nodes == 0)
         return 1;
     if (nodes[0].count) {
-        S->root_first = (int32_t)nodes[0].first;
-        S->root_count = (int32_t)nodes[0].count;
+        S->root_first = nodes[0].offset;
+        S->root_count = nodes[0].count;
         return 1;
     }
     int64_t *pair_of = (int64_t *)malloc((size_t)S->n_nodes * sizeof(int64_t));
@@ -746,12 +824,12 @@ static int pair_tree(Scene *S)
             continue;
         PairNode *p = &S->pairs[pair_of[k]];
         for (int c = 0; c < 2; c++) {
-            const TopNode *child = &nodes[nodes[k].left + c];
+            const BvhNode *child = &nodes[nodes[k].offset + c];
             for (int i = 0; i < 3; i++) {
                 p->b[i][0][c] = child->lo[i];
                 p->b[i][1][c] = child->hi[i];
             }
-            p->child[c] = (int32_t)(child->count ? child->first : pair_of[nodes[k].left + c]);
+            p->child[c] = (int32_t)(child->count ? child->offset : pair_of[nodes[k].offset + c]);
             p->count[c] = (int32_t)child->count;
         }
     }
@@ -793,7 +871,7 @@ static void drop_tree(Scene *S)
     S->nodes = NULL;
     S->pairs = NULL;
     S->items = S->unbounded = S->leaf_of = S->parent_of = NULL;
-    S->n_nodes = S->n_pairs = S->n_unbounded = 0;
+    S->n_nodes = S->n_pairs = S->n_unbounded = S->n_items = S->n_loose = 0;
     S->root_first = S->root_count = 0;
 }
 
@@ -809,6 +887,7 @@ static int build_tree(Scene *S, int64_t threads)
     if (nb >= INT32_MAX)
         return 0;
     S->n_unbounded = D->n_objects - nb;
+    S->n_items = nb;
     S->unbounded = (int64_t *)malloc((size_t)(S->n_unbounded + 1) * sizeof(int64_t));
     S->items = (int64_t *)malloc((size_t)(nb + 1) * sizeof(int64_t));
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
@@ -960,7 +1039,7 @@ static int64_t mesh_check_depth(const MeshView *m)
     stack[top++] = 1;
     while (top) {
         int64_t depth = stack[--top], node = stack[--top];
-        const MeshNode *nd = &m->nodes[node];
+        const BvhNode *nd = &m->nodes[node];
         if (++visited > m->n_nodes) { free(stack); return -1; }
         if (depth > deepest) deepest = depth;
         if (nd->count) {
@@ -989,6 +1068,87 @@ static int mesh_check_indices(const MeshView *m)
         if (m->tri_vertex[i] < 0 || m->tri_vertex[i] >= m->n_vertices ||
             (m->tri_normal && m->tri_normal[i] >= m->n_normals))
             return 0;
+    return 1;
+}
+
+/* Most objects added since the hierarchy was built that are kept outside it (each is tried by every ray)
+ * before it is built again. */
+#define LOOSE_MAX 64
+
+/* After objects were removed (`removed`: their indices before, ascending, n of them) and added (the objects
+ * after the old_n - n survivors): the hierarchy keeps its shape, its objects renumbered; a leaf's slots of a
+ * removed object take a surviving object of the same leaf (tried twice, found once), or the leaf lists none
+ * (count -1: an empty box, never entered by a ray the fast box test sees, and nothing in it if entered); the
+ * added objects go outside the hierarchy; the leaves that lost objects are refitted.  S->d is the new description; leaf_of and parent_of are those of the old numbering
+ * (tree_links).  1 when done; 0 when the hierarchy must be built again instead (or memory ran out). */
+static int restructure_tree(Scene *S, int64_t old_n, const int64_t *removed, int64_t n)
+{
+    int64_t new_n = S->d.n_objects, added = new_n - (old_n - n);
+    if (S->n_pairs == 0 || added < 0 || S->n_loose + added > LOOSE_MAX)
+        return 0;
+    int64_t *renumber = (int64_t *)malloc((size_t)(old_n + 1) * sizeof(int64_t));
+    int64_t *touched = (int64_t *)malloc((size_t)(n + 1) * sizeof(int64_t));
+    int64_t *leaf_of = (int64_t *)malloc((size_t)(new_n + 1) * sizeof(int64_t));
+    int64_t *outside = (int64_t *)malloc((size_t)(S->n_unbounded + added + 1) * sizeof(int64_t));
+    int ok = renumber && touched && leaf_of && outside;
+    for (int64_t o = 0, r = 0; ok && o < old_n; o++) {
+        if (r < n && removed[r] == o) {
+            renumber[o] = -1;
+            r++;
+            ok = r == n || removed[r] > o;  /* (ascending, in range) */
+        } else {
+            renumber[o] = o - r;
+        }
+    }
+    ok = ok && (n == 0 || removed[n - 1] < old_n);
+    int64_t n_touched = 0;
+    for (int64_t r = 0; ok && r < n; r++) {
+        int64_t link = S->leaf_of[removed[r]];
+        if (link < 0)
+            continue;
+        PairNode *pair = &S->pairs[link / 2];
+        int64_t first = pair->child[link % 2], end = first + pair->count[link % 2], survivor = -1;
+        for (int64_t k = first; k < end && survivor < 0; k++)
+            if (renumber[S->items[k]] >= 0)
+                survivor = S->items[k];
+        if (survivor < 0)  /* no object left in the leaf: a count of -1 lists none (and its box is empty) */
+            pair->count[link % 2] = -1;
+        for (int64_t k = first; k < end; k++)
+            if (renumber[S->items[k]] < 0)
+                S->items[k] = survivor;
+        touched[n_touched++] = link;
+    }
+    if (!ok) {
+        free(renumber);
+        free(touched);
+        free(leaf_of);
+        free(outside);
+        return 0;
+    }
+    for (int64_t k = 0; k < S->n_items; k++)  /* (slots of emptied leaves hold -1, and are never read) */
+        S->items[k] = S->items[k] < 0 ? -1 : renumber[S->items[k]];
+    int64_t u = 0;
+    for (int64_t k = 0; k < S->n_unbounded; k++)
+        if (renumber[S->unbounded[k]] >= 0)
+            outside[u++] = renumber[S->unbounded[k]];
+    for (int64_t o = new_n - added; o < new_n; o++)
+        outside[u++] = o;
+    for (int64_t o = 0; o < old_n; o++)
+        if (renumber[o] >= 0)
+            leaf_of[renumber[o]] = S->leaf_of[o];
+    for (int64_t o = new_n - added; o < new_n; o++)
+        leaf_of[o] = -2;  /* (outside, though maybe bounded) */
+    free(S->unbounded);
+    free(S->leaf_of);
+    S->unbounded = outside;
+    S->n_unbounded = u;
+    S->n_loose += added;
+    S->leaf_of = leaf_of;
+    for (int64_t t = 0; t < n_touched; t++)
+        for (int64_t link = touched[t]; link >= 0; link = S->parent_of[link / 2])
+            set_child_box(S, link / 2, (int)(link % 2));
+    free(renumber);
+    free(touched);
     return 1;
 }
 
@@ -1150,7 +1310,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
     for (int64_t k = 0; k < D->n_meshes && ok; k++) {
         const int64_t *info = D->mesh_info + 4 * k;
         MeshView *m = &S->meshes[k];
-        m->nodes = (const MeshNode *)D->mesh_nodes[k];
+        m->nodes = (const BvhNode *)D->mesh_nodes[k];
         m->n_nodes = info[0];
         m->n_tris = info[1];
         m->n_vertices = info[2];
@@ -1233,11 +1393,14 @@ fail:
 
 /* An edit of the scene in place (tracer.edit): `desc` describes the scene as it is now (its arrays edited,
  * or new ones), and is checked and taken as rt_create takes it.  flags: EDIT_MESHES when the meshes may have
- * changed (each mesh not seen before is checked), EDIT_REBUILD to build the object hierarchy anew (on
- * `threads` threads); else the hierarchy is refitted to the boxes of `objects` (n of them; n < 0: every
- * object's), or rebuilt where an object's boundedness or the number of objects changed.  Keeps the sealed
- * table only while the numbers of objects and lights stay.  0 on success; -1 (with the reason in `error`) when
- * the description is refused or memory runs out: the scene must then be destroyed, not traced. */
+ * changed (each mesh not seen before is checked); EDIT_REBUILD to build the object hierarchy anew (on
+ * `threads` threads); EDIT_OBJECTS when the objects `objects` (n of them, their indices before, ascending)
+ * were removed and the objects after the survivors added (restructure_tree: the hierarchy renumbered, the
+ * added objects outside it, until LOOSE_MAX of them call for a build); else the hierarchy is refitted to the
+ * boxes of `objects` (n of them; n < 0: every object's), or rebuilt where an object in it became unbounded.
+ * Keeps the sealed table only while the numbers of objects and lights stay.  0 on success; -1 (with the reason
+ * in `error`) when the description is refused or memory runs out: the scene must then be destroyed, not
+ * traced. */
 int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t n, int64_t flags, int64_t threads,
             char *error, int64_t capacity)
 {
@@ -1245,21 +1408,21 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
     if (error && capacity > 0)
         error[0] = '\0';
     int64_t n_objects = S->d.n_objects, n_lights = S->d.n_lights;
-    int rebuild = (flags & EDIT_REBUILD) || desc->n_objects != n_objects || S->n_pairs == 0;
-    if (!rebuild && n != 0) {
-        /* an object that became bounded or unbounded is in the wrong list: only a build puts it right */
-        if (!tree_links(S)) {
-            if (error && capacity > 0)
-                snprintf(error, (size_t)capacity, "out of memory");
-            return -1;
-        }
-        for (int64_t k = 0; k < (n < 0 ? n_objects : n) && !rebuild; k++) {
-            int64_t i = n < 0 ? k : objects[k];
-            rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0) != (desc->object_bounded[i] != 0);
-        }
+    int restructured = (flags & EDIT_OBJECTS) != 0;
+    int rebuild = (flags & EDIT_REBUILD) || (desc->n_objects != n_objects && !restructured) || S->n_pairs == 0;
+    if (!rebuild && (n != 0 || restructured) && !tree_links(S)) {
+        if (error && capacity > 0)
+            snprintf(error, (size_t)capacity, "out of memory");
+        return -1;
+    }
+    /* an object in the hierarchy that became unbounded has no box to be found by: only a build puts it right
+     * (one outside it may be bounded or not: every ray tries it) */
+    for (int64_t k = 0; !rebuild && !restructured && k < (n < 0 ? n_objects : n); k++) {
+        int64_t i = n < 0 ? k : objects[k];
+        rebuild = i < 0 || i >= n_objects || (S->leaf_of[i] >= 0 && !desc->object_bounded[i]);
     }
     /* an edit in place (no object added or removed, the meshes as they were) checks its own objects again */
-    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD)) && desc->n_objects == n_objects &&
+    int in_place = !(flags & (EDIT_MESHES | EDIT_REBUILD | EDIT_OBJECTS)) && desc->n_objects == n_objects &&
                    desc->n_csg == S->d.n_csg && desc->n_prims == S->d.n_prims && n >= 0;
     if (!take_desc(S, desc, in_place ? objects : NULL, in_place ? n : -1, error, capacity))
         return -1;
@@ -1269,7 +1432,10 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
         free(S->sealed);
         S->sealed = NULL;
     }
-    if (rebuild ? !build_tree(S, threads) : !refit_tree(S, objects, n)) {
+    if (restructured && !rebuild)
+        rebuild = !restructure_tree(S, n_objects, objects, n);
+    int fitted = rebuild ? build_tree(S, threads) : restructured ? 1 : refit_tree(S, objects, n);
+    if (!fitted) {
         if (error && capacity > 0)
             snprintf(error, (size_t)capacity, "out of memory fitting the object hierarchy");
         return -1;
@@ -1285,7 +1451,7 @@ int rt_edit(void *scene, const SceneDesc *desc, const int64_t *objects, int64_t 
 int64_t rt_object_tree(const void *scene, void *pairs, int64_t *items, int64_t *root)
 {
     const Scene *S = (const Scene *)scene;
-    int64_t n_items = S->d.n_objects - S->n_unbounded;
+    int64_t n_items = S->n_items;
     if (pairs && S->n_pairs)
         memcpy(pairs, S->pairs, (size_t)S->n_pairs * sizeof(PairNode));
     if (items && n_items)
@@ -1345,6 +1511,8 @@ typedef struct {
     ShadeFn shade;
     double cutoff;        /* JOB_TRACE: the savings it makes (Work.cutoff, Work.savings) */
     int64_t savings;
+    int64_t ray_budget;   /* JOB_TRACE: Work.ray_budget */
+    const volatile int32_t *cancel;  /* Work.cancel */
     _Atomic int64_t next;
 } Job;
 
@@ -1352,6 +1520,7 @@ typedef struct {
     Job *job;
     int64_t counts[N_COUNTS];
     int failed;
+    int stopped;
 } Worker;
 
 #define CHUNK 16
@@ -1368,6 +1537,8 @@ static void *run_worker(void *arg)
     }
     w.cutoff = job->cutoff;
     w.savings = job->savings;
+    w.ray_budget = job->ray_budget;
+    w.cancel = job->cancel;
     Media air;
     memset(&air, 0, sizeof(air));
     for (;;) {
@@ -1375,9 +1546,15 @@ static void *run_worker(void *arg)
         if (start >= job->n)
             break;
         int64_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
+        if (stop_requested(&w)) {
+            w.stopped = 1;
+            break;
+        }
         for (int64_t i = start; i < end; i++) {
             const double *o = job->o + 3 * i, *d = job->d + 3 * i;
             if (job->mode == JOB_TRACE) {
+                w.rays_used = 0;
+                w.ray_limit = w.ray_budget;
                 job->shade(S, &w, o, d, 0, &air, 1.0, job->colors + 3 * i);
             } else if (job->mode == JOB_FIRST) {
                 Hit h;
@@ -1402,13 +1579,15 @@ static void *run_worker(void *arg)
     }
     memcpy(wk->counts, w.counts, sizeof(wk->counts));
     wk->failed = w.oom;
+    wk->stopped = w.stopped;
     work_free(&w);
     return NULL;
 }
 
 #define MAX_THREADS 256
 
-/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure. */
+/* Runs the job on up to `threads` threads (the caller's among them); 0 on success, -1 on failure, -2 when
+ * it stopped because stop_requested() (its results are then incomplete). */
 static int run_job(Job *job, int64_t threads, int64_t *counts)
 {
     if (threads < 1)
@@ -1426,25 +1605,31 @@ static int run_job(Job *job, int64_t threads, int64_t *counts)
         workers[k].job = job;
         memset(workers[k].counts, 0, sizeof(workers[k].counts));
         workers[k].failed = 0;
+        workers[k].stopped = 0;
         started[k] = 0;
     }
     for (int64_t k = 1; k < threads; k++)
         started[k] = pthread_create(&ids[k], NULL, run_worker, &workers[k]) == 0;
     run_worker(&workers[0]);
-    int failed = 0;
+    int failed = 0, stopped = 0;
     for (int64_t k = 0; k < threads; k++) {
         if (k > 0 && started[k])
             pthread_join(ids[k], NULL);
         failed |= workers[k].failed;
+        stopped |= workers[k].stopped;
         if (counts)
             for (int c = 0; c < N_COUNTS; c++)
                 counts[c] += workers[k].counts[c];
     }
-    return failed ? -1 : 0;
+    return failed ? -1 : stopped ? -2 : 0;
 }
 
+/* Shades n camera rays.  `ray_budget`: the most reflected and transmitted rays each one's tree traces (see
+ * shade.h); `cancel`: a flag polled at every ray (NULL: none) which, set, stops the batch: -2 is returned
+ * (as when a signal is heard, interrupt.h) and the colours are not to be used. */
 int rt_trace(void *scene, int64_t n, const double *origins, const double *directions, double *colors,
-             int64_t *counts, int64_t threads, double cutoff, int64_t savings)
+             int64_t *counts, int64_t threads, double cutoff, int64_t savings, int64_t ray_budget,
+             const int32_t *cancel)
 {
     const Scene *S = (const Scene *)scene;
     Job job;
@@ -1458,6 +1643,8 @@ int rt_trace(void *scene, int64_t n, const double *origins, const double *direct
     job.shade = pick_shade(S->d.effects);
     job.cutoff = cutoff;
     job.savings = savings;
+    job.ray_budget = ray_budget < 0 ? 0 : ray_budget;
+    job.cancel = cancel;
     counts[RAY_CAMERA] += n;
     return run_job(&job, threads, counts);
 }
@@ -1495,11 +1682,12 @@ int rt_occluded(void *scene, int64_t n, const double *origins, const double *dir
     return run_job(&job, threads, NULL);
 }
 
-/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, as
- * the reference's obj.intersect(); returns the number of hits (only `capacity` are written) or -1. */
+/* Whole-line hits of one top-level object (CSG: the boolean's hits), world normals not normalised, with
+ * their error bounds and offsets, as the reference's obj.intersect(); returns the number of hits (only
+ * `capacity` are written) or -1. */
 int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const double *direction,
                        int64_t capacity, double *t, int8_t *entering, double *normal, int32_t *shape,
-                       int32_t *part, double *uv, int8_t *inside_at_start)
+                       int32_t *part, double *uv, int8_t *inside_at_start, double *error, double *offset)
 {
     const Scene *S = (const Scene *)scene;
     if (object < 0 || object >= S->d.n_objects)
@@ -1514,11 +1702,14 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
         const Hit *h = &top->h[i];
         t[i] = h->t;
         entering[i] = (int8_t)h->entering;
+        double unit[3];
+        offset[i] = world_unit_normal(S, h, unit);
         normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, normal + 3 * i);
         shape[i] = h->shape;
         part[i] = h->part;
         uv[2 * i] = h->uv[0];
         uv[2 * i + 1] = h->uv[1];
+        error[i] = h->err;
     }
     if (n >= 0)
         *inside_at_start = (int8_t)top->inside;

@@ -34,7 +34,15 @@ typedef struct {
     int32_t shape;
     int32_t entering;
     int32_t pad;
-    double err;         /* bound on the rounding error of t (tracer.numerics) */
+    double err;         /* bound on the rounding error of t (tracer.numerics); shapes: their own root's */
+    /* From a shape routine to its primitive's error bound (tracer.intersect.hits.HitArrays): with n the
+     * gradient of the shape's function G on the surface, G's second derivative along the generic direction
+     * (0 for a flat face). */
+    double bend;
+    /* Shapes: the residual of the computed hit point, |G| to first order (|G| / |n| is its distance from
+     * the surface); after the primitive: how far the point may be from the surface in generic units (the
+     * shading's world_unit_normal maps it to the world). */
+    double offset;
 } Hit;
 
 #endif

@@ -1,4 +1,4 @@
-"""A CompiledScene as flat, contiguous arrays for the C core, and the ctypes mirror of its SceneDesc.
+"""A CompiledScene as flat, contiguous arrays for the C core, pointed to by a SceneDesc (contract.SceneDesc).
 
 Nothing is recomputed here that the NumPy path computes: inverse matrices, bounding spheres, polyhedron
 planes, mesh BVHs and material tables are taken from the compiled scene as they are, so both backends
@@ -15,14 +15,15 @@ from typing import Optional, Union
 
 import numpy as np
 
-from ..backend import MAX_CSG_DEPTH  # (make_tracer refuses deeper trees, for every backend)
-from ..compile import CompiledScene, Primitive, PrimitiveTable, boolean_box, boolean_depth, fold_tree
-from ..geometry.polyhedra import face_planes
-from ..intersect.mesh import NODE, MeshArrays
+from ..compile import (MAX_CSG_DEPTH, CompiledScene, Primitive, PrimitiveTable, boolean_box, boolean_depth,
+                       fold_tree)
 from .. import numerics, shapes
+from ..geometry.polyhedra import face_planes
+from ..intersect import mesh as mesh_module
+from ..intersect.mesh import NODE, MeshArrays
 from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
 from . import contract
-from .contract import EFFECT_BITS, KIND_CODES, OP_CODES
+from .contract import EFFECT_BITS, KIND_CODES, OP_CODES, SceneDesc
 
 #: Effects the C core implements; any other live effect sends the scene to the NumPy path.
 HANDLED_EFFECTS = frozenset(EFFECT_BITS) | {"csg"} | {f"shape:{kind}" for kind in KIND_CODES}
@@ -42,10 +43,6 @@ MESH_DTYPES = {"nodes": NODE, "tri_order": np.int32, "tri_vertex": np.int32, "tr
 _SHARED = contract.constant_values()
 TEX_PARAMS = _SHARED["TEX_PARAMS"]
 PRIM_PARAMS = _SHARED["PRIM_PARAMS"]
-
-
-#: The ctypes mirror of SceneDesc (made from contract.SCENE_DESC).
-SceneDesc = contract.SceneDesc
 
 
 
@@ -77,7 +74,6 @@ def unsupported_reason(compiled: CompiledScene) -> Optional[str]:
         if boolean_depth(obj) > MAX_CSG_DEPTH:
             return f"booleans nested more than {MAX_CSG_DEPTH} deep"
     if table.meshes:
-        from ..intersect import mesh as mesh_module
         missing = [c for c in MESH_CONSTANTS if not hasattr(mesh_module, c)]
         if missing:
             return f"mesh constants not found: {', '.join(missing)}"
@@ -364,11 +360,11 @@ class FlatScene:
         indices; the pictures (by address: each is already one contiguous array, no copy); the noise
         tables.  Nothing for a scene without textures.  With ``rows`` (tracer.edit: the pictures and the
         number of materials as they were), only those materials' rows.  Returns the number of pictures."""
-        from ..textures.noise import GRADIENTS, PERM
-
         a = self.arrays
         if "textures" not in compiled.effects:  # the C core never reads these tables then
             return 0
+        # deferred: the textures (and the noise tables made as they load) wait for the first textured scene
+        from ..textures.noise import GRADIENTS, PERM
         images = getattr(compiled.textures, "images", None) or {}
         numbers = sorted(images)
         materials = compiled.materials.materials
@@ -389,6 +385,7 @@ class FlatScene:
 
     def _texture_rows(self, materials, rows, numbers: list[int]) -> None:
         """The texture tables' rows of these materials (``numbers``: the pictures' texture numbers, in order)."""
+        # deferred: (as in _flatten_textures)
         from ..textures import image_repeats
         from ..textures.solid import SOLID_DEFAULTS, with_defaults
 
@@ -414,7 +411,6 @@ class FlatScene:
     def _mesh_constants(meshes) -> tuple:
         if not meshes:
             return (0.0,) * 5
-        from ..intersect import mesh as mesh_module
         return tuple(float(getattr(mesh_module, name)) for name in MESH_CONSTANTS)
 
     def _flatten_meshes(self, meshes: list[MeshArrays]) -> None:

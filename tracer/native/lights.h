@@ -183,18 +183,18 @@ static void physical_light(const Scene *S, Work *w, const ShadePoint *p, int64_t
         return;
     }
     const double *frame = D->light_frame + 9 * l, *lc = D->light_color + 3 * l;
-    double s[3], scale = 1.0, distance2 = 1.0;
+    double s[3], scale = 1.0, falloff = 1.0;
     if (kind == LIGHT_SUN) {
         for (int i = 0; i < 3; i++)
             s[i] = -frame[i];
     } else {
         const double *pos = D->light_pos + 3 * l;
         double to[3] = {pos[0] - p->point[0], pos[1] - p->point[1], pos[2] - p->point[2]};
-        distance2 = dot3(to, to);
-        double length = sqrt(distance2);
+        double distance2 = dot3(to, to), length = sqrt(distance2), radius = D->light_param[4 * l];
         for (int i = 0; i < 3; i++)
             s[i] = to[i] / length;
-        scale = 1.0 / distance2;
+        falloff = distance2 + radius * radius;  /* (Cycles': a disk of the radius facing the point) */
+        scale = 1.0 / falloff;
     }
     double lambert = dot3(s, p->facing);
     if (!(lambert > 0.0))
@@ -204,7 +204,7 @@ static void physical_light(const Scene *S, Work *w, const ShadePoint *p, int64_t
         double factor = spot_factor(-dot3(s, frame), param[1], param[2]);
         if (!(factor > 0.0))
             return;
-        scale = factor / distance2;
+        scale = factor / falloff;
     }
     double visible = 1.0;
     if (use_shadows) {

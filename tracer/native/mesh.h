@@ -14,24 +14,10 @@
 
 #include "core.h"
 #include "numeric.h"
-
-/* One BVH node (tracer.intersect.mesh.NODE): the box in single precision (rounded outward); an inner node
- * (count 0) has its children at offset and offset + 1 and was split along axis; a leaf holds the
- * triangles order[offset .. offset + count). */
-typedef struct {
-    float lo[3], hi[3];
-    int32_t offset;
-    uint16_t count;
-    int8_t axis;
-    uint8_t pad;
-} MeshNode;
-
-_Static_assert(sizeof(MeshNode) == 32 && offsetof(MeshNode, hi) == 12 && offsetof(MeshNode, offset) == 24 &&
-                   offsetof(MeshNode, count) == 28 && offsetof(MeshNode, axis) == 30,
-               "MeshNode must match tracer.intersect.mesh.NODE");
+#include "bvh_build.h"
 
 typedef struct {
-    const MeshNode *nodes;
+    const BvhNode *nodes;
     int64_t n_nodes;
     const int32_t *order;       /* leaf slot -> triangle */
     const int32_t *tri_vertex;  /* 3 per triangle */
@@ -75,7 +61,7 @@ static inline double nan_max(double a, double b) { return (isnan(a) || isnan(b))
 /* The node's box meets the ray for some t in [lower, upper]; a NaN slab (origin on a face plane of a
  * parallel ray) constrains nothing, as in TriangleMesh._slab.  A ray whose inverse direction (and origin)
  * is finite cannot make a NaN (box corners are finite), and then plain min/max give the same answer. */
-static inline int slab_hit(const MeshNode *node, const MeshRay *r, double lower, double upper)
+static inline int slab_hit(const BvhNode *node, const MeshRay *r, double lower, double upper)
 {
     const double *o = r->o, *inv = r->inv;
     if (r->finite_inv && !isnan(lower) && !isnan(upper)) {
@@ -280,7 +266,7 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        const MeshNode *nd = &m->nodes[node];
+        const BvhNode *nd = &m->nodes[node];
         if (!slab_hit(nd, &r, lower, best_t))
             continue;
         if (nd->count) {
@@ -320,7 +306,7 @@ static int mesh_any(const MeshView *m, const double *o, const double *d, double 
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        const MeshNode *nd = &m->nodes[node];
+        const BvhNode *nd = &m->nodes[node];
         if (!slab_hit(nd, &r, lower, upper))
             continue;
         if (nd->count) {
@@ -428,7 +414,7 @@ static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
-        const MeshNode *nd = &m->nodes[node];
+        const BvhNode *nd = &m->nodes[node];
         if (!slab_hit(nd, &r, -INFINITY, INFINITY))
             continue;
         if (nd->count) {

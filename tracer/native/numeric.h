@@ -11,6 +11,8 @@
 #include <math.h>
 #include <stdint.h>
 
+#include "core.h"
+
 /* fmin/fmax with their NaN rule (a NaN argument loses; np.fmin/np.fmax too), inlined: the libm calls are
  * slow in the inner loops. */
 static inline double fmin_nan(double a, double b) { return (a < b || b != b) ? a : b; }
@@ -75,6 +77,17 @@ static inline double feeler_to(const double *start, const double *target, double
     return ldexp(1.0, exponent);
 }
 
+/* feeler_to where the shading knows the distance to the target from the hit point the feeler starts near:
+ * the scaling is looked for only beyond FEELER_REACH (numerics.feeler_to with lengths). */
+static inline double feeler_to_known(const double *start, const double *target, double length, double *d)
+{
+    if (length > 0x1p64)
+        return feeler_to(start, target, d);
+    for (int i = 0; i < 3; i++)
+        d[i] = target[i] - start[i];
+    return 1.0;
+}
+
 /* p' = M p for an affine row-major 4x4 */
 static inline void affine_point(const double *m, const double *p, double *out)
 {
@@ -109,8 +122,23 @@ static inline void generic_to_world_vector(const double *a, const double *v, dou
     out[2] = (c02 * v[0] + c12 * v[1] + c22 * v[2]) / det;
 }
 
-/* tracer.numerics.generic_time_error for the hits of one generic ray, its per-ray parts computed once.
- * `r` is the primitive's prim_rounding: rounding / size, size, |inverse|, |translation|. */
+/* tracer.numerics.crossing_shift: how far (in t) a crossing of a line with a surface G = 0 can move when G
+ * along the line is off by `delta`, where the line crosses at rate `slope` (|dG/dt|) and G bends by `bend`
+ * (|d^2G/dt^2|): at most delta slope / (slope^2 - bend delta), which is delta / slope on a flat face and at
+ * most 2 delta / slope, or where the root pair may be a double root, sqrt(2 delta / bend).  No curvature is
+ * assumed: a flat face at grazing incidence gets delta / slope. */
+static inline double crossing_shift(double delta, double slope, double bend)
+{
+    if (!(delta > 0.0))
+        return 0.0;
+    double squared = slope * slope;
+    if (squared > 2.0 * bend * delta)  /* (2 / (1 + sqrt(1 - x)) <= 1 / (1 - x / 2): no square root) */
+        return delta * slope / (squared - bend * delta);
+    return sqrt(2.0 * delta / bend);
+}
+
+/* tracer.numerics.point_errors and time_errors for the hits of one generic ray, its per-ray parts computed
+ * once.  `r` is the primitive's prim_rounding: rounding / size, size, |inverse|, |translation|. */
 typedef struct {
     double base;   /* the transformed origin's size before cancellation + |centred origin| + size */
     double reach;  /* max |d_generic| */
@@ -128,43 +156,49 @@ static inline void error_frame(const double *o, const double *og, const double *
     f->size = r[1];
 }
 
-/* The relative point error E of a hit at t. */
+/* The generic point error E of a hit at t, relative to the shape's size (the line's, across it). */
 static inline double point_error(const ErrorFrame *f, double t)
 {
     return f->rate * (f->base + (isfinite(t) ? fabs(t) : 0.0) * f->reach);
 }
 
-/* The bound on t's error from E and the generic normal: size E / (|d| max(cos phi, sqrt E)), with one square
- * root and one division: (|d| cos phi)^2 = (n.d)^2 / |n|^2, so the bound is size E sqrt(|n|^2 / max((n.d)^2,
- * |d|^2 E |n|^2)); a zero normal counts as grazing. */
-static inline double time_error(const ErrorFrame *f, double error, const double *dg, const double *n)
+/* The bound on t's error beyond the shape's own root error (Hit.err), given |n| (`length`): G along the line
+ * is off by |n| size E (the line's error across the surface), and the crossing moves by crossing_shift of
+ * that (tracer.numerics.time_errors); a zero normal counts as grazing. */
+static inline double time_error_of(const ErrorFrame *f, double error, const double *dg, const Hit *h, double nn,
+                                   double length)
 {
-    double along = dot3(n, dg), nn = dot3(n, n);
     if (!(nn > 0.0))
         return f->size * sqrt(error / f->dd);
-    double crossing = along * along, grazing = f->dd * error * nn;
-    return f->size * error * sqrt(nn / (crossing > grazing ? crossing : grazing));
+    return crossing_shift(length * (f->size * error), fabs(dot3(h->n, dg)), fabs(h->bend));
 }
 
-/* Is delta > time_error(f, error, dg, n)?  The same test without the square root, for the many candidate
- * hits whose bound is only compared: delta |d| max(cos, sqrt E) > size E. */
-static inline int exceeds_time_error(const ErrorFrame *f, double delta, double error, const double *dg, const double *n)
+static inline double time_error(const ErrorFrame *f, double error, const double *dg, const Hit *h)
 {
-    if (!(delta > 0.0))
-        return 0;
-    double limit = f->size * error;
-    if (delta * delta * f->dd > f->size * limit)
-        return 1;  /* delta |d| sqrt(E) > size E: the usual case, a hit far from where the ray starts */
-    double along = dot3(n, dg);
-    return delta * delta * (along * along) > limit * limit * dot3(n, n);  /* delta |n.d| / |n| > size E */
+    double nn = dot3(h->n, h->n);
+    return time_error_of(f, error, dg, h, nn, sqrt(nn));
 }
 
-/* tracer.numerics.offset_distance: how far a secondary ray starts from a hit, along the unit normal. */
-static inline double offset_distance(double t, double t_error, const double *o, const double *d, double offset_ulps)
+/* Is gap > time_error(f, error, dg, h)?  `along` is n . dg.  The bound is at most 2 |n| size E / |n.d|: most
+ * hits, far from where the ray starts, are decided without a square root. */
+static inline int exceeds_time_error(const ErrorFrame *f, double gap, double error, const double *dg, const Hit *h,
+                                     double along)
+{
+    if (!(gap > 0.0))
+        return 0;
+    double line = f->size * error;
+    if (gap * gap * (along * along) > 4.0 * dot3(h->n, h->n) * (line * line))
+        return 1;
+    return gap > time_error(f, error, dg, h);
+}
+
+/* Where a secondary ray starts (tracer.numerics.offset_distance): along the unit normal by the hit's
+ * offset (its point's distance from the surface, bounded by the primitive) plus the rounding of the world
+ * point o + t d and of the offset origin. */
+static inline double offset_distance(double offset, double t, const double *o, const double *d, double offset_ulps)
 {
     double u = DBL_EPSILON / 2.0, g = offset_ulps * u / (1.0 - offset_ulps * u);
-    double speed = sqrt(dot3(d, d));
-    return t_error * speed + g * (max_abs3(o) + fabs(t) * max_abs3(d));
+    return offset + g * (max_abs3(o) + fabs(t) * max_abs3(d));
 }
 
 /* Roots of a t^2 + 2 b t + c = 0 given disc = b^2 - a c, as tracer.intersect.quadratic.solve_quadratic:

@@ -154,7 +154,7 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
                 continue;
             w->counts[RAY_SHADOW]++;
             double to_light[3];
-            double reach = feeler_to(p->feeler, lp, to_light);
+            double reach = feeler_to_known(p->feeler, lp, sl, to_light);
             if (scene_occluded(S, w, p->feeler, to_light, reach, l < SHADOW_CACHE ? &w->last_blocker[l] : NULL))
                 continue;
         }
@@ -210,6 +210,37 @@ static void fresnel_weights(const SceneDesc *D, const double *d, const Hit *h, i
     *kt = *kt * (1.0 - reflectance);
 }
 
+/* The ray budget (tracer.trace: Tracer._take_rays is the NumPy side, the same arithmetic): a camera ray's
+ * tree traces at most Work.ray_budget reflected and transmitted rays, whatever the depth and the weights (two
+ * mirrors of reflectivity 1 facing each other, or glass of reflectivity and transparency 0.95, double the rays
+ * at every level, and the cutoff never stops them).  A ray's descendants may bring w->rays_used up to `limit`
+ * (w->ray_limit when the ray was shaded).  Of two wanted children, the first (the mirror ray) may give its own
+ * descendants a part of what is left after both children's rays in proportion to its weight, but at least a
+ * chain as long as the levels left (`chain`); the second child gets everything left after the first's
+ * subtree.  A wanted ray over the budget is not traced (counted as SKIP_BUDGET).  Returns whether to trace
+ * the ray; if so, it is counted as used and w->ray_limit is set for its descendants. */
+static inline int take_ray(Work *w, int64_t limit, int sibling_wanted, double weight, double sibling_weight,
+                           int64_t chain)
+{
+    int64_t left = limit - w->rays_used;
+    if (left <= 0) {
+        w->counts[SKIP_BUDGET]++;
+        return 0;
+    }
+    int64_t share = left - 1;
+    if (sibling_wanted) {
+        double ratio = weight / (weight + sibling_weight);
+        if (!(ratio >= 0.0 && ratio <= 1.0))  /* (weights of 0 or infinity: an even split) */
+            ratio = 0.5;
+        int64_t by_weight = (int64_t)floor((double)(left - 2) * ratio);
+        int64_t by_depth = left - 2 < chain ? left - 2 : chain;
+        share = by_weight > by_depth ? by_weight : by_depth;
+    }
+    w->rays_used++;
+    w->ray_limit = w->rays_used + (share > 0 ? share : 0);
+    return 1;
+}
+
 /* Tracer._secondary: the reflected and transmitted colours, each times its coefficient, added to `color`. */
 static inline __attribute__((always_inline)) void
 secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, const double *point,
@@ -250,10 +281,17 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
     double mirrored[3] = {0.0, 0.0, 0.0}, mirror[3], start[3];
     if (shared)
         w->counts[SKIP_SHARED_TIR]++;
-    if (reflects && worth_tracing(w, weight * (shared ? kr_max + kt : kr_max))) {
+    /* Which of the two rays are wanted (the cutoff), decided before either is traced: they share what is left
+     * of the ray budget (take_ray). */
+    double mirror_weight = weight * (shared ? kr_max + kt : kr_max), through_weight = weight * kt;
+    int want_mirror = reflects && worth_tracing(w, mirror_weight);
+    int want_through = transmits && !shared && worth_tracing(w, through_weight);
+    int64_t limit = w->ray_limit, chain = D->max_depth - level;
+    if (want_mirror && take_ray(w, limit, want_through, mirror_weight, through_weight, chain)) {
         mirror_ray(d, facing, point, offset, mirror, start);
         w->counts[RAY_REFLECTION]++;
-        self(S, w, start, mirror, level + 1, media, weight * (shared ? kr_max + kt : kr_max), mirrored);
+        self(S, w, start, mirror, level + 1, media, mirror_weight, mirrored);
+        w->ray_limit = limit;
     }
     if (reflects)
         for (int i = 0; i < 3; i++)
@@ -265,11 +303,11 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
         c[0] = mirrored[0];
         c[1] = mirrored[1];
         c[2] = mirrored[2];
-    } else if (worth_tracing(w, weight * kt)) {
+    } else if (want_through && take_ray(w, limit, 0, through_weight, 0.0, chain)) {
         if (total_internal) {  /* total internal reflection: stays in the medium it came from */
             mirror_ray(d, facing, point, offset, mirror, start);
             w->counts[RAY_REFLECTION]++;
-            self(S, w, start, mirror, level + 1, media, weight * kt, c);
+            self(S, w, start, mirror, level + 1, media, through_weight, c);
         } else {
             double along = ratio * cos1 - sqrt(cos2_squared), next[3];
             for (int i = 0; i < 3; i++) {
@@ -277,8 +315,9 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
                 start[i] = point[i] - offset * facing[i];
             }
             w->counts[RAY_REFRACTION]++;
-            self(S, w, start, next, level + 1, &after, weight * kt, c);
+            self(S, w, start, next, level + 1, &after, through_weight, c);
         }
+        w->ray_limit = limit;
     }
     for (int i = 0; i < 3; i++)
         color[i] += kt * c[i];
@@ -295,6 +334,10 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     out[0] = D->background[0];
     out[1] = D->background[1];
     out[2] = D->background[2];
+    if (stop_requested(w)) {  /* a signal or a cancel: nothing more is traced, the colours are dropped */
+        w->stopped = 1;
+        return;
+    }
     Hit h;
     int64_t obj;
     if (!scene_first(S, w, o, d, &h, &obj))
@@ -302,7 +345,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     ShadePoint p;
     for (int i = 0; i < 3; i++)
         p.point[i] = o[i] + h.t * d[i];
-    world_unit_normal(S, &h, p.facing);
+    double gap = world_unit_normal(S, &h, p.facing);
     if (dot3(p.facing, d) > 0.0) {  /* shade the side the ray arrives on */
         p.facing[0] = -p.facing[0];
         p.facing[1] = -p.facing[1];
@@ -311,7 +354,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     p.mat = D->prim_material[h.shape];
     p.inside_of = h.entering ? -1 : obj;
     /* secondary rays start off the surface by the bound on the hit point's rounding error */
-    double offset = offset_distance(h.t, h.err, o, d, D->tol_offset_ulps);
+    double offset = offset_distance(gap, h.t, o, d, D->tol_offset_ulps);
     const double *ambient = D->mat_ambient + 3 * p.mat, *emissive = D->mat_emissive + 3 * p.mat;
     p.diffuse = D->mat_diffuse + 3 * p.mat;
     double textured_ambient[3], textured_diffuse[3];

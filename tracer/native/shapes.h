@@ -13,15 +13,17 @@
 /* TORUS_RING and TORUS_TUBE come from contract.h (via core.h). */
 
 /* analytic.agree_with_crossing for one hit: a normal on the wrong side of the ray loses its component
- * along the ray. */
-static inline void agree_with_crossing(Hit *h, const double *d)
+ * along the ray.  Returns n . d, after. */
+static inline double agree_with_crossing(Hit *h, const double *d)
 {
     double along = dot3(h->n, d);
     if (h->entering ? along > 0.0 : along < 0.0) {
         double k = along / dot3(d, d);
         for (int i = 0; i < 3; i++)
             h->n[i] -= k * d[i];
+        along = dot3(h->n, d);
     }
+    return along;
 }
 
 static inline void set_hit(Hit *h, double t, int entering, double nx, double ny, double nz, int part)
@@ -35,6 +37,8 @@ static inline void set_hit(Hit *h, double t, int entering, double nx, double ny,
     h->shape = -1;
     h->entering = entering;
     h->err = 0.0;
+    h->bend = 0.0;  /* a flat face, unless the shape says otherwise */
+    h->offset = 0.0;
 }
 
 /* Roots -b/a -+ sqrt(disc)/a about the line's point nearest the centre (analytic.intersect_sphere). */
@@ -50,6 +54,10 @@ static int hits_sphere(const double *o, const double *d, Hit *out)
     double lo = mid - half, hi = mid + half;
     set_hit(&out[0], lo, 1, o[0] + lo * d[0], o[1] + lo * d[1], o[2] + lo * d[2], 0);
     set_hit(&out[1], hi, 0, o[0] + hi * d[0], o[1] + hi * d[1], o[2] + hi * d[2], 0);
+    for (int i = 0; i < 2; i++) {  /* G = (|p|^2 - 1) / 2: n = p, G'' = |d|^2 */
+        out[i].bend = a;
+        out[i].offset = 0.5 * fabs(dot3(out[i].n, out[i].n) - 1.0);
+    }
     return 2;
 }
 
@@ -82,6 +90,8 @@ static int hits_cube(const double *o, const double *d, Hit *out)
     n_out[ao] = s_out;
     set_hit(&out[0], t_in, 1, n_in[0], n_in[1], n_in[2], 2 * ai + (s_in < 0.0));
     set_hit(&out[1], t_out, 0, n_out[0], n_out[1], n_out[2], 2 * ao + (s_out > 0.0));
+    out[0].offset = fabs(fabs(o[ai] + t_in * d[ai]) - 1.0);  /* the point's distance from its face's plane */
+    out[1].offset = fabs(fabs(o[ao] + t_out * d[ao]) - 1.0);
     return 2;
 }
 
@@ -102,6 +112,7 @@ static int hits_z_plane(const double *o, const double *d, Hit *out, int bounded,
     set_hit(&out[0], t, d[2] < 0.0, 0.0, 0.0, 1.0, 0);
     out[0].uv[0] = px;
     out[0].uv[1] = py;
+    out[0].offset = fabs(o[2] + t * d[2]);
     return 1;
 }
 
@@ -131,17 +142,57 @@ static int hits_plane(const double *o, const double *d, Hit *out, int *inside)
     return hits_z_plane(o, d, out, 0, 0.0);
 }
 
-static inline void tapered_normal(const double *p, double k, double *n)
+/* The sizes of the terms of G = (x^2 + y^2 - (1 + k z)^2) / 2 along the line o + t d, which is
+ * (a t^2 + 2 b t + c) / 2 with a, b, c computed from o: G's rounding at t is gamma times wall_terms_at
+ * (analytic.wall_term_sizes).  (w = 1 + k z at o is off by its terms' size times the rounding, which near
+ * the apex is not small.) */
+typedef struct {
+    double a, b, c;
+} WallTerms;
+
+static inline WallTerms wall_term_sizes(const double *o, const double *d, double k)
 {
-    double radius = 1.0 + k * p[2];
-    n[0] = p[0];
-    n[1] = p[1];
-    n[2] = -k * radius;
+    double w0 = fabs(1.0 + k * o[2]), terms = 1.0 + fabs(k * o[2]);
+    WallTerms m;
+    m.a = d[0] * d[0] + d[1] * d[1] + k * k * d[2] * d[2];
+    m.b = fabs(o[0] * d[0]) + fabs(o[1] * d[1]) + fabs(k * d[2]) * (w0 + terms);
+    m.c = o[0] * o[0] + o[1] * o[1] + w0 * (w0 + 2.0 * terms);
+    return m;
+}
+
+static inline double wall_terms_at(const WallTerms *m, double t)
+{
+    double at = fabs(t);
+    return 0.5 * ((m->a * at + 2.0 * m->b) * at + m->c);
+}
+
+/* A wall hit of the line o + t d at t (analytic.wall_hits): the outward normal at the azimuth of the point p,
+ * scaled by p's distance rho from the axis, (x, y, -k rho): the gradient of G at the wall point of that
+ * azimuth and height.  Every point of a generator has the same normal, so it is known however far p is off
+ * the wall along it (near a cone's apex 1 - z cancels); on the axis itself the axis is the only sensible
+ * direction.  G bends by a; the root's own error is how far G's rounding moves it (crossing_shift of gamma
+ * times its terms, which near the apex, where |grad G| is as small as the distance to the apex, the point
+ * error no longer covers); the residual is the point's distance from the wall times |n| = rho sqrt(1 + k^2):
+ * that of (rho, z) from the line rho = 1 + k z in the plane through the axis, or, where its foot
+ * (rho, z) - (rho - w) (1, -k) / (1 + k^2) is past a cone's apex, its distance from the apex. */
+static inline void wall_hit(const double *o, const double *d, double k, double a, double b, double t, int entering,
+                            const WallTerms *m, double gamma, Hit *h)
+{
+    double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+    double rho = sqrt(p[0] * p[0] + p[1] * p[1]), w = 1.0 + k * p[2];
+    double n[3] = {p[0], p[1], -k * rho};
     if (dot3(n, n) < 1e-300) {
         n[0] = 0.0;
         n[1] = 0.0;
         n[2] = 1.0;
     }
+    set_hit(h, t, entering, n[0], n[1], n[2], 0);
+    h->bend = a;
+    h->err = crossing_shift(gamma * wall_terms_at(m, t), fabs(a * t + b), fabs(a));
+    if (rho * k * k + w >= 0.0)
+        h->offset = fabs(rho - w) * rho;
+    else
+        h->offset = sqrt(rho * rho + (w / k) * (w / k)) * rho * sqrt(1.0 + k * k);
 }
 
 /* Where the line is inside the wall's double cone a t^2 + 2 b t + c <= 0, clipped to the slab
@@ -175,10 +226,23 @@ static int wall_interval(double a, double b, double c, double slab_lo, double sl
     return 1;
 }
 
-/* Tapered cylinder with top radius s: wall (part 0), base disc z = 0 (part 1), cap disc z = 1 (part 2). */
-static int hits_tapered(const double *o, const double *d, double s, Hit *out)
+/* Tapered cylinder with top radius s: wall (part 0), base disc z = 0 (part 1), cap disc z = 1 (part 2).
+ * Where the apex (0, 0, -1/k) is within two units of the base, the line is taken from its point nearest the
+ * apex (analytic.apex_shift): near the apex the wall's function is as small as the distance to it, and
+ * computed from a far origin its roots lost as many digits (10^8 from the apex: half of them). */
+static int hits_tapered(const double *centred, const double *d, double s, double hit_ulps, Hit *out)
 {
-    double k = s - 1.0;
+    double k = s - 1.0, u = DBL_EPSILON / 2.0, gamma = hit_ulps * u / (1.0 - hit_ulps * u);
+    double o[3] = {centred[0], centred[1], centred[2]}, shift = 0.0;
+    if (fabs(k) >= 0.5) {
+        double apart[3] = {o[0], o[1], o[2] + 1.0 / k};
+        double along = -dot3(apart, d) / dot3(d, d);
+        if (isfinite(along)) {
+            shift = along;
+            for (int i = 0; i < 3; i++)
+                o[i] = centred[i] + along * d[i];
+        }
+    }
     double r0 = 1.0 + k * o[2];
     double a = d[0] * d[0] + d[1] * d[1] - k * k * d[2] * d[2];
     double b = o[0] * d[0] + o[1] * d[1] - k * d[2] * r0;
@@ -200,19 +264,24 @@ static int hits_tapered(const double *o, const double *d, double s, Hit *out)
     /* An end on the slab's boundary is a cap (ties too: a cone's apex is its cap's point). */
     int part_in = t_in <= slab_lo ? (rising ? 1 : 2) : 0;
     int part_out = t_out >= slab_hi ? (rising ? 2 : 1) : 0;
+    /* A pair with a wall crossing, between the wall's roots, counts only where the line is provably inside
+     * between its ends (the tangent line's touching pair, a line through a cone's apex). */
+    WallTerms m = wall_term_sizes(o, d, k);
+    if ((part_in == 0 || part_out == 0) && a >= 0.0) {
+        double mid = 0.5 * (t_in + t_out);
+        if (!(0.5 * ((a * mid + 2.0 * b) * mid + c) < -gamma * wall_terms_at(&m, mid)))
+            return 0;
+    }
     for (int end = 0; end < 2; end++) {
         double t = end ? t_out : t_in;
         int part = end ? part_out : part_in;
-        double n[3];
         if (part == 0) {
-            double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
-            tapered_normal(p, k, n);
-        } else {
-            n[0] = 0.0;
-            n[1] = 0.0;
-            n[2] = part == 1 ? -1.0 : 1.0;
+            wall_hit(o, d, k, a, b, t, !end, &m, gamma, &out[end]);
+        } else {  /* a cap: its residual is the point's distance from its plane */
+            set_hit(&out[end], t, !end, 0.0, 0.0, part == 1 ? -1.0 : 1.0, part);
+            out[end].offset = fabs(o[2] + t * d[2] - (part == 1 ? 0.0 : 1.0));
         }
-        set_hit(&out[end], t, !end, n[0], n[1], n[2], part);
+        out[end].t = t + shift;
     }
     return 2;
 }
@@ -240,6 +309,12 @@ static int hits_polyhedron(const double *o, const double *d, const double *plane
     const double *a = planes + 4 * i_in, *b = planes + 4 * i_out;
     set_hit(&out[0], t_in, 1, a[0], a[1], a[2], (int)i_in);
     set_hit(&out[1], t_out, 0, b[0], b[1], b[2], (int)i_out);
+    for (int end = 0; end < 2; end++) {  /* the point's distance from its face's plane */
+        const double *f = end ? b : a;
+        double t = end ? t_out : t_in;
+        double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+        out[end].offset = fabs(dot3(p, f) - f[3]);
+    }
     return 2;
 }
 
@@ -316,8 +391,8 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
     double wr[4], wi[4];
     if (hessenberg_eigenvalues(h, 4, wr, wi) != 0)
         return 0;
-    /* Real eigenvalues count; a complex pair only where the quartic's minimum next to it is below the
-     * rounding bound (then as its two nearby roots, or a touching pair). See tracer/intersect/torus.py. */
+    /* Real eigenvalues count; a complex pair only where the quartic's minimum next to it is provably below
+     * zero (then as its two nearby roots). See tracer/intersect/torus.py. */
     double s[4];
     int m_count = 0;
     for (int i = 0; i < 4; i++) {
@@ -330,7 +405,9 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
             double centre = torus_minimum_near(wr[i], c, newton_steps);
             double depth = quartic_at(centre, c);
             double curvature = (12.0 * centre + 6.0 * c[0]) * centre + 2.0 * c[1];
-            if (!(fabs(depth) <= torus_residual_bound(centre, m, residual_ulps)) || !(curvature > 0.0))
+            /* a proven pair of real roots split by no more than twice the imaginary part (torus.py) */
+            if (!(depth < -torus_residual_bound(centre, m, residual_ulps)) ||
+                !(-depth <= 2.0 * curvature * wi[i] * wi[i]) || !(curvature > 0.0))
                 continue;
             double half = sqrt((depth < 0.0 ? -depth : 0.0) / (0.5 * curvature));
             start = wi[i] > 0.0 ? centre - half : centre + half;
@@ -344,7 +421,7 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
     for (int i = m_count; i < 4; i++)
         s[i] = INFINITY;
     /* Inside the tube between an entry and its exit, outside between an exit and the next entry: a pair
-     * the quartic's sign (beyond rounding) disagrees with is no crossing. */
+     * whose sign the quartic does not prove beyond rounding is no crossing. */
     static const int pairs[3][3] = {{0, 1, 1}, {2, 3, 1}, {1, 2, 0}};
     for (int k = 0; k < 3; k++) {
         int first = pairs[k][0], second = pairs[k][1];
@@ -352,7 +429,7 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
             continue;
         double mid = 0.5 * (s[first] + s[second]);
         double value = quartic_at(mid, c), limit = torus_residual_bound(mid, m, residual_ulps);
-        if (pairs[k][2] ? value > limit : value < -limit)
+        if (pairs[k][2] ? !(value < -limit) : !(value > limit))
             s[first] = s[second] = INFINITY;
     }
     for (int i = 1; i < 4; i++)
@@ -377,6 +454,9 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
         double slope = fabs(((4.0 * s[i] + 3.0 * c[0]) * s[i] + 2.0 * c[1]) * s[i] + c[2]);
         double curvature = fabs((12.0 * s[i] + 6.0 * c[0]) * s[i] + 2.0 * c[1]);
         out[n].err = fmin_nan(limit / slope, sqrt(2.0 * limit / curvature)) / speed;
+        /* G is the quartic itself (n its gradient): it bends by speed^2 times its curvature in s */
+        out[n].bend = curvature * speed * speed;
+        out[n].offset = fabs(kk * kk - 4.0 * TORUS_RING * TORUS_RING * (p[0] * p[0] + p[1] * p[1]));
         n++;
     }
     return n;
@@ -405,12 +485,94 @@ static int hits_paraboloid(const double *o, const double *d, Hit *out)
     for (int end = 0; end < 2; end++) {
         double t = end ? t_out : t_in;
         int part = end ? t_out >= slab_hi : t_in <= slab_lo;  /* an end on z = 1 is the cap (ties too) */
-        if (part)
+        double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+        if (part) {
             set_hit(&out[end], t, !end, 0.0, 0.0, 1.0, 1);
-        else
-            set_hit(&out[end], t, !end, 2.0 * (o[0] + t * d[0]), 2.0 * (o[1] + t * d[1]), -1.0, 0);
+            out[end].offset = fabs(p[2] - 1.0);
+        } else {  /* G = x^2 + y^2 - z (n its gradient) bends by 2 a */
+            set_hit(&out[end], t, !end, 2.0 * p[0], 2.0 * p[1], -1.0, 0);
+            out[end].bend = 2.0 * a;
+            out[end].offset = fabs(p[0] * p[0] + p[1] * p[1] - p[2]);
+        }
     }
     return 2;
+}
+
+/* The generic hyperboloid of one sheet x^2 + y^2 - (1 - S^2) z^2 <= S^2, -1 <= z <= 1 (intersect/hyperboloid.py):
+ * wall (part 0), bottom cap z = -1 (part 1), top cap z = 1 (part 2); S is the waist.  Up to two intervals of
+ * the line inside (a line steeper than the wall's asymptotes can cross the waist's hole): up to 4 hits. */
+static int hits_hyperboloid(const double *o, const double *d, double waist, Hit *out)
+{
+    double w2 = waist * waist;
+    double k = 1.0 - w2;
+    double a = d[0] * d[0] + d[1] * d[1] - k * d[2] * d[2];
+    double b = o[0] * d[0] + o[1] * d[1] - k * o[2] * d[2];
+    double c = o[0] * o[0] + o[1] * o[1] - k * o[2] * o[2] - w2;
+    double t_bottom = (-1.0 - o[2]) / d[2], t_top = (1.0 - o[2]) / d[2];
+    int rising = d[2] > 0.0;
+    double slab_lo, slab_hi;
+    if (d[2] == 0.0) {
+        int in_slab = o[2] >= -1.0 && o[2] <= 1.0;
+        slab_lo = in_slab ? -INFINITY : NAN;
+        slab_hi = in_slab ? INFINITY : NAN;
+    } else {
+        slab_lo = rising ? t_bottom : t_top;
+        slab_hi = rising ? t_top : t_bottom;
+    }
+    /* hyperboloid._inside_intervals: a >= 0 between the roots, a < 0 outside them */
+    double lo = NAN, hi = NAN;
+    int real = solve_quadratic(a, b, c, b * b - a * c, &lo, &hi);
+    double between_lo = real ? lo : NAN, between_hi = real ? hi : NAN;
+    if (a == 0.0 && b == 0.0) {  /* no t at all: inside everywhere or nowhere */
+        between_lo = c <= 0.0 ? -INFINITY : NAN;
+        between_hi = c <= 0.0 ? INFINITY : NAN;
+    }
+    double t[4];
+    if (a < 0.0) {
+        t[0] = slab_lo;
+        t[1] = real ? nan_min2(lo, slab_hi) : slab_hi;
+        t[2] = real ? nan_max2(hi, slab_lo) : NAN;
+        t[3] = real ? slab_hi : NAN;
+    } else {
+        t[0] = nan_max2(between_lo, slab_lo);
+        t[1] = nan_min2(between_hi, slab_hi);
+        t[2] = t[3] = NAN;
+    }
+    if (t[0] <= t[1] && t[2] <= t[3] && t[1] >= t[2]) {  /* touching intervals are one */
+        t[1] = t[3];
+        t[2] = t[3] = NAN;
+    }
+    int n = 0;
+    for (int interval = 0; interval < 2; interval++) {
+        double t_in = t[2 * interval], t_out = t[2 * interval + 1];
+        if (!(t_in <= t_out) || !isfinite(t_in) || !isfinite(t_out))
+            continue;
+        /* An end on the slab's boundary is a cap (ties too). */
+        int part_in = t_in <= slab_lo ? (rising ? 1 : 2) : 0;
+        int part_out = t_out >= slab_hi ? (rising ? 2 : 1) : 0;
+        for (int end = 0; end < 2; end++) {
+            double at = end ? t_out : t_in;
+            int part = end ? part_out : part_in;
+            double p[3] = {o[0] + at * d[0], o[1] + at * d[1], o[2] + at * d[2]};
+            double nv[3] = {p[0], p[1], -k * p[2]};  /* half the gradient */
+            if (part) {
+                nv[0] = nv[1] = 0.0;
+                nv[2] = part == 1 ? -1.0 : 1.0;
+            } else if (dot3(nv, nv) < 1e-300) {  /* the double cone's apex */
+                nv[0] = nv[1] = 0.0;
+                nv[2] = 1.0;
+            }
+            set_hit(&out[n], at, !end, nv[0], nv[1], nv[2], part);
+            if (part) {  /* G = (x^2 + y^2 - k z^2 - S^2) / 2 bends by a; the residuals are |G| and |z -+ 1| */
+                out[n].offset = fabs(p[2] - (part == 1 ? -1.0 : 1.0));
+            } else {
+                out[n].bend = a;
+                out[n].offset = 0.5 * fabs(p[0] * p[0] + p[1] * p[1] - k * p[2] * p[2] - w2);
+            }
+            n++;
+        }
+    }
+    return n;
 }
 
 #endif

@@ -228,6 +228,13 @@ static void wall_and_discs_uv(double x, double y, double z, int32_t part, double
     *wrap_v = 0;
 }
 
+/* hyperboloid.hyperboloid_uv: the tapered cylinders' mapping with the wall's height -1..1 as 0..1. */
+static void hyperboloid_uv(double x, double y, double z, int32_t part, double *u, double *v, int *wrap_u,
+                           int *wrap_v)
+{
+    wall_and_discs_uv(x, y, (z + 1.0) / 2.0, part, u, v, wrap_u, wrap_v);
+}
+
 /* surface_uv for one generic point on a primitive of kind `kind`, hit on `part`. */
 static void surface_uv(int kind, const double *p, int32_t part, double *u, double *v, int *wrap_u, int *wrap_v)
 {

@@ -27,8 +27,9 @@ from typing import Optional, Union
 import numpy as np
 
 from .. import shapes as shape_registry
-from . import statements
+from ..camera import camera_problem
 from ..model import Camera, Light, Material, MaterialRows, Scene, ShapeTable
+from . import statements
 
 #: Whether this process's math.cos and math.sin are the C core's cos and sin (one C library on Linux and macOS;
 #: on Windows Python's and the core's may differ in the last bit): otherwise the C reader declines rotations
@@ -74,12 +75,11 @@ class _Setup:
 @functools.lru_cache(maxsize=1)
 def _setup() -> Optional[_Setup]:
     """None when the C core is not loaded (then the Python reader reads everything)."""
-    from .. import native  # here, not at the top: the parser must not import the C core for small texts
+    from .. import native  # deferred: the parser must not load the C core for small texts
     if native.load_error is not None or native._lib is None:
         return None
     lib = native._lib  # (its functions declared from tracer/native/contract.py's FUNCTIONS)
-    from . import parser
-    _check_material_rows(lib.rt_sdl_material_width(), parser.MAX_PARAMETERS)
+    _check_material_rows(lib.rt_sdl_material_width(), statements.MAX_PARAMETERS)
     vocabulary = statements.vocabulary()  # (the library speaks its actions' codes: the contract's digest)
     words = b"".join(word.encode("ascii") + b"\0" for word in vocabulary)
     codes = np.array(list(vocabulary.values()), dtype=np.int32).reshape(-1, 3)
@@ -238,7 +238,6 @@ def read(text: str, file: Optional[str] = None) -> Optional[Scene]:
     columns = scan(text)
     if not isinstance(columns, Columns):
         return None
-    from .parser import camera_problem
     with np.errstate(over="ignore", invalid="ignore"):  # (huge numbers: the checks' answer is what counts)
         for numbers in columns.cameras:  # one the Python reader would refuse: its message is the parser's
             if camera_problem(numbers[0:3], numbers[3:6], numbers[6:9], numbers[9]) is not None:

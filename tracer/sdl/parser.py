@@ -34,6 +34,7 @@ import numpy as np
 
 from .. import shapes, transforms
 from ..bulk import collector_paused
+from ..camera import camera_problem
 from ..errors import SDLError
 from ..geometry import builtin_mesh  # (its home; imported under this name by the add-on and tests)
 from ..meshio import read_3vn
@@ -42,7 +43,8 @@ from ..model import (ANALYTIC_KINDS, CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, PO
 from ..userfiles import read_text
 from .lexer import Tokens, to_float, to_floats
 from .lights import LIGHT_USAGE, argument_count, light_of
-from .statements import COLOR_MATERIAL, FLOAT_MATERIAL, STATEMENTS  # noqa: F401 - (the writer reads them here)
+# (the writer reads COLOR_MATERIAL and FLOAT_MATERIAL here)
+from .statements import COLOR_MATERIAL, FLOAT_MATERIAL, MAX_PARAMETERS, STATEMENTS  # noqa: F401
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -50,8 +52,6 @@ PathLike = Union[str, "os.PathLike[str]"]
 # Keyword tables (tracer/sdl/statements.py has every statement; the writer uses them too, so that both sides
 # agree on spelling).
 
-#: The most numbers ``parameters`` may give (as in the book's material record).
-MAX_PARAMETERS = 10
 #: Image numbers ``makePixmap`` accepts.
 PIXMAP_RANGE = range(16)
 CSG_OPS = CSG.OPS
@@ -792,18 +792,6 @@ def _chain(names: tuple[str, ...], shown: int = 6) -> str:
     return " -> ".join(names)
 
 
-def camera_problem(eye: Sequence[float], look: Sequence[float], up: Sequence[float], angle: float) -> Optional[str]:
-    """Why a camera statement's numbers make no camera, or None if they do."""
-    forward = np.subtract(look, eye)
-    if not np.any(forward):
-        return "camera eye and look-at point are the same"
-    if np.linalg.norm(np.cross(forward, up)) <= 1e-12 * np.linalg.norm(forward) * np.linalg.norm(up):
-        return "camera up vector is zero or points along the view direction"
-    if not 0.0 < angle < 180.0:
-        return "camera view angle must be between 0 and 180 degrees"
-    return None
-
-
 def _clearly_invertible(matrix: np.ndarray) -> bool:
     """A cheap, pure-Python sufficient condition for is_singular(matrix) to be False.
 
@@ -877,7 +865,7 @@ def parse_sdl(text: str, base_dir: Optional[PathLike] = None, file: Optional[str
     # overflow warning on the way would only repeat that.
     with collector_paused(), np.errstate(over="ignore", invalid="ignore"):
         if fast:
-            from . import fastread  # (imports the C core: only for texts big enough to need it)
+            from . import fastread  # deferred: the C reader's glue is loaded by the first text big enough for it
             scene = fastread.read(text, file)
             if scene is not None:
                 return scene

@@ -26,6 +26,8 @@ COLOR_MATERIAL = {"ambient": "ambient", "diffuse": "diffuse", "specular": "specu
 FLOAT_MATERIAL = {"specularExponent": "specular_exponent", "reflectivity": "reflectivity",
                   "transparency": "transparency", "speedOfLight": "speed_of_light",
                   "specularFraction": "specular_fraction", "surfaceRoughness": "surface_roughness"}
+#: The most numbers ``parameters`` may give (as in the book's material record).
+MAX_PARAMETERS = 10
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,14 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from ..diagnostics import held_stderr
 from ..errors import TracerError, TracerWarning
 from ..userfiles import open_regular, shown_name
+
+#: The picture formats textures may use (Pillow's names): what a user of SDL textures needs.  Pillow reads
+#: some forty more, whose decoders were never meant for files from anywhere (a 128-byte DDS that declares
+#: 4096 x 16384 pixels took minutes): those are refused before anything is decoded.
+FORMATS = ("PNG", "JPEG", "BMP", "PPM", "TIFF")
 
 #: Largest picture accepted, in pixels: 8192 x 8192 (192 MiB as 8-bit RGB).  Below Pillow's own
 #: decompression-bomb threshold, so that check never speaks first.
@@ -52,14 +58,12 @@ def load_image(path: str | Path) -> np.ndarray:
         if _fallback_decoder is None:
             raise TracerError(f"{name}: reading texture images needs Pillow (pip install Pillow)") from None
         return _from_fallback(name, _fallback_decoder(path))
+    printed: list[str] = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            with open_regular(path, "texture image") as handle, Image.open(_ReadsWithinFile(handle)) as picture:
-                width, height = picture.size  # from the header: nothing decoded yet
-                _check_size(name, width, height)
-                rgb = picture.convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM)
-                texels = np.asarray(rgb, dtype=np.uint8)
+            with held_stderr() as printed:  # (libtiff and libjpeg print their complaints)
+                texels = _decode(Image, path, name)
         except FileNotFoundError:
             raise TracerError(f"{name}: texture image not found") from None
         except Image.DecompressionBombError:
@@ -67,18 +71,34 @@ def load_image(path: str | Path) -> np.ndarray:
         except TracerError:
             raise
         except Image.UnidentifiedImageError:  # (its own message names the file object Pillow was given)
-            raise TracerError(f"{name}: not a picture format Pillow reads") from None
+            raise TracerError(f"{name}: not a picture textures may use ({', '.join(FORMATS)})") from None
+        except MemoryError:
+            raise TracerError(f"{name}: not enough memory to decode the picture") from None
         except OSError as err:
-            raise TracerError(f"{name}: cannot read texture image ({err.strerror or err})") from None
+            problem = _decoder_said(printed) or err.strerror or str(err)
+            raise TracerError(f"{name}: cannot read texture image ({problem})") from None
         # A hostile file can make a decoder fail in many ways besides OSError (ValueError from a PPM header,
         # SyntaxError from some plugins, struct.error, EOFError, IndexError...): each is this file's fault.
         except Exception as err:  # noqa: BLE001
             raise TracerError(f"{name}: cannot read texture image ({type(err).__name__}: {err})") from None
+    for line in dict.fromkeys(printed):  # (a decoder's complaint about a picture it read all the same)
+        warnings.warn(ImageWarning(f"{name}: the decoder says: {line}"), stacklevel=2)
     for record in caught:
         if issubclass(record.category, Image.DecompressionBombWarning):
             continue  # the size check above has already refused such a picture
         warnings.warn(ImageWarning(f"{name}: {record.message}"), stacklevel=2)
     return texels
+
+
+def _decode(Image, path: Path, name: str) -> np.ndarray:
+    """The picture's texels (see load_image), its format and size checked before anything is decoded."""
+    with open_regular(path, "texture image") as handle, \
+            Image.open(_ReadsWithinFile(handle), formats=FORMATS) as picture:
+        width, height = picture.size  # from the header: nothing decoded yet
+        _check_size(name, width, height)
+        _check_stored_size(name, picture, handle)
+        rgb = picture.convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM)
+        return np.asarray(rgb, dtype=np.uint8)
 
 
 class _ReadsWithinFile:
@@ -112,6 +132,27 @@ def _from_fallback(name: str, rgb) -> np.ndarray:
         np.clip(band, 0.0, 1.0, out=band)
         texels[top:top + 256] = np.rint(band * 255.0)
     return texels
+
+
+def _check_stored_size(name: str, picture, handle) -> None:
+    """Refuse a picture whose stored pixels (the parts Pillow reads uncompressed) need more bytes than the file
+    holds, before anything is decoded: Pillow makes the whole picture first, and a 70-byte BMP that declares
+    67108864 x 1 pixels asked for a quarter of a gigabyte.  (At least one bit a pixel, or the row size the
+    header gives.)"""
+    size = os.fstat(handle.fileno()).st_size
+    for tile in picture.tile:
+        x0, y0, x1, y1 = tile[1]
+        args = tile[3] if isinstance(tile[3], tuple) else (tile[3],)
+        stride = args[1] if tile[0] == "raw" and len(args) > 1 and args[1] else (x1 - x0 + 7) // 8
+        needed = tile[2] + (y1 - y0) * abs(stride) if tile[0] == "raw" else tile[2]
+        if needed > size:
+            raise TracerError(f"{name}: the picture declares {picture.size[0]} x {picture.size[1]} pixels, which "
+                              f"need {needed:,} bytes; the file holds {size:,}")
+
+
+def _decoder_said(printed: list[str]) -> str:
+    """What a C decoder (libtiff, libjpeg) printed when it failed, as one clause: its first complaint."""
+    return printed[0] if printed else ""
 
 
 def _check_size(name: str, width: int, height: int) -> None:

@@ -4,8 +4,12 @@ References and payloads copy whole subtrees, so a file of a few kilobytes can as
 (seven levels of ten references), which USD would spend minutes and gigabytes composing.  Counting is
 cheap: each layer is parsed once (USD's layer registry then serves it to the stage), and the number of
 prims under each prim spec is worked out once, with an explicit stack (a chain of references of any length
-is fine) and a stop as soon as the count passes the budget.  The estimate counts a referenced prim's whole
-subtree and every variant, so it is an upper bound: a file under it composes to no more prims than that.
+is fine).  The estimate counts a referenced prim's whole subtree and every variant, so it is an upper bound:
+a file under it composes to no more prims than that.
+
+What is bounded is what composition adds: a stage may compose to the prim specs its layers hold plus
+MAX_USD_PRIMS.  Prims written out one by one cost reading time in proportion to the file's size, as an SDL
+file's shapes do; so any stage the writer makes (it uses no references) reads back, however large.
 """
 from __future__ import annotations
 
@@ -14,9 +18,11 @@ from typing import Optional
 from ..errors import TracerError
 from . import common as C
 
-#: Most prims (instances expanded) a stage may compose to: ten times the largest scenes we benchmark, and
-#: still read in well under a minute.
+#: Most prims (instances expanded) a stage may compose to beyond those its layers define: ten times the
+#: largest scenes we benchmark, and still read in well under a minute.
 MAX_USD_PRIMS = 50_000
+#: Where a count stops growing (a count past every budget; Python's integers would grow without end).
+_SATURATED = 10 ** 12
 
 
 class _Counter:
@@ -66,7 +72,7 @@ class _Counter:
         return parts + self._arcs(layer, spec)
 
     def size(self, root: tuple[str, str]) -> int:
-        """Prims the prim at ``root`` composes to (saturating just above the budget)."""
+        """Prims the prim at ``root`` composes to (a count past every budget stays at _SATURATED)."""
         sizes, stack, open_keys = self.sizes, [root], set()
         children: dict[tuple[str, str], list] = {}
         while stack:
@@ -82,13 +88,14 @@ class _Counter:
             open_keys.discard(key)
             # A cycle (which USD reports itself) counts once here.
             total = 1 + sum(sizes.get(k, 0) for k in children.pop(key))
-            sizes[key] = min(total, self.budget + 1)
+            sizes[key] = min(total, _SATURATED)
             stack.pop()
         return sizes[root]
 
 
 def check_prim_budget(path: str, budget: Optional[int] = None) -> None:
-    """TracerError naming the file if its stage would compose to more than ``budget`` prims."""
+    """TracerError naming the file if its stage would compose to more than ``budget`` prims beyond the prim
+    specs its layers hold."""
     budget = MAX_USD_PRIMS if budget is None else budget
     counter = _Counter(C.pxr().Sdf, budget)
     root = counter.layer(path)
@@ -102,6 +109,8 @@ def check_prim_budget(path: str, budget: Optional[int] = None) -> None:
     for layer in layers:
         for prim in layer.rootPrims:
             total += counter.size((layer.identifier, str(prim.path)))
-            if total > budget:
-                raise TracerError(f"{path}: the stage composes to more than {budget:,} prims (references, "
-                                  f"payloads and instances expanded): too many to read")
+            held = len(counter.sizes)  # (every prim spec met so far, each counted once)
+            if total > budget + held:
+                raise TracerError(f"{path}: the stage composes to more than {budget:,} prims beyond the {held:,} "
+                                  f"its layers define (references, payloads and instances expanded): too many "
+                                  f"to read")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import signals
 from ..errors import TracerError
 from ..model import iter_shapes
 
@@ -34,6 +35,14 @@ A_MATRIX = "sdl:matrix"  # matrix4d: our exact matrix (USD convention) where the
 A_GROUPS = "sdl:groups"  # string[]: def macros the object was made in
 A_CSG = "sdl:csg"  # token on a CSG group: union, intersection, difference
 A_OPERAND = "sdl:operand"  # token on a CSG child: left, right
+#: A chain (sdl:csg = "chain", for booleans nested deeper than the writer's CHAIN_DEPTH): its first child is
+#: where the chain starts; each later child is combined with what came before by its sdl:chainOp (union,
+#: intersection, difference), on the side its sdl:chainSide names ("right": before op child; "left": child op
+#: before), the boolean taking that child's sdl:chainGroups.
+CHAIN = "chain"
+A_CHAIN_OP = "sdl:chainOp"
+A_CHAIN_SIDE = "sdl:chainSide"
+A_CHAIN_GROUPS = "sdl:chainGroups"
 A_LIGHT_COLOR = "sdl:color"  # double3 on a light
 A_EYE, A_LOOK, A_UP, A_VIEW_ANGLE = "sdl:eye", "sdl:look", "sdl:up", "sdl:viewAngle"
 A_VERSION = "sdl:version"
@@ -62,7 +71,10 @@ FORMAT_VERSION = 1
 def pxr():
     """The pxr modules we use, or a TracerError saying how to get them."""
     try:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, Vt  # noqa: F401
+        # usd-core's module loader catches any exception raised while its modules load, a KeyboardInterrupt
+        # too, and goes on with the rest half set up: a signal meanwhile is acted on once they are loaded.
+        with signals.shielded():
+            from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, Vt  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise TracerError("USD files need the usd-core package: pip install usd-core") from exc
     import pxr as module

@@ -10,6 +10,7 @@ from typing import Optional
 import numpy as np
 
 from ..model import Light
+from ..numerics import norm3
 from . import common as C
 
 A_KIND = "sdl:kind"
@@ -32,7 +33,7 @@ READ_TYPES = ("SphereLight", "DistantLight", "RectLight", "DiskLight")
 
 def _unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
-    return v / np.sqrt(v @ v)
+    return v / norm3(v)
 
 
 def light_matrix(light: Light) -> np.ndarray:
@@ -58,10 +59,16 @@ def _any_across(v: np.ndarray) -> np.ndarray:
     return np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
 
 
+def light_schema(writer, light: Light):
+    """The UsdLux schema of a light's prim, and the API schemas it has (for writer._define_all)."""
+    lux_type = getattr(writer.UsdLux, SCHEMA[light.shape if light.kind == "area" else light.kind])
+    api = writer.Sdf.TokenListOp.Create(prependedItems=["ShapingAPI"]) if light.kind == "spot" else None
+    return lux_type, api
+
+
 def write_light(writer, light: Light, path: str) -> None:
     """Define the light's prim at ``path`` (``writer``: the USD writer, with its pxr modules and helpers)."""
-    lux_type = getattr(writer.UsdLux, SCHEMA[light.shape if light.kind == "area" else light.kind])
-    lux = lux_type.Define(writer.stage, path)
+    lux = light_schema(writer, light)[0].Define(writer.stage, path)
     prim = lux.GetPrim()
     lux.CreateColorAttr(writer.Gf.Vec3f(*map(float, light.color)))
     lux.CreateIntensityAttr(1.0)

@@ -35,8 +35,17 @@ def sdl_mesh(reader, prim) -> Optional[MeshData]:
     if any(not 0 <= v < len(vertices) for f in faces for v in f[0]) or \
             any(not 0 <= i < len(normals) for f in faces for i in f[1]):
         raise SceneError("a face index is out of range")
-    return MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>",
-                    corner_uvs=_our_uvs(reader, prim, len(indices)))
+    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{key}>",
+                                           corner_uvs=_our_uvs(reader, prim, len(indices))))
+
+
+def _checked(reader, prim, mesh: MeshData) -> Optional[MeshData]:
+    """The mesh, unless its numbers cannot be traced (then the reader's problem, and None)."""
+    problem = mesh.coordinate_problem()
+    if problem is None:
+        return mesh
+    reader.problem(prim, problem)
+    return None
 
 
 def _our_uvs(reader, prim, n_corners: int) -> Optional[np.ndarray]:
@@ -124,7 +133,8 @@ def usd_mesh(reader, prim) -> Optional[MeshData]:
     if not faces:
         return None
     uvs = _texture_coordinates(reader, prim, len(indices), kept_corners, [indices[c] for c in kept_corners])
-    return MeshData(vertices, normals, faces, origin=f"{reader.file}<{prim.GetPath()}>", corner_uvs=uvs)
+    return _checked(reader, prim, MeshData(vertices, normals, faces, origin=f"{reader.file}<{prim.GetPath()}>",
+                                           corner_uvs=uvs))
 
 
 def _normals(reader, prim, mesh, n_points: int, n_faces: int, n_corners: int):

@@ -13,6 +13,7 @@ so deep nesting cannot overflow Python's stack.
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,7 @@ import numpy as np
 from .. import shapes
 from ..camera import focal_length, view_angle
 from ..errors import SceneError, TracerError
+from ..geometry import builtin_mesh
 from ..model import (CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, SHAPE_KINDS, Camera, Light, Material, Scene,
                      SceneObject, Settings, Shape, SourceLocation, traced_depth)
 from ..sdl.parser import is_singular
@@ -32,6 +34,7 @@ from .lights import read_light
 from .meshes import sdl_mesh, usd_mesh
 from .opening import held_stderr, open_stage, usd_error_message
 from .preview import material_from_preview
+from .writer import camera_frame
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -44,17 +47,18 @@ MATRIX_AGREEMENT = 1e-12
 READ_LIGHTS = ("SphereLight", "DistantLight", "RectLight", "DiskLight", "CylinderLight")
 #: What a value of the wrong type or shape raises while a prim is read (float("x"), a float where a triple
 #: belongs, an index out of range): the prim cannot be read.
-_BAD_VALUE = (ValueError, IndexError, TypeError)
+_BAD_VALUE = (ValueError, IndexError, TypeError, OverflowError)
 
 
 @dataclass
 class _Group:
     """A CSG group whose operands are being collected."""
 
-    op: str
+    op: str  # or common.CHAIN
     path: str
     groups: tuple[str, ...]
     children: list[SceneObject] = field(default_factory=list)
+    links: list[tuple] = field(default_factory=list)  # a chain's: (op, side, groups) of each child's boolean
 
 
 class _Reader:
@@ -106,7 +110,7 @@ class _Reader:
         try:
             return self.up @ C.from_gf(self.xforms.GetLocalToWorldTransform(prim))
         except self.Tf.ErrorException as exc:
-            raise ValueError(f"its transform: {usd_error_message(str(exc))}") from None
+            raise ValueError(f"its transform: {usd_error_message(exc)}") from None
 
     # -- the whole stage --------------------------------------------------------------------------------
 
@@ -136,7 +140,7 @@ class _Reader:
             if obj is not _DESCEND:
                 walk.PruneChildren()
                 if obj is not None:
-                    self._place(obj, stack)
+                    self._place(obj, stack, prim)
         return self.scene
 
     def _shown(self, prim) -> bool:
@@ -148,28 +152,49 @@ class _Reader:
             return False
         return imageable.ComputePurpose() not in (self.UsdGeom.Tokens.guide, self.UsdGeom.Tokens.proxy)
 
-    def _place(self, obj: SceneObject, stack: list[_Group]) -> None:
-        if stack:
-            stack[-1].children.append(obj)
-        else:
+    def _place(self, obj: SceneObject, stack: list[_Group], prim) -> None:
+        if not stack:
             self.scene.objects.append(obj)
+            return
+        stack[-1].children.append(obj)
+        if stack[-1].op == C.CHAIN:
+            stack[-1].links.append((self.get(prim, C.A_CHAIN_OP), self.get(prim, C.A_CHAIN_SIDE),
+                                    self._groups(prim, C.A_CHAIN_GROUPS)))
 
     def _finish_group(self, group: _Group, stack: list[_Group]) -> None:
         prim = self.stage.GetPrimAtPath(group.path)
+        if group.op == C.CHAIN:
+            return self._finish_chain(group, stack, prim)
         children = group.children
         if not children:
             self.problem(prim, f"{group.op} has no operands")
             return
         if len(children) == 1:
             self.problem(prim, f"{group.op} has one operand", "read as that object alone")
-            self._place(children[0], stack)
+            self._place(children[0], stack, prim)
             return
         if len(children) > 2:
             self.problem(prim, f"{group.op} has {len(children)} operands", "combined left to right")
         obj = children[0]
+        where = SourceLocation(f"{self.file}<{group.path}>", 0)  # (messages about the boolean name the file)
         for child in children[1:]:
-            obj = CSG(group.op, obj, child, groups=group.groups)
-        self._place(obj, stack)
+            obj = CSG(group.op, obj, child, groups=group.groups, source=where)
+        self._place(obj, stack, prim)
+
+    def _finish_chain(self, group: _Group, stack: list[_Group], prim) -> None:
+        """A chain (common.CHAIN): its first child, then each later one combined with what came before."""
+        if not group.children:
+            self.problem(prim, "chain has no operands")
+            return
+        obj = group.children[0]
+        where = SourceLocation(f"{self.file}<{group.path}>", 0)
+        for child, (op, side, groups) in zip(group.children[1:], group.links[1:]):
+            if str(op) not in CSG.OPS or str(side) not in ("left", "right"):
+                self.problem(prim, f"a link of the chain has {C.A_CHAIN_OP} {op!r} and {C.A_CHAIN_SIDE} "
+                                   f"{side!r}", "that operand left out")
+                continue
+            obj = CSG(str(op), obj, child, groups, where) if side == "right" else CSG(str(op), child, obj, groups, where)
+        self._place(obj, stack, prim)
 
     # -- settings ---------------------------------------------------------------------------------------
 
@@ -191,9 +216,9 @@ class _Reader:
                 setattr(s, field_name, self.triple(root, name, getattr(s, field_name)))
             for field_name, name in C.SETTING_FLOATS.items():
                 setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
-            s.max_recursion_depth = int(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth))
+            s.max_recursion_depth = whole_number(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth), C.A_MAX_DEPTH)
             s.smooth_terminator = bool(self.get(root, C.A_SMOOTH_TERMINATOR, False))
-            numbers = list(self.get(root, C.A_PIXMAP_NUMBERS, []))
+            numbers = [whole_number(n, C.A_PIXMAP_NUMBERS) for n in self.get(root, C.A_PIXMAP_NUMBERS, [])]
             files = list(self.get(root, C.A_PIXMAP_FILES, []))
         except _BAD_VALUE as exc:
             self.problem(root, f"cannot read the scene settings ({exc})", "SDL's defaults used")
@@ -208,7 +233,7 @@ class _Reader:
             return
         attr = root.GetAttribute(C.A_PIXMAP_FILES)
         for number, asset in zip(numbers, files):
-            self.scene.pixmaps[int(number)] = self._asset_file(attr, asset)
+            self.scene.pixmaps[number] = self._asset_file(attr, asset)
 
     def _asset_file(self, attr, asset) -> str:
         """An asset path's file: as USD resolved it, else anchored to the layer that wrote it."""
@@ -228,7 +253,7 @@ class _Reader:
         unsupported); _DESCEND to look at its children (a CSG group is pushed on ``stack`` first)."""
         op = self.get(prim, C.A_CSG)
         if op is not None:
-            if str(op) not in CSG.OPS:
+            if str(op) not in CSG.OPS + (C.CHAIN,):
                 self.problem(prim, f"unknown sdl:csg {str(op)!r}", "its children read as separate objects")
             else:
                 stack.append(_Group(str(op), str(prim.GetPath()), self._groups(prim)))
@@ -298,8 +323,8 @@ class _Reader:
         shape.source = SourceLocation(f"{self.file}<{prim.GetPath()}>", 0)
         return shape
 
-    def _groups(self, prim) -> tuple[str, ...]:
-        groups = self.get(prim, C.A_GROUPS, [])
+    def _groups(self, prim, name: str = C.A_GROUPS) -> tuple[str, ...]:
+        groups = self.get(prim, name, [])
         if isinstance(groups, str):  # one name written as a string rather than a string array
             groups = [groups]
         return tuple(str(g) for g in groups)
@@ -343,7 +368,6 @@ class _Reader:
     def _mesh(self, prim, world: np.ndarray, kind: Optional[str]) -> Optional[Shape]:
         entry = shapes.KINDS.get(kind)
         if entry is not None and entry.builtin_mesh:
-            from ..geometry import builtin_mesh
             return Shape(kind, world, mesh=builtin_mesh(kind))
         if kind in _TESSELLATED:
             return Shape("mesh", world)  # the caller makes the exact shape
@@ -374,7 +398,7 @@ class _Reader:
             values[field_name] = self.triple(prim, C.NS + keyword, getattr(default, field_name))
         for field_name, keyword in C.MATERIAL_FLOATS.items():
             values[field_name] = float(self.get(prim, C.NS + keyword, getattr(default, field_name)))
-        values["texture"] = int(self.get(prim, C.A_TEXTURE, 0))
+        values["texture"] = whole_number(self.get(prim, C.A_TEXTURE, 0), C.A_TEXTURE)
         values["parameters"] = tuple(float(p) for p in self.get(prim, C.A_PARAMETERS, []))
         fresnel = self.get(prim, C.A_FRESNEL)
         if fresnel is not None:
@@ -486,8 +510,6 @@ class _Reader:
     def _sdl_camera(self, prim, camera, world: np.ndarray) -> Optional[Camera]:
         """The exact SDL camera we stored, if the USD camera still agrees with it (not moved or zoomed
         in another tool since)."""
-        from .writer import camera_frame
-
         eye, look, up = (self.triple(prim, name) for name in (C.A_EYE, C.A_LOOK, C.A_UP))
         angle = self.get(prim, C.A_VIEW_ANGLE)
         if None in (eye, look, up, angle):
@@ -509,6 +531,15 @@ class _Reader:
 
 
 _DESCEND = object()
+
+
+def whole_number(value, name: str) -> int:
+    """An integer attribute's value (a file may author it as a float, even inf or nan): ValueError naming it
+    when it is not a whole number."""
+    number = float(value)
+    if not (math.isfinite(number) and number == int(number)):
+        raise ValueError(f"{name} = {value!r} is not a whole number")
+    return int(number)
 
 
 def _time_code(Usd, stage):

@@ -9,6 +9,7 @@ shaders so that other tools show them.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional, Union
 
@@ -18,10 +19,12 @@ from .. import shapes
 from ..atomic import replacing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
+from ..geometry import builtin_mesh
+from ..meshio import _face_normal
 from ..model import CSG, Camera, Light, Material, MeshData, Scene, SceneObject, Shape
 from ..transforms import translation
 from . import common as C
-from .lights import prim_name, write_light
+from .lights import light_schema, prim_name, write_light
 from .preview import preview_inputs
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -33,6 +36,11 @@ CENTRED = translation(0.0, 0.0, 0.5)
 #: The SDL plane is infinite; its UsdGeom.Plane (finite, for other tools) reaches this many times past the
 #: farthest thing in the scene.
 PLANE_REACH = 10.0
+
+#: Booleans nested deeper than this below an object are written as a chain (see _chained): a prim's cost to
+#: USD grows with its depth (its crate writer took 46 s for 2,000 nested booleans, the cube of the nesting,
+#: and a .usda file spells every path out in full: 240 MB for the same 2,000 levels).
+CHAIN_DEPTH = 32
 
 #: USD's default vertical film aperture (mm); the focal length is chosen to give the SDL view angle.
 VERTICAL_APERTURE = 15.2908
@@ -104,8 +112,7 @@ class _Writer:
         self._settings(root)
         self.UsdGeom.Scope.Define(stage, C.MATERIALS)
         self.UsdGeom.Scope.Define(stage, C.LIGHTS)
-        for light in self.scene.lights:
-            self._light(light)
+        self._lights()
         if self.scene.camera is not None:
             self._camera(self.scene.camera)
         UsdGeom.Xform.Define(stage, C.OBJECTS)
@@ -141,10 +148,16 @@ class _Writer:
         rel = self._relpath(name)
         return rel if rel.startswith("../") or os.path.isabs(rel) else "./" + rel
 
-    def _light(self, light: Light) -> None:
-        index = self.names.get("light", 0)
-        self.names["light"] = index + 1
-        write_light(self, light, f"{C.LIGHTS}/{prim_name(light, index, self.light_names)}")
+    def _lights(self) -> None:
+        """Every light's prim, all first made in one change block (as the objects' are, see _objects: defining
+        them one at a time recomposed the growing list each time, 20,000 lights took 29 s), then authored."""
+        planned = []
+        for index, light in enumerate(self.scene.lights):
+            planned.append((light, f"{C.LIGHTS}/{prim_name(light, index, self.light_names)}"))
+        self.names["light"] = len(planned)
+        self._define_all([(path, *light_schema(self, light)) for light, path in planned])
+        for light, path in planned:
+            write_light(self, light, path)
 
     def _camera(self, camera: Camera) -> None:
         cam = self.UsdGeom.Camera.Define(self.stage, C.CAMERA)
@@ -178,41 +191,57 @@ class _Writer:
         Define() on a prim already defined with that type only returns it, so the authoring is unchanged."""
         placed = self._place_objects()
         bound = self.Sdf.TokenListOp.Create(prependedItems=["MaterialBindingAPI"])  # what its Apply() authors
-        self._define_all([(path, self._schema(obj), None if isinstance(obj, CSG) else bound) for obj, path, _ in placed]
+        self._define_all([(path, self._schema(obj), None if isinstance(obj, (CSG, _Chain)) else bound)
+                          for obj, path, _ in placed]
                          + [prim for path in self.material_paths.values()
                             for prim in ((path, self.UsdShade.Material, None),
                                          (path + "/PreviewSurface", self.UsdShade.Shader, None))])
+        Token, Strings = self.Sdf.ValueTypeNames.Token, self.Sdf.ValueTypeNames.StringArray
         for obj, path, operand in placed:
-            if isinstance(obj, CSG):
+            if isinstance(obj, (CSG, _Chain)):
                 prim = self.UsdGeom.Xform.Define(self.stage, path).GetPrim()
-                self._attr(prim, C.A_CSG, self.Sdf.ValueTypeNames.Token, obj.op)
+                self._attr(prim, C.A_CSG, Token, C.CHAIN if isinstance(obj, _Chain) else obj.op)
             else:
                 prim = self._shape(obj, path)
-            if operand is not None:
-                self._attr(prim, C.A_OPERAND, self.Sdf.ValueTypeNames.Token, operand)
+            if isinstance(operand, _Link):
+                self._attr(prim, C.A_CHAIN_OP, Token, operand.op)
+                self._attr(prim, C.A_CHAIN_SIDE, Token, operand.side)
+                if operand.groups:
+                    self._attr(prim, C.A_CHAIN_GROUPS, Strings, self.Vt.StringArray(list(operand.groups)))
+            elif operand is not None:
+                self._attr(prim, C.A_OPERAND, Token, operand)
             if obj.groups:
-                self._attr(prim, C.A_GROUPS, self.Sdf.ValueTypeNames.StringArray, self.Vt.StringArray(list(obj.groups)))
+                self._attr(prim, C.A_GROUPS, Strings, self.Vt.StringArray(list(obj.groups)))
 
-    def _place_objects(self) -> list[tuple[SceneObject, str, Optional[str]]]:
+    def _place_objects(self) -> list[tuple[object, str, Optional[object]]]:
         """Every object (a boolean before its left and right operands) with its prim path and its operand
-        side; also names each distinct material's prim in ``material_paths``, in the order of first use."""
+        side (or, in a chain, its _Link); also names each distinct material's prim in ``material_paths``, in
+        the order of first use.  A boolean with booleans nested more than CHAIN_DEPTH deep below it is
+        written as a _Chain."""
         placed = []
+        depths = _boolean_depths(self.scene.objects)
         # An explicit stack, so that deeply nested booleans cannot overflow Python's.
-        todo: list[tuple[SceneObject, str, Optional[str]]] = [
+        todo: list[tuple[object, str, Optional[object]]] = [
             (o, C.OBJECTS, None) for o in reversed(self.scene.objects)]
         while todo:
             obj, parent, operand = todo.pop()
-            path = f"{parent}/{self._name(obj.op if isinstance(obj, CSG) else obj.kind)}"
+            if isinstance(obj, CSG) and depths[id(obj)] > CHAIN_DEPTH:
+                obj = _chained(obj, depths)
+            name = C.CHAIN if isinstance(obj, _Chain) else obj.op if isinstance(obj, CSG) else obj.kind
+            path = f"{parent}/{self._name(name)}"
             placed.append((obj, path, operand))
-            if isinstance(obj, CSG):
+            if isinstance(obj, _Chain):
+                todo += [(link.operand, path, link) for link in reversed(obj.links)] + [(obj.start, path, None)]
+            elif isinstance(obj, CSG):
                 todo += [(obj.right, path, "right"), (obj.left, path, "left")]
             elif obj.material not in self.material_paths:
                 self.material_paths[obj.material] = f"{C.MATERIALS}/{self._name('material')}"
         return placed
 
     def _schema(self, obj: SceneObject):
-        """The UsdGeom schema of an object's prim: the implicit prim its kind names, else a Mesh."""
-        if isinstance(obj, CSG):
+        """The UsdGeom schema of an object's prim: the implicit prim its kind names, else a Mesh (a boolean's
+        and a chain's: an Xform)."""
+        if isinstance(obj, (CSG, _Chain)):
             return self.UsdGeom.Xform
         return getattr(self.UsdGeom, shapes.KINDS[obj.kind].usd_prim or "Mesh")
 
@@ -304,15 +333,12 @@ class _Writer:
             return entry.function("tessellate")(*entry.traced(shape.parameters))
         if shape.mesh is None:
             if entry.builtin_mesh:
-                from ..geometry import builtin_mesh
                 return builtin_mesh(shape.kind)
             raise TracerError(f"cannot write the {shape.kind}: it has no mesh data")
         return shape.mesh
 
     def _mesh(self, mesh, data: MeshData) -> None:
         """Points, faces and per-corner (faceVarying) normals; faces without normals get their flat one."""
-        from ..meshio import _face_normal
-
         vertices = np.asarray(data.vertices, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(data.normals, dtype=np.float64).reshape(-1, 3)
         counts, indices, corner_normals = [], [], []
@@ -395,6 +421,60 @@ class _Writer:
                 shader.CreateInput(name, Sdf.ValueTypeNames.Float).Set(float(value))
         usd_material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
         return usd_material
+
+
+@dataclass
+class _Link:
+    """One boolean of a chain: ``operand`` combined by ``op`` with what the chain made before it, on the
+    right of it (``side`` "right") or on its left ("left"); the boolean's def groups."""
+
+    op: str
+    side: str
+    operand: SceneObject
+    groups: tuple[str, ...]
+
+
+@dataclass
+class _Chain:
+    """A boolean tree written flat (common.CHAIN): ``start``, then each link applied in turn."""
+
+    start: SceneObject
+    links: list[_Link]
+    groups: tuple[str, ...] = ()
+
+
+def _chained(obj: CSG, depths: dict[int, int]) -> _Chain:
+    """``obj`` as a chain along its spine: from it down to a primitive, always into the deeper operand (a tree
+    nested deep is a long spine with shallow operands hanging off it, each written on its own, as a chain
+    again if it is deep too).  The links are listed from the spine's bottom up, the order they apply in."""
+    links = []
+    node: SceneObject = obj
+    while isinstance(node, CSG):
+        left_deeper = depths.get(id(node.left), 0) >= depths.get(id(node.right), 0)
+        if left_deeper:
+            links.append(_Link(node.op, "right", node.right, node.groups))
+            node = node.left
+        else:
+            links.append(_Link(node.op, "left", node.left, node.groups))
+            node = node.right
+    return _Chain(node, links[::-1])
+
+
+def _boolean_depths(objects) -> dict[int, int]:
+    """How deeply booleans nest below each boolean of the scene (by id; 1 for a boolean of two primitives),
+    without recursion."""
+    depths: dict[int, int] = {}
+    for root in objects:
+        todo = [(root, False)]
+        while todo:
+            node, ready = todo.pop()
+            if not isinstance(node, CSG) or id(node) in depths:
+                continue
+            if ready:
+                depths[id(node)] = 1 + max(depths.get(id(node.left), 0), depths.get(id(node.right), 0))
+            else:
+                todo += [(node, True), (node.left, False), (node.right, False)]
+    return depths
 
 
 def build_stage(scene: Scene, folder: PathLike = "."):

@@ -165,3 +165,19 @@ def test_c_and_numpy_agree_where_the_last_bit_decides(text):
     n = tracer.render(tracer.parse_sdl(text), 100, 100, backend="numpy").image
     worst = np.abs(np.clip(c, 0, 1) - np.clip(n, 0, 1)).max(axis=2) * 255
     assert worst.max() <= 1.0, f"{int((worst > 1).sum())} pixels differ, up to {worst.max():.0f}/255"
+
+
+@requires_core
+@pytest.mark.parametrize("move", ["9e15 0 0", "0 0 9e15", "9e15 0 9e15"])
+def test_c_and_numpy_agree_with_the_floor_moved_far_along_itself(move):
+    """The bundled glass scene with its floor moved 9e15 along its own plane: generic ray origins 9e15 out,
+    where an ulp is 1 (6 pixels up to 9/255 apart before)."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scenes" / "glass.sdl"
+    text = path.read_text().replace("rotate -90 1 0 0  plane", f"translate {move} rotate -90 1 0 0  plane")
+    assert text != path.read_text()
+    c = tracer.render(tracer.parse_sdl(text, base_dir=path.parent), 64, 48, backend="c").image
+    n = tracer.render(tracer.parse_sdl(text, base_dir=path.parent), 64, 48, backend="numpy").image
+    worst = np.abs(np.clip(c, 0, 1) - np.clip(n, 0, 1)).max(axis=2) * 255
+    assert worst.max() <= 1.0, f"{int((worst > 1).sum())} pixels differ, up to {worst.max():.0f}/255"

@@ -146,6 +146,28 @@ def test_the_addon_on_threads_traces_the_same_pixels(compiled, sampling_mode):
                              **options).run(cancel=lambda: True)
 
 
+def test_a_restarted_addon_render_judges_adaptive_sampling_again():
+    """The viewport restarts its render on a scene edited in place (BlockRenderer.restart): the pilot and the
+    refinement are traced and judged again, so the image is the edited scene's."""
+    from dataclasses import replace
+
+    from addon.pure import blocks
+    from tracer.edit import EditableScene
+
+    scene = EditableScene(tracer.load(SCENES / "glass.sdl"))
+    frame = CameraFrame.from_camera(scene.compiled.scene.camera, WIDTH / HEIGHT)
+    options = dict(samples=8, tile=16, seed=5)
+    renderer = blocks.BlockRenderer(scene.compiled, tiles.camera_rays_for(frame, WIDTH, HEIGHT), WIDTH, HEIGHT,
+                                    sampling="adaptive", **options)
+    renderer.run()
+    before = renderer.color.copy()
+    scene.set_settings(replace(scene.scene.settings, background=(0.6, 0.2, 0.1)))
+    renderer.restart()
+    renderer.run()
+    expected = tracer.render(scene.compiled, WIDTH, HEIGHT, sampling_mode="adaptive", **options).image
+    assert not np.array_equal(before, expected[::-1]) and np.array_equal(renderer.color, expected[::-1])
+
+
 def test_a_tile_run_keeps_its_refinement(compiled):
     """TileRun judges the refinement once, on the film the block passes left and the pilot: tiles traced one
     at a time (the viewport's slices), after earlier refinement tiles changed the film, give the whole

@@ -117,12 +117,13 @@ class BlockRenderer:
         """Trace the film again from its first item, for a scene edited in place (tracer.edit) under an
         unchanged view: the plan is kept (made again it costs tens of milliseconds for a whole viewport), and
         so is the film, whose old image shows until each of its tiles is traced again; the tracers, and what
-        they counted, are made anew."""
+        they counted, are made anew, and so is adaptive sampling's pilot and refinement (judged again on the
+        new film)."""
         self.done = 0
         self.seconds = 0.0
         self._local = threading.local()
         self._tracers = []
-        self._refine = None
+        self._tiles = tiles.TileRun(self.plan, self._traced, self._shade)
 
     # -- tracing ---------------------------------------------------------------------------------------
 

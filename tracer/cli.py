@@ -67,7 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where the samples go: a regular grid, one random point per stratum, or about N "
                         "rays per pixel on average, jittered, where an error model says they lower the "
                         "image's error most (default jittered)")
-    r.add_argument("--threshold", type=float, default=None, help=argparse.SUPPRESS)  # no longer used: warned
+    r.add_argument("--threshold", type=float, default=None, metavar="T",
+                   help="no longer used (adaptive sampling places its rays by an error model); accepted, with a "
+                        "warning")
     r.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto",
                    help="who does the per-ray work (default: the C core when it is built)")
     r.add_argument("--threads", type=int, default=None, metavar="N",

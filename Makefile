@@ -95,9 +95,12 @@ wheel: setup
 contract: setup
 	$(PY) -W ignore::RuntimeWarning -m tracer.native.contract
 
-# Hostile input (tests/fuzz/): 10,000 mutated scenes, meshes, images and USD stages through the command line,
-# each in its own process; fails on any traceback, signal, hang past 20 s, memory past 2 GB or C != NumPy.
-# Failing inputs are copied to out/fuzz-findings/.  The test suite runs a seeded slice of 300.
+# Hostile input (tests/fuzz/): 10,000 inputs through the command line, each in its own process: half of them
+# mutated scenes, meshes, images and USD stages (mutate.py), half generated (generators.py: deep ray trees,
+# extreme mesh and USD numbers, pictures of every format, hostile stages, signals and kills at random moments,
+# output names of every length, hits on shared edges, the two SDL readers compared); fails on any traceback,
+# signal, hang past 20 s, memory past 2 GB, litter, readers or C != NumPy.  Failing inputs are copied to
+# out/fuzz-findings/.  The test suite runs a seeded slice of 300.
 .PHONY: fuzz
 fuzz: setup
 	$(PY) tests/fuzz/fuzz.py --count 10000 --seed $${FUZZ_SEED:-1} --findings out/fuzz-findings

@@ -26,7 +26,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import object_cache
+from . import live_scene, object_cache
 from .importer import CAM_EXACT, CAM_SHOWN
 from .pure import blocks, convert, passes, raycam
 from .scene_build import SceneBuilder, flat, matrix_np
@@ -36,8 +36,13 @@ from .tracer.errors import TracerError
 from .tracer.model import Camera
 
 ENGINE_ID = "SDL_RAYTRACER"
-#: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled.
+#: Statistics of the last final render (for scripts and tests): rays, seconds, size, passes, cancelled; "scene":
+#: how its scene was made ("full": built; "edit": the kept scene edited; "none": the kept scene as it was).
 LAST_RENDER: dict = {}
+#: The viewport's last change: seconds from view_update to the first block drawn ("first_block"), of which
+#: Blender's wait before it asked for the draw ("until_view_draw") and making the scene ("sync"; "scene" as in
+#: LAST_RENDER), and when it was drawn ("drawn_at", time.perf_counter).
+LAST_VIEW: dict = {}
 #: Seconds of tracing per viewport redraw.
 VIEWPORT_SLICE = 0.08
 #: Shortest pause between two updates of the render result during a final render.
@@ -215,16 +220,23 @@ class SDLRenderEngine(bpy.types.RenderEngine):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        self._start()
+
+    def _start(self) -> None:
+        """The engine's own state (the tests drive view_update and view_draw on stand-ins that start so)."""
         self._view = None  # viewport state
         self._view_dirty = True
         self._view_scene = None
         self._geometry = object_cache.ObjectCache()  # what each object's geometry became, between builds
-        self._kept = None  # the last final render's compiled scene, with Persistent Data on
+        # the compiled scene, edited as Blender's updates say (the viewport's; F12's with Persistent Data)
+        self._live = live_scene.LiveScene(self._geometry)
+        self._changed_at: Optional[float] = None  # when the viewport was told of a change not yet drawn
+        self._draw_stride = 1  # (see _draw)
 
     def update(self, data, depsgraph):
         """Before each final render: what changed since the last one (everything, unless Persistent Data
         kept this engine and its depsgraph)."""
-        self._geometry.apply_updates(depsgraph)
+        self._live.take_updates(depsgraph)
 
     # -- final render ---------------------------------------------------------------------------------
 
@@ -285,17 +297,23 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         return cam_obj, matrix, camera_params(cam_obj, matrix)
 
     def _compiled(self, depsgraph):
-        """(tracer scene, compiled scene, warnings) of the final render; the object cache is kept for the next
-        render only where Blender keeps this engine for it (Persistent Data)."""
+        """(tracer scene, compiled scene, warnings) of the final render: the live scene, kept and edited, where
+        Blender keeps this engine for the next render (Persistent Data); else built anew."""
         render = depsgraph.scene.render
         self.update_stats("", "SDL Ray Tracer | building the scene")
-        tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
+        if render.use_persistent_data and not self.is_preview:
+            # Blender keeps this engine for the next render: the scene is kept, and edited as it changes
+            compiled, warnings = self._live.compiled(depsgraph, "RENDER")
+            tracer_scene = self._live.editable.scene
+            LAST_RENDER["scene"] = self._live.last_sync[0]
+        else:
+            tracer_scene, warnings = build_scene(depsgraph, "RENDER", self._geometry)
+            compiled = compile_scene(tracer_scene)
+            self._live.clear()
+            self._geometry.clear()
+            LAST_RENDER["scene"] = "full"
         for message in warnings:
             self.report({"WARNING"}, message)
-        compiled = compile_scene(tracer_scene)
-        self._kept = compiled if render.use_persistent_data else None
-        if not render.use_persistent_data:
-            self._geometry.clear()
         return tracer_scene, compiled, warnings
 
     def _settings(self, scene, warnings: list) -> dict:
@@ -367,9 +385,10 @@ class SDLRenderEngine(bpy.types.RenderEngine):
     # -- viewport -------------------------------------------------------------------------------------
 
     def view_update(self, context, depsgraph):
-        self._geometry.apply_updates(depsgraph)
+        self._live.take_updates(depsgraph)
         self._view_dirty = True
-        self._view = None
+        if self._changed_at is None:
+            self._changed_at = time.perf_counter()
 
     def view_draw(self, context, depsgraph):
         region = context.region
@@ -377,51 +396,72 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         width, height = region.width, region.height
         if width < 1 or height < 1:
             return
+        entered = time.perf_counter()
         persp = matrix_np(rv3d.perspective_matrix)
-        key = (width, height, persp.tobytes())
+        settings = render_settings(depsgraph.scene)
+        settings["progressive"] = True  # the viewport always refines while the user waits
+        key = (width, height, persp.tobytes(), tuple(sorted(settings.items())))
         try:
             if self._view_dirty or self._view_scene is None:
-                tracer_scene, _ = build_scene(depsgraph, "VIEWPORT", self._geometry)
-                # (the scene compiled before stays alive until this one is made: its BVHs are found again)
-                self._view_scene = compile_scene(tracer_scene)
+                compiled, _ = self._live.compiled(depsgraph, "VIEWPORT")
                 self._view_dirty = False
-                self._view = None
+                if not self._live.changed and compiled is self._view_scene:
+                    self._changed_at = None  # (the image being refined is still the scene's: a selection, say)
+                elif self._view is not None and self._view[1].compiled is compiled:
+                    self._view[1].restart()  # (the scene was edited in place)
+                else:
+                    self._view = None
+                self._view_scene = compiled
             if self._view is None or self._view[0] != key:
-                settings = render_settings(depsgraph.scene)
-                settings["progressive"] = True  # the viewport always refines while the user waits
-
                 def rays_for(rows, cols, dy=0.5, dx=0.5, persp=persp, width=width, height=height):
                     return raycam.projection_rays(persp, width, height, rows, cols, dy, dx)
 
                 renderer = blocks.BlockRenderer(self._view_scene, rays_for, width, height, **settings)
-                self._view = (key, renderer)
-            renderer = self._view[1]
+                self._view = (key, renderer, sum(1 for item in renderer.items if item.pass_index == 0))
+            renderer, coarse_items = self._view[1], self._view[2]
             if not renderer.finished:
-                # at least as long as drawing takes (slow on software OpenGL), so tracing keeps half the time
-                renderer.run_for(max(VIEWPORT_SLICE, self._draw_seconds))
+                # After a change, one work item (the first block of the coarsest pass) is drawn at once; then
+                # slices at least as long as drawing takes (slow on software OpenGL), so that tracing keeps
+                # half the time.
+                renderer.run_for(0.0 if renderer.done == 0 else max(VIEWPORT_SLICE, self._draw_seconds))
         except Exception as exc:  # noqa: BLE001
             self.update_stats("", f"SDL Ray Tracer: {exc}")
             return
         started = time.perf_counter()
+        # While the film is all blocks of the first pass, one pixel of each block is enough to draw it.
+        self._draw_stride = renderer.passes[0] if renderer.done <= coarse_items else 1
         self._draw(depsgraph.scene, renderer.rgba(), width, height)
-        self._draw_seconds = time.perf_counter() - started
-        self.update_stats("", "SDL Ray Tracer | " + ("done" if renderer.finished else
-                                                     f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
+        drawn = time.perf_counter()
+        self._draw_seconds = drawn - started
+        if self._changed_at is not None:  # the first block since Blender said the scene changed
+            what, seconds = self._live.last_sync
+            LAST_VIEW.update({"first_block": drawn - self._changed_at, "sync": seconds, "scene": what,
+                              "drawn_at": drawn, "until_view_draw": entered - self._changed_at})
+            self._changed_at = None
+        first = f" | first block {LAST_VIEW['first_block']:.3f} s after the change" if LAST_VIEW else ""
+        self.update_stats("", "SDL Ray Tracer" + first + " | " + (
+            "done" if renderer.finished else f"pass {renderer.current_pass() + 1}/{renderer.pass_count}"))
         if not renderer.finished:
             self.tag_redraw()
             if not bpy.app.timers.is_registered(_redraw_rendered_viewports):
                 bpy.app.timers.register(_redraw_rendered_viewports, first_interval=0.0)
 
     def _draw(self, scene, rgba: np.ndarray, width: int, height: int) -> None:
+        """Draw the film over the region: with ``_draw_stride`` s > 1 (a film of s x s blocks, anchored at
+        the bottom left) one texel per block, stretched: s² times less to upload (tens of milliseconds for a
+        whole viewport in software OpenGL)."""
         import gpu
         from gpu_extras.presets import draw_texture_2d
 
-        data = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+        stride = getattr(self, "_draw_stride", 1)
+        film = rgba[::stride, ::stride] if stride > 1 else rgba
+        rows, cols = film.shape[:2]
+        data = np.ascontiguousarray(film, dtype=np.float32).reshape(-1)
         buffer = gpu.types.Buffer("FLOAT", data.size, data)
-        texture = gpu.types.GPUTexture((width, height), format="RGBA16F", data=buffer)
+        texture = gpu.types.GPUTexture((cols, rows), format="RGBA16F", data=buffer)
         gpu.state.blend_set("ALPHA_PREMULT")
         self.bind_display_space_shader(scene)
-        draw_texture_2d(texture, (0, 0), width, height)
+        draw_texture_2d(texture, (0, 0), cols * stride, rows * stride)
         self.unbind_display_space_shader()
         gpu.state.blend_set("NONE")
 

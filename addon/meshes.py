@@ -119,8 +119,9 @@ def cached_generic_info(mesh) -> Optional[GenericInfo]:
 
 @bpy.app.handlers.persistent
 def forget_edited(scene, depsgraph) -> None:
-    """depsgraph_update_post: drop the cached info of meshes whose geometry changed."""
-    if _drawn_info:
+    """depsgraph_update_post: drop the cached info of meshes whose geometry changed (reading the updates looks
+    through every datablock of the depsgraph: only when Blender says a mesh was updated)."""
+    if _drawn_info and depsgraph.id_type_updated("MESH"):
         for update in depsgraph.updates:
             if update.is_updated_geometry and isinstance(update.id, bpy.types.Mesh):
                 _drawn_info.pop(update.id.original.name_full, None)

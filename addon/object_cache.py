@@ -55,6 +55,7 @@ class ObjectCache:
         self._this_build: dict[tuple[int, str], object] = {}  # (evaluated data pointer, kind) -> value
         self._graph = None  # (scene, view layer) of the last build
         self.made: Counter = Counter()
+        self.clears = 0  # times emptied (a file load, an undo): what others keep beside it is then stale too
         _LIVE.add(self)
 
     def __len__(self) -> int:
@@ -63,23 +64,25 @@ class ObjectCache:
     def clear(self) -> None:
         self._entries.clear()
         self._by_data.clear()
+        self.clears += 1
 
     # -- what changed ---------------------------------------------------------------------------------
 
-    def apply_updates(self, depsgraph) -> None:
-        """Drop the entries that ``depsgraph.updates`` says are out of date (call it where Blender offers the
-        updates: view_update, RenderEngine.update)."""
-        for update in depsgraph.updates:
+    def apply_updates(self, updates) -> None:
+        """Drop the entries that ``updates`` (a ``depsgraph.updates``, read where Blender offers it: view_update,
+        RenderEngine.update) says are out of date."""
+        for update in updates:
             if not update.is_updated_geometry:
                 continue
             datablock = update.id
             if isinstance(datablock, bpy.types.Object):
-                self._forget(_pointer(datablock))
+                self.forget(_pointer(datablock))
             else:  # a mesh, curve, ... : every object built from it
                 for pointer in self._by_data.pop(_pointer(datablock), ()):
-                    self._forget(pointer)
+                    self.forget(pointer)
 
-    def _forget(self, pointer: int) -> None:
+    def forget(self, pointer: int) -> None:
+        """Drop what was made of one object (by its original's pointer)."""
         entry = self._entries.pop(pointer, None)
         if entry is not None:
             users = self._by_data.get(entry[0][2])
@@ -100,7 +103,7 @@ class ObjectCache:
         """Drop the objects this build did not meet."""
         self._this_build = {}
         for pointer in [p for p in self._entries if p not in self._seen]:
-            self._forget(pointer)
+            self.forget(pointer)
 
     def get(self, obj_eval, kind: str, make: Callable[[], object], own: bool = True):
         """The ``kind`` value made from this evaluated object's geometry: kept from an earlier build while
@@ -119,7 +122,7 @@ class ObjectCache:
         self._seen.add(pointer)
         entry = self._entries.get(pointer)
         if entry is None or entry[0] != identity:
-            self._forget(pointer)
+            self.forget(pointer)
             entry = self._entries[pointer] = (identity, {})
             self._by_data.setdefault(identity[2], set()).add(pointer)
         values = entry[1]

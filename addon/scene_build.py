@@ -81,10 +81,39 @@ class SceneBuilder:
         self._pixmaps: dict[str, int] = {}  # image file -> its texture number in the built scene
         self._uv_materials: set[int] = set()  # materials whose picture is looked up through the UV map
 
+    def refresh(self, depsgraph, materials=()) -> list[tuple]:
+        """Make this builder ready to build some objects again (the add-on's live scene keeps one builder,
+        so that the objects it makes share their tracer materials with those it made before): the depsgraph
+        now, and ``materials`` (Blender materials that were edited) made anew.  Returns (old, new) for each
+        of those whose tracer material changed; one that did not keeps its tracer material."""
+        self.depsgraph = depsgraph
+        self.warnings = []
+        self._generic_cache.clear()
+        changed = []
+        for material in materials:
+            pointer = material.original.as_pointer()
+            old = self._materials.pop(pointer, None)
+            try:
+                material = material.evaluated_get(depsgraph)
+            except (ReferenceError, RuntimeError):
+                pass
+            new = self._material(material)
+            if old is not None and new == old:
+                self._materials[pointer] = old
+            elif old is not None:
+                changed.append((old, new))
+        return changed
+
+    @property
+    def pixmaps(self) -> dict:
+        """Image file -> its texture number, for the images the built objects use."""
+        return dict(self._pixmaps)
+
     # -- helpers --------------------------------------------------------------------------------------
 
     def _material(self, material):
-        key = material.as_pointer() if material is not None else 0
+        # (by the original material: its evaluated copy is another datablock in each depsgraph)
+        key = getattr(material, "original", material).as_pointer() if material is not None else 0
         if key not in self._materials:
             if material is not None and not material.sdl.use_sdl:  # Blender's own: its shader nodes
                 sdl_material, picture = props.blender_material(material, self.warnings)
@@ -271,11 +300,11 @@ class SceneBuilder:
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
         """The tracer Scene of everything the depsgraph shows (its object instances)."""
         model = self.model
-        # (sort key, what it made): import order first (so that files round-trip in their own order), then by
-        # name, then as the depsgraph listed them
-        made: list[tuple[tuple, list]] = []
+        # (sort key, what it made, its edit key): import order first (so that files round-trip in their own
+        # order), then by name, then as the depsgraph listed them
+        made: list[tuple[tuple, list, object]] = []
         lights: list[tuple[tuple, object, np.ndarray]] = []
-        later: list[tuple[tuple, object, np.ndarray]] = []
+        later: list[tuple[tuple, object, np.ndarray, object]] = []
         self.cache.begin_build(self.depsgraph)
         for count, inst in enumerate(instances if instances is not None else self.depsgraph.object_instances):
             obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
@@ -294,18 +323,24 @@ class SceneBuilder:
             if inst.is_instance and inst.parent is not None and \
                     original.as_pointer() == inst.parent.original.as_pointer():
                 if obj.type in GEOMETRY_TYPES:
-                    made.append((key, self.object_node(obj, matrix, own=False)))
+                    made.append((key, self.object_node(obj, matrix, own=False), ("instance", count)))
                 continue
             stable = inst.instance_object if inst.is_instance else obj  # (the instanced object itself)
             if obj.type == "LIGHT":
                 lights.append((key, stable, matrix))
             elif obj.type in GEOMETRY_TYPES:
-                later.append((key, stable, matrix))
-        for key, obj, matrix in later:
-            made.append((key, self.object_node(obj, matrix)))
+                later.append((key, stable, matrix, ("instance", count) if inst.is_instance else
+                              original.as_pointer()))
+        for key, obj, matrix, edit_key in later:
+            made.append((key, self.object_node(obj, matrix), edit_key))
         made.sort(key=lambda entry: entry[0])
-        objects = [node for _, nodes in made for node in nodes]
-        lights = [self.light(obj, matrix) for _, obj, matrix in sorted(lights, key=lambda entry: entry[0])]
+        objects = [node for _, nodes, _ in made for node in nodes]
+        #: for each object, the original Blender object's pointer, or ("instance", n) for an instance (the add-on's
+        #: live scene edits objects by these keys: addon/live_scene.py)
+        self.object_keys = [edit_key for _, nodes, edit_key in made for _ in nodes]
+        lights.sort(key=lambda entry: entry[0])
+        self.light_objects = [obj for _, obj, _ in lights]  # (likewise, the lights' objects)
+        lights = [self.light(obj, matrix) for _, obj, matrix in lights]
         self.cache.end_build()
         world = scene.world
         settings = props.world_settings(world, scene.sdl_render.max_recursion_depth

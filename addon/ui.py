@@ -69,7 +69,8 @@ class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
         col = layout.column()
         col.active = s.use_sdl
         for name in ("ambient", "diffuse", "specular", "emissive", "specular_exponent", "reflectivity",
-                     "transparency", "speed_of_light", "specular_fraction", "surface_roughness", "texture",
+                     "transparency", "speed_of_light", "fresnel", "fresnel_tint", "specular_fraction",
+                     "surface_roughness", "texture",
                      "image", "parameter_count"):
             col.prop(s, name)
         if s.parameter_count:

@@ -95,7 +95,9 @@ def child(root: str, grid: int) -> dict:
             pass
 
     view = Viewport()
-    if hasattr(engine, "object_cache"):
+    if hasattr(engine.SDLRenderEngine, "_start"):
+        engine.SDLRenderEngine._start(view)
+    elif hasattr(engine, "object_cache"):
         view._geometry = engine.object_cache.ObjectCache()
     depsgraph = bpy.context.evaluated_depsgraph_get()
     persp = camera.calc_matrix_camera(depsgraph, x=320, y=240) @ camera.matrix_world.inverted()

@@ -307,7 +307,7 @@ def test_viewport_refines_while_the_user_waits(monkeypatch):
 
         def __init__(self):
             self.redraws, self.frames = 0, []
-            self._geometry = object_cache.ObjectCache()
+            engine.SDLRenderEngine._start(self)
 
         def tag_redraw(self):
             self.redraws += 1
@@ -331,8 +331,20 @@ def test_viewport_refines_while_the_user_waits(monkeypatch):
     first, last = eng.frames[0][..., :3], eng.frames[-1][..., :3]
     np.testing.assert_allclose(last, expected, atol=1e-4)  # bottom row first, as a texture wants
     assert np.abs(first - expected).max() > 0.05  # the first redraw showed a coarse image
-    # a change to the scene starts again
+    # an update that changes nothing traced (a selection, say) keeps the finished image
     eng.view_update(Context, depsgraph)
+    eng.view_draw(Context, depsgraph)
+    assert eng.info.endswith("done")
+    # a change to the scene starts again (Blender calls view_update with what changed)
+    def updated(scene, graph):
+        eng.view_update(Context, graph)
+
+    bpy.app.handlers.depsgraph_update_post.append(updated)
+    try:
+        next(o for o in bpy.data.objects if o.type == "MESH").location.x += 0.1
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(updated)
     eng.view_draw(Context, depsgraph)
     assert not eng.info.endswith("done")
 

@@ -226,3 +226,21 @@ def test_object_names_survive_export_and_import(tmp_path):
     fresh()
     import_sdl(out)
     assert sorted(o.name for o in bpy.data.objects if o.type == "MESH") == names
+
+
+def test_fresnel_materials_survive_import_and_export(tmp_path):
+    """The SDL Material keeps `fresnel` and `fresnelTint` (a copper metal, a dielectric glass): the engine
+    traces them and export writes them, as the file had them (they used to come back as `constant`)."""
+    source = tmp_path / "fresnel.sdl"
+    source.write_text("camera 0 2 8  0 1 0  0 1 0  40\nlight 4 6 4 1 1 1\n"
+                      "push diffuse 0.05 0.05 0.05 reflectivity 1 fresnel metal fresnelTint 0.95 0.64 0.54\n"
+                      "  translate -1.5 1 0 sphere pop\n"
+                      "push diffuse 0 0 0 reflectivity 1 transparency 1 speedOfLight 0.69 fresnel dielectric\n"
+                      "  translate 1.5 1 0 sphere pop\n")
+    original = tracer.load(str(source), strict=True)
+    assert {s.material.fresnel for s in original.shapes()} == {"metal", "dielectric"}
+    import_sdl(source)
+    from addon import props
+    traced = sorted((props.material_to_sdl(o.active_material) for o in shape_objects()), key=lambda m: m.fresnel)
+    assert traced == sorted((s.material for s in original.shapes()), key=lambda m: m.fresnel)
+    assert_same_scene(original, export(tmp_path / "out.sdl"))

@@ -14,7 +14,7 @@ from blender_binary import BLENDER
 
 ROOT = Path(__file__).resolve().parent.parent
 FILES = ["test_addon_passes.py", "test_addon_layers.py", "test_addon_materials.py", "test_addon_panels.py",
-         "test_addon_updates.py"]
+         "test_addon_updates.py", "test_addon_live.py"]
 
 
 def _same_python() -> bool:

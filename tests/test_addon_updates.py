@@ -152,7 +152,7 @@ class _Viewport:
     view_update = engine.SDLRenderEngine.__dict__["view_update"]
 
     def __init__(self):
-        self._geometry = object_cache.ObjectCache()
+        engine.SDLRenderEngine._start(self)
         self.info, self.image = "", None
         camera = bpy.context.scene.camera
         depsgraph = bpy.context.evaluated_depsgraph_get()

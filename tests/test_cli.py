@@ -411,3 +411,22 @@ def test_info_shows_light_kinds_and_names(tmp_path):
     key, sun = json.loads(run("info", scene, "--json").stdout)["lights"]
     assert key == {"position": [1.0, 2.0, 3.0], "color": [1.0, 1.0, 1.0], "name": "Key Light"}
     assert (sun["kind"], sun["direction"], sun["angle"], sun["samples"]) == ("sun", [0.0, -1.0, 0.0], 1.0, 4)
+
+
+def test_every_option_of_every_command_says_what_it_does():
+    """`--help` of each command explains each option (--width and --height had no words, so their defaults and
+    limit were nowhere in the help)."""
+    import argparse
+
+    from tracer.cli import build_parser
+
+    def commands(parser):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    yield name, sub
+                    yield from commands(sub)
+
+    silent = [f"{name} {action.option_strings[-1]}" for name, sub in commands(build_parser())
+              for action in sub._actions if action.option_strings and not action.help]
+    assert silent == []

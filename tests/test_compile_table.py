@@ -2,6 +2,8 @@
 numbers and the same images as the scene of the list of Shapes it reads as."""
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 
@@ -188,3 +190,71 @@ def test_nested_booleans_render_as_before(backend):
     assert image.std() > 0.01  # (something is drawn)
     baseline = render(scene, 40, 30, backend="c" if backend == "numpy" else "numpy", threads=2).image
     assert np.abs(image - baseline).max() <= 1 / 255
+
+
+def _exact_world(matrix: np.ndarray, vertices: np.ndarray) -> list[list[Fraction]]:
+    """Each vertex carried by the matrix in exact (rational) arithmetic."""
+    m = [[Fraction(float(x)) for x in row] for row in matrix[:3]]
+    return [[sum(m[r][j] * Fraction(float(v[j])) for j in range(3)) + m[r][3] for r in range(3)] for v in vertices]
+
+
+def test_mesh_instances_are_bounded_from_the_mesh_once():
+    """A mesh instance's world box comes from its mesh's own box and sphere (computed once per mesh, not by
+    carrying every vertex): it holds every vertex carried in exact arithmetic, even where the translation
+    cancels the vertices' size (1e8 away), and is as tight as the vertices' own box for an axis-aligned
+    instance and within 0.2% of it for a rotated ball."""
+    from helpers import rotation, scaling, scene_of, translation
+    from tracer.meshdata import MeshData
+
+    rng = np.random.default_rng(5)
+    k = np.arange(3000) + 0.5  # (a Fibonacci sphere: points spread evenly over the unit sphere)
+    z, phi = 1 - 2 * k / 3000, np.pi * (1 + 5 ** 0.5) * k
+    ball = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
+    lumpy = rng.uniform(-1, 1, size=(40, 3)) * (3.0, 0.2, 1.0) + (1e8, 0.0, 0.0)
+    meshes = [MeshData(v, np.zeros((0, 3)), [((0, 1, 2), ())], origin=f"test:{k}")
+              for k, v in enumerate((ball, lumpy))]
+    aligned = [np.eye(4), translation(5, -2, 7) @ scaling(2, 3, 4), translation(-1e8, 3.3, 1e-7) @ scaling(1, -1, 1)]
+    rotated = [rotation(37, 1, 2, 3) @ scaling(0.3, 1.7, 0.9), translation(-1e8, 3.3, 1e-7) @ rotation(0.001, 0, 0, 1),
+               translation(-0.7e8, 1e8, 0) @ rotation(81, 3, -1, 2) @ scaling(0.7, 0.7, 0.7)]
+    objects = [Shape("mesh", m, mesh=mesh) for mesh in meshes for m in aligned + rotated]
+    table = compile_scene(scene_of(*objects)).table
+    for i, shape in enumerate(objects):
+        lo, hi = table.boxes[i, :3], table.boxes[i, 3:]
+        exact = _exact_world(shape.matrix, shape.mesh.vertices)
+        assert all(Fraction(float(lo[r])) <= p[r] <= Fraction(float(hi[r])) for p in exact for r in range(3)), i
+        world = shape.mesh.vertices @ shape.matrix[:3, :3].T + shape.matrix[:3, 3]
+        tight_lo, tight_hi = world.min(axis=0), world.max(axis=0)
+        rounding = 1e-12 * (np.abs(world).max() + np.abs(shape.matrix[:3, 3]).max() + 1.0)
+        if i % len(aligned + rotated) < len(aligned):  # axis-aligned: the vertices' own box
+            assert np.allclose(lo, tight_lo, rtol=0, atol=rounding), i
+            assert np.allclose(hi, tight_hi, rtol=0, atol=rounding), i
+        elif shape.mesh is meshes[0]:  # a rotated ball: its sphere's image, close to the vertices' own box
+            assert np.all(hi - lo <= (tight_hi - tight_lo) * 1.002 + rounding), i
+        assert table.generic_size[i] == np.abs(shape.mesh.vertices).max()
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_mesh_instances_render_as_when_bounded_by_their_vertices(backend, monkeypatch):
+    """Bounds made from the mesh once change no pixel against bounds made from every vertex carried to the
+    world (what the compile did before): the culling only skips rays that miss."""
+    from helpers import Camera, Light, rotation, scaling, scene_of, translation
+    from tracer.geometry import builtin_mesh
+
+    teapot = builtin_mesh("teapot")
+    rng = np.random.default_rng(2)
+    objects = [Shape("mesh", translation(1.2 * (k % 5) - 2.4, 1.2 * (k // 5) - 1.2, 0)
+                     @ rotation(float(rng.uniform(0, 360)), *rng.normal(size=3)) @ scaling(0.3, 0.3, 0.3),
+                     Material(diffuse=(0.8, 0.4, 0.2), reflectivity=0.3), mesh=teapot) for k in range(15)]
+
+    def scene():
+        return scene_of(*objects, lights=[Light((3, 4, 5), (1, 1, 1))], camera=Camera((0, 0, 6), (0, 0, 0), (0, 1, 0), 50))
+
+    image = render(scene(), 40, 30, backend=backend, threads=2).image
+
+    def by_vertices(self, mesh, rows):
+        self.generic_size[rows] = np.abs(mesh.vertices).max()
+        self._bound(rows, np.asarray(mesh.vertices, dtype=np.float64))
+
+    monkeypatch.setattr(compile_module.PrimitiveTable, "_bound_mesh_instances", by_vertices)
+    assert np.array_equal(render(scene(), 40, 30, backend=backend, threads=2).image, image)
+    assert image.std() > 0.01

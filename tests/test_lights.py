@@ -430,3 +430,45 @@ def test_usd_rect_and_disk_lights_of_other_tools_are_area_lights(tmp_path):
     np.testing.assert_allclose(panel.direction, (0.0, -1.0, 0.0), atol=1e-12)
     np.testing.assert_allclose(panel.position, (0.0, 3.0, 0.0))
     assert (round_light.shape, round_light.size) == ("ellipse", (0.5, 0.5))
+
+
+@pytest.mark.parametrize("prim, attribute, value, message", [
+    ("Fill", "inputs:radius", float("nan"), "finite"),
+    ("Fill", "inputs:radius", -1.0, "radius must not be negative"),
+    ("Sun", "inputs:angle", 720.0, "angle"),
+    ("Sun", "inputs:angle", float("inf"), "finite"),
+    ("light_4", "inputs:width", 0.0, "width and height"),
+    ("light_4", "inputs:height", float("nan"), "finite"),
+    ("light_2", "inputs:shaping:cone:angle", 0.0, "spot size"),
+    ("light_2", "inputs:shaping:cone:softness", float("nan"), "finite"),
+])
+def test_usd_lights_with_numbers_sdl_refuses_are_refused_naming_the_prim(tmp_path, prim, attribute, value, message):
+    """A light's numbers read from USD are checked as SDL's statements are (tracer.sdl.lights.light_problem):
+    a NaN radius, a zero-width area light or a sun of 720 degrees is one error naming the file and prim
+    (strict), or a warning and the light left out (lenient); they used to reach the tracer."""
+    from pxr import Usd
+    from tracer.errors import TracerError
+    from tracer.usd import load_usd, save_usd
+    save_usd(parse_sdl(SDL_LIGHTS), tmp_path / "lights.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "lights.usda"))
+    stage.GetPrimAtPath(f"/SDLScene/Lights/{prim}").GetAttribute(attribute).Set(value)
+    stage.Save()
+    with pytest.raises(TracerError) as err:
+        load_usd(tmp_path / "lights.usda")
+    assert message in str(err.value) and f"/SDLScene/Lights/{prim}" in str(err.value)
+    assert "lights.usda" in str(err.value)
+    lenient = load_usd(tmp_path / "lights.usda", strict=False)
+    assert len(lenient.lights) == len(parse_sdl(SDL_LIGHTS).lights) - 1 and lenient.warnings
+
+
+def test_usd_spot_cone_edited_in_another_tool_follows_the_edit(tmp_path):
+    from pxr import Usd, UsdLux
+    from tracer.usd import load_usd, save_usd
+    save_usd(parse_sdl(SDL_LIGHTS), tmp_path / "lights.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "lights.usda"))
+    shaping = UsdLux.ShapingAPI(stage.GetPrimAtPath("/SDLScene/Lights/light_2"))
+    shaping.GetShapingConeAngleAttr().Set(20.0)  # USD's half-angle: a 40-degree spot
+    shaping.GetShapingConeSoftnessAttr().Set(0.5)
+    stage.Save()
+    spot = load_usd(tmp_path / "lights.usda").lights[2]
+    assert (spot.kind, spot.spot_size, spot.spot_blend) == ("spot", 40.0, 0.5)

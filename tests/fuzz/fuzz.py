@@ -1,4 +1,5 @@
-"""The fuzz run: mutated inputs through the command line, each in its own process, judged by harness.judge.
+"""The fuzz run: mutated (mutate.py) and generated (generators.py) inputs through the command line, each in its
+own process, judged by harness.judge (and, for a run sent a signal or the SDL readers' comparison, here).
 
     python tests/fuzz/fuzz.py --count 10000 --seed 1 --jobs 2     # what `make fuzz` runs
     python tests/fuzz/fuzz.py --only 4711                         # one case again, from its seed
@@ -20,6 +21,7 @@ import json
 import os
 import resource
 import shutil
+import random
 import signal
 import sys
 import tempfile
@@ -34,12 +36,28 @@ sys.path.insert(0, str(HERE.parents[1]))
 
 from harness import (FAILURES, HANG_SECONDS, MEMORY_BYTES, WALL_FACTOR, Outcome, judge,  # noqa: E402
                      SANITIZED, set_memory_limit)
+from generators import OLD_OUTPUT, differential_sdl, generated_case  # noqa: E402
 from mutate import SCENES, Case, make_case  # noqa: E402
 
 #: Image difference allowed between the backends (tracer's C = NumPy promise).
 SAME_IMAGE = 1
 #: A comparison whose second render (the slow NumPy path, mostly) ran out of time: counted apart, not judged.
 SLOW = "too slow to compare"
+#: The share of inputs made by tests/fuzz/generators.py (the rest are mutations of the bundled files).
+GENERATED_SHARE = 0.5
+#: How soon after SIGINT or SIGTERM a run must have ended (tests/test_signals.py holds a real process to 0.5 s;
+#: here many runs share a loaded machine).
+SIGNAL_LATENCY = 2.0
+#: What a run's folder may hold besides its inputs and output.
+HOUSEKEEPING = {"stdout", "stderr", "images", "meshes", "other.png"}
+
+
+def case_for(seed: int, usd: bool = True):
+    """The input of one seed: a generated one (generators.py) or a mutation (mutate.py), as a draw of its own
+    decides (so a mutation's seed makes the same case as before generators were added)."""
+    if random.Random(seed * 7919 + 1).random() < GENERATED_SHARE:
+        return generated_case(seed, usd)
+    return make_case(seed, usd)
 
 
 def _child(argv: list[str], folder: Path, memory_bytes: int, cpu_seconds: float) -> None:
@@ -53,7 +71,10 @@ def _child(argv: list[str], folder: Path, memory_bytes: int, cpu_seconds: float)
         # (the parent still kills anything past WALL_FACTOR times the limit: a read blocked on a FIFO).
         cpu = max(1, int(cpu_seconds))
         resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        from tracer import signals
+
+        signal.signal(signal.SIGINT, signal.SIG_DFL)  # (a fuzz run started with `&` ignores SIGINT; its runs not)
+        signals.install_at_start()  # (as the program does first: a signal before the command ends it at once)
         os.chdir(folder)
         for fd, name in ((1, "stdout"), (2, "stderr")):
             out = os.open(folder / name, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -61,9 +82,14 @@ def _child(argv: list[str], folder: Path, memory_bytes: int, cpu_seconds: float)
             os.close(out)
         sys.stdout = open(1, "w", closefd=False)
         sys.stderr = open(2, "w", closefd=False)
-        from tracer.cli import main
+        if argv[0] == "differential-sdl":  # (generators.readers)
+            code, detail = differential_sdl(argv[1], "--lenient" in argv)
+            if detail:
+                print(detail, file=sys.stderr)
+        else:
+            from tracer.cli import main
 
-        code = main(argv)
+            code = main(argv)
     except SystemExit as exit_:
         code = exit_.code if isinstance(exit_.code, int) else 2
     except BaseException:  # what Python would print for an exception nobody caught
@@ -85,7 +111,9 @@ class Runner:
         self.running: dict[int, tuple] = {}
         self.done: list = []
 
-    def start(self, argv: list[str], folder: Path, token, cpu_seconds: float | None = None) -> None:
+    def start(self, argv: list[str], folder: Path, token, cpu_seconds: float | None = None,
+              signal_at: tuple[int, float] | None = None) -> None:
+        """``signal_at``: (signal, seconds after the start) to send the child."""
         while len(self.running) >= self.jobs:
             self.done.append(self.wait_one())
         sys.stdout.flush()
@@ -94,13 +122,19 @@ class Runner:
         pid = os.fork()
         if pid == 0:
             _child(argv, folder, self.memory_bytes, cpu_seconds)
-        self.running[pid] = (time.monotonic(), argv, folder, token, [False], cpu_seconds)
+        self.running[pid] = (time.monotonic(), argv, folder, token, [False], cpu_seconds, [signal_at, None])
 
     def wait_one(self):
         """Reap one finished child (killing any past the limit meanwhile): (token, Outcome) or None."""
         while True:
             now = time.monotonic()
-            for pid, (started, _, _, _, killed, cpu_seconds) in self.running.items():
+            for pid, (started, _, _, _, killed, cpu_seconds, sending) in self.running.items():
+                if sending[0] is not None and sending[1] is None and now - started >= sending[0][1]:
+                    sending[1] = now
+                    try:
+                        os.kill(pid, sending[0][0])
+                    except ProcessLookupError:
+                        pass
                 if not killed[0] and now - started > WALL_FACTOR * cpu_seconds:
                     killed[0] = True
                     try:
@@ -114,10 +148,12 @@ class Runner:
             else:
                 time.sleep(0.01)
                 continue
-            started, argv, folder, token, killed, _ = self.running.pop(pid)
+            started, argv, folder, token, killed, _, sending = self.running.pop(pid)
+            ended = time.monotonic()
             stderr = (folder / "stderr").read_text("utf-8", "replace") if (folder / "stderr").exists() else ""
             code = os.waitstatus_to_exitcode(status)
-            outcome = Outcome("", code, stderr, time.monotonic() - started, usage.ru_maxrss * 1024, args=argv)
+            outcome = Outcome("", code, stderr, ended - started, usage.ru_maxrss * 1024, args=argv)
+            outcome.signal_latency = None if sending[1] is None else ended - sending[1]
             return token, outcome, killed[0] or code in (-signal.SIGXCPU, -signal.SIGKILL)
 
     def drain(self):
@@ -132,8 +168,12 @@ def _compare_argv(case: Case) -> list[str]:
     return ["render", case.main, "-o", "other.png", *options, "--backend", backend]
 
 
-def _compared(folder: Path, outcome: Outcome, hung: bool):
-    """None if out.png and other.png agree within SAME_IMAGE, else why not."""
+def _output(case) -> str:
+    return getattr(case, "output", "out.png")
+
+
+def _compared(folder: Path, outcome: Outcome, hung: bool, output: str = "out.png"):
+    """None if the output and other.png agree within SAME_IMAGE, else why not."""
     import numpy as np
     from PIL import Image
 
@@ -142,10 +182,53 @@ def _compared(folder: Path, outcome: Outcome, hung: bool):
         return SLOW
     if outcome.returncode != 0 or not other.exists():
         return f"the other backend did not render it (exit {outcome.returncode}): {outcome.stderr[-300:]}"
-    a = np.asarray(Image.open(folder / "out.png").convert("RGB"), dtype=np.int16)
+    a = np.asarray(Image.open(folder / output).convert("RGB"), dtype=np.int16)
     b = np.asarray(Image.open(other).convert("RGB"), dtype=np.int16)
     worst = int(np.abs(a - b).max()) if a.shape == b.shape else 255
     return None if worst <= SAME_IMAGE else f"C and NumPy images differ by up to {worst}/255"
+
+
+def _litter(folder: Path, case) -> list[str]:
+    """What a run left in its folder besides its inputs, its output (convert's with the meshes an SDL file
+    names: out_mesh1.3vn, ...) and the harness's files."""
+    expected = set(case.files) | HOUSEKEEPING | {_output(case), "out.sdl", "out.usda"}
+    return sorted(p.name for p in folder.iterdir()
+                  if p.name not in expected and not (case.command == "convert" and p.name.startswith("out_")))
+
+
+def _judge_signal(case, outcome: Outcome, folder: Path) -> None:
+    """A run sent a signal (generators.interrupt, kill): it ended by the signal's status (or finished first),
+    soon, with the old output intact or the whole new one, and nothing else left behind."""
+    signum = case.signal[0]
+    output = folder / _output(case)
+    data = output.read_bytes() if output.exists() else b""
+    interrupted = outcome.returncode in (128 + signum, -signum)
+    latency = getattr(outcome, "signal_latency", None)
+    lines = [line for line in outcome.stderr.splitlines() if line.strip()]
+    stray = [line for line in lines if line not in ("interrupted",) and not line.startswith("warning: ")]
+    if "Traceback" in outcome.stderr or stray:
+        outcome.verdict, outcome.detail = "stray-output", (stray or ["a traceback"])[0][:200]
+    elif outcome.returncode != 0 and not interrupted:
+        outcome.verdict, outcome.detail = "bad-exit", f"exit {outcome.returncode} after {signal.Signals(signum).name}"
+    elif interrupted and signum != signal.SIGKILL and latency is not None and latency > SIGNAL_LATENCY:
+        outcome.verdict, outcome.detail = "hang", f"{signal.Signals(signum).name} heard after {latency:.2f} s"
+    elif data != OLD_OUTPUT and (outcome.returncode != 0 or not data) and not _whole_image(output):
+        outcome.verdict, outcome.detail = "bad-exit", "the output is neither the old one nor a whole new one"
+    elif _litter(folder, case):
+        outcome.verdict, outcome.detail = "bad-exit", f"left {_litter(folder, case)}"
+    else:
+        outcome.verdict, outcome.detail = ("error" if interrupted else "image"), ""
+
+
+def _whole_image(path: Path) -> bool:
+    try:
+        from PIL import Image
+
+        with Image.open(path) as picture:
+            picture.load()
+        return True
+    except Exception:  # noqa: BLE001
+        return False
 
 
 def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, compare_every: int,
@@ -163,7 +246,7 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
         nonlocal compared
         (case_seed, case, folder, comparing), outcome, killed = item
         if comparing:
-            why = _compared(folder, outcome, killed)
+            why = _compared(folder, outcome, killed, _output(case))
             if why is SLOW:
                 skipped.append(case_seed)
             elif why:
@@ -172,12 +255,22 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
                     log(f"MISMATCH seed {case_seed} {case.kind}: {why}")
             shutil.rmtree(folder, ignore_errors=True)
             return
-        output = folder / "out.png"
-        judge(outcome, killed, output if case.command == "render" else None,
-              names=[*case.files, "--", "out."], memory_bytes=memory_bytes)  # an input, an option or the output
-        leftovers = [p.name for p in folder.iterdir() if p.name.endswith(".tmp")]
-        if outcome.ok and leftovers:
-            outcome.verdict, outcome.detail = "bad-exit", f"left {leftovers}"
+        output = folder / _output(case)
+        if getattr(case, "signal", None) is not None:
+            _judge_signal(case, outcome, folder)
+        elif case.command == "differential-sdl":
+            outcome.verdict = "image" if outcome.returncode == 0 else "mismatch" if outcome.returncode == 3 else \
+                judge(outcome, killed).verdict
+            outcome.detail = outcome.stderr.strip()[-300:]
+        else:
+            judge(outcome, killed, output if case.command == "render" else None,
+                  names=[*case.files, "--", "out.", *getattr(case, "names", ())],
+                  memory_bytes=memory_bytes)  # an input, an option or the output
+            if outcome.ok and _litter(folder, case):
+                outcome.verdict, outcome.detail = "bad-exit", f"left {_litter(folder, case)}"
+            old = getattr(case, "old_output", None)
+            if outcome.verdict == "error" and old is not None and output.read_bytes() != old:
+                outcome.verdict, outcome.detail = "bad-exit", "a failed run changed the old output"
         verdicts[outcome.verdict] += 1
         if not outcome.ok:
             failures.append({"seed": case_seed, "kind": case.kind, "verdict": outcome.verdict,
@@ -188,9 +281,10 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
                 (keep / "command").write_text(" ".join(["python -m tracer", *outcome.args]) + "\n")
             if log:
                 log(f"FAIL seed {case_seed} {case.kind}: {outcome.verdict} {outcome.detail[:200]}")
-        elif (compare_every and case.kind in ("sdl", "3vn", "png") and case.command == "render"
-              and outcome.verdict == "image" and "--lenient" not in case.options
-              and (case_seed % compare_every == 0 or only is not None)):
+        elif (case.command == "render" and outcome.verdict == "image" and "--lenient" not in case.options
+              and getattr(case, "signal", None) is None
+              and (getattr(case, "compare", False) or compare_every and case.kind in ("sdl", "3vn", "png")
+                   and (case_seed % compare_every == 0 or only is not None))):
             compared += 1
             # (the NumPy path is the slower one: it gets three times the limit)
             runner.start(_compare_argv(case), folder, (case_seed, case, folder, True), cpu_seconds=3 * timeout)
@@ -200,19 +294,25 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
     try:
         for index, case_seed in enumerate(seeds):
             # (under make sanitize, usd-core's C++ exceptions abort with ASan's runtime preloaded: no USD)
-            case = make_case(case_seed, usd=not SANITIZED)
+            case = case_for(case_seed, usd=not SANITIZED)
             folder = work / f"case{case_seed}"
             folder.mkdir()
             for folder_name in ("images", "meshes"):
                 os.symlink(work / folder_name, folder / folder_name)
             for name, data in case.files.items():
                 (folder / name).write_bytes(data)
+            if getattr(case, "old_output", None) is not None:
+                try:
+                    (folder / _output(case)).write_bytes(case.old_output)
+                except OSError:  # (a name past the file system's limit: there is no old output)
+                    case.old_output = None
             argv = [case.command, case.main]
             if case.command == "render":
-                argv += ["-o", "out.png"]
+                argv += ["-o", _output(case)]
             elif case.command == "convert":
-                argv += ["out.sdl" if case.kind == "usd" else "out.usda"]
-            runner.start(argv + case.options, folder, (case_seed, case, folder, False))
+                argv += ["out.sdl" if case.main.endswith(".usda") else "out.usda"]
+            runner.start(argv + case.options, folder, (case_seed, case, folder, False),
+                         signal_at=getattr(case, "signal", None))
             while runner.done:
                 finish(runner.done.pop())
             if log and (index + 1) % 500 == 0:
@@ -223,7 +323,7 @@ def run(count: int, seed: int, jobs: int, timeout: float, memory_bytes: int, com
                 finish(runner.done.pop())
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    failed = {kind: verdicts[kind] for kind in FAILURES if verdicts[kind]}
+    failed = {kind: verdicts[kind] for kind in FAILURES + ("mismatch",) if verdicts[kind]}
     return {"inputs": len(seeds), "seconds": round(time.monotonic() - started, 1), "verdicts": dict(verdicts),
             "failures": failed, "failed_inputs": failures[:50], "compared": compared - len(skipped),
             "compare_too_slow": skipped, "mismatches": mismatches}

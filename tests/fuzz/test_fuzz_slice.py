@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from fuzz import case_for
+from generators import GENERATED, differential_sdl, generated_case, readers
 from mutate import KINDS, make_case, mutate_bytes, mutate_png, seeds
 from tracer.errors import TracerError
 from tracer.reporting import error_message, user_path
@@ -41,6 +43,43 @@ def test_cases_are_reproduced_from_their_seed():
     assert (first.kind, first.files, first.options, first.command) == \
         (again.kind, again.files, again.options, again.command)
     assert {make_case(seed).kind for seed in range(200)} == set(KINDS)
+    made, remade = generated_case(4711), generated_case(4711)
+    assert made == remade
+    assert {generated_case(seed).kind for seed in range(200)} == set(GENERATED)
+    # about half of a run's inputs are generated, and a mutation's seed makes the mutation it always made
+    drawn = [case_for(seed) for seed in range(400)]
+    assert 150 < sum(case.kind in GENERATED for case in drawn) < 250
+    assert all(case.files == make_case(seed).files for seed, case in enumerate(drawn) if case.kind in KINDS)
+
+
+def test_the_differential_run_reads_with_both_readers_and_tells_them_apart(tmp_path, monkeypatch):
+    """The generated texts are long enough for the C reader, which reads most of them to the end; both readers
+    then give the same scene.  A reader that differs is caught."""
+    import random
+    from dataclasses import replace
+
+    from tracer.sdl import fastread, parser
+
+    read = 0
+    for seed in range(12):
+        path = tmp_path / f"r{seed}.sdl"
+        path.write_bytes(readers(random.Random(seed), "r").files["r.sdl"])
+        assert len(path.read_text()) >= parser.FAST_MIN_CHARS
+        read += isinstance(fastread.scan(path.read_text()), fastread.Columns)
+        assert differential_sdl(str(path), seed % 2 == 0) == (0, "")
+    assert read >= 6
+    slow = parser.parse_sdl
+
+    def off_by_an_ulp(text, *args, fast=True, **kwargs):  # a C reader that rounds one light differently
+        scene = slow(text, *args, fast=fast, **kwargs)
+        if fast and scene.lights:
+            light = scene.lights[0]
+            scene.lights[0] = replace(light, position=tuple(np.nextafter(light.position, np.inf).tolist()))
+        return scene
+
+    monkeypatch.setattr(parser, "parse_sdl", off_by_an_ulp)
+    code, detail = differential_sdl(str(tmp_path / "r1.sdl"), False)
+    assert code == 3 and "differ" in detail
 
 
 def test_some_scenes_are_long_enough_for_the_c_reader_and_some_of_those_it_reads():

@@ -315,8 +315,11 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
 def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
                                 plane_normals: np.ndarray, plane_offsets: np.ndarray) -> HitArrays:
     """Cyrus–Beck: the line is inside where it is on the inner side of every face plane."""
-    num = plane_offsets[None, :] - origin @ plane_normals.T  # (N, F): > 0 means origin inside that plane
-    den = direction @ plane_normals.T
+    # (N, F): > 0 means origin inside that plane.  Summed as the C core does (dot3), not by a matrix
+    # product: a ray through an edge two faces share meets both at one t, and which face it enters by must not
+    # hang on the last bit.
+    num = plane_offsets[None, :] - dot3(origin[:, None, :], plane_normals[None, :, :])
+    den = dot3(direction[:, None, :], plane_normals[None, :, :])
     with np.errstate(divide="ignore", invalid="ignore"):
         t = num / den
     entering_face = den < 0.0

@@ -118,8 +118,15 @@ int rt_interrupt_install(int64_t grace_ms)
         ours.sa_handler = rt_on_signal;
         sigemptyset(&ours.sa_mask);
         ours.sa_flags = rt_python_action[0].sa_flags & ~SA_SIGINFO;  /* (Python's: SA_ONSTACK) */
-        if (sigaction(SIGINT, &ours, NULL) != 0 || sigaction(SIGTERM, &ours, NULL) != 0) {
+        /* (a signal the process ignores, as a shell's `cmd &` makes SIGINT, stays ignored) */
+        int failed = 0;
+        if (rt_python_action[0].sa_handler != SIG_IGN)
+            failed |= sigaction(SIGINT, &ours, NULL) != 0;
+        if (rt_python_action[1].sa_handler != SIG_IGN)
+            failed |= sigaction(SIGTERM, &ours, NULL) != 0;
+        if (failed) {
             sigaction(SIGINT, &rt_python_action[0], NULL);
+            sigaction(SIGTERM, &rt_python_action[1], NULL);
             return -1;
         }
         atomic_store(&rt_installed, 1);

@@ -37,27 +37,39 @@ def light_of(keyword: str, numbers: tuple[float, ...], name: Optional[str] = Non
         return "the direction is zero"
     position = (values.get("x", 0.0), values.get("y", 0.0), values.get("z", 0.0))
     if keyword == "sunLight":
-        if not 0.0 <= values["angle"] < 180.0:
-            return "the sun's angle must be at least 0 and under 180 degrees"
-        return Light(position, kind="sun", direction=direction, angle=values["angle"], **common)
-    if keyword in ("sphereLight", "spotLight") and not values["radius"] >= 0.0:
+        light = Light(position, kind="sun", direction=direction, angle=values["angle"], **common)
+    elif keyword == "sphereLight":
+        light = Light(position, kind="sphere", radius=values["radius"], **common)
+    elif keyword == "spotLight":
+        light = Light(position, kind="spot", direction=direction, radius=values["radius"], spot_size=values["size"],
+                      spot_blend=values["blend"], **common)
+    else:
+        axis = (values["ax"], values["ay"], values["az"])
+        if not _across(direction, axis):
+            return "the axis must not be zero or along the direction"
+        light = Light(position, kind="area", direction=direction, axis=axis, size=(values["width"], values["height"]),
+                      shape="rectangle" if keyword == "areaLight" else "ellipse", **common)
+    return light_problem(light) or light
+
+
+def light_problem(light: Light) -> Optional[str]:
+    """What is wrong with a physical light's numbers (one phrase), or None: the rules every reader applies
+    (the SDL statements above, USD's lights), so that no reader hands the tracer a light it cannot trace."""
+    numbers = (*light.position, *light.color, *light.direction, *light.axis, light.radius, light.angle,
+               light.spot_size, light.spot_blend, *light.size)
+    if not all(math.isfinite(x) for x in numbers):
+        return "its numbers must be finite"
+    if light.kind == "sun" and not 0.0 <= light.angle < 180.0:
+        return "the sun's angle must be at least 0 and under 180 degrees"
+    if light.kind in ("sphere", "spot") and not light.radius >= 0.0:
         return "the radius must not be negative"
-    if keyword == "sphereLight":
-        return Light(position, kind="sphere", radius=values["radius"], **common)
-    if keyword == "spotLight":
-        if not 0.0 < values["size"] <= 180.0:
-            return "the spot size must be over 0 and at most 180 degrees"
-        if not 0.0 <= values["blend"] <= 1.0:
-            return "the spot blend must be 0..1"
-        return Light(position, kind="spot", direction=direction, radius=values["radius"], spot_size=values["size"],
-                     spot_blend=values["blend"], **common)
-    axis = (values["ax"], values["ay"], values["az"])
-    if not _across(direction, axis):
-        return "the axis must not be zero or along the direction"
-    if not (values["width"] > 0.0 and values["height"] > 0.0):
+    if light.kind == "spot" and not 0.0 < light.spot_size <= 180.0:
+        return "the spot size must be over 0 and at most 180 degrees"
+    if light.kind == "spot" and not 0.0 <= light.spot_blend <= 1.0:
+        return "the spot blend must be 0..1"
+    if light.kind == "area" and not (light.size[0] > 0.0 and light.size[1] > 0.0):
         return "the width and height must be over 0"
-    return Light(position, kind="area", direction=direction, axis=axis, size=(values["width"], values["height"]),
-                 shape="rectangle" if keyword == "areaLight" else "ellipse", **common)
+    return None
 
 
 def _across(direction, axis) -> bool:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import numerics
 from ..errors import TracerError
 from .images import load_image, sample_bilinear
 from .mapping import surface_uv
@@ -120,7 +121,7 @@ class TextureSet:
             if material.texture == 0:
                 continue
             rows = np.nonzero(shape_index == index)[0]
-            generic = points[rows] @ prim.inverse[:3, :3].T + prim.inverse[:3, 3]
+            generic = numerics.affine_points(prim.inverse, points[rows])  # (as the C core sums: texture.h)
             if material.texture < 0:
                 out[rows] = SOLID_TEXTURES[material.texture](generic, material.parameters)
             else:

@@ -10,6 +10,7 @@ from typing import Optional
 import numpy as np
 
 from ..model import Light
+from ..sdl.lights import light_problem
 from ..numerics import norm3
 from . import common as C
 
@@ -140,9 +141,19 @@ def _same_way(exact, found: np.ndarray) -> bool:
     return float(np.linalg.norm(_unit(v) - found)) < 1e-6
 
 
-def read_light(reader, prim, type_name: str, color) -> Optional[Light]:
-    """The Light of a UsdLux prim we read (``color``: its colour as the reader worked it out), or None when it
-    is SDL's point light (the reader's own path).  Ours come back exactly; another tool's SphereLight is
+def read_light(reader, prim, type_name: str, color) -> Light:
+    """The Light of a UsdLux prim (see _light_of_prim), its numbers checked as SDL's statements check them: a
+    ValueError saying what is wrong (a NaN radius, an area light of width 0, a sun's angle of 720 degrees)."""
+    light = _light_of_prim(reader, prim, type_name, color)
+    problem = None if light.kind == "point" else light_problem(light)
+    if problem is not None:
+        raise ValueError(problem)
+    return light
+
+
+def _light_of_prim(reader, prim, type_name: str, color) -> Light:
+    """The Light of a UsdLux prim we read (``color``: its colour as the reader worked it out).  Ours come back
+    exactly; another tool's SphereLight is
     SDL's point light as before, its DistantLight a sun, its RectLight and DiskLight area lights."""
     kind = reader.get(prim, A_KIND)
     name = reader.get(prim, A_NAME)
@@ -168,10 +179,10 @@ def read_light(reader, prim, type_name: str, color) -> Optional[Light]:
         radius = _exact_or(reader, prim, A_RADIUS, "inputs:radius", 0.0)
         if str(kind) == "sphere":
             return Light(position, kind="sphere", radius=radius, **common)
-        half = reader.get(prim, "shaping:cone:angle")
+        half = reader.get(prim, "inputs:shaping:cone:angle")
         size = _exact_or(reader, prim, A_SPOT_SIZE, None, 2.0 * float(half) if half is not None else 180.0,
                          None if half is None else 2.0 * float(half))
-        blend = _exact_or(reader, prim, A_SPOT_BLEND, "shaping:cone:softness", 0.0)
+        blend = _exact_or(reader, prim, A_SPOT_BLEND, "inputs:shaping:cone:softness", 0.0)
         return Light(position, kind="spot", direction=direction, radius=radius, spot_size=size,
                      spot_blend=min(max(blend, 0.0), 1.0), **common)
     x_length, y_length = float(np.linalg.norm(x_axis)), float(np.linalg.norm(y_axis))

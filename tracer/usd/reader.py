@@ -26,7 +26,7 @@ from ..camera import focal_length, view_angle
 from ..errors import SceneError, TracerError
 from ..geometry import builtin_mesh
 from ..model import (CSG, FRESNEL_MODES, MAX_RECURSION_DEPTH, SHAPE_KINDS, Camera, Light, Material, Scene,
-                     SceneObject, Settings, Shape, SourceLocation, traced_depth)
+                     SceneObject, Settings, Shape, SourceLocation, TEXTURE_NUMBERS, traced_depth)
 from ..sdl.parser import is_singular
 from ..transforms import scaling, translation
 from . import common as C
@@ -218,7 +218,8 @@ class _Reader:
                 setattr(s, field_name, float(self.get(root, name, getattr(s, field_name))))
             s.max_recursion_depth = whole_number(self.get(root, C.A_MAX_DEPTH, s.max_recursion_depth), C.A_MAX_DEPTH)
             s.smooth_terminator = bool(self.get(root, C.A_SMOOTH_TERMINATOR, False))
-            numbers = [whole_number(n, C.A_PIXMAP_NUMBERS) for n in self.get(root, C.A_PIXMAP_NUMBERS, [])]
+            numbers = [whole_number(n, C.A_PIXMAP_NUMBERS, TEXTURE_NUMBERS)
+                       for n in self.get(root, C.A_PIXMAP_NUMBERS, [])]
             files = list(self.get(root, C.A_PIXMAP_FILES, []))
         except _BAD_VALUE as exc:
             self.problem(root, f"cannot read the scene settings ({exc})", "SDL's defaults used")
@@ -398,7 +399,7 @@ class _Reader:
             values[field_name] = self.triple(prim, C.NS + keyword, getattr(default, field_name))
         for field_name, keyword in C.MATERIAL_FLOATS.items():
             values[field_name] = float(self.get(prim, C.NS + keyword, getattr(default, field_name)))
-        values["texture"] = whole_number(self.get(prim, C.A_TEXTURE, 0), C.A_TEXTURE)
+        values["texture"] = whole_number(self.get(prim, C.A_TEXTURE, 0), C.A_TEXTURE, TEXTURE_NUMBERS)
         values["parameters"] = tuple(float(p) for p in self.get(prim, C.A_PARAMETERS, []))
         fresnel = self.get(prim, C.A_FRESNEL)
         if fresnel is not None:
@@ -470,7 +471,7 @@ class _Reader:
         try:
             self.scene.lights.append(read_light(self, prim, type_name, color))
         except (*_BAD_VALUE, SceneError) as err:
-            self.problem(prim, f"{type_name} with {err}")
+            self.problem(prim, f"{type_name}: {err}")
 
     def _camera(self, prim) -> None:
         if self.scene.camera is not None:
@@ -533,12 +534,14 @@ class _Reader:
 _DESCEND = object()
 
 
-def whole_number(value, name: str) -> int:
+def whole_number(value, name: str, allowed: Optional[range] = None) -> int:
     """An integer attribute's value (a file may author it as a float, even inf or nan): ValueError naming it
-    when it is not a whole number."""
+    when it is not a whole number, or not in ``allowed``."""
     number = float(value)
     if not (math.isfinite(number) and number == int(number)):
         raise ValueError(f"{name} = {value!r} is not a whole number")
+    if allowed is not None and int(number) not in allowed:
+        raise ValueError(f"{name} = {value!r} is out of range ({allowed.start}..{allowed.stop - 1})")
     return int(number)
 
 

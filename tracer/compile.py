@@ -295,15 +295,17 @@ class Primitive:
         the unit-curvature floor of the bound and their point is off by the t error along the line.  (The
         caller ignores floating-point warnings.)"""
         linear, translation = self.inverse_norms
-        raw_scale = linear * np.max(np.abs(origins), axis=1) + translation
+        raw_scale = linear * numerics.max_abs3(origins) + translation
         size = self.generic_size
         error = numerics.point_errors(hits.t, raw_scale, o_generic, d_generic, size, self.rounding)
         nn = numerics.dot3(hits.normal, hits.normal)
         length = np.sqrt(nn)
         mesh = self._mesh is not None
-        if mesh or hits.bend is None:
+        if mesh:
             dd = numerics.dot3(d_generic, d_generic)[:, None]
             hits.bend = 2.0 * length * dd / size
+        elif hits.bend is None:  # a flat face
+            hits.bend = 0.0
         hits.error = hits.error + numerics.time_errors(error, hits, d_generic, size, nn, length)
         if mesh:
             hits.offset = hits.error * np.sqrt(dd)

@@ -7,7 +7,7 @@ view angle to keep the framing (except for the perspective, which is why the tel
 the same view from 10^4 away, where rounding is harmless).  What differs is rounding error.
 
 ``python -m tracer.extremes [WIDTH HEIGHT]`` prints the table (percent of pixels that differ by more than
-1/255 from the reference, per backend).
+1/255 from the reference, per backend, and the pixels in which the backends' extreme images differ).
 """
 from __future__ import annotations
 
@@ -162,6 +162,47 @@ def coplanar_faces() -> Scene:
                  settings=Settings(global_ambient=(0.15, 0.15, 0.15), background=(0.1, 0.1, 0.15)))
 
 
+def grazing_mirror() -> Scene:
+    """A mirror floor (a square 40 wide) seen from 10^-6 above it, 10 away: the camera's rays meet it within
+    10^-7 ... 10^-5 rad, and the reflected rays leave it as flat (a cube and a sphere stand on it, lit)."""
+    floor = Shape("square", _FLOOR @ scaling(20.0, 20.0, 1.0),
+                  Material(diffuse=(0.1, 0.1, 0.1), specular=(0.0, 0.0, 0.0), reflectivity=0.8))
+    cube = Shape("cube", translation(-0.8, 0.5, -1.0) @ rotation(25, 0, 1, 0) @ scaling(0.5, 0.5, 0.5),
+                 Material(diffuse=(0.9, 0.3, 0.2), **_MATT))
+    sphere = Shape("sphere", translation(0.9, 0.6, -0.5) @ scaling(0.6, 0.6, 0.6), Material(diffuse=(0.2, 0.5, 0.9), **_MATT))
+    return Scene(objects=[floor, cube, sphere], lights=[Light((3, 6, 5), (0.9, 0.9, 0.9))],
+                 camera=Camera((0.0, 1e-6, 9.0), (0.0, 1e-6, -1.0), (0, 1, 0), 30),
+                 settings=Settings(global_ambient=(0.15, 0.15, 0.15), background=(0.25, 0.3, 0.4),
+                                   max_recursion_depth=2, min_reflectivity=0.05))
+
+
+def tangent_tubes() -> Scene:
+    """A torus and a thin one (flattened to 0.3) seen edge on, from their own plane, with a cone on
+    its apex between them: the silhouettes are rays tangent to the tubes, and the rays near the middle pass
+    by the apex, along its generators."""
+    torus = Shape("torus", translation(-1.3, 0.6, 0.0) @ rotation(-90, 1, 0, 0) @ scaling(0.8, 0.8, 0.8),
+                  Material(diffuse=(0.9, 0.6, 0.2), **_MATT))
+    thin = Shape("torus", translation(1.3, 0.6, 0.0) @ rotation(-90, 1, 0, 0) @ scaling(0.8, 0.8, 0.3),
+                 Material(diffuse=(0.3, 0.8, 0.4), **_MATT))
+    cone = Shape("cone", translation(0.0, 1.4, 0.0) @ rotation(90, 1, 0, 0) @ scaling(0.4, 0.4, 1.0),
+                 Material(diffuse=(0.6, 0.4, 0.9), **_MATT))
+    return Scene(objects=[torus, thin, cone], lights=[Light((2, 5, 6), (0.9, 0.9, 0.9))],
+                 camera=Camera((0.0, 0.6, 6.0), (0.0, 0.6, 0.0), (0, 1, 0), 40),
+                 settings=Settings(global_ambient=(0.15, 0.15, 0.15), background=(0.1, 0.1, 0.15)))
+
+
+def torus_silhouette(span: float, flattened: float = 1.0) -> Scene:
+    """The top of a torus's tube (flattened to ``flattened`` of its height) seen along the line that touches
+    it at x = -1 and x = 1, through a window ``span`` high: the lower rows cross the tube twice in chords as
+    short as sqrt(2 r span), the upper rows miss it, and the middle ones are tangent within the span."""
+    top = 0.2 * flattened
+    torus = Shape("torus", scaling(1.0, 1.0, flattened), Material(diffuse=(0.9, 0.6, 0.2), **_MATT))
+    angle = 2.0 * math.degrees(math.atan(span / 2.0 / 4.0))
+    return Scene(objects=[torus], lights=[Light((-6.0, 2.0, 4.0), (0.9, 0.9, 0.9))],
+                 camera=Camera((-5.0, 0.0, top), (-1.0, 0.0, top), (0, 0, 1), angle),
+                 settings=Settings(global_ambient=(0.15, 0.15, 0.15), background=(0.1, 0.1, 0.15)))
+
+
 def cone_apex(span: float) -> Scene:
     """A cone standing on its base, its apex seen from 3 units away through a window ``span`` wide, lit from
     the eye (every point seen faces the light, and a convex solid cannot shadow itself: any shadow on it is
@@ -212,6 +253,14 @@ CASES: dict[str, Callable[[], tuple[Scene, Scene]]] = {
     "light at 1e300": lambda: (far_light(1e12), far_light(1e300)),
     "coplanar faces: moved by +1e5": lambda: (coplanar_faces(), moved(coplanar_faces(), (1e5, 1e5, 1e5))),
     "coplanar faces: scaled by 1e-6": lambda: (coplanar_faces(), scaled(coplanar_faces(), 1e-6)),
+    "grazing mirror floor: moved by +1e5": lambda: (grazing_mirror(), moved(grazing_mirror(), (1e5, 1e5, 1e5))),
+    "grazing mirror floor: scaled by 1e-6": lambda: (grazing_mirror(), scaled(grazing_mirror(), 1e-6)),
+    "tangent tubes, apex lines: moved by +1e5": lambda: (tangent_tubes(), moved(tangent_tubes(), (1e5, 1e5, 1e5))),
+    "tangent tubes, apex lines: scaled by 1e-6": lambda: (tangent_tubes(), scaled(tangent_tubes(), 1e-6)),
+    "torus silhouette: span 1e-7, moved by +1e5": lambda: (torus_silhouette(1e-7),
+                                                           moved(torus_silhouette(1e-7), (1e5, 1e5, 1e5))),
+    "thin torus silhouette: span 1e-7, scaled by 1e-6": lambda: (torus_silhouette(1e-7, 0.05),
+                                                                 scaled(torus_silhouette(1e-7, 0.05), 1e-6)),
     "cone apex: span 1e-4": lambda: (without_shadows(cone_apex(1e-4)), cone_apex(1e-4)),
     "cone apex: span 1e-6": lambda: (without_shadows(cone_apex(1e-6)), cone_apex(1e-6)),
     "cone apex: span 1e-8": lambda: (without_shadows(cone_apex(1e-8)), cone_apex(1e-8)),
@@ -229,13 +278,24 @@ def measure(name: str, width: int = 80, height: int = 60, backend: str = "numpy"
                               render(extreme, width, height, backend=backend).image)
 
 
+def compare(name: str, width: int, height: int) -> tuple[float, float, int]:
+    """The fraction of pixels off the twin on the C core and on the NumPy path, and the number of pixels in
+    which the two backends' extreme images differ by more than 1/255."""
+    reference, extreme = CASES[name]()
+    images = {backend: render(extreme, width, height, backend=backend).image for backend in ("c", "numpy")}
+    off = [differing_fraction(render(reference, width, height, backend=backend).image, images[backend])
+           for backend in ("c", "numpy")]
+    apart = round(differing_fraction(images["c"], images["numpy"]) * width * height)
+    return off[0], off[1], apart
+
+
 def main(argv: list[str]) -> int:
     width, height = (int(argv[0]), int(argv[1])) if len(argv) >= 2 else (160, 120)
-    print(f"| case ({width}x{height}) | C: pixels differing | NumPy: pixels differing |")
-    print("|---|---|---|")
+    print(f"| case ({width}x{height}) | C: pixels differing | NumPy: pixels differing | pixels C != NumPy |")
+    print("|---|---|---|---|")
     for name in CASES:
-        c, numpy = (100.0 * measure(name, width, height, backend) for backend in ("c", "numpy"))
-        print(f"| {name} | {c:.2f} % | {numpy:.2f} % |", flush=True)
+        c, numpy, apart = compare(name, width, height)
+        print(f"| {name} | {100.0 * c:.2f} % | {100.0 * numpy:.2f} % | {apart} |", flush=True)
     return 0
 
 

@@ -80,16 +80,25 @@ def feeler_to(starts: np.ndarray, targets: np.ndarray,
     caller knows them (the distances to the targets from the hit points the feelers start near), spare the
     look at the components below FEELER_REACH (the C core's feeler_to_known)."""
     directions = targets - starts
-    largest = np.max(np.abs(directions), axis=1)
+    t_max = np.ones(len(starts))
+    if lengths is not None and not (lengths > FEELER_REACH).any():
+        return directions, t_max
+    largest = max_abs3(directions)
     far = (largest > FEELER_REACH) & np.isfinite(largest)
     if lengths is not None:
         far &= lengths > FEELER_REACH
-    t_max = np.ones(len(starts))
     if far.any():
         _, exponent = np.frexp(np.where(far, largest, 1.0))
         directions = np.where(far[:, None], np.ldexp(directions, -exponent[:, None]), directions)
         t_max = np.ldexp(t_max, np.where(far, exponent, 0))
     return directions, t_max
+
+
+def max_abs3(v: np.ndarray) -> np.ndarray:
+    """max |v_i| over the last axis (of length 3): as np.max(np.abs(v), axis=-1), with two ufunc calls instead
+    of a reduction (a third of the time on the tracer's (N, 3) arrays)."""
+    a = np.abs(v)
+    return np.maximum(np.maximum(a[..., 0], a[..., 1]), a[..., 2])
 
 
 def gamma(n: float) -> float:
@@ -145,8 +154,12 @@ def crossing_shift(delta: np.ndarray, slope: np.ndarray, bend: np.ndarray) -> np
     incidence exceeded it by 10^6, a cone near its apex by 10^5).  (Its callers ignore floating-point
     warnings: a zero slope or bend divides by zero where the other form is taken.)"""
     squared = slope * slope
-    shift = np.where(squared > 2.0 * bend * delta, delta * slope / (squared - bend * delta), np.sqrt(2.0 * delta / bend))
-    return np.where(delta > 0.0, shift, 0.0)
+    shift = delta * slope / (squared - bend * delta)
+    double = ~(squared > 2.0 * bend * delta)  # (few: only near tangency)
+    if double.any():
+        shift[double] = np.sqrt(2.0 * delta[double] / np.broadcast_to(bend, delta.shape)[double])
+    shift[~(delta > 0.0)] = 0.0
+    return shift
 
 
 def point_errors(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray, direction: np.ndarray, size: float,
@@ -158,9 +171,9 @@ def point_errors(t: np.ndarray, raw_scale: np.ndarray, origin: np.ndarray, direc
     the translation's size); ``origin`` (N, 3) and ``direction`` (N, 3) are the generic ray the shape solved
     (origin at the line's point nearest the centre); ``rounding`` is the error of the generic line in units
     of the coordinates involved (gamma of the hit ulps plus the inverse matrix's own rounding)."""
-    reach = np.abs(np.where(np.isfinite(t), t, 0.0)) * np.max(np.abs(direction), axis=1)[:, None]
+    reach = np.abs(np.where(np.isfinite(t), t, 0.0)) * max_abs3(direction)[:, None]
     # (summed in the C core's order: with a 1e30 vertex the size dominates and the order moves the last bit)
-    scale = raw_scale[:, None] + np.max(np.abs(origin), axis=1)[:, None] + size + reach
+    scale = raw_scale[:, None] + max_abs3(origin)[:, None] + size + reach
     return rounding / size * scale
 
 
@@ -174,9 +187,12 @@ def time_errors(error: np.ndarray, hits, direction: np.ndarray, size: float, nn:
     crossing_shift of that; a zero normal counts as grazing.  (numeric.h's time_error_of; the caller ignores
     floating-point warnings.)"""
     along = np.abs(dot3(hits.normal, direction[:, None, :]))
-    dd = dot3(direction, direction)[:, None]
     bound = crossing_shift(length * (size * error), along, np.abs(hits.bend))
-    return np.where(nn > 0.0, bound, size * np.sqrt(error / dd))
+    grazing = ~(nn > 0.0) & np.isfinite(hits.t)
+    if grazing.any():
+        dd = np.broadcast_to(dot3(direction, direction)[:, None], nn.shape)
+        bound[grazing] = size * np.sqrt(error[grazing] / dd[grazing])
+    return bound
 
 
 def normal_to_world(normal: np.ndarray, normal_matrix: np.ndarray) -> np.ndarray:
@@ -199,6 +215,5 @@ def offset_distance(offset: np.ndarray, t: np.ndarray, origins: np.ndarray, dire
     point's distance from the surface, bounded by the scene: HitArrays.offset) plus the rounding of the
     world point o + t d and of the offset origin.
     """
-    rounding = gamma(tolerances.offset_ulps) * (np.max(np.abs(origins), axis=1)
-                                                + np.abs(t) * np.max(np.abs(directions), axis=1))
+    rounding = gamma(tolerances.offset_ulps) * (max_abs3(origins) + np.abs(t) * max_abs3(directions))
     return offset + rounding

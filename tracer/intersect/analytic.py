@@ -56,10 +56,7 @@ def intersect_sphere(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     p_lo = origin + np.nan_to_num(t_lo)[:, None] * direction
     p_hi = origin + np.nan_to_num(t_hi)[:, None] * direction
     out = _two_hits(t_lo, t_hi, p_lo, p_hi, 0, 0, hit)
-    # G = (|p|^2 - 1) / 2: the normal p is its gradient, G'' = |d|^2
-    out.bend[:] = np.where(hit, a, 0.0)[:, None]
-    for slot, p in enumerate((p_lo, p_hi)):
-        out.offset[:, slot] = np.where(hit, 0.5 * np.abs(dot3(p, p) - 1.0), 0.0)
+    out.bend = np.repeat(np.where(hit, a, 0.0)[:, None], 2, axis=1)  # G = (|p|^2 - 1) / 2: n = p, G'' = |d|^2
     return out
 
 
@@ -105,11 +102,7 @@ def intersect_cube(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     # Faces numbered 2*axis + (1 on the + side): the entering face is on the - side when d > 0.
     part_in = 2 * axis_in + (sign[rows, axis_in] < 0)
     part_out = 2 * axis_out + (sign[rows, axis_out] > 0)
-    out = _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit)
-    for slot, (t, axis) in enumerate(((t_in, axis_in), (t_out, axis_out))):  # its distance from its face's plane
-        gap = np.abs(np.abs(origin[rows, axis] + np.where(hit, t, 0.0) * direction[rows, axis]) - 1.0)
-        out.offset[:, slot] = np.where(hit, gap, 0.0)
-    return out
+    return _two_hits(t_in, t_out, n_in, n_out, part_in, part_out, hit)
 
 
 def _z_plane_crossing(origin: np.ndarray, direction: np.ndarray, z: float = 0.0):
@@ -137,7 +130,6 @@ def intersect_square(origin: np.ndarray, direction: np.ndarray, tol: Tolerances 
     hit = crosses & (np.abs(p[:, 0]) <= limit) & (np.abs(p[:, 1]) <= limit)
     out = _one_hit(t, hit, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(hit[:, None], p[:, :2], 0.0)
-    out.offset[:, 0] = np.where(hit, np.abs(p[:, 2]), 0.0)
     return out
 
 
@@ -145,7 +137,6 @@ def intersect_plane(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
     t, crosses, p = _z_plane_crossing(origin, direction)
     out = _one_hit(t, crosses, direction[:, 2] < 0.0, np.array([0.0, 0.0, 1.0]))
     out.uv[:, 0] = np.where(crosses[:, None], p[:, :2], 0.0)
-    out.offset[:, 0] = np.where(crosses, np.abs(p[:, 2]), 0.0)
     # The half-space z <= 0 holds the line at t = -inf when it rises, or when it runs inside, parallel.
     dz = direction[:, 2]
     out.inside_at_start = (dz > 0.0) | ((dz == 0.0) & (origin[:, 2] < 0.0))
@@ -296,10 +287,12 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
     # A pair with a wall crossing, between the wall's roots, counts only where the line is provably inside
     # between its ends (the tangent line's touching pair, a line through a cone's apex).
     rounding = gamma(tol.hit_ulps)
-    sizes = wall_term_sizes(origin, direction, k)
-    mid = np.where(hit, 0.5 * (t_in + t_out), 0.0)
-    proven = 0.5 * ((a * mid + 2.0 * b) * mid + c) < -rounding * wall_terms_at(sizes, mid)
-    hit &= ~(((part_in == 0) | (part_out == 0)) & (a >= 0.0)) | proven
+    rows = np.nonzero(hit & ((part_in == 0) | (part_out == 0)))[0]  # (the rays with a wall crossing)
+    o_w, d_w, a_w, b_w = origin[rows], direction[rows], a[rows], b[rows]
+    sizes = wall_term_sizes(o_w, d_w, k)
+    mid = 0.5 * (t_in[rows] + t_out[rows])
+    proven = 0.5 * ((a_w * mid + 2.0 * b_w) * mid + c[rows]) < -rounding * wall_terms_at(sizes, mid)
+    hit[rows[(a_w >= 0.0) & ~proven]] = False
     cap_normal = {1: np.array([0.0, 0.0, -1.0]), 2: np.array([0.0, 0.0, 1.0])}
 
     def normal_at(t, part):
@@ -308,14 +301,13 @@ def intersect_tapered_cylinder(origin: np.ndarray, direction: np.ndarray, small_
         return np.where((part == 1)[:, None], cap_normal[1], np.where((part == 2)[:, None], cap_normal[2], wall))
 
     out = _two_hits(t_in, t_out, normal_at(t_in, part_in), normal_at(t_out, part_out), part_in, part_out, hit)
+    out.bend = np.zeros_like(out.t)
     for slot, (t, part) in enumerate(((t_in, part_in), (t_out, part_out))):
-        t = np.where(hit, t, 0.0)
-        bend, own, gap = wall_error_terms(origin, direction, k, a, b, t, sizes, rounding)
-        wall = hit & (part == 0)
-        cap_gap = np.abs(oz + t * dz - np.where(part == 1, 0.0, 1.0))  # the point's distance from the cap's plane
-        out.bend[:, slot] = np.where(wall, bend, 0.0)
-        out.error[:, slot] = np.where(wall, own, 0.0)
-        out.offset[:, slot] = np.where(wall, gap, np.where(hit, cap_gap, 0.0))
+        wall = hit[rows] & (part[rows] == 0)
+        ends = rows[wall]
+        if ends.size:
+            out.bend[ends, slot], out.error[ends, slot], out.offset[ends, slot] = wall_error_terms(
+                o_w[wall], d_w[wall], k, a_w[wall], b_w[wall], t[ends], tuple(m[wall] for m in sizes), rounding)
     out.t = out.t + shift[:, None]
     return out
 
@@ -341,11 +333,7 @@ def intersect_convex_polyhedron(origin: np.ndarray, direction: np.ndarray,
     t_out = t_out_each[rows, i_out]
     outside_parallel = ((den == 0.0) & (num < 0.0)).any(axis=1)
     hit = ~outside_parallel & np.isfinite(t_in) & np.isfinite(t_out) & (t_in <= t_out)
-    out = _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)
-    for slot, (t, face) in enumerate(((t_in, i_in), (t_out, i_out))):  # the point's distance from its face's plane
-        p = origin + np.where(hit, t, 0.0)[:, None] * direction
-        out.offset[:, slot] = np.where(hit, np.abs(dot3(p, plane_normals[face]) - plane_offsets[face]), 0.0)
-    return out
+    return _two_hits(t_in, t_out, plane_normals[i_in], plane_normals[i_out], i_in, i_out, hit)
 
 
 #: The corners of the squares round a tapered cylinder's base (z = 0) and top (z = 1) discs, for a top radius

@@ -27,11 +27,13 @@ class HitArrays:
       leave it -1 and the scene fills it in.
     * ``error`` (N, K): a bound on the rounding error of ``t`` (tracer.numerics); shape routines put their
       own root's error there (the torus's, or 0) and the scene adds the rest.
-    * ``bend`` (N, K): from a shape routine to the error bound (None after it, and in what ``take`` and the
-      others make): with the normal the gradient of the shape's function G on the surface, G's second
-      derivative along the generic direction (0 for a flat face).
+    * ``bend`` (N, K): from a shape routine to the error bound (not carried by ``take`` and the others):
+      with the normal the gradient of the shape's function G on the surface, G's second derivative along the
+      generic direction; None (what ``empty`` makes) for flat faces.
     * ``offset`` (N, K): shape routines: the residual of the computed hit point, |G| to first order (so
-      that |G| / |n| is its distance from the surface); the scene turns it into how far a secondary ray
+      that |G| / |n| is its distance from the surface), where the root carries more rounding than the point
+      error (tapered walls, the torus, the paraboloid's and hyperboloid's walls; a flat face's point and the
+      sphere's are off by no more than the line's error: 0); the scene turns it into how far a secondary ray
       starts from the hit along the unit world normal (before the world rounding,
       tracer.numerics.offset_distance).
     """
@@ -69,8 +71,7 @@ class HitArrays:
                    normal=np.zeros((n, k, 3)),
                    part=np.full((n, k), -1, dtype=np.int32),
                    uv=np.zeros((n, k, 2)),
-                   inside_at_start=np.zeros(n, dtype=bool),
-                   bend=np.zeros((n, k)))
+                   inside_at_start=np.zeros(n, dtype=bool))
 
     def sorted(self) -> "HitArrays":
         """The same hits with each row sorted by t (stable, so equal times keep their order)."""

@@ -74,6 +74,7 @@ def intersect_hyperboloid(origin: np.ndarray, direction: np.ndarray, waist: floa
     slab_hi = np.where(parallel, np.where(in_slab, np.inf, np.nan), np.where(rising, t_top, t_bottom))
     s1, e1, s2, e2 = _inside_intervals(a, b, c, slab_lo, slab_hi)
     hits = HitArrays.empty(origin.shape[0], 4)
+    hits.bend = np.zeros_like(hits.t)
     for slot, (t_in, t_out) in enumerate(((s1, e1), (s2, e2))):
         hit = np.isfinite(t_in) & np.isfinite(t_out)
         # An end on the slab's boundary is a cap (ties too).
@@ -90,12 +91,11 @@ def intersect_hyperboloid(origin: np.ndarray, direction: np.ndarray, waist: floa
             hits.entering[:, column] = hit & (end == 0)
             hits.normal[:, column] = np.where(hit[:, None], normal, 0.0)
             hits.part[:, column] = np.where(hit, part, -1)
-            # G = (x^2 + y^2 - k z^2 - S^2) / 2 bends by a; the residuals are |G| and a cap's |z -+ 1|
+            # G = (x^2 + y^2 - k z^2 - S^2) / 2 bends by a; its residual is |G|
             wall_hit = hit & (part == 0)
             residual = 0.5 * np.abs(p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1] - k * p[:, 2] * p[:, 2] - w2)
             hits.bend[:, column] = np.where(wall_hit, a, 0.0)
-            hits.offset[:, column] = np.where(wall_hit, residual,
-                                              np.where(hit, np.abs(p[:, 2] - np.where(part == 1, -1.0, 1.0)), 0.0))
+            hits.offset[:, column] = np.where(wall_hit, residual, 0.0)
     return hits
 
 

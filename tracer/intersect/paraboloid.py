@@ -47,14 +47,14 @@ def intersect_paraboloid(origin: np.ndarray, direction: np.ndarray) -> HitArrays
         return np.where((part == 1)[:, None], np.array([0.0, 0.0, 1.0]), wall)
 
     out = _two_hits(t_in, t_out, normal_at(t_in, part_in), normal_at(t_out, part_out), part_in, part_out, hit)
-    # The wall's G = x^2 + y^2 - z (the normal its gradient) bends by 2 a; the residuals are |G| and the
-    # cap's |z - 1|.
+    # The wall's G = x^2 + y^2 - z (the normal its gradient) bends by 2 a; its residual is |G|.
+    out.bend = np.zeros_like(out.t)
     for slot, (t, part) in enumerate(((t_in, part_in), (t_out, part_out))):
         p = origin + np.where(hit, t, 0.0)[:, None] * direction
         wall = hit & (part == 0)
         residual = np.abs(p[:, 0] * p[:, 0] + p[:, 1] * p[:, 1] - p[:, 2])
         out.bend[:, slot] = np.where(wall, 2.0 * a, 0.0)
-        out.offset[:, slot] = np.where(wall, residual, np.where(hit, np.abs(p[:, 2] - 1.0), 0.0))
+        out.offset[:, slot] = np.where(wall, residual, 0.0)
     return out
 
 

@@ -188,6 +188,7 @@ def intersect_torus(origin: np.ndarray, direction: np.ndarray, tol: Tolerances =
     # G is the quartic itself (the normal its gradient): it bends by speed^2 times its curvature in s
     x = np.where(np.isfinite(s), s, 0.0)
     curvature = np.abs((12.0 * x + 6.0 * coeffs[0][:, None]) * x + 2.0 * coeffs[1][:, None])
+    hits.bend = np.zeros_like(hits.t)
     hits.bend[idx] = np.where(np.isfinite(t), curvature * speed[idx, None] * speed[idx, None], 0.0)
     hits.offset[idx] = np.where(np.isfinite(t), np.abs(torus_value(points)), 0.0)
     return hits

@@ -465,7 +465,7 @@ static inline double next_up_positive(double x)
  * index), the second nearest time, and `reach`, the least t + error: every hit up to it lies within the
  * error interval of every hit found, so none of them is certainly nearer than another. */
 typedef struct {
-    Hit best;
+    Hit *best;
     int64_t obj;
     double second, reach;
 } Nearest;
@@ -476,9 +476,9 @@ static inline void consider_object(const Scene *S, Work *w, int64_t obj, const d
     double limit = isfinite(n->reach) ? next_up_positive(n->reach) : INFINITY;  /* hits up to the reach */
     if (!object_first(S, w, S->d.object_ref[obj], o, d, 0.0, limit, &h))
         return;
-    if (h.t < n->best.t || (h.t == n->best.t && obj < n->obj)) {
-        n->second = n->best.t;
-        n->best = h;
+    if (h.t < n->best->t || (h.t == n->best->t && obj < n->obj)) {
+        n->second = n->best->t;
+        *n->best = h;
         n->obj = obj;
     } else if (h.t < n->second) {
         n->second = h.t;
@@ -590,12 +590,13 @@ static inline int pair_children(const PairNode *p, const RayBoxes *r, double lo,
     return 1;
 }
 
-/* Every object whose box the ray meets for some t in [lo, hi] (the hierarchy's boxes, then the unbounded
- * objects), each offered to `visit` with the Nearest so far (whose reach may shrink as it goes). */
+/* Every object whose box the ray meets for some t in [lo, reach] (the unbounded objects, then the hierarchy's
+ * boxes), each offered to `visit` with the Nearest so far (whose reach may shrink as it goes).  Inlined
+ * where it is called, with `visit` a constant. */
 typedef void (*ObjectVisit)(const Scene *, Work *, int64_t, const double *, const double *, Nearest *);
 
-static void scene_objects(const Scene *S, Work *w, const double *o, const double *d, double lo, Nearest *n,
-                          ObjectVisit visit)
+static inline __attribute__((always_inline)) void
+scene_objects(const Scene *S, Work *w, const double *o, const double *d, double lo, Nearest *n, ObjectVisit visit)
 {
     for (int64_t i = 0; i < S->n_unbounded; i++)
         visit(S, w, S->unbounded[i], o, d, n);
@@ -628,7 +629,7 @@ static void earlier_in_reach(const Scene *S, Work *w, int64_t obj, const double 
 {
     Hit h;
     if (obj < n->obj && object_first(S, w, S->d.object_ref[obj], o, d, 0.0, next_up_positive(n->reach), &h)) {
-        n->best = h;
+        *n->best = h;
         n->obj = obj;
     }
 }
@@ -640,13 +641,13 @@ static void earlier_in_reach(const Scene *S, Work *w, int64_t obj, const double 
 static int scene_first(const Scene *S, Work *w, const double *o, const double *d, Hit *best, int64_t *best_obj)
 {
     Nearest n;
-    n.best.t = INFINITY;
+    n.best = best;
+    best->t = INFINITY;
     n.obj = -1;
     n.second = n.reach = INFINITY;
     scene_objects(S, w, o, d, 0.0, &n, consider_object);
     if (n.obj >= 0 && n.second <= n.reach)
-        scene_objects(S, w, o, d, n.best.t, &n, earlier_in_reach);
-    *best = n.best;
+        scene_objects(S, w, o, d, best->t, &n, earlier_in_reach);
     *best_obj = n.obj;
     return n.obj >= 0;
 }

@@ -38,6 +38,8 @@ static inline void set_hit(Hit *h, double t, int entering, double nx, double ny,
     h->entering = entering;
     h->err = 0.0;
     h->bend = 0.0;  /* a flat face, unless the shape says otherwise */
+    /* A flat face's point and the sphere's are off their surface by no more than the line's error (their
+     * roots carry no rounding beyond the point error's): only the shapes whose roots do report more. */
     h->offset = 0.0;
 }
 
@@ -54,10 +56,7 @@ static int hits_sphere(const double *o, const double *d, Hit *out)
     double lo = mid - half, hi = mid + half;
     set_hit(&out[0], lo, 1, o[0] + lo * d[0], o[1] + lo * d[1], o[2] + lo * d[2], 0);
     set_hit(&out[1], hi, 0, o[0] + hi * d[0], o[1] + hi * d[1], o[2] + hi * d[2], 0);
-    for (int i = 0; i < 2; i++) {  /* G = (|p|^2 - 1) / 2: n = p, G'' = |d|^2 */
-        out[i].bend = a;
-        out[i].offset = 0.5 * fabs(dot3(out[i].n, out[i].n) - 1.0);
-    }
+    out[0].bend = out[1].bend = a;  /* G = (|p|^2 - 1) / 2: n = p, G'' = |d|^2 */
     return 2;
 }
 
@@ -90,8 +89,6 @@ static int hits_cube(const double *o, const double *d, Hit *out)
     n_out[ao] = s_out;
     set_hit(&out[0], t_in, 1, n_in[0], n_in[1], n_in[2], 2 * ai + (s_in < 0.0));
     set_hit(&out[1], t_out, 0, n_out[0], n_out[1], n_out[2], 2 * ao + (s_out > 0.0));
-    out[0].offset = fabs(fabs(o[ai] + t_in * d[ai]) - 1.0);  /* the point's distance from its face's plane */
-    out[1].offset = fabs(fabs(o[ao] + t_out * d[ao]) - 1.0);
     return 2;
 }
 
@@ -112,7 +109,6 @@ static int hits_z_plane(const double *o, const double *d, Hit *out, int bounded,
     set_hit(&out[0], t, d[2] < 0.0, 0.0, 0.0, 1.0, 0);
     out[0].uv[0] = px;
     out[0].uv[1] = py;
-    out[0].offset = fabs(o[2] + t * d[2]);
     return 1;
 }
 
@@ -277,9 +273,8 @@ static int hits_tapered(const double *centred, const double *d, double s, double
         int part = end ? part_out : part_in;
         if (part == 0) {
             wall_hit(o, d, k, a, b, t, !end, &m, gamma, &out[end]);
-        } else {  /* a cap: its residual is the point's distance from its plane */
+        } else {  /* a cap */
             set_hit(&out[end], t, !end, 0.0, 0.0, part == 1 ? -1.0 : 1.0, part);
-            out[end].offset = fabs(o[2] + t * d[2] - (part == 1 ? 0.0 : 1.0));
         }
         out[end].t = t + shift;
     }
@@ -309,12 +304,6 @@ static int hits_polyhedron(const double *o, const double *d, const double *plane
     const double *a = planes + 4 * i_in, *b = planes + 4 * i_out;
     set_hit(&out[0], t_in, 1, a[0], a[1], a[2], (int)i_in);
     set_hit(&out[1], t_out, 0, b[0], b[1], b[2], (int)i_out);
-    for (int end = 0; end < 2; end++) {  /* the point's distance from its face's plane */
-        const double *f = end ? b : a;
-        double t = end ? t_out : t_in;
-        double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
-        out[end].offset = fabs(dot3(p, f) - f[3]);
-    }
     return 2;
 }
 
@@ -488,7 +477,6 @@ static int hits_paraboloid(const double *o, const double *d, Hit *out)
         double p[3] = {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
         if (part) {
             set_hit(&out[end], t, !end, 0.0, 0.0, 1.0, 1);
-            out[end].offset = fabs(p[2] - 1.0);
         } else {  /* G = x^2 + y^2 - z (n its gradient) bends by 2 a */
             set_hit(&out[end], t, !end, 2.0 * p[0], 2.0 * p[1], -1.0, 0);
             out[end].bend = 2.0 * a;
@@ -563,9 +551,7 @@ static int hits_hyperboloid(const double *o, const double *d, double waist, Hit 
                 nv[2] = 1.0;
             }
             set_hit(&out[n], at, !end, nv[0], nv[1], nv[2], part);
-            if (part) {  /* G = (x^2 + y^2 - k z^2 - S^2) / 2 bends by a; the residuals are |G| and |z -+ 1| */
-                out[n].offset = fabs(p[2] - (part == 1 ? -1.0 : 1.0));
-            } else {
+            if (!part) {  /* G = (x^2 + y^2 - k z^2 - S^2) / 2 bends by a; the residual is |G| */
                 out[n].bend = a;
                 out[n].offset = 0.5 * fabs(p[0] * p[0] + p[1] * p[1] - k * p[2] * p[2] - w2);
             }

@@ -225,3 +225,17 @@ def test_textured_render_is_the_same_on_both_backends():
     assert diff.max() <= 1.0 / 255.0 + 1e-12
     covered = np.ptp(c.image.reshape(-1, c.image.shape[-1]), axis=0).max()
     assert covered > 0.2  # the shape is in view: not an empty image
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_a_usd_waist_that_is_not_a_number_is_refused_naming_the_prim(tmp_path, value):
+    """SDL's reader refuses `hyperboloid nan`; a stage's sdl:waistRadius (or any kind's parameter) of nan or
+    inf is refused too, one error naming the file and prim, rather than a shape that silently draws nothing."""
+    from tracer.errors import TracerError
+    path = tmp_path / "h.usda"
+    save_usd(scene_of(hyperboloid(0.3, translation(1, 2, 3))), path)
+    path.write_text(path.read_text().replace("sdl:waistRadius = 0.3", f"sdl:waistRadius = {value}"))
+    with pytest.raises(TracerError, match="not a finite number") as err:
+        load_usd(path)
+    assert "h.usda" in str(err.value) and "hyperboloid" in str(err.value)
+    assert load_usd(path, strict=False).shapes() == []

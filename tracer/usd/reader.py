@@ -310,6 +310,9 @@ class _Reader:
                                                                for p in shapes.KINDS[kind].parameters))
         elif kind is not None and kind != shape.kind:
             self.note(prim, f"sdl:shape {kind!r} does not match its USD type: read as {shape.kind}")
+        if not np.all(np.isfinite(shape.parameters)):  # (SDL's reader refuses nan and inf as numbers)
+            self.problem(prim, f"its {shape.kind} has a parameter that is not a finite number: {shape.parameters}")
+            return None
         exact = self.get(prim, C.A_MATRIX)
         if exact is not None:
             exact = C.from_gf(exact)

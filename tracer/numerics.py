@@ -206,7 +206,7 @@ def world_offsets(gap: np.ndarray, normal: np.ndarray, world: np.ndarray) -> np.
     distance ``gap`` (the point's own distance from the surface plus the line's error) along the gradient
     ``normal`` (N, K, 3) maps to the world along its world normal ``world`` by |n| / |world| (exactly for a
     plane; the C core's world_unit_normal; the caller ignores floating-point warnings)."""
-    return gap * np.sqrt(dot3(normal, normal) / dot3(world, world))
+    return gap * (norm3(normal) / norm3(world))
 
 
 def offset_distance(offset: np.ndarray, t: np.ndarray, origins: np.ndarray, directions: np.ndarray,

@@ -87,7 +87,7 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
     if tie.size:
         _earliest_in_reach(scene, best, tie, origins, directions, t_min, np.nextafter(reach, np.inf))
     best.hit = np.isfinite(best.t)
-    length = np.linalg.norm(best.normal, axis=1, keepdims=True)
+    length = numerics.norm3(best.normal)[:, None]  # (a shape scaled by 1e-200: |n M^-1|^2 overflows)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
     return best
 

@@ -701,8 +701,7 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
 static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
 {
     normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, n);
-    double squared = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-    double length = sqrt(squared);
+    double length = norm3(n);  /* (a shape scaled by 1e-200: |n M^-1|^2 overflows) */
     if (length > 0.0) {
         n[0] /= length;
         n[1] /= length;
@@ -710,7 +709,7 @@ static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
     } else {
         n[0] = n[1] = n[2] = 0.0;
     }
-    return h->offset * sqrt(dot3(h->n, h->n) / squared);
+    return h->offset * (norm3(h->n) / length);
 }
 
 /* ------------------------------------------------------------------------------------------------------

@@ -48,7 +48,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("NumPy tracer", ("tracer.trace",)),
     ("C tracer", ("tracer.native.flatten", "tracer.native.tracer")),
     ("render", ("tracer.backend", "tracer.edit", "tracer.edit_ledger", "tracer.tiles", "tracer.target",
-                "tracer.render")),
+                "tracer.adaptive", "tracer.render")),
     ("programs", ("tracer", "tracer.__main__", "tracer.cli", "tracer.reporting", "tracer.distributed",
                   "tracer.accuracy", "tracer.extremes")),
     # The add-on: its bpy-free part, then the modules that talk to Blender.  In the add-on the tracer is the

@@ -289,7 +289,7 @@ def trace_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect: 
         window = trace_rect(plan, rect, shade)
         pilot = None
         if plan.adaptive:
-            from .adaptive import trace_pilot  # (deferred as in tracer.tiles.TileRun)
+            from .adaptive import trace_pilot  # deferred: adaptive renders alone load it (as tracer.tiles does)
 
             pilot = trace_pilot(plan, rect, shade)
     return window, pilot, rays, shade.tracer.name
@@ -300,7 +300,7 @@ def refine_tile_task(bundle: SceneBundle, job: Job, time: Optional[float], rect:
     """A task: adaptive sampling's refinement of one tile, given its window of the refinement's rays per
     pixel and its pilot.  Returns ((rows, columns, colours) of the pixels it gives a colour, as
     tracer.adaptive.trace_refinement; the rays it cast; the backend's name)."""
-    from .adaptive import trace_refinement
+    from .adaptive import trace_refinement  # deferred: adaptive renders alone load it (as tracer.tiles does)
 
     with _tile_tracing(bundle, job, time) as (plan, shade, rays):
         pixels = trace_refinement(plan, rect, shade, counts, pilot)
@@ -506,7 +506,7 @@ def render_frames(client, bundle: SceneBundle, job: Job, times: Sequence[Optiona
             if frame.waiting:
                 continue
             if plan.adaptive and not frame.refining:
-                from .adaptive import refinement
+                from .adaptive import refinement  # deferred: adaptive renders alone load it (as tracer.tiles does)
 
                 frame.refining = True
                 counts = refinement(plan, frame.film, frame.pilot.values())

@@ -237,7 +237,7 @@ class TileRun:
     def judge_refinement(self) -> None:
         """Judge adaptive sampling's refinement, once, on the film as it is now (the block passes done)."""
         if self.refinement is None:
-            from . import adaptive
+            from . import adaptive  # deferred: as in trace (adaptive renders alone load it)
 
             if self.at != (0, 0):
                 raise ValueError("adaptive sampling's refinement is judged on the whole film")

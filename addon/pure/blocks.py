@@ -76,8 +76,8 @@ class BlockRenderer:
 
     ``samples`` rays per traced pixel placed by ``sampling`` (tracer.sampling's modes); with ``adaptive`` the
     passes trace one ray per pixel, then a pilot and a refinement pass spend about ``samples`` rays per pixel
-    in all where they lower the error most (tracer.adaptive).  ``threads``: with the C core, its own worker threads (one work item at a time);
-    with NumPy, work items traced at once.
+    in all where they lower the error most (tracer.adaptive).  ``threads``: with the C core, its own worker
+    threads (one work item at a time); with NumPy, work items traced at once.
     """
 
     def __init__(self, compiled, rays_for: RaysFor, width: int, height: int, *, block_size: int = 1,

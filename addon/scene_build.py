@@ -112,8 +112,7 @@ class SceneBuilder:
     # -- helpers --------------------------------------------------------------------------------------
 
     def _material(self, material):
-        # (by the original material: its evaluated copy is another datablock in each depsgraph)
-        key = getattr(material, "original", material).as_pointer() if material is not None else 0
+        key = _material_key(material)
         if key not in self._materials:
             if material is not None and not material.sdl.use_sdl:  # Blender's own: its shader nodes
                 sdl_material, picture = props.blender_material(material, self.warnings)
@@ -271,8 +270,7 @@ class SceneBuilder:
         if not self._usable(matrix_world, obj_eval.name):
             return []
         # (the UV map is read only for a material with a picture on it)
-        uvs = any(self._material(slot.material) is not None and
-                  (slot.material.as_pointer() if slot.material is not None else 0) in self._uv_materials
+        uvs = any(self._material(slot.material) is not None and _material_key(slot.material) in self._uv_materials
                   for slot in obj_eval.material_slots)
         kind = f"evaluated mesh {self.mode}" + (" with UVs" if uvs else "")
         parts = self.cache.get(obj_eval, kind, lambda: self._evaluated_mesh(obj_eval, uvs), own)
@@ -348,6 +346,12 @@ class SceneBuilder:
         tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
         tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
         return tracer_scene
+
+
+def _material_key(material) -> int:
+    """Who a material is, for the builder's tables: its original's pointer (an evaluated object's slots give
+    the evaluated copy, another datablock in each depsgraph); 0 for no material."""
+    return getattr(material, "original", material).as_pointer() if material is not None else 0
 
 
 def polygon_meshes(mesh) -> dict:

@@ -29,7 +29,7 @@ class _Counter:
     def __init__(self, Sdf, budget: int):
         self.Sdf = Sdf
         self.budget = budget
-        self.sizes: dict[tuple[str, str], int] = {}
+        self.sizes: dict[tuple[str, object], int] = {}
         self.layers: dict[str, object] = {}
 
     def layer(self, identifier: str):
@@ -40,8 +40,8 @@ class _Counter:
                 self.layers[identifier] = None
         return self.layers[identifier]
 
-    def _arcs(self, layer, spec) -> list[tuple[str, str]]:
-        """(layer, prim path) of what a prim spec's references and payloads bring in."""
+    def _arcs(self, layer, spec) -> list[tuple[str, object]]:
+        """(layer, Sdf prim path) of what a prim spec's references and payloads bring in."""
         found = []
         for arcs in (spec.referenceList, spec.payloadList):
             items = list(arcs.explicitItems) + list(arcs.prependedItems) + list(arcs.appendedItems) + \
@@ -53,28 +53,28 @@ class _Counter:
                     target = layer
                 if target is None:
                     continue
-                path = str(item.primPath) if not item.primPath.isEmpty else (
-                    f"/{target.defaultPrim}" if target.defaultPrim else "")
-                if path:
+                path = item.primPath if not item.primPath.isEmpty else (
+                    self.Sdf.Path(f"/{target.defaultPrim}") if target.defaultPrim else None)
+                if path is not None:
                     found.append((target.identifier, path))
         return found
 
-    def _parts(self, key: tuple[str, str]) -> list[tuple[str, str]]:
+    def _parts(self, key: tuple[str, object]) -> list[tuple[str, object]]:
         """What the prim at ``key`` is made of: its children, its variants' prims and its arcs' targets."""
         layer = self.layer(key[0])
         spec = layer.GetPrimAtPath(key[1]) if layer is not None else None
         if spec is None:
             return []
-        parts = [(key[0], str(child.path)) for child in spec.nameChildren]
+        parts = [(key[0], child.path) for child in spec.nameChildren]
         for variant_set in spec.variantSets:
             for variant in variant_set.variants:
-                parts += [(key[0], str(child.path)) for child in variant.primSpec.nameChildren]
+                parts += [(key[0], child.path) for child in variant.primSpec.nameChildren]
         return parts + self._arcs(layer, spec)
 
-    def size(self, root: tuple[str, str]) -> int:
+    def size(self, root: tuple[str, object]) -> int:
         """Prims the prim at ``root`` composes to (a count past every budget stays at _SATURATED)."""
         sizes, stack, open_keys = self.sizes, [root], set()
-        children: dict[tuple[str, str], list] = {}
+        children: dict[tuple[str, object], list] = {}
         while stack:
             key = stack[-1]
             if key in sizes:
@@ -108,7 +108,7 @@ def check_prim_budget(path: str, budget: Optional[int] = None) -> None:
             layers.append(sublayer)
     for layer in layers:
         for prim in layer.rootPrims:
-            total += counter.size((layer.identifier, str(prim.path)))
+            total += counter.size((layer.identifier, prim.path))
             held = len(counter.sizes)  # (every prim spec met so far, each counted once)
             if total > budget + held:
                 raise TracerError(f"{path}: the stage composes to more than {budget:,} prims beyond the {held:,} "

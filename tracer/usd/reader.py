@@ -55,7 +55,7 @@ class _Group:
     """A CSG group whose operands are being collected."""
 
     op: str  # or common.CHAIN
-    path: str
+    path: object  # its Sdf.Path (a string would be parsed again at each use: time in the depth)
     groups: tuple[str, ...]
     children: list[SceneObject] = field(default_factory=list)
     links: list[tuple] = field(default_factory=list)  # a chain's: (op, side, groups) of each child's boolean
@@ -74,6 +74,7 @@ class _Reader:
         # SDL's world is y-up: a z-up stage is turned so that its up becomes +y (see common.to_y_up).
         self.up = C.to_y_up(str(self.UsdGeom.GetStageUpAxis(stage)))
         self.scene = Scene()
+        self._bound: Optional[dict] = None  # prim path -> its bound material (see _bound_material)
 
     # -- messages and attributes ------------------------------------------------------------------------
 
@@ -124,7 +125,7 @@ class _Reader:
         walk = iter(Usd.PrimRange.PreAndPostVisit(self.stage.GetPseudoRoot(), predicate))
         for prim in walk:
             if walk.IsPostVisit():
-                if stack and stack[-1].path == str(prim.GetPath()):
+                if stack and stack[-1].path == prim.GetPath():
                     self._finish_group(stack.pop(), stack)
                 continue
             if prim.IsPseudoRoot():
@@ -144,13 +145,18 @@ class _Reader:
         return self.scene
 
     def _shown(self, prim) -> bool:
-        """False for invisible prims and guide or proxy purposes (and their children)."""
+        """False for invisible prims and guide or proxy purposes (and their children).  The walk prunes a
+        hidden prim's children, so every prim asked about has shown ancestors: its own authored visibility
+        and purpose decide (USD's Compute* would walk the ancestors again, in time the square of the depth)."""
         imageable = self.UsdGeom.Imageable(prim)
         if not imageable:
             return True
-        if imageable.ComputeVisibility(self.time) == self.UsdGeom.Tokens.invisible:
+        Tokens = self.UsdGeom.Tokens
+        visibility = imageable.GetVisibilityAttr()
+        if visibility.HasAuthoredValue() and visibility.Get(self.time) == Tokens.invisible:
             return False
-        return imageable.ComputePurpose() not in (self.UsdGeom.Tokens.guide, self.UsdGeom.Tokens.proxy)
+        purpose = imageable.GetPurposeAttr()
+        return not (purpose.HasAuthoredValue() and purpose.Get() in (Tokens.guide, Tokens.proxy))
 
     def _place(self, obj: SceneObject, stack: list[_Group], prim) -> None:
         if not stack:
@@ -257,7 +263,7 @@ class _Reader:
             if str(op) not in CSG.OPS + (C.CHAIN,):
                 self.problem(prim, f"unknown sdl:csg {str(op)!r}", "its children read as separate objects")
             else:
-                stack.append(_Group(str(op), str(prim.GetPath()), self._groups(prim)))
+                stack.append(_Group(str(op), prim.GetPath(), self._groups(prim)))
             return _DESCEND
         type_name = prim.GetTypeName()
         if prim.IsA(self.UsdGeom.Camera):
@@ -412,10 +418,24 @@ class _Reader:
             values["fresnel_tint"] = self.triple(prim, C.A_FRESNEL_TINT, default.fresnel_tint)
         return Material(**values)
 
+    def _bound_material(self, prim):
+        """The material bound to ``prim``.  Bindings are resolved for every geometric prim of the stage in
+        one batch the first time one is asked for (each ComputeBoundMaterial walks the prim's ancestors, in
+        time the square of the depth for a deep tree); a prim outside that batch is resolved alone."""
+        if self._bound is None:
+            Usd = self.Usd
+            predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+            prims = [p for p in Usd.PrimRange(self.stage.GetPseudoRoot(), predicate) if p.IsA(self.UsdGeom.Gprim)]
+            materials, _ = self.UsdShade.MaterialBindingAPI.ComputeBoundMaterials(prims)
+            self._bound = {p.GetPath(): m for p, m in zip(prims, materials)}
+        if prim.GetPath() in self._bound:
+            return self._bound[prim.GetPath()]
+        return self.UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
+
     def _preview_material(self, prim) -> Material:
         """SDL material from the bound UsdPreviewSurface, else from displayColor, else SDL's default."""
         UsdShade = self.UsdShade
-        bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        bound = self._bound_material(prim)
         shader = None
         if bound:
             source = bound.ComputeSurfaceSource()

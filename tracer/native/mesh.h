@@ -15,10 +15,15 @@
 #include "core.h"
 #include "numeric.h"
 #include "bvh_build.h"
+#include "mesh_wide.h"
 
 typedef struct {
     const BvhNode *nodes;
     int64_t n_nodes;
+    WideNode *wide;  /* the same tree four children a node (mesh_wide.h; owned), or NULL: the binary walk */
+    int64_t n_wide;
+    int wide_mode;   /* WIDE_SCALAR or WIDE_SSE2 where there is a wide tree */
+    BvhNode fingerprint[2];  /* the first and last binary node when the wide tree was made */
     const int32_t *order;       /* leaf slot -> triangle */
     const int32_t *tri_vertex;  /* 3 per triangle */
     const int32_t *tri_normal;  /* 3 per triangle (below 0: the triangle has no normals), or NULL */
@@ -253,9 +258,49 @@ static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, doub
     h->err = 0.0;  /* the primitive adds the bound on t's rounding (core.c, tracer.numerics) */
 }
 
+/* The leaf's triangles in slot order: a hit with lower < t < *best_t becomes the best. */
+static inline void mesh_leaf_closest(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
+                                     double *best_t, double *best_b1, double *best_b2, int64_t *best_slot)
+{
+    for (int64_t i = first; i < first + count; i++) {
+        double t, b1, b2;
+        if (mesh_triangle(m, i, r, &t, &b1, &b2) && t > lower && t < *best_t) {
+            *best_t = t;
+            *best_b1 = b1;
+            *best_b2 = b2;
+            *best_slot = i;
+        }
+    }
+}
+
+/* mesh_closest's walk of the wide tree (mesh_wide.h: the same leaves in the same order as the binary walk). */
+static inline void mesh_closest_wide(const MeshView *m, const MeshRay *r, const WideRay *wr, double lower,
+                                     WideEntry *stack, double *best_t, double *best_b1, double *best_b2,
+                                     int64_t *best_slot)
+{
+    int64_t top = 0;
+    WideEntry e = {0, 0, lower};
+    for (;;) {
+        if (e.count) {
+            mesh_leaf_closest(m, r, e.child, e.count, lower, best_t, best_b1, best_b2, best_slot);
+        } else {
+            const WideNode *node = &m->wide[e.child];
+            double near[WIDE_CHILDREN];
+            int mask = wide_hit(m->wide_mode, node, wr, lower, *best_t, near);
+            if (mask)
+                wide_push(node, mask, near, wr->octant, stack, &top);
+        }
+        do {
+            if (!top)
+                return;
+            e = stack[--top];
+        } while (e.near > *best_t);
+    }
+}
+
 /* The first hit with lower < t < upper (nearer child first, by the ray's own direction). */
 static int mesh_closest(const MeshView *m, const double *o, const double *d, double lower, double upper,
-                        int64_t *stack, Hit *out)
+                        int64_t *stack, WideEntry *wide_stack, Hit *out)
 {
     if (m->n_nodes == 0)
         return 0;
@@ -263,6 +308,11 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
     mesh_ray(&r, o, d);
     double best_t = upper, best_b1 = 0.0, best_b2 = 0.0;
     int64_t best_slot = -1, top = 0;
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
+        mesh_closest_wide(m, &r, &wr, lower, wide_stack, &best_t, &best_b1, &best_b2, &best_slot);
+        goto found;
+    }
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
@@ -270,16 +320,7 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
         if (!slab_hit(nd, &r, lower, best_t))
             continue;
         if (nd->count) {
-            int64_t first = nd->offset, last = first + nd->count;
-            for (int64_t i = first; i < last; i++) {
-                double t, b1, b2;
-                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < best_t) {
-                    best_t = t;
-                    best_b1 = b1;
-                    best_b2 = b2;
-                    best_slot = i;
-                }
-            }
+            mesh_leaf_closest(m, &r, nd->offset, nd->count, lower, &best_t, &best_b1, &best_b2, &best_slot);
             continue;
         }
         int64_t near = nd->offset, far = nd->offset + 1;
@@ -289,19 +330,53 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
         stack[top++] = far;
         stack[top++] = near;
     }
+found:
     if (best_slot < 0)
         return 0;
     mesh_fill_hit(m, best_slot, best_t, best_b1, best_b2, mesh_entering(m, best_slot, d), out);
     return 1;
 }
 
-/* Any hit with lower < t < upper (shadow feelers). */
-static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack)
+static inline int mesh_leaf_any(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
+                                double upper)
+{
+    for (int64_t i = first; i < first + count; i++) {
+        double t, b1, b2;
+        if (mesh_triangle(m, i, r, &t, &b1, &b2) && t > lower && t < upper)
+            return 1;
+    }
+    return 0;
+}
+
+/* Any hit with lower < t < upper (shadow feelers); the leaves are tried nearer first on the wide walk (the
+ * answer does not depend on the order). */
+static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack,
+                    WideEntry *wide_stack)
 {
     if (m->n_nodes == 0)
         return 0;
     MeshRay r;
     mesh_ray(&r, o, d);
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
+        int64_t top = 0;
+        WideEntry e = {0, 0, lower};
+        for (;;) {
+            if (e.count) {
+                if (mesh_leaf_any(m, &r, e.child, e.count, lower, upper))
+                    return 1;
+            } else {
+                const WideNode *node = &m->wide[e.child];
+                double near[WIDE_CHILDREN];
+                int mask = wide_hit(m->wide_mode, node, &wr, lower, upper, near);
+                if (mask)
+                    wide_push(node, mask, near, wr.octant, wide_stack, &top);
+            }
+            if (!top)
+                return 0;
+            e = wide_stack[--top];
+        }
+    }
     int64_t top = 0;
     stack[top++] = 0;
     while (top) {
@@ -310,12 +385,8 @@ static int mesh_any(const MeshView *m, const double *o, const double *d, double 
         if (!slab_hit(nd, &r, lower, upper))
             continue;
         if (nd->count) {
-            int64_t first = nd->offset, last = first + nd->count;
-            for (int64_t i = first; i < last; i++) {
-                double t, b1, b2;
-                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < upper)
-                    return 1;
-            }
+            if (mesh_leaf_any(m, &r, nd->offset, nd->count, lower, upper))
+                return 1;
             continue;
         }
         stack[top++] = nd->offset + 1;
@@ -400,34 +471,63 @@ static inline double dedupe_window(const MeshView *m, const RawHit *a, const Raw
     return (mesh_touching(m, a->slot, b->slot) ? m->dedupe_adjacent : m->dedupe) * scale;
 }
 
+/* Every crossing of the leaf's triangles, kept raw; 0 when memory ran out. */
+static inline int mesh_leaf_all(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, RawBuffer *raw)
+{
+    for (int64_t i = first; i < first + count; i++) {
+        double t, b1, b2;
+        if (mesh_triangle(m, i, r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
+            return 0;
+    }
+    return 1;
+}
+
 /* Every crossing of the whole line, deduplicated and ordered as TriangleMesh.all_hits.  Grows
  * *out_buffer as needed and returns the count, or -1 when memory ran out. */
-static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int64_t *stack, RawBuffer *raw,
-                        Hit **out_buffer, int64_t *out_capacity)
+static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int64_t *stack, WideEntry *wide_stack,
+                        RawBuffer *raw, Hit **out_buffer, int64_t *out_capacity)
 {
     raw->n = 0;
     if (m->n_nodes == 0)
         return 0;
     MeshRay r;
     mesh_ray(&r, o, d);
-    int64_t top = 0;
-    stack[top++] = 0;
-    while (top) {
-        int64_t node = stack[--top];
-        const BvhNode *nd = &m->nodes[node];
-        if (!slab_hit(nd, &r, -INFINITY, INFINITY))
-            continue;
-        if (nd->count) {
-            int64_t first = nd->offset, last = first + nd->count;
-            for (int64_t i = first; i < last; i++) {
-                double t, b1, b2;
-                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, -INFINITY, INFINITY, &wr)) {
+        /* every leaf the line meets, left first (the binary walk's order: octant 0's) */
+        int64_t top = 0;
+        WideEntry e = {0, 0, -INFINITY};
+        for (;;) {
+            if (e.count) {
+                if (!mesh_leaf_all(m, &r, e.child, e.count, raw))
                     return -1;
+            } else {
+                const WideNode *node = &m->wide[e.child];
+                double near[WIDE_CHILDREN];
+                int mask = wide_hit(m->wide_mode, node, &wr, -INFINITY, INFINITY, near);
+                if (mask)
+                    wide_push(node, mask, near, 0, wide_stack, &top);
             }
-            continue;
+            if (!top)
+                break;
+            e = wide_stack[--top];
         }
-        stack[top++] = nd->offset + 1;
-        stack[top++] = nd->offset;
+    } else {
+        int64_t top = 0;
+        stack[top++] = 0;
+        while (top) {
+            int64_t node = stack[--top];
+            const BvhNode *nd = &m->nodes[node];
+            if (!slab_hit(nd, &r, -INFINITY, INFINITY))
+                continue;
+            if (nd->count) {
+                if (!mesh_leaf_all(m, &r, nd->offset, nd->count, raw))
+                    return -1;
+                continue;
+            }
+            stack[top++] = nd->offset + 1;
+            stack[top++] = nd->offset;
+        }
     }
     int64_t n = raw->n;
     if (n == 0)

@@ -92,7 +92,7 @@ def phases(sdl: Path, width: int, height: int, threads: int, out: Path) -> dict:
         scene = tracer.load(sdl)
         t1 = time.perf_counter()
         compiled = compile_scene(scene)
-        make_tracer(compiled, "c", threads)  # flattens the scene for the C core (kept on `compiled`)
+        core = make_tracer(compiled, "c", threads)  # flattens the scene for the C core (kept on `compiled`)
         t2 = time.perf_counter()
         result = render(compiled, width, height, backend="c", threads=threads)
         t3 = time.perf_counter()
@@ -114,8 +114,12 @@ def phases(sdl: Path, width: int, height: int, threads: int, out: Path) -> dict:
         kept = sum(nbytes for address, nbytes in own.items() if address not in source_buffers)
         source = sum(source_buffers.values())
         row["triangles"] = mesh.triangle_count
+        # (the C core's own four-wide copy of the tree, tracer/native/mesh_wide.h: 128 bytes a node; the
+        # scene's only mesh is the C core's mesh 0)
+        wide = 128 * core.mesh_wide_nodes(0) if hasattr(core, "mesh_wide_nodes") else 0
         row["bytes_per_triangle"] = {"bvh_and_tables": kept / mesh.triangle_count,
-                                     "mesh_data": source / mesh.triangle_count}
+                                     "mesh_data": source / mesh.triangle_count,
+                                     "wide_tree": wide / mesh.triangle_count}
         row["throughput"] = primary_ray_throughput(compiled, width, height, threads)
     return row
 
@@ -209,7 +213,7 @@ def summary(row: dict) -> str:
         text += f"   [read {ph['read']:.2f} build {ph['build']:.2f} trace {ph['trace']:.2f} write {ph['write']:.2f}]"
     if "bytes_per_triangle" in ph:
         b = ph["bytes_per_triangle"]
-        text += f" {b['bvh_and_tables'] + b['mesh_data']:.0f} B/triangle"
+        text += f" {b['bvh_and_tables'] + b['mesh_data'] + b.get('wide_tree', 0):.0f} B/triangle"
     if "throughput" in ph:
         t = ph["throughput"]
         text += f"   closest hit, one thread: ours {t['ours_rays_per_cpu_s'] / 1e6:.1f} M rays/CPU-s"

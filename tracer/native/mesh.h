@@ -112,6 +112,35 @@ static inline void mesh_edges(const MeshView *m, int64_t tri, double *e1, double
     }
 }
 
+/* Whether the triangle in leaf slot i may be hit: mesh_triangle's quick rejection alone (its numbers, by its
+ * operations), without a branch, so that the loads of a leaf's triangles overlap (mesh_leaf_candidates). */
+static inline int mesh_triangle_may_hit(const MeshView *m, int64_t i, const MeshRay *r)
+{
+    const double *p0, *p1, *p2;
+    mesh_corners(m, m->order[i], &p0, &p1, &p2);
+    double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+    double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
+    double pvec[3], qvec[3];
+    cross3(r->d, e2, pvec);
+    double det = dot3(e1, pvec);
+    cross3(s, e1, qvec);
+    double inv_det = 1.0 / det;
+    double u = dot3(s, pvec) * inv_det;
+    double v = dot3(r->d, qvec) * inv_det;
+    double reject = 2.0 * m->barycentric_max;
+    return !((u < -reject) | (v < -reject) | (u + v > 1.0 + 2.0 * reject));
+}
+
+/* Bit k: the triangle in leaf slot first + k (k < count <= 64) may be hit (mesh_triangle_may_hit). */
+static inline uint64_t mesh_leaf_candidates(const MeshView *m, int64_t first, int64_t count, const MeshRay *r)
+{
+    uint64_t may = 0;
+    for (int64_t k = 0; k < count; k++)
+        may |= (uint64_t)mesh_triangle_may_hit(m, first + k, r) << k;
+    return may;
+}
+
 /* Moller-Trumbore against the triangle in leaf slot i. */
 static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, double *t, double *b1, double *b2)
 {
@@ -262,13 +291,18 @@ static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, doub
 static inline void mesh_leaf_closest(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
                                      double *best_t, double *best_b1, double *best_b2, int64_t *best_slot)
 {
-    for (int64_t i = first; i < first + count; i++) {
-        double t, b1, b2;
-        if (mesh_triangle(m, i, r, &t, &b1, &b2) && t > lower && t < *best_t) {
-            *best_t = t;
-            *best_b1 = b1;
-            *best_b2 = b2;
-            *best_slot = i;
+    /* (in runs of 64: first which may be hit, then those in slot order) */
+    for (int64_t start = first; start < first + count; start += 64) {
+        int64_t run = first + count - start < 64 ? first + count - start : 64;
+        for (uint64_t may = mesh_leaf_candidates(m, start, run, r); may; may &= may - 1) {
+            int64_t i = start + __builtin_ctzll(may);
+            double t, b1, b2;
+            if (mesh_triangle(m, i, r, &t, &b1, &b2) && t > lower && t < *best_t) {
+                *best_t = t;
+                *best_b1 = b1;
+                *best_b2 = b2;
+                *best_slot = i;
+            }
         }
     }
 }
@@ -340,10 +374,13 @@ found:
 static inline int mesh_leaf_any(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
                                 double upper)
 {
-    for (int64_t i = first; i < first + count; i++) {
-        double t, b1, b2;
-        if (mesh_triangle(m, i, r, &t, &b1, &b2) && t > lower && t < upper)
-            return 1;
+    for (int64_t start = first; start < first + count; start += 64) {
+        int64_t run = first + count - start < 64 ? first + count - start : 64;
+        for (uint64_t may = mesh_leaf_candidates(m, start, run, r); may; may &= may - 1) {
+            double t, b1, b2;
+            if (mesh_triangle(m, start + __builtin_ctzll(may), r, &t, &b1, &b2) && t > lower && t < upper)
+                return 1;
+        }
     }
     return 0;
 }
@@ -474,10 +511,14 @@ static inline double dedupe_window(const MeshView *m, const RawHit *a, const Raw
 /* Every crossing of the leaf's triangles, kept raw; 0 when memory ran out. */
 static inline int mesh_leaf_all(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, RawBuffer *raw)
 {
-    for (int64_t i = first; i < first + count; i++) {
-        double t, b1, b2;
-        if (mesh_triangle(m, i, r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
-            return 0;
+    for (int64_t start = first; start < first + count; start += 64) {
+        int64_t run = first + count - start < 64 ? first + count - start : 64;
+        for (uint64_t may = mesh_leaf_candidates(m, start, run, r); may; may &= may - 1) {
+            int64_t i = start + __builtin_ctzll(may);
+            double t, b1, b2;
+            if (mesh_triangle(m, i, r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
+                return 0;
+        }
     }
     return 1;
 }

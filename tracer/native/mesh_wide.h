@@ -45,7 +45,7 @@
  * the binary walk reaches them for a direction in that octant (bit k set: d[k] < 0), two bits each, the
  * first in the lowest bits; order[0] is also the left-first order of all-hits and any-hit. */
 typedef struct {
-    float lo[3][WIDE_CHILDREN], hi[3][WIDE_CHILDREN];  /* [axis][child]: the binary nodes' boxes as they are */
+    float box[2][3][WIDE_CHILDREN];  /* [0: lo, 1: hi][axis][child]: the binary nodes' boxes as they are */
     int32_t child[WIDE_CHILDREN];
     uint16_t count[WIDE_CHILDREN];
     uint8_t order[8];
@@ -165,8 +165,8 @@ static void wide_fill(const BvhNode *nodes, int64_t root, WideNode *w, WideGroup
     for (int j = 0; j < WIDE_CHILDREN; j++) {
         const BvhNode *f = j < g->n ? &nodes[g->frontier[j]] : NULL;
         for (int i = 0; i < 3; i++) {
-            w->lo[i][j] = f ? f->lo[i] : INFINITY;
-            w->hi[i][j] = f ? f->hi[i] : -INFINITY;
+            w->box[0][i][j] = f ? f->lo[i] : INFINITY;
+            w->box[1][i][j] = f ? f->hi[i] : -INFINITY;
         }
         w->child[j] = f ? (f->count ? f->offset : (int32_t)g->frontier[j]) : -1;
         w->count[j] = f ? f->count : 0;
@@ -200,8 +200,8 @@ static WideNode *wide_build(const BvhNode *nodes, int64_t n, int64_t *count)
         WideNode *w = &wide[0];
         for (int j = 0; j < WIDE_CHILDREN; j++)
             for (int i = 0; i < 3; i++) {
-                w->lo[i][j] = j ? INFINITY : nodes[0].lo[i];
-                w->hi[i][j] = j ? -INFINITY : nodes[0].hi[i];
+                w->box[0][i][j] = j ? INFINITY : nodes[0].lo[i];
+                w->box[1][i][j] = j ? -INFINITY : nodes[0].hi[i];
             }
         for (int j = 0; j < WIDE_CHILDREN; j++) {
             w->child[j] = j ? -1 : nodes[0].offset;
@@ -265,8 +265,7 @@ static inline int wide_hit_scalar(const WideNode *node, const WideRay *r, double
     for (int j = 0; j < WIDE_CHILDREN; j++) {
         double n = lower, f = upper;
         for (int i = 0; i < 3; i++) {
-            const float *near_plane = r->near_side[i] ? node->hi[i] : node->lo[i];
-            const float *far_plane = r->near_side[i] ? node->lo[i] : node->hi[i];
+            const float *near_plane = node->box[r->near_side[i]][i], *far_plane = node->box[1 - r->near_side[i]][i];
             double enter = ((double)near_plane[j] - r->o[i]) * r->inv[i];
             double leave = ((double)far_plane[j] - r->o[i]) * r->inv[i];
             n = enter > n ? enter : n;
@@ -284,8 +283,7 @@ static inline int wide_hit_sse2(const WideNode *node, const WideRay *r, double l
     __m128d n01 = _mm_set1_pd(lower), n23 = n01, f01 = _mm_set1_pd(upper), f23 = f01;
     for (int i = 0; i < 3; i++) {
         __m128d o = _mm_set1_pd(r->o[i]), inv = _mm_set1_pd(r->inv[i]);
-        __m128 np = _mm_loadu_ps(r->near_side[i] ? node->hi[i] : node->lo[i]);
-        __m128 fp = _mm_loadu_ps(r->near_side[i] ? node->lo[i] : node->hi[i]);
+        __m128 np = _mm_loadu_ps(node->box[r->near_side[i]][i]), fp = _mm_loadu_ps(node->box[1 - r->near_side[i]][i]);
         /* (cvtps2pd widens exactly; max(a, b) = a > b ? a : b and min likewise, as the scalar test) */
         n01 = _mm_max_pd(_mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(np), o), inv), n01);
         n23 = _mm_max_pd(_mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(np, np)), o), inv), n23);

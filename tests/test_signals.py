@@ -172,3 +172,30 @@ def test_a_cancel_is_heard_inside_a_batch_of_rays(backend):
     again = render(scene, 6, 4, backend=backend)
     reference = render(_nested_glass(eye=2.5), 6, 4, backend="numpy" if backend == "c" else "c")
     assert np.abs(again.image - reference.image).max() <= 1 / 255
+
+
+def test_a_signal_while_a_librarys_messages_are_held_back_still_says_interrupted(tmp_path):
+    """usd-core's and libtiff's messages are caught by pointing file descriptor 2 at a temporary file
+    (tracer.diagnostics.held_stderr).  A signal that comes meanwhile, while the main thread is stuck in C code
+    (here a long key derivation), is acted on by the C core's watchdog: its "interrupted" line goes to the program's
+    standard error, not into the held-back file that nobody reads once the process has ended.  (The signal
+    comes from another thread: sent from the main thread, Python would act on it before the C call began.)"""
+    sent = tmp_path / "sent"
+    code = ("import hashlib, os, signal, threading, time\n"
+            "from tracer import signals, diagnostics\n"
+            "from tracer.backend import load_core\n"
+            "signals.install_at_start()\n"
+            "with signals.working():\n"
+            "    load_core('c')\n"
+            "    with diagnostics.held_stderr():\n"
+            "        def send():\n"
+            f"            open({str(sent)!r}, 'w').write(repr(time.monotonic()))\n"
+            "            os.kill(os.getpid(), signal.SIGTERM)\n"
+            "        threading.Timer(0.2, send).start()\n"
+            "        hashlib.pbkdf2_hmac('sha256', b'x', b'y', 3 * 10**7)\n"
+            "print('went on')\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=_env(), timeout=60)
+    ended = time.monotonic()
+    assert run.returncode == 128 + signal.SIGTERM and run.stdout == "", (run.returncode, run.stdout, run.stderr)
+    assert run.stderr.strip().splitlines()[-1:] == ["interrupted"], run.stderr
+    assert ended - float(sent.read_text()) < 3  # (the watchdog's 0.3 s, not the key's 10 s of CPU or more)

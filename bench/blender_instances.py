@@ -9,7 +9,9 @@ holding its matrix and the number of the one MeshData they share), compile_scene
 an F12 (the engine's whole render, build and compile included).  Memory is the process's resident size
 before and after each step (/proc/self/statm) and, in a second pass, Python's own allocations per step
 (tracemalloc: slower, so its times are not reported).  The mesh once is its arrays plus its BVH, measured
-alone (one instance).  Prints JSON and writes bench/results/blender_instances.json.
+alone (one instance).  Of the build's bytes, what bpy itself keeps for each read of an instance's object
+is measured alone too (bpy_keeps_per_object_read).  Prints JSON and writes
+bench/results/blender_instances.json.
 """
 from __future__ import annotations
 
@@ -143,6 +145,24 @@ def _mesh_once() -> dict:
             "rss_growth": _rss() - before}
 
 
+def _bpy_object_reads() -> float:
+    """Bytes per instance that bpy itself keeps, for good, when ``DepsgraphObjectInstance.object`` is read
+    (each read of a geometry-nodes instance's object makes a Python object bpy never frees, in 4.5 and 5.0;
+    the scene build must read it once per instance: it is the only way to its geometry and materials)."""
+    import bpy
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    count = 0
+    for inst in depsgraph.object_instances:
+        inst.object
+        count += 1
+    kept = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    return round(kept / count, 1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--instances", type=int, default=100_000)
@@ -168,6 +188,7 @@ def main() -> None:
     # (the mesh's BVH was built by _mesh_once and is found again: what build and compile add is per instance)
     result["bytes_per_instance_rss"] = round(sum(timed[k]["rss_growth"] for k in steps) / points, 1)
     result["bytes_per_instance_python"] = round(sum(result["python_allocated"].values()) / points, 1)
+    result["bpy_keeps_per_object_read"] = _bpy_object_reads()
     if args.render != "none":
         from blender_scripts.addon_env import set_resolution
 

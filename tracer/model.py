@@ -629,6 +629,8 @@ class TableRows:
              name: Optional[str] = None) -> int:
         """The number of a part (made when new): what add_block's rows point at."""
         parameters = _parameters_of(kind, parameters)
+        if kind in BUILTIN_MESH_KINDS and mesh is builtin_mesh(kind):
+            mesh = None  # (the row's kind gives it: no mesh of its own)
         key = (kind, id(mesh), id(material), parameters, name)
         number = self._parts.get(key)
         if number is None:
@@ -671,7 +673,7 @@ class TableRows:
         values = self._part_values
         meshes, mesh_number = [], {}
         for kind, mesh, *_ in values:
-            if _OWN_MESH[kind] and id(mesh) not in mesh_number:
+            if mesh is not None and id(mesh) not in mesh_number:
                 mesh_number[id(mesh)] = len(meshes)
                 meshes.append(mesh)
         materials = list({id(v[2]): v[2] for v in values}.values())
@@ -687,7 +689,7 @@ class TableRows:
             column([material_number[id(v[2])] for v in values], np.int32), materials,
             parameter_rows([v[3] for v in values])[part_of_row], None, None, None,
             RowNames(column([name_number.get(v[4], -1) for v in values], np.int32), names) if names else None,
-            meshes, column([mesh_number[id(v[1])] if _OWN_MESH[v[0]] else -1 for v in values], np.int32))
+            meshes, column([mesh_number[id(v[1])] if v[1] is not None else -1 for v in values], np.int32))
 
 
 @dataclass

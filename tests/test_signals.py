@@ -65,11 +65,15 @@ def _run_and_signal(scene: Path, output: Path, signum: int, after: float):
 
 
 def _machine_latency() -> float:
-    """How long this machine takes, now, from a SIGTERM to the end of a Python process that does nothing but
-    die of it (the default action): the share of a run's ending that is the machine's load, not the tracer.
-    (A timed bound on a shared machine must leave this out, or it measures the neighbours.)"""
-    proc = subprocess.Popen([sys.executable, "-c", "import sys, time; sys.stdout.write('up\\n'); sys.stdout.flush(); "
-                             "time.sleep(60)"], stdout=subprocess.PIPE)
+    """How long this machine takes, now, from a SIGTERM to the end of a busy Python process that ends on it
+    in a Python handler (as the tracer does: it must be given a core, run the handler and tear down): the
+    share of a run's ending that is the machine's load, not the tracer.  (A timed bound on a shared machine
+    must leave this out, or it measures the neighbours; a process dying of the default action is never
+    scheduled at all, so it would measure nothing.)"""
+    proc = subprocess.Popen([sys.executable, "-c", "import signal, sys\n"
+                             "signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))\n"
+                             "sys.stdout.write('up\\n'); sys.stdout.flush()\n"
+                             "while True: sum(range(1000))\n"], stdout=subprocess.PIPE)
     proc.stdout.readline()
     sent = time.monotonic()
     proc.send_signal(signal.SIGTERM)

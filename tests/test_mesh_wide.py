@@ -167,8 +167,9 @@ def test_ties_go_to_the_triangle_the_binary_walk_reaches_first(monkeypatch):
 
 
 def test_a_large_mesh_is_walked_four_wide_in_fewer_nodes(monkeypatch):
-    """The wide tree collapses the binary one: at most one wide node per binary inner node, and at least
-    two binary inner nodes per wide node on a full tree."""
+    """The wide tree collapses the binary one: each wide node stands for a binary inner node and, where
+    there is room, for up to two more below it (none where both children are leaves): on a mesh about two
+    binary inner nodes a wide node (0.46 to 0.51 of them from 2,000 to 10^6 triangles)."""
     from tracer.native.tracer import NativeTracer
 
     compiled = compile_scene(scene_of(_mesh_shape(_torus(20_000))))
@@ -176,7 +177,7 @@ def test_a_large_mesh_is_walked_four_wide_in_fewer_nodes(monkeypatch):
     inner = int((mesh.nodes["count"] == 0).sum())
     _set_mode(monkeypatch, "sse2")
     wide = NativeTracer(compiled, threads=1).mesh_wide_nodes(0)
-    assert inner / 3 <= wide <= inner / 2
+    assert inner / 3 <= wide < 0.6 * inner
 
 
 @pytest.mark.parametrize("scene_file", ["polyhedra.sdl", "shapes.sdl"])

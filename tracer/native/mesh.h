@@ -247,11 +247,15 @@ static inline int mesh_entering(const MeshView *m, int64_t slot, const double *d
 }
 
 /* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
-static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+/* mesh_normal, and whether a ray along d enters there (mesh_entering), from one set of corner normals. */
+static inline int mesh_normal_entering(const MeshView *m, int64_t tri, double b1, double b2, const double *d,
+                                       double *n)
 {
     double c[3][3], g[3];
     int has = mesh_corner_normals(m, tri, c);
     int flip = mesh_winding(m, tri, c, g);
+    double facing = d ? dot3(d, g) : 0.0;
+    int entering = flip ? facing > 0.0 : facing < 0.0;
     if (flip)
         for (int k = 0; k < 3; k++)
             g[k] = -g[k];
@@ -272,6 +276,12 @@ static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double
         n[1] = g[1];
         n[2] = g[2];
     }
+    return entering;
+}
+
+static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+{
+    mesh_normal_entering(m, tri, b1, b2, NULL, n);
 }
 
 static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, double b1, double b2, int entering, Hit *h)
@@ -285,6 +295,20 @@ static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, doub
     h->shape = -1;
     h->entering = entering;
     h->err = 0.0;  /* the primitive adds the bound on t's rounding (core.c, tracer.numerics) */
+}
+
+/* mesh_fill_hit with the flag mesh_entering gives a ray along d, the corner normals found once. */
+static inline void mesh_fill_hit_along(const MeshView *m, int64_t slot, double t, double b1, double b2, const double *d,
+                                       Hit *h)
+{
+    int64_t tri = m->order[slot];
+    h->t = t;
+    h->entering = mesh_normal_entering(m, tri, b1, b2, d, h->n);
+    h->uv[0] = b1;
+    h->uv[1] = b2;
+    h->part = (int32_t)tri;
+    h->shape = -1;
+    h->err = 0.0;
 }
 
 /* The leaf's triangles in slot order: a hit with lower < t < *best_t becomes the best. */
@@ -367,7 +391,7 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
 found:
     if (best_slot < 0)
         return 0;
-    mesh_fill_hit(m, best_slot, best_t, best_b1, best_b2, mesh_entering(m, best_slot, d), out);
+    mesh_fill_hit_along(m, best_slot, best_t, best_b1, best_b2, d, out);
     return 1;
 }
 

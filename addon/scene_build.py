@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from array import array
 import math
 import os
 from typing import Optional
@@ -264,20 +265,22 @@ class SceneBuilder:
         finally:
             obj_eval.to_mesh_clear()
 
-    def mesh_nodes(self, obj_eval, matrix_world: np.ndarray, top_level: bool, own: bool = True) -> list:
-        if obj_eval.type not in GEOMETRY_TYPES:
-            return []
-        if not self._usable(matrix_world, obj_eval.name):
-            return []
+    def mesh_parts(self, obj_eval, own: bool = True) -> list[tuple]:
+        """(tracer mesh, tracer material) of each material of an object's evaluated geometry."""
         # (the UV map is read only for a material with a picture on it)
         uvs = any(self._material(slot.material) is not None and _material_key(slot.material) in self._uv_materials
                   for slot in obj_eval.material_slots)
         kind = f"evaluated mesh {self.mode}" + (" with UVs" if uvs else "")
         parts = self.cache.get(obj_eval, kind, lambda: self._evaluated_mesh(obj_eval, uvs), own)
-        shapes = []
-        for index, data in sorted(parts.items()):
-            shapes.append(self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=data,
-                                           material=self._slot_material(obj_eval, index)))
+        return [(data, self._slot_material(obj_eval, index)) for index, data in sorted(parts.items())]
+
+    def mesh_nodes(self, obj_eval, matrix_world: np.ndarray, top_level: bool, own: bool = True) -> list:
+        if obj_eval.type not in GEOMETRY_TYPES:
+            return []
+        if not self._usable(matrix_world, obj_eval.name):
+            return []
+        shapes = [self.model.Shape("mesh", matrix=self._target(matrix_world), mesh=data, material=material)
+                  for data, material in self.mesh_parts(obj_eval, own)]
         if not top_level and len(shapes) > 1:
             # A Boolean operand is one solid: keep it whole, with its first material.
             merged = self.cache.get(obj_eval, f"merged mesh {self.mode}",
@@ -296,14 +299,19 @@ class SceneBuilder:
         return blender_lights.tracer_light(obj_eval, matrix_world, self.to_target, samples, self.warnings)
 
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
-        """The tracer Scene of everything the depsgraph shows (its object instances)."""
-        model = self.model
+        """The tracer Scene of everything the depsgraph shows (its object instances).  Where geometry nodes
+        make instances (and nothing needs the objects one by one: a Boolean, an export), the objects are a
+        ShapeTable: a row per instance and material, no Python object per instance."""
         # (sort key, what it made, its edit key): import order first (so that files round-trip in their own
-        # order), then by name, then as the depsgraph listed them
-        made: list[tuple[tuple, list, object]] = []
+        # order), then by name, then as the depsgraph listed them; an _InstanceRun stands for the rows of
+        # consecutive instances of one instancer
+        made: list[tuple[tuple, object, object]] = []
         lights: list[tuple[tuple, object, np.ndarray]] = []
         later: list[tuple[tuple, object, np.ndarray, object]] = []
         self.cache.begin_build(self.depsgraph)
+        self._templates: dict[tuple, int] = {}
+        self._template_parts: list[tuple] = []
+        rows = self.mode != "EXPORT"  # (an export writes each instance's mesh file name: Shapes)
         for count, inst in enumerate(instances if instances is not None else self.depsgraph.object_instances):
             obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
             original = obj.original
@@ -314,15 +322,24 @@ class SceneBuilder:
             if selected_only and not (inst.is_instance and inst.parent and inst.parent.original.select_get()) \
                     and not original.select_get():
                 continue
-            key = (original.get(OBJ_ORDER, math.inf), original.name, count)
-            matrix = matrix_np(inst.matrix_world)
             # An instance whose original is its instancer was made by geometry nodes: its geometry is not that
             # object's, and only ``inst.object`` carries it, until the iteration moves on: made now.
             if inst.is_instance and inst.parent is not None and \
                     original.as_pointer() == inst.parent.original.as_pointer():
-                if obj.type in GEOMETRY_TYPES:
-                    made.append((key, self.object_node(obj, matrix, own=False), ("instance", count)))
+                if obj.type not in GEOMETRY_TYPES:
+                    continue
+                if rows:
+                    run = made[-1][1] if made else None
+                    if not (isinstance(run, _InstanceRun) and run.pointer == original.as_pointer()):
+                        run = _InstanceRun(original.as_pointer())
+                        made.append(((original.get(OBJ_ORDER, math.inf), original.name, count), run, None))
+                    run.add(count, inst.matrix_world, self._instance_template(obj))
+                else:
+                    made.append(((original.get(OBJ_ORDER, math.inf), original.name, count),
+                                 self.object_node(obj, matrix_np(inst.matrix_world), own=False), ("instance", count)))
                 continue
+            key = (original.get(OBJ_ORDER, math.inf), original.name, count)
+            matrix = matrix_np(inst.matrix_world)
             stable = inst.instance_object if inst.is_instance else obj  # (the instanced object itself)
             if obj.type == "LIGHT":
                 lights.append((key, stable, matrix))
@@ -331,11 +348,12 @@ class SceneBuilder:
                               original.as_pointer()))
         for key, obj, matrix, edit_key in later:
             made.append((key, self.object_node(obj, matrix), edit_key))
+        made = self._runs_placed(made)
         made.sort(key=lambda entry: entry[0])
-        objects = [node for _, nodes, _ in made for node in nodes]
+        objects = self._objects(made)
         #: for each object, the original Blender object's pointer, or ("instance", n) for an instance (the add-on's
         #: live scene edits objects by these keys: addon/live_scene.py)
-        self.object_keys = [edit_key for _, nodes, edit_key in made for _ in nodes]
+        self._keys = [(nodes if isinstance(nodes, _InstanceRun) else len(nodes), edit_key) for _, nodes, edit_key in made]
         lights.sort(key=lambda entry: entry[0])
         self.light_objects = [obj for _, obj, _ in lights]  # (likewise, the lights' objects)
         lights = [self.light(obj, matrix) for _, obj, matrix in lights]
@@ -346,6 +364,142 @@ class SceneBuilder:
         tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
         tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
         return tracer_scene
+
+    @property
+    def object_keys(self) -> list:
+        """Per object of the last build, in order: its original Blender object's pointer, or ("instance", n)."""
+        return [key for made, edit_key in self._keys
+                for key in (made.keys() if isinstance(made, _InstanceRun) else [edit_key] * made)]
+
+    def _instance_template(self, obj) -> int:
+        """The number of what a geometry-nodes instance is made of (its meshes and materials, the names it
+        goes by): the same for every instance of one evaluated geometry with the same materials."""
+        slots = tuple(_material_key(slot.material) for slot in obj.material_slots)
+        data = obj.data
+        key = (data.as_pointer() if data is not None else id(obj), slots, obj.name)
+        number = self._templates.get(key)
+        if number is None:
+            number = self._templates[key] = len(self._template_parts)
+            self._template_parts.append((self.mesh_parts(obj, own=False), obj.name, obj.original.name))
+        return number
+
+    def _runs_placed(self, made: list) -> list:
+        """``made`` with each run of instances checked (their matrices: the unusable ones skipped, with a
+        warning each) and turned into rows; a run with another entry of its object's sort key between its first
+        and last instance (in the depsgraph's order) is made into its instances' entries, so that sorting puts
+        each where it was."""
+        others: dict[tuple, list[int]] = {}  # (order, name) -> the counts of the other entries of that object
+        for key, nodes, _ in made:
+            if nodes and not isinstance(nodes, _InstanceRun):
+                others.setdefault(key[:2], []).append(key[2])
+        out = []
+        for key, nodes, edit_key in made:
+            if isinstance(nodes, _InstanceRun):
+                nodes.finish(self)
+                first, last = (int(nodes.counts[0]), int(nodes.counts[-1])) if len(nodes.counts) else (0, 0)
+                if any(first < count < last for count in others.get(key[:2], ())):
+                    out += [((key[0], key[1], count), shapes, ("instance", count))
+                            for count, shapes in nodes.shapes_by_instance(self)]
+                    continue
+            out.append((key, nodes, edit_key))
+        return out
+
+    def _objects(self, made: list):
+        """The scene's objects: a ShapeTable where there are runs of instances and every other object can be
+        a row of it, else a list."""
+        runs = [nodes for _, nodes, _ in made if isinstance(nodes, _InstanceRun)]
+        if runs and all(model.TableRows.can_hold(node) for _, nodes, _ in made
+                        if not isinstance(nodes, _InstanceRun) for node in nodes):
+            rows = model.TableRows()
+            for _, nodes, _ in made:
+                if isinstance(nodes, _InstanceRun):
+                    nodes.put(rows, self)
+                else:
+                    for node in nodes:
+                        rows.add_shape(node)
+            return rows.table()
+        objects = []
+        for _, nodes, _ in made:
+            if isinstance(nodes, _InstanceRun):
+                for _, shapes in nodes.shapes_by_instance(self):
+                    objects += shapes
+            else:
+                objects += nodes
+        return objects
+
+
+class _InstanceRun:
+    """Consecutive geometry-nodes instances of one instancer: per instance its count in the depsgraph's
+    iteration (its edit key), its matrix and its template (SceneBuilder._instance_template), gathered as
+    numbers, not objects."""
+
+    def __init__(self, pointer: int):
+        self.pointer = pointer  # (the instancer's original object)
+        self.counts = array("q")
+        self.templates = array("i")
+        self.matrices = array("d")  # 16 per instance, row after row
+
+    def add(self, count: int, matrix_world, template: int) -> None:
+        self.counts.append(count)
+        self.templates.append(template)
+        for row in matrix_world:
+            self.matrices.extend(row)
+
+    def finish(self, builder: SceneBuilder) -> None:
+        """Drop the instances whose matrix cannot be traced, as SceneBuilder._usable does (its warnings, in
+        order), and keep each one's matrix in the output frame."""
+        world = np.frombuffer(self.matrices, dtype=np.float64).reshape(-1, 4, 4)
+        usable = usable_matrices(world)
+        for k in np.flatnonzero(~usable).tolist():  # (few: their messages, one by one)
+            builder._usable(world[k], builder._template_parts[self.templates[k]][1])
+        kept = np.flatnonzero(usable)
+        self.counts = np.frombuffer(self.counts, dtype=np.int64)[kept]
+        self.templates = np.frombuffer(self.templates, dtype=np.int32)[kept]
+        self.target = np.matmul(builder.to_target, world[kept])  # (the products Shape's matrix had)
+        self.matrices = None
+        parts = builder._template_parts
+        self.part_counts = np.array([len(parts[t][0]) for t in range(len(parts))], dtype=np.int64)[self.templates]
+
+    def _row_instances(self) -> np.ndarray:
+        """Per row (an instance's material, in the order of its parts), the instance's position in the run."""
+        return np.repeat(np.arange(len(self.templates)), self.part_counts)
+
+    def keys(self) -> list:
+        return [("instance", count) for count in self.counts[self._row_instances()].tolist()]
+
+    def put(self, rows: "model.TableRows", builder: SceneBuilder) -> None:
+        """The run's rows, in order (each instance's parts together)."""
+        numbers = [[rows.part("mesh", data, material, name=name) for data, material in parts]
+                   for parts, _, name in builder._template_parts]
+        offsets = np.cumsum([0] + [len(n) for n in numbers])
+        flat = np.array([k for n in numbers for k in n], dtype=np.int32)
+        instance = self._row_instances()
+        first_row = np.repeat(np.cumsum(self.part_counts) - self.part_counts, self.part_counts)
+        part_index = np.arange(len(instance)) - first_row
+        rows.add_block(self.target[instance], flat[offsets[self.templates[instance]] + part_index])
+        self.target = None  # (the table has them)
+
+    def shapes_by_instance(self, builder: SceneBuilder):
+        """(count, its Shapes) of each instance, as SceneBuilder.mesh_nodes makes them."""
+        for count, template, matrix in zip(self.counts.tolist(), self.templates.tolist(), self.target):
+            parts, _, name = builder._template_parts[template]
+            shapes = [builder.model.Shape("mesh", matrix=matrix, mesh=data, material=material, name=name)
+                      for data, material in parts]
+            for shape in shapes:
+                builder.mesh_object_names[id(shape)] = name
+            yield count, shapes
+        self.target = None
+
+
+def usable_matrices(matrices: np.ndarray) -> np.ndarray:
+    """(N,) bool: which of these (N, 4, 4) matrices SceneBuilder._usable accepts (the same tests, at once)."""
+    usable = np.isfinite(matrices).all(axis=(1, 2))
+    linear = matrices[usable, :3, :3]
+    with np.errstate(all="ignore"):
+        det = np.linalg.det(linear)
+        cond = np.linalg.cond(linear) if len(linear) else np.zeros(0)
+    usable[usable] = (det != 0.0) & np.isfinite(det) & ~(cond > 1e12)
+    return usable
 
 
 def _material_key(material) -> int:

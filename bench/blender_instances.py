@@ -4,12 +4,14 @@ once, in the bpy module:
 
     python bench/blender_instances.py [--instances 100000] [--triangles 10000] [--render 320x240]
 
-Measured, each in its own step: the scene build (depsgraph -> tracer Scene: a Shape per instance, all
-sharing one MeshData), compile_scene (primitive rows, bounds, the mesh's BVH once, the object hierarchy) and
+Measured, each in its own step: the scene build (depsgraph -> tracer Scene: a ShapeTable, a row per instance
+holding its matrix and the number of the one MeshData they share), compile_scene (primitive rows, bounds, the mesh's BVH once, the object hierarchy) and
 an F12 (the engine's whole render, build and compile included).  Memory is the process's resident size
 before and after each step (/proc/self/statm) and, in a second pass, Python's own allocations per step
 (tracemalloc: slower, so its times are not reported).  The mesh once is its arrays plus its BVH, measured
-alone (one instance).  Prints JSON and writes bench/results/blender_instances.json.
+alone (one instance).  Of the build's bytes, what bpy itself keeps for each read of an instance's object
+is measured alone too (bpy_keeps_per_object_read).  Prints JSON and writes
+bench/results/blender_instances.json.
 """
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ import sys
 import time
 import tracemalloc
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
@@ -97,8 +101,25 @@ def _steps(traced: bool) -> dict:
     step("build", lambda: engine.build_scene(depsgraph, "RENDER")[0])
     step("compile", lambda: compile_scene(kept["build"]))
     out["objects"] = len(kept["build"].objects)
-    out["meshes"] = len({id(s.mesh) for s in kept["build"].objects})
+    out["meshes"] = _meshes(kept["build"].objects)
     return out, kept
+
+
+def _first(objects):
+    """The first object, without making the others (a ShapeTable's rows stay rows)."""
+    from addon.tracer.model import ShapeTable
+
+    return objects.shape_at(0) if isinstance(objects, ShapeTable) else objects[0]
+
+
+def _meshes(objects) -> int:
+    """How many distinct meshes the objects hold (a table's: by its mesh numbers, without making Shapes)."""
+    from addon.tracer.model import ShapeTable
+
+    if isinstance(objects, ShapeTable) and objects.columns is not None:
+        columns = objects.columns
+        return len({id(columns.mesh_of(int(i))) for i in np.unique(columns.mesh_ids, return_index=True)[1]})
+    return len({id(s.mesh) for s in objects})
 
 
 def _mesh_once() -> dict:
@@ -111,16 +132,35 @@ def _mesh_once() -> dict:
     from addon.tracer.model import Scene
 
     built, _ = engine.build_scene(bpy.context.evaluated_depsgraph_get(), "RENDER")
-    mesh = built.objects[0].mesh
+    first = _first(built.objects)
+    mesh = first.mesh
     arrays = sum(a.nbytes for a in (mesh.vertices, mesh.normals) + tuple(mesh.faces.arrays()))
     before = _rss()
     tracemalloc.start()
-    compiled = compile_scene(Scene(objects=built.objects[:1], lights=built.lights, settings=built.settings))
+    compiled = compile_scene(Scene(objects=[first], lights=built.lights, settings=built.settings))
     python = tracemalloc.get_traced_memory()[0]
     tracemalloc.stop()
     _mesh_once.kept = (compiled, built)  # (alive while the instances are compiled: their BVH is this one)
     return {"triangles": int(len(mesh.faces)), "arrays": int(arrays), "compiled_python_allocated": int(python),
             "rss_growth": _rss() - before}
+
+
+def _bpy_object_reads() -> float:
+    """Bytes per instance that bpy itself keeps, for good, when ``DepsgraphObjectInstance.object`` is read
+    (each read of a geometry-nodes instance's object makes a Python object bpy never frees, in 4.5 and 5.0;
+    the scene build must read it once per instance: it is the only way to its geometry and materials)."""
+    import bpy
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    count = 0
+    for inst in depsgraph.object_instances:
+        inst.object
+        count += 1
+    kept = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    return round(kept / count, 1)
 
 
 def main() -> None:
@@ -148,6 +188,7 @@ def main() -> None:
     # (the mesh's BVH was built by _mesh_once and is found again: what build and compile add is per instance)
     result["bytes_per_instance_rss"] = round(sum(timed[k]["rss_growth"] for k in steps) / points, 1)
     result["bytes_per_instance_python"] = round(sum(result["python_allocated"].values()) / points, 1)
+    result["bpy_keeps_per_object_read"] = _bpy_object_reads()
     if args.render != "none":
         from blender_scripts.addon_env import set_resolution
 

@@ -6,20 +6,16 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution
+from blender_scripts.addon_env import SCENES, compositor, fresh, import_sdl, render_rgba, set_resolution
 from addon import engine
 
 
 def _composite_layer(scene, name: str) -> None:
-    """The Composite output shows view layer ``name``'s Combined pass (Blender 3.4-4.5's compositor API)."""
-    scene.use_nodes = True
-    tree = scene.node_tree
-    tree.nodes.clear()
+    """The compositor's output shows view layer ``name``'s Combined pass."""
+    tree, output = compositor(scene)
     layers = tree.nodes.new("CompositorNodeRLayers")
     layers.scene, layers.layer = scene, name
-    composite = tree.nodes.new("CompositorNodeComposite")
-    tree.links.new(layers.outputs["Image"], composite.inputs["Image"])
-    scene.render.use_compositing = True
+    tree.links.new(layers.outputs["Image"], output)
 
 
 def test_each_view_layer_renders_its_own_collections():

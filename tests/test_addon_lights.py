@@ -45,8 +45,9 @@ def _same_lights(got, wanted) -> None:
             assert a.position == pytest.approx(b.position, abs=1e-5), (a, b)
         if a.kind in ("spot", "sun", "area"):
             assert _unit(a.direction) == pytest.approx(_unit(b.direction), abs=1e-6), (a, b)
-        assert (a.radius, a.angle, a.spot_blend, a.shape, a.samples) == pytest.approx(
-            (b.radius, b.angle, b.spot_blend, b.shape, b.samples), rel=1e-5), (a, b)
+        assert a.shape == b.shape, (a, b)  # (a string: newer pytest refuses one inside approx)
+        assert (a.radius, a.angle, a.spot_blend, a.samples) == pytest.approx(
+            (b.radius, b.angle, b.spot_blend, b.samples), rel=1e-5), (a, b)
         assert a.spot_size == pytest.approx(b.spot_size, rel=1e-5) and a.size == pytest.approx(b.size, rel=1e-5)
         if a.kind == "area":
             assert _unit(a.axis) == pytest.approx(_unit(b.axis), abs=1e-6)

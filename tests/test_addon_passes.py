@@ -10,7 +10,7 @@ from bpy_extras.object_utils import world_to_camera_view
 
 from addon import engine
 from addon.pure import passes
-from blender_scripts.addon_env import SCENES, fresh, import_sdl, render_rgba, set_resolution, shape_objects
+from blender_scripts.addon_env import SCENES, compositor, fresh, import_sdl, render_rgba, set_resolution, shape_objects
 
 WIDTH, HEIGHT = 96, 72
 
@@ -24,19 +24,16 @@ def _setup():
         setattr(layer, switch, True)
     scene = bpy.context.scene
     scene.render.engine = engine.ENGINE_ID
-    scene.use_nodes = True
-    scene.render.use_compositing = True
     return scene
 
 
 def _show(scene, output: str, through=None):
-    """Composite shows the Render Layers node's ``output`` (optionally through a node ``through(tree, rl)``)."""
-    tree = scene.node_tree
-    tree.nodes.clear()
+    """The compositor's output shows the Render Layers node's ``output`` (optionally through a node
+    ``through(tree, rl)``)."""
+    tree, composite = compositor(scene)
     layers = tree.nodes.new("CompositorNodeRLayers")
-    composite = tree.nodes.new("CompositorNodeComposite")
     source = layers.outputs[output] if through is None else through(tree, layers)
-    tree.links.new(source, composite.inputs["Image"])
+    tree.links.new(source, composite)
 
 
 def _pixel(scene, point) -> tuple[int, int]:
@@ -78,7 +75,8 @@ def test_only_enabled_passes_are_offered():
     scene = _setup()
     layer = bpy.context.view_layer
     layer.use_pass_mist = layer.use_pass_position = False
-    rl = scene.node_tree.nodes.new("CompositorNodeRLayers")
+    tree, _ = compositor(scene)
+    rl = tree.nodes.new("CompositorNodeRLayers")
     offered = {o.name for o in rl.outputs if o.enabled}
     assert {"Image", "Depth", "Normal", "DiffCol"} <= offered and not {"Mist", "Position"} & offered
     bpy.ops.render.render()

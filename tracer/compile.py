@@ -802,10 +802,19 @@ class PrimitiveTable:
     def _groups(self, kinds) -> list[tuple[MeshData, np.ndarray]]:
         """(mesh, rows) of the rows of these kinds, a group per MeshData object, in order of first use."""
         rows = self.rows(kinds)
-        if isinstance(self.shapes, _RowShapes):  # (a table's rows of a kind share its built-in mesh)
-            codes = self.kind[rows]
-            return [(self.shapes.mesh_of(int(rows[codes == code][0])), rows[codes == code])
-                    for code in dict.fromkeys(codes.tolist())]
+        if isinstance(self.shapes, _RowShapes):  # (a table's rows of a kind share its built-in mesh or hold
+            # one of the table's meshes: a group per kind and mesh number, in order of first use)
+            columns = self.shapes.columns
+            own = columns.mesh_ids[rows] if columns.mesh_ids is not None else np.full(len(rows), -1)
+            group = self.kind[rows].astype(np.int64) * (len(columns.meshes) + 1) + (own + 1)
+            values, first, which = np.unique(group, return_index=True, return_inverse=True)
+            members = rows[np.argsort(which.reshape(-1), kind="stable")]  # (each group's rows, in order)
+            ends = np.cumsum(np.bincount(which.reshape(-1), minlength=len(values)))
+            out = []
+            for k in np.argsort(first).tolist():
+                chosen = members[(ends[k - 1] if k else 0):ends[k]]
+                out.append((self.shapes.mesh_of(int(chosen[0])), chosen))
+            return out
         groups: dict[int, tuple[MeshData, list]] = {}
         for i in rows.tolist():
             mesh = self.shapes[i].mesh
@@ -1328,11 +1337,8 @@ class _RowShapes(Sequence):
         return shape
 
     def mesh_of(self, index: int) -> Optional[MeshData]:
-        """The mesh row ``index`` holds (its kind's built-in mesh, or None), without making its Shape."""
-        kind = _KEYWORDS[self.columns.kinds[index]]
-        if shapes.KINDS[kind].builtin_mesh:
-            return builtin_mesh(kind)
-        return None
+        """The mesh row ``index`` holds (its own, its kind's built-in mesh, or None), without making its Shape."""
+        return self.columns.mesh_of(index)
 
 
 def _walk(objects: list[SceneObject]) -> tuple[list, list[Shape], list[tuple]]:
@@ -1391,6 +1397,7 @@ def _table_content(scene: Scene, table: ShapeColumns) -> tuple[tuple, _Columns]:
     another key, and a new compile from them.)"""
     shapes = _RowShapes(table)
     meshes = {id(mesh): mesh for mesh in map(shapes.mesh_of, _builtin_mesh_rows(table))}
+    meshes.update((id(mesh), mesh) for mesh in table.meshes)
     key = ("table", id(table), table.materials,
            tuple((k, mesh_digest(m)) for k, m in meshes.items())) + _scene_wide_key(scene)
     return key, _Columns([table], shapes, False, table.affines, table=table)

@@ -264,29 +264,39 @@ class ShapeColumns:
     """The arrays of a :class:`ShapeTable` (see there), read-only: row i is shape i."""
 
     kinds: np.ndarray  # (N,) int16
-    affines: np.ndarray  # (N, 12) float64
+    affines: np.ndarray  # (N, 12) float64, or float32 (values a float32 holds: Blender's matrices)
     material_ids: np.ndarray  # (N,) int32
     materials: Sequence[Material]  # a tuple, or a MaterialRows
     parameters: np.ndarray  # (N, shapes.MAX_PARAMETERS) float64
-    lines: np.ndarray  # (N,) int32
-    columns: np.ndarray  # (N,) int32
+    lines: Optional[np.ndarray]  # (N,) int32; None: no row has a source
+    columns: Optional[np.ndarray]  # (N,) int32; None with lines
     file: Optional[str] = None
-    names: Optional[dict[int, str]] = None
+    names: Optional[Union[dict[int, str], "RowNames"]] = None
+    meshes: tuple[MeshData, ...] = ()
+    mesh_ids: Optional[np.ndarray] = None  # (N,) int32: index into meshes, -1 for its kind's built-in mesh or none
 
     def __len__(self) -> int:
         return len(self.kinds)
 
+    def mesh_of(self, i: int) -> Optional[MeshData]:
+        """Row i's mesh (its own, its kind's built-in one, or None), without making its Shape."""
+        if self.mesh_ids is not None and self.mesh_ids[i] >= 0:
+            return self.meshes[self.mesh_ids[i]]
+        kind = _KEYWORD_OF_CODE[self.kinds[i]]
+        return builtin_mesh(kind) if kind in BUILTIN_MESH_KINDS else None
+
+    def _source(self, i: int, line: int, column: int) -> Optional[SourceLocation]:
+        return None if self.lines is None else SourceLocation(self.file, line, column)
+
     def shape(self, i: int) -> Shape:
         """Shape i, made anew (as the Python reader makes it: its own matrix, the shared material object,
-        the built-in mesh of a polyhedron or the teapot)."""
+        its mesh: its own, or the built-in mesh of a polyhedron or the teapot)."""
         i = range(len(self))[i]  # (negative from the end; IndexError)
         kind = _KEYWORD_OF_CODE[self.kinds[i]]
         matrix = matrices_of_affines(self.affines[i:i + 1])[0]
-        mesh = None
-        if kind in BUILTIN_MESH_KINDS:
-            mesh = builtin_mesh(kind)
-        return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]), mesh,
-                     None, (), SourceLocation(self.file, int(self.lines[i]), int(self.columns[i])),
+        lines, columns = (0, 0) if self.lines is None else (int(self.lines[i]), int(self.columns[i]))
+        return Shape(kind, matrix, self.materials[self.material_ids[i]], self._parameters(kind, self.parameters[i]),
+                     self.mesh_of(i), None, (), self._source(i, lines, columns),
                      None if self.names is None else self.names.get(i))
 
     def shapes(self) -> list[Shape]:
@@ -303,11 +313,15 @@ class ShapeColumns:
                 matrices = matrices_of_affines(self.affines[rows])
                 kinds = list(map(_KEYWORD_OF_CODE.__getitem__, self.kinds[rows].tolist()))
                 values = self._parameter_tuples(rows) if with_parameters else repeat(())
-                for i, (kind, matrix, material, parameters, line, column) in enumerate(zip(
+                own = repeat(-1) if self.mesh_ids is None else self.mesh_ids[rows].tolist()
+                places = repeat((0, 0)) if self.lines is None else zip(self.lines[rows].tolist(),
+                                                                      self.columns[rows].tolist())
+                for i, (kind, matrix, material, parameters, (line, column), mesh_id) in enumerate(zip(
                         kinds, matrices, map(self.materials.__getitem__, self.material_ids[rows].tolist()),
-                        values, self.lines[rows].tolist(), self.columns[rows].tolist()), start):
-                    out.append(Shape(kind, matrix, material, parameters, meshes.get(kind), None, (),
-                                     SourceLocation(self.file, line, column), names.get(i)))
+                        values, places, own), start):
+                    mesh = self.meshes[mesh_id] if mesh_id >= 0 else meshes.get(kind)
+                    out.append(Shape(kind, matrix, material, parameters, mesh, None, (),
+                                     self._source(i, line, column), names.get(i)))
         return out
 
     @staticmethod
@@ -323,6 +337,29 @@ class ShapeColumns:
             for j, values in zip(where.tolist(), self.parameters[rows][where, :count].tolist()):
                 out[j] = tuple(values)
         return out
+
+
+class RowNames:
+    """The names of a ShapeTable's rows as a column: ``ids`` (N,) int32, each row's index into ``names``, -1
+    for no name.  (The many rows of one Blender object's instances share its name: 4 bytes each, where a
+    {row: name} entry takes about 100.)"""
+
+    def __init__(self, ids, names: Sequence[str]):
+        self.ids = np.asarray(ids, dtype=np.int32)
+        self.ids.setflags(write=False)
+        self.names = tuple(names)
+
+    def get(self, row: int, default=None) -> Optional[str]:
+        number = int(self.ids[row])
+        return self.names[number] if number >= 0 else default
+
+    def items(self):
+        """(row, name) of every named row."""
+        rows = np.flatnonzero(self.ids >= 0)
+        return zip(rows.tolist(), map(self.names.__getitem__, self.ids[rows].tolist()))
+
+    def __reduce__(self):
+        return RowNames, (self.ids, self.names)
 
 
 #: Rows made into Shapes at a time (their 4x4 matrices stacked: a few MB).
@@ -348,6 +385,8 @@ def matrices_of_affines(affines: np.ndarray) -> np.ndarray:
 
 #: The code of each shape kind (the index of its keyword in tracer.shapes.REGISTRY).
 _KIND_CODE = {keyword: code for code, keyword in enumerate(_KEYWORD_OF_CODE)}
+#: Per kind code: whether a table's row of that kind may hold a mesh of its own (ShapeTable.mesh_ids).
+_OWN_MESH = np.array([keyword in MESH_KINDS for keyword in _KEYWORD_OF_CODE])
 
 
 def _read_only(array, dtype, shape: tuple, what: str) -> np.ndarray:
@@ -377,15 +416,18 @@ class ShapeTable(MutableSequence):
     ~700 bytes; a row here takes ~120).
 
     ``kinds`` (N,) int16, each shape's kind as its index in tracer.shapes.REGISTRY; ``affines`` (N, 12)
-    float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1);
+    float64, the top three rows of each matrix, row after row (the bottom row is 0 0 0 1), or float32 where
+    every matrix is made of float32 values (Blender's are: half the memory, widened exactly when read);
     ``material_ids`` (N,) int32, indices into ``materials`` (distinct Material objects, or a MaterialRows);
     ``parameters`` (N, tracer.shapes.MAX_PARAMETERS) float64, each row's Shape.parameters and then anything
     (a single column may be given as (N,)); ``lines``, ``columns`` (N,) int32, 1-based, and ``file``: each
-    shape's SourceLocation; ``names``: None or {row: Shape.name}.  Every row has no groups and no mesh file;
-    polyhedra and the teapot get their kind's built-in mesh (tracer.geometry.builtin_mesh).  The table takes
-    the arrays over: nobody may change them afterwards (compile_scene knows a table by its identity).  They,
-    and the arrays that own their memory, are made read-only; memory that no array owns (a writable buffer)
-    is copied.
+    shape's SourceLocation (both None: no shape has one); ``names``: None, {row: Shape.name} or a RowNames.
+    ``meshes`` (MeshData objects) and ``mesh_ids`` (N,) int32: the mesh of each row of a mesh kind, as an
+    index into ``meshes`` (-1: its kind's built-in mesh, tracer.geometry.builtin_mesh, or none); without
+    them, polyhedra and the teapot get their built-in mesh.  Every row has no groups and no mesh file.  The
+    table takes the arrays over: nobody may change them afterwards (compile_scene knows a table by its
+    identity).  They, and the arrays that own their memory, are made read-only; memory that no array owns
+    (a writable buffer) is copied.
 
     It reads as the list of those Shapes.  len() makes nothing; the first access to an element (indexing,
     iteration, any change, ==) makes every Shape once, and from then on the table is a plain list of them
@@ -393,7 +435,7 @@ class ShapeTable(MutableSequence):
     copied as the arrays while nothing has been made (scenes travel to Dask workers)."""
 
     def __init__(self, kinds, affines, material_ids, materials, parameters, lines, columns,
-                 file=None, names=None):
+                 file=None, names=None, meshes=(), mesh_ids=None):
         kinds = np.asarray(kinds)
         n = len(kinds)
         kinds = _read_only(kinds, np.int16, (n,), "kinds")
@@ -403,11 +445,22 @@ class ShapeTable(MutableSequence):
             raise ValueError("ShapeTable: a kind code is not in tracer.shapes.REGISTRY")
         if n and not (0 <= material_ids.min() and material_ids.max() < len(materials)):
             raise ValueError("ShapeTable: a material id is not an index into materials")
+        meshes = tuple(meshes)
+        if mesh_ids is not None:
+            mesh_ids = _read_only(mesh_ids, np.int32, (n,), "mesh_ids")
+            if n and not (-1 <= mesh_ids.min() and mesh_ids.max() < len(meshes)):
+                raise ValueError("ShapeTable: a mesh id is not an index into meshes")
+            if (mesh_ids[~_OWN_MESH[kinds]] >= 0).any():
+                raise ValueError("ShapeTable: a row of a kind without a mesh of its own has a mesh id")
+        if ((kinds == _KIND_CODE["mesh"]) & ((-1 if mesh_ids is None else mesh_ids) < 0)).any():
+            raise ValueError("ShapeTable: a mesh row has no mesh")
+        affines = np.asarray(affines)
         self._columns: Optional[ShapeColumns] = ShapeColumns(
-            kinds, _read_only(affines, np.float64, (n, 12), "affines"), material_ids, materials,
-            _read_only(parameters, np.float64, (n, shapes.MAX_PARAMETERS), "parameters"),
-            _read_only(lines, np.int32, (n,), "lines"), _read_only(columns, np.int32, (n,), "columns"),
-            file, None if names is None else dict(names))
+            kinds, _read_only(affines, np.float32 if affines.dtype == np.float32 else np.float64, (n, 12), "affines"),
+            material_ids, materials, _read_only(parameters, np.float64, (n, shapes.MAX_PARAMETERS), "parameters"),
+            None if lines is None else _read_only(lines, np.int32, (n,), "lines"),
+            None if lines is None else _read_only(columns, np.int32, (n,), "columns"),
+            file, names if names is None or isinstance(names, RowNames) else dict(names), meshes, mesh_ids)
         self._shapes: Optional[list[SceneObject]] = None
 
     @classmethod
@@ -544,7 +597,99 @@ class ShapeTable(MutableSequence):
         if c is None:
             return ShapeTable._of_list, (self._shapes,)
         return ShapeTable, (c.kinds, c.affines, c.material_ids, c.materials, c.parameters, c.lines,
-                            c.columns, c.file, c.names)
+                            c.columns, c.file, c.names, c.meshes, c.mesh_ids)
+
+
+class TableRows:
+    """A ShapeTable's rows gathered in order: a Shape at a time (:meth:`add_shape`), or many rows at once that
+    share a few *parts* (kind, mesh, material, parameters, name), each under its own matrix
+    (:meth:`add_block`: the instances of a Blender object).  :meth:`table` makes the table; nothing per row
+    is a Python object.  For shapes made from a program's data (a Blender scene): rows have no source."""
+
+    def __init__(self) -> None:
+        self._parts: dict[tuple, int] = {}  # (kind, id(mesh), id(material), parameters, name) -> part number
+        self._part_values: list[tuple] = []  # (kind code, mesh, material, parameters, name) of each part
+        self._blocks: list[tuple[np.ndarray, np.ndarray]] = []  # (matrices (k, 4, 4), part numbers (k,))
+        self._single_matrices: list[np.ndarray] = []  # add_shape's, not yet a block
+        self._single_parts: list[int] = []
+
+    @staticmethod
+    def can_hold(obj) -> bool:
+        """Whether an object can be a row: a Shape without groups, mesh file or source, whose matrix is an
+        affine 4x4 and whose mesh is its own only if its kind is a mesh kind."""
+        if not isinstance(obj, Shape) or obj.groups or obj.mesh_file is not None or obj.source is not None:
+            return False
+        matrix = np.asarray(obj.matrix)
+        if matrix.shape != (4, 4) or matrix[3].tolist() != [0.0, 0.0, 0.0, 1.0]:
+            return False
+        return obj.kind in MESH_KINDS or obj.mesh is (builtin_mesh(obj.kind) if obj.kind in BUILTIN_MESH_KINDS
+                                                       else None)
+
+    def part(self, kind: str, mesh: Optional[MeshData], material: Material, parameters: tuple = (),
+             name: Optional[str] = None) -> int:
+        """The number of a part (made when new): what add_block's rows point at."""
+        parameters = _parameters_of(kind, parameters)
+        if kind in BUILTIN_MESH_KINDS and mesh is builtin_mesh(kind):
+            mesh = None  # (the row's kind gives it: no mesh of its own)
+        key = (kind, id(mesh), id(material), parameters, name)
+        number = self._parts.get(key)
+        if number is None:
+            number = self._parts[key] = len(self._part_values)
+            self._part_values.append((_KIND_CODE[kind], mesh, material, parameters, name))
+        return number
+
+    def add_shape(self, shape: Shape) -> None:
+        """One row: a Shape that can_hold."""
+        self._single_matrices.append(shape.matrix)
+        self._single_parts.append(self.part(shape.kind, shape.mesh, shape.material, shape.parameters, shape.name))
+
+    def add_block(self, matrices: np.ndarray, parts: np.ndarray) -> None:
+        """Rows under ``matrices`` ((k, 4, 4) affine float64: the bottom rows 0 0 0 1), row i of part
+        ``parts[i]`` (numbers from :meth:`part`)."""
+        self._flush()
+        self._blocks.append((matrices, np.asarray(parts, dtype=np.int32)))
+
+    def _flush(self) -> None:
+        if self._single_parts:
+            self._blocks.append((np.stack(self._single_matrices), np.array(self._single_parts, dtype=np.int32)))
+            self._single_matrices, self._single_parts = [], []
+
+    def table(self) -> ShapeTable:
+        """The table of every row so far.  Its matrices are kept as float32 where every one of them is made
+        of float32 values (as Blender's are), else as float64."""
+        self._flush()
+        n = sum(len(parts) for _, parts in self._blocks)
+        affines = np.empty((n, 12))
+        part_of_row = np.empty(n, dtype=np.int32)
+        at = 0
+        for matrices, parts in self._blocks:
+            affines[at:at + len(parts)] = matrices[:, :3, :].reshape(-1, 12)
+            part_of_row[at:at + len(parts)] = parts
+            at += len(parts)
+        self._blocks = []
+        narrow = affines.astype(np.float32)
+        if np.array_equal(narrow, affines):
+            affines = narrow
+        values = self._part_values
+        meshes, mesh_number = [], {}
+        for kind, mesh, *_ in values:
+            if mesh is not None and id(mesh) not in mesh_number:
+                mesh_number[id(mesh)] = len(meshes)
+                meshes.append(mesh)
+        materials = list({id(v[2]): v[2] for v in values}.values())
+        material_number = {id(m): i for i, m in enumerate(materials)}
+        names = list(dict.fromkeys(v[4] for v in values if v[4] is not None))
+        name_number = {name: i for i, name in enumerate(names)}
+
+        def column(values, dtype):
+            return np.array(values, dtype=dtype)[part_of_row]
+
+        return ShapeTable(
+            column([v[0] for v in values], np.int16), affines,
+            column([material_number[id(v[2])] for v in values], np.int32), materials,
+            parameter_rows([v[3] for v in values])[part_of_row], None, None, None,
+            RowNames(column([name_number.get(v[4], -1) for v in values], np.int32), names) if names else None,
+            meshes, column([mesh_number[id(v[1])] if v[1] is not None else -1 for v in values], np.int32))
 
 
 @dataclass

@@ -204,11 +204,11 @@ REGISTRY: tuple[ShapeKind, ...] = (
     _mesh("teapot"),
     _mesh("mesh", file_argument=True, addable=False),
     # SDL extensions (append new kinds here: C kind codes follow this order).
-    ShapeKind("paraboloid", "PARABOLOID", box=((0.0, 0.0, 0.5), (1.0, 1.0, 0.5)),
+    ShapeKind("paraboloid", "PARABOLOID", box=((0.0, 0.0, 0.5), (1.0, 1.0, 0.5)), budget=("hit_ulps",),
               intersect="tracer.intersect.paraboloid:intersect_paraboloid", c_intersect="hits_paraboloid",
               uv=WALL_AND_DISCS_UV, c_uv="wall_and_discs_uv",
               tessellate="tracer.intersect.paraboloid:paraboloid_mesh", extension=True),
-    ShapeKind("hyperboloid", "HYPERBOLOID", parameters=(WAIST,),
+    ShapeKind("hyperboloid", "HYPERBOLOID", parameters=(WAIST,), budget=("hit_ulps",),
               intersect="tracer.intersect.hyperboloid:intersect_hyperboloid", c_intersect="hits_hyperboloid",
               bounds="tracer.intersect.hyperboloid:hyperboloid_bounds",
               uv="tracer.intersect.hyperboloid:hyperboloid_uv", c_uv="hyperboloid_uv",

@@ -90,6 +90,22 @@ def render_rgba(engine_id: str, path: str | None = None) -> np.ndarray:
     return pixels.reshape(height, width, 4)[::-1]
 
 
+def compositor(scene):
+    """An empty compositor node tree for ``scene`` and the socket whose image F12 writes: the Composite node's
+    Image in Blender 3.4-4.5 (scene.node_tree); in 5.0, which has neither, the Image output of the group the
+    scene composites with (scene.compositing_node_group)."""
+    scene.render.use_compositing = True
+    if hasattr(scene, "compositing_node_group"):
+        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
+        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        scene.compositing_node_group = tree
+        return tree, tree.nodes.new("NodeGroupOutput").inputs["Image"]
+    scene.use_nodes = True
+    tree = scene.node_tree
+    tree.nodes.clear()
+    return tree, tree.nodes.new("CompositorNodeComposite").inputs["Image"]
+
+
 def iou(a: np.ndarray, b: np.ndarray) -> float:
     union = np.logical_or(a, b).sum()
     return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)

@@ -83,7 +83,8 @@ def cases() -> dict:
     plain = bpy.data.materials.new("no nodes")
     plain.use_nodes = False
     plain.diffuse_color, plain.metallic, plain.roughness = (0.3, 0.6, 0.9, 1.0), 0.0, 0.7
-    made["no nodes"] = plain
+    if not plain.use_nodes:  # (Blender 5.0 has no material without nodes: use_nodes stays on)
+        made["no nodes"] = plain
     return made
 
 
@@ -96,7 +97,7 @@ def worlds() -> dict:
     flat = bpy.data.worlds.new("flat")
     flat.use_nodes = False
     flat.color = (0.1, 0.2, 0.3)
-    return {"background node": lit, "no nodes": flat}
+    return {"background node": lit, **({} if flat.use_nodes else {"no nodes": flat})}  # (as materials in 5.0)
 
 
 fresh()

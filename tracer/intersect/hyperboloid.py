@@ -18,8 +18,10 @@ import math
 import numpy as np
 
 from ..model import MeshData
+from ..numerics import TOLERANCES, Tolerances, gamma
 from ..textures.mapping import wall_and_discs_uv
 from .hits import HitArrays
+from .paraboloid import wall_proven_inside
 from .quadratic import solve_quadratic
 
 #: Rings of the tessellation's wall (z evenly spaced from -1 to 1: an even count puts one at the waist) and
@@ -55,8 +57,11 @@ def _inside_intervals(a, b, c, slab_lo, slab_hi):
             np.where(both, s2, np.nan), np.where(both, e2, np.nan))
 
 
-def intersect_hyperboloid(origin: np.ndarray, direction: np.ndarray, waist: float) -> HitArrays:
-    """Every crossing of the whole lines (K = 4: in, out, in, out); parts 0 wall, 1 bottom cap, 2 top cap."""
+def intersect_hyperboloid(origin: np.ndarray, direction: np.ndarray, waist: float,
+                          tol: Tolerances = TOLERANCES) -> HitArrays:
+    """Every crossing of the whole lines (K = 4: in, out, in, out); parts 0 wall, 1 bottom cap, 2 top cap.
+    Where the line is inside between the wall's roots (a >= 0), a pair with a wall crossing counts only
+    where it is provably inside between its ends (paraboloid.wall_proven_inside)."""
     w2 = waist * waist
     k = 1.0 - w2
     ox, oy, oz = origin.T
@@ -73,6 +78,14 @@ def intersect_hyperboloid(origin: np.ndarray, direction: np.ndarray, waist: floa
     slab_lo = np.where(parallel, np.where(in_slab, -np.inf, np.nan), np.where(rising, t_bottom, t_top))
     slab_hi = np.where(parallel, np.where(in_slab, np.inf, np.nan), np.where(rising, t_top, t_bottom))
     s1, e1, s2, e2 = _inside_intervals(a, b, c, slab_lo, slab_hi)
+    with np.errstate(invalid="ignore"):
+        wall = (a >= 0.0) & np.isfinite(s1) & np.isfinite(e1) & ((s1 > slab_lo) | (e1 < slab_hi))
+    if wall.any():
+        sizes = (dx * dx + dy * dy + np.abs(k) * dz * dz, np.abs(ox * dx) + np.abs(oy * dy) + np.abs(k * oz * dz),
+                 ox * ox + oy * oy + np.abs(k) * oz * oz + w2)
+        with np.errstate(invalid="ignore"):
+            proven = wall_proven_inside(a, b, c, sizes, 0.5 * (s1 + e1), gamma(tol.hit_ulps))
+        s1, e1 = np.where(wall & ~proven, np.nan, s1), np.where(wall & ~proven, np.nan, e1)
     hits = HitArrays.empty(origin.shape[0], 4)
     hits.bend = np.zeros_like(hits.t)
     for slot, (t_in, t_out) in enumerate(((s1, e1), (s2, e2))):

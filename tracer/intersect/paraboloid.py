@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from ..model import MeshData
+from ..numerics import TOLERANCES, Tolerances, gamma
 from .analytic import _two_hits, _wall_interval
 from .hits import HitArrays
 
@@ -20,9 +21,21 @@ RINGS = 16
 AROUND = 48
 
 
-def intersect_paraboloid(origin: np.ndarray, direction: np.ndarray) -> HitArrays:
+def wall_proven_inside(a, b, c, sizes, t: np.ndarray, rounding: float) -> np.ndarray:
+    """Is the quadratic wall function G = a t^2 + 2 b t + c provably negative at t: below minus its rounding,
+    ``rounding`` times the size of its terms there (``sizes``: those of a, b and c)?  A pair of crossings
+    with the wall, whose middle is not, may be the touching pair rounding makes of a line tangent to the
+    wall, or one that misses it by 1e-12 (the paraboloid's and the hyperboloid's; shapes.h's
+    quadric_proven_inside)."""
+    am, bm, cm = sizes
+    at = np.abs(t)
+    return (a * t + 2.0 * b) * t + c < -rounding * ((am * at + 2.0 * bm) * at + cm)
+
+
+def intersect_paraboloid(origin: np.ndarray, direction: np.ndarray, tol: Tolerances = TOLERANCES) -> HitArrays:
     """Entry and exit of the whole line: inside the wall where ``a t^2 + 2 b t + c <= 0`` (a >= 0, so between
-    the roots; a vertical line has one root), clipped to the half-space z <= 1 below the cap."""
+    the roots; a vertical line has one root), clipped to the half-space z <= 1 below the cap.  A pair with a
+    wall crossing counts only where the line is provably inside between its ends (wall_proven_inside)."""
     ox, oy, oz = origin.T
     dx, dy, dz = direction.T
     a = dx * dx + dy * dy
@@ -40,6 +53,13 @@ def intersect_paraboloid(origin: np.ndarray, direction: np.ndarray) -> HitArrays
     # An end on the half-space's boundary is the cap (ties too).
     part_in = np.where(t_in <= slab_lo, 1, 0)
     part_out = np.where(t_out >= slab_hi, 1, 0)
+    wall = hit & ((part_in == 0) | (part_out == 0))
+    if wall.any():
+        sizes = (a, np.abs(ox * dx) + np.abs(oy * dy) + 0.5 * np.abs(dz), ox * ox + oy * oy + np.abs(oz))
+        with np.errstate(invalid="ignore"):
+            proven = wall_proven_inside(a, b, c, sizes, 0.5 * (t_in + t_out), gamma(tol.hit_ulps))
+        hit &= ~wall | proven
+        t_in, t_out = np.where(hit, t_in, np.nan), np.where(hit, t_out, np.nan)
 
     def normal_at(t, part):
         p = origin + np.where(hit, t, 0.0)[:, None] * direction

@@ -29,8 +29,8 @@ enum { EDIT_MESHES = 1, EDIT_REBUILD = 2, EDIT_OBJECTS = 4 };
     X(K_TAPERED, hits_tapered(o, d, param[0], D->tol_hit_ulps, out)) \
     X(K_TORUS, hits_torus(o, d, D->tol_torus_newton_steps, D->tol_torus_residual_ulps, D->tol_torus_pair_shortcut, out)) \
     X(K_POLYHEDRON, hits_polyhedron(o, d, D->planes + 4 * aux[0], aux[1], out)) \
-    X(K_PARABOLOID, hits_paraboloid(o, d, out)) \
-    X(K_HYPERBOLOID, hits_hyperboloid(o, d, param[0], out))
+    X(K_PARABOLOID, hits_paraboloid(o, d, D->tol_hit_ulps, out)) \
+    X(K_HYPERBOLOID, hits_hyperboloid(o, d, param[0], D->tol_hit_ulps, out))
 /* Every kind's texture mapping (ShapeKind.c_uv). */
 #define RT_SHAPE_UV(X) \
     X(K_SPHERE, sphere_uv) \
@@ -342,6 +342,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "643f6b0c907b6cac"
+#define RT_CONTRACT_DIGEST "7d899c4a99a47b8e"
 
 #endif

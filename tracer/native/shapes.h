@@ -451,9 +451,26 @@ static int hits_torus(const double *o, const double *d, int64_t newton_steps, do
     return n;
 }
 
+/* paraboloid.wall_proven_inside: is the wall function a t^2 + 2 b t + c provably negative at t, below minus
+ * gamma times the size of its terms there (those of a, b, c: am, bm, cm)?  A pair of wall crossings whose
+ * middle is not may be the touching pair rounding makes of a line tangent to the wall. */
+static inline int quadric_proven_inside(double a, double b, double c, double am, double bm, double cm, double t,
+                                        double gamma)
+{
+    double at = fabs(t);
+    return (a * t + 2.0 * b) * t + c < -gamma * ((am * at + 2.0 * bm) * at + cm);
+}
+
+static inline double gamma_of(double ulps)
+{
+    double u = DBL_EPSILON / 2.0;
+    return ulps * u / (1.0 - ulps * u);
+}
+
 /* The generic paraboloid x^2 + y^2 <= z <= 1 (intersect/paraboloid.py): wall (part 0), cap disc z = 1
- * (part 1).  Inside the wall between the roots of a t^2 + 2 b t + c (a >= 0), clipped to z <= 1. */
-static int hits_paraboloid(const double *o, const double *d, Hit *out)
+ * (part 1).  Inside the wall between the roots of a t^2 + 2 b t + c (a >= 0), clipped to z <= 1; a pair with
+ * a wall crossing counts only where the line is provably inside between its ends. */
+static int hits_paraboloid(const double *o, const double *d, double hit_ulps, Hit *out)
 {
     double a = d[0] * d[0] + d[1] * d[1];
     double b = o[0] * d[0] + o[1] * d[1] - 0.5 * d[2];
@@ -470,6 +487,10 @@ static int hits_paraboloid(const double *o, const double *d, Hit *out)
     }
     double t_in, t_out;
     if (!wall_interval(a, b, c, slab_lo, slab_hi, &t_in, &t_out) || !isfinite(t_in) || !isfinite(t_out))
+        return 0;
+    if ((t_in > slab_lo || t_out < slab_hi) &&
+        !quadric_proven_inside(a, b, c, a, fabs(o[0] * d[0]) + fabs(o[1] * d[1]) + 0.5 * fabs(d[2]),
+                               o[0] * o[0] + o[1] * o[1] + fabs(o[2]), 0.5 * (t_in + t_out), gamma_of(hit_ulps)))
         return 0;
     for (int end = 0; end < 2; end++) {
         double t = end ? t_out : t_in;
@@ -489,7 +510,7 @@ static int hits_paraboloid(const double *o, const double *d, Hit *out)
 /* The generic hyperboloid of one sheet x^2 + y^2 - (1 - S^2) z^2 <= S^2, -1 <= z <= 1 (intersect/hyperboloid.py):
  * wall (part 0), bottom cap z = -1 (part 1), top cap z = 1 (part 2); S is the waist.  Up to two intervals of
  * the line inside (a line steeper than the wall's asymptotes can cross the waist's hole): up to 4 hits. */
-static int hits_hyperboloid(const double *o, const double *d, double waist, Hit *out)
+static int hits_hyperboloid(const double *o, const double *d, double waist, double hit_ulps, Hit *out)
 {
     double w2 = waist * waist;
     double k = 1.0 - w2;
@@ -530,6 +551,13 @@ static int hits_hyperboloid(const double *o, const double *d, double waist, Hit 
         t[1] = t[3];
         t[2] = t[3] = NAN;
     }
+    /* Between the roots, a pair with a wall crossing counts only where the line is provably inside. */
+    if (a >= 0.0 && isfinite(t[0]) && isfinite(t[1]) && (t[0] > slab_lo || t[1] < slab_hi) &&
+        !quadric_proven_inside(a, b, c, d[0] * d[0] + d[1] * d[1] + fabs(k) * d[2] * d[2],
+                               fabs(o[0] * d[0]) + fabs(o[1] * d[1]) + fabs(k * o[2] * d[2]),
+                               o[0] * o[0] + o[1] * o[1] + fabs(k) * o[2] * o[2] + w2, 0.5 * (t[0] + t[1]),
+                               gamma_of(hit_ulps)))
+        t[0] = t[1] = NAN;
     int n = 0;
     for (int interval = 0; interval < 2; interval++) {
         double t_in = t[2 * interval], t_out = t[2 * interval + 1];

@@ -360,7 +360,8 @@ def _affine(seed, condition, size):
     return m
 
 
-SOLIDS = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus"]
+SOLIDS = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus", "paraboloid", "hyperboloid", "double cone",
+          "octahedron", "dodecahedron"]
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
@@ -372,7 +373,7 @@ def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, 
     rng = np.random.default_rng(seed)
     # Rays from outside toward random points of the generic shape's extent.
     n = 64
-    targets = np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(0, 1, (n, 1))]
+    targets = np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(-1 if kind in WAISTS else 0, 1, (n, 1))]
     _spawn_from_hits(kind, matrix, targets, 4.0 * size * 10.0 ** log_condition, rng)
 
 
@@ -394,10 +395,7 @@ def test_spawned_rays_near_a_cone_apex_never_find_their_surface_again(seed, log_
 def _spawn_from_hits(kind, matrix, generic_targets, distance, rng):
     """Rays from ``distance`` away toward the targets (generic points of ``kind`` under ``matrix``), and from
     each hit rays spawned outward and inward: none finds the surface it left."""
-    solid = shape(kind, matrix)
-    if kind == "taperedCylinder":
-        solid.parameters = (0.5,)
-    compiled = compile_scene(scene_of(solid))
+    compiled = compile_scene(scene_of(_solid(kind, matrix)))
     core = NativeTracer(compiled) if native.load_error is None else None
     targets = generic_targets @ matrix[:3, :3].T + matrix[:3, 3]
     away = rng.normal(size=targets.shape)
@@ -533,7 +531,7 @@ def test_claimed_bounds_hold_against_the_oracle(kind, family, backend):
 
 # ------------------------------------------------------------------------------------------------ lights on surfaces
 
-CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder"]
+CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "paraboloid", "octahedron", "icosahedron"]
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
@@ -544,16 +542,34 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
     # outer side of the tangent plane there: each feeler's segment touches the solid only at the light, so
     # no feeler is blocked, on either backend (the far end of the feeler is protected as its start is,
     # compile.blocks_between).
-    size = 10.0 ** log_size
-    matrix = _affine(seed, 10.0 ** log_condition, size)
-    solid = shape(kind, matrix)
-    if kind == "taperedCylinder":
-        solid.parameters = (0.5,)
-    compiled = compile_scene(scene_of(solid))
     rng = np.random.default_rng(seed)
-    targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))] @ matrix[:3, :3].T + matrix[:3, 3]
-    away = rng.normal(size=(8, 3))
-    eyes = targets + 4.0 * size * 10.0 ** log_condition * away / np.linalg.norm(away, axis=1, keepdims=True)
+    targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))]
+    _lights_on_hits(kind, _affine(seed, 10.0 ** log_condition, 10.0 ** log_size), targets,
+                    10.0 ** (log_size + log_condition), rng)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2 ** 31), log_condition=st.floats(0, 6), log_size=st.floats(-6, 6),
+       log_distance=st.floats(-8, -2))
+def test_a_light_near_a_cone_apex_is_not_shadowed_by_it(seed, log_condition, log_size, log_distance):
+    # Lights on a cone's wall 1e-8 ... 1e-2 from its apex, where the wall's function is as small as the
+    # distance to the apex: seen from outside the tangent plane, no feeler is blocked (the point-error
+    # bounds reproject near the apex too).
+    rng = np.random.default_rng(seed)
+    around = rng.normal(size=(8, 3))
+    targets = np.array([0.0, 0.0, 1.0]) + 10.0 ** log_distance * around / np.linalg.norm(around, axis=1, keepdims=True)
+    _lights_on_hits("cone", _affine(seed, 10.0 ** log_condition, 10.0 ** log_size), targets,
+                    10.0 ** (log_size + log_condition), rng)
+
+
+def _lights_on_hits(kind, matrix, generic_targets, reach, rng):
+    """Lights where rays from ``4 reach`` away meet ``kind`` (under ``matrix``) aiming at the generic targets,
+    and from each, 32 feelers from points 0.5 ... 3 ``reach`` away on the outer side of the tangent plane
+    there: none is blocked, on either backend."""
+    compiled = compile_scene(scene_of(_solid(kind, matrix)))
+    targets = generic_targets @ matrix[:3, :3].T + matrix[:3, 3]
+    away = rng.normal(size=targets.shape)
+    eyes = targets + 4.0 * reach * away / np.linalg.norm(away, axis=1, keepdims=True)
     hit = first_hits(compiled, eyes, targets - eyes)
     rows = np.nonzero(hit.hit)[0]
     if rows.size == 0:
@@ -564,7 +580,7 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
     for light, n in zip(lights, normal):
         w = rng.normal(size=(32, 3))
         w = np.where((w @ n < 0)[:, None], -w, w) + 0.2 * n * np.linalg.norm(w, axis=1, keepdims=True)
-        w *= size * 10.0 ** log_condition * rng.uniform(0.5, 3, (32, 1)) / np.linalg.norm(w, axis=1, keepdims=True)
+        w *= reach * rng.uniform(0.5, 3, (32, 1)) / np.linalg.norm(w, axis=1, keepdims=True)
         starts = light + w
         assert not occluded(compiled, starts, light - starts).any(), f"{kind}: the light's host shadows it"
         if core is not None:

@@ -45,7 +45,11 @@ POLYHEDRA = ("tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyb
 
 def _solid(kind, matrix=None):
     """The Shape of one of these tests' kinds (a taperedCylinder of top radius TAPER, the WAISTS, the built-in
-    polyhedra with their meshes)."""
+    polyhedra with their meshes, and "octahedron mesh": a polyhedron's faces as a triangle mesh)."""
+    if kind.endswith(" mesh"):
+        solid = shape("mesh", matrix)
+        solid.mesh = builtin_mesh(kind.split()[0])
+        return solid
     if kind in WAISTS:
         solid = shape("hyperboloid", matrix)
         solid.parameters = (WAISTS[kind],)
@@ -162,9 +166,8 @@ def exact_hits(kind, origin, direction):
                                       o[0] ** 2 + o[1] ** 2 - k * o[2] ** 2 - w2)
         candidates += [(-1 - o[2]) / d[2], (1 - o[2]) / d[2]] if d[2] != 0 else []
         return _crossings(lambda t: _inside_quadric(kind, at(t)), candidates)
-    if kind in POLYHEDRA:  # the float face planes, exactly
-        normals, offsets = face_planes(kind)
-        planes = [(_mp(n), mpmath.mpf(float(off))) for n, off in zip(normals, offsets)]
+    if kind in POLYHEDRA or kind.endswith(" mesh"):  # the float face planes, or triangles, exactly
+        planes = _convex_planes(kind)
         candidates = [(off - sum(n[i] * o[i] for i in range(3))) / sum(n[i] * d[i] for i in range(3))
                       for n, off in planes if sum(n[i] * d[i] for i in range(3)) != 0]
 
@@ -173,6 +176,25 @@ def exact_hits(kind, origin, direction):
             return all(sum(n[i] * p[i] for i in range(3)) <= off for n, off in planes)
         return _crossings(inside, candidates)
     raise ValueError(kind)
+
+
+def _convex_planes(kind):
+    """A polyhedron's face planes (n, offset: n . p <= offset), or those of the triangles of a convex mesh
+    (n = E1 x E2 turned outward, from the float vertices), to 50 digits."""
+    if not kind.endswith(" mesh"):
+        normals, offsets = face_planes(kind)
+        return [(_mp(n), mpmath.mpf(float(off))) for n, off in zip(normals, offsets)]
+    mesh = builtin_mesh(kind.split()[0])
+    vertices = [_mp(v) for v in np.asarray(mesh.vertices, dtype=float)]
+    planes = []
+    for face, _ in mesh.faces:
+        for i in range(1, len(face) - 1):
+            a, b, c = vertices[face[0]], vertices[face[i]], vertices[face[i + 1]]
+            e1, e2 = [b[j] - a[j] for j in range(3)], [c[j] - a[j] for j in range(3)]
+            n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]]
+            offset = sum(n[j] * a[j] for j in range(3))
+            planes.append((n, offset) if offset > 0 else ([-x for x in n], -offset))  # (the centre is inside)
+    return planes
 
 
 def _inside_quadric(kind, point, strictly=False):
@@ -437,15 +459,20 @@ def _generic_rays(kind, family, rng, count):
         if family == "tangent":
             gap = 10.0 ** -(6 + 6 * trial / count) * (1 if trial % 2 else -1)
             rays.append(tangent_ray(kind, gap, rng))
-        elif family == "grazing" and kind in POLYHEDRA:  # across a face, near its point nearest the centre
-            angle = 10.0 ** -(3 + 9 * trial / count)
-            normals, offsets = face_planes(kind)
+        elif family == "grazing" and (kind in POLYHEDRA or kind.endswith(" mesh")):  # across a face, near its middle
+            # (a mesh counts a crossing up to its barycentric slack outside a triangle, ~1e-13 of its size
+            # (tracer.intersect.mesh, ROUNDING_FACTOR): a line that grazes a face at under ~1e-12 rad passes
+            # that close to the next face's edge and meets it there, slack / angle before the exact line
+            # enters: its meshes are taken down to 1e-11 rad.)
+            angle = 10.0 ** -(3 + (8 if kind.endswith(" mesh") else 9) * trial / count)
+            polyhedron = kind.split()[0]
+            normals, offsets = face_planes(polyhedron)
             face = trial % len(normals)
             n = normals[face] / np.linalg.norm(normals[face])
             along = np.cross(n, rng.normal(size=3))
             along /= np.linalg.norm(along)
             d = math.cos(angle) * along - math.sin(angle) * n
-            corners = np.asarray(builtin_mesh(kind).vertices, dtype=float)
+            corners = np.asarray(builtin_mesh(polyhedron).vertices, dtype=float)
             on_face = corners[np.abs(corners @ normals[face] - offsets[face]) <= 1e-9 * np.abs(offsets[face])]
             p = on_face.mean(axis=0) + 0.05 * np.cross(n, along) * np.ptp(on_face, axis=0).max()
             rays.append((p - rng.uniform(2, 6) * d, d))
@@ -486,7 +513,8 @@ def _exact_generic(matrix, origin, direction):
 
 BOUND_CASES = ([(k, "tangent") for k in ("sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus",
                                          "paraboloid", "hyperboloid", "narrow hyperboloid")]
-               + [(k, "grazing") for k in ("cube", "square", "plane", "paraboloid", "hyperboloid") + POLYHEDRA]
+               + [(k, "grazing") for k in ("cube", "square", "plane", "paraboloid", "hyperboloid") + POLYHEDRA
+                  + ("octahedron mesh", "icosahedron mesh")]
                + [(k, "apex") for k in ("cone", "paraboloid", "narrow hyperboloid", "double cone")])
 
 

@@ -385,14 +385,19 @@ class SceneBuilder:
 
     def _runs_placed(self, made: list) -> list:
         """``made`` with each run of instances checked (their matrices: the unusable ones skipped, with a
-        warning each) and turned into rows; a run that shares its sort key's object with another entry is
-        made into its instances' entries, so that sorting puts each where it was."""
-        others = {key[:2] for key, nodes, _ in made if not isinstance(nodes, _InstanceRun) and nodes}
+        warning each) and turned into rows; a run with another entry of its object's sort key between its first
+        and last instance (in the depsgraph's order) is made into its instances' entries, so that sorting puts
+        each where it was."""
+        others: dict[tuple, list[int]] = {}  # (order, name) -> the counts of the other entries of that object
+        for key, nodes, _ in made:
+            if nodes and not isinstance(nodes, _InstanceRun):
+                others.setdefault(key[:2], []).append(key[2])
         out = []
         for key, nodes, edit_key in made:
             if isinstance(nodes, _InstanceRun):
                 nodes.finish(self)
-                if key[:2] in others:
+                first, last = (int(nodes.counts[0]), int(nodes.counts[-1])) if len(nodes.counts) else (0, 0)
+                if any(first < count < last for count in others.get(key[:2], ())):
                     out += [((key[0], key[1], count), shapes, ("instance", count))
                             for count, shapes in nodes.shapes_by_instance(self)]
                     continue

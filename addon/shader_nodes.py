@@ -107,11 +107,7 @@ class Reader:
 
     def surface(self) -> whitted.Shader:
         """The shader tree on the active Material Output's Surface (None: nothing connected)."""
-        tree = self.owner.node_tree
-        outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-        # Cycles' choice: the active output among those for all engines or for Cycles
-        usable = [n for n in outputs if getattr(n, "target", "ALL") in ("ALL", "CYCLES")] or outputs
-        output = next((n for n in usable if n.is_active_output), usable[0] if usable else None)
+        output = active_output(self.owner.node_tree)
         if output is None:
             return None
         linked = self._linked_node(output.inputs["Surface"])
@@ -191,6 +187,15 @@ def _plain(value):
         return float(value)
 
 
+def active_output(tree):
+    """The output node a material's or world's node tree is traced from (None: it has none): Cycles' choice,
+    the active Material (World) Output among those for all engines or for Cycles."""
+    kinds = ("ShaderNodeOutputMaterial", "ShaderNodeOutputWorld")
+    outputs = [n for n in tree.nodes if n.bl_idname in kinds]
+    usable = [n for n in outputs if getattr(n, "target", "ALL") in ("ALL", "CYCLES")] or outputs
+    return next((n for n in usable if n.is_active_output), usable[0] if usable else None)
+
+
 def material_shader(material, warnings: Optional[list] = None) -> whitted.Shader:
     """The shader tree of a Blender material (its nodes; without nodes, its viewport colour, metallic,
     roughness and specular as a Principled BSDF's).  Problems are appended to ``warnings``."""
@@ -215,8 +220,7 @@ def world_color(world, warnings: Optional[list] = None) -> tuple[float, float, f
     plugged into the active World Output), else the world's viewport colour."""
     if world.use_nodes and world.node_tree is not None:
         reader = Reader(world)
-        outputs = [n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
-        output = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+        output = active_output(world.node_tree)
         linked = reader._linked_node(output.inputs["Surface"]) if output is not None else None
         color = (0.0, 0.0, 0.0)
         if linked is not None and linked[0].bl_idname == "ShaderNodeBackground":

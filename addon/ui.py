@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import bpy
 
-from . import blender_lights, meshes, object_cache, props, scene_build
+from . import blender_lights, meshes, object_cache, props, scene_build, shader_nodes
 from .engine import ENGINE_ID
 
 
 class _PropertiesPanel:
-    """Where all four panels live: a tab of the Properties editor (bl_context names the tab)."""
+    """Where the panels live: a tab of the Properties editor (bl_context names the tab)."""
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
 
@@ -45,6 +45,59 @@ class SDL_PT_render(_PropertiesPanel, bpy.types.Panel):
         # Blender's own switch (Cycles shows it under Performance): keep this engine between final renders,
         # so that F12 after moving a light or editing a material rebuilds only what changed.
         layout.column().prop(context.scene.render, "use_persistent_data")
+
+
+def draw_surface(layout, owner, sdl_wins: bool, plain: tuple) -> None:
+    """The shader nodes the engine traces, as Cycles' Surface panel shows them: the inputs of the node on the
+    active output's Surface (template_node_view), or, without nodes (before Blender 5.0), Use Nodes and the
+    ``plain`` settings read instead."""
+    if sdl_wins:  # (the greyed inputs below stay editable: unticking brings them back)
+        layout.label(text="SDL settings are ticked: these nodes are not traced", icon="INFO")
+    tree = owner.node_tree if owner.use_nodes else None
+    if tree is None:
+        layout.prop(owner, "use_nodes", icon="NODETREE")
+        for name in plain:
+            layout.prop(owner, name)
+        return
+    output = shader_nodes.active_output(tree)
+    if output is None:
+        layout.label(text="No output node")
+        return
+    layout.template_node_view(tree, output, output.inputs["Surface"])
+
+
+class SDL_PT_surface(_PropertiesPanel, bpy.types.Panel):
+    """A material's shader nodes, which the engine traces unless SDL Material is ticked (Blender's own Surface
+    panels list only Blender's engines: without this one a material made in Blender could not be edited here)."""
+    bl_idname = "SDL_PT_surface"
+    bl_label = "Surface"
+    bl_context = "material"
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "material", None) is not None
+
+    def draw(self, context):
+        material = context.material
+        draw_surface(self.layout, material, material.sdl.use_sdl,
+                     ("diffuse_color", "metallic", "roughness", "specular_intensity"))
+
+
+class SDL_PT_world_surface(_PropertiesPanel, bpy.types.Panel):
+    """The world's nodes (its background and ambient light unless SDL World is ticked)."""
+    bl_idname = "SDL_PT_world_surface"
+    bl_label = "Surface"
+    bl_context = "world"
+    COMPAT_ENGINES = {ENGINE_ID}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "world", None) is not None
+
+    def draw(self, context):
+        world = context.world
+        draw_surface(self.layout, world, world.sdl.use_sdl, ("color",))
 
 
 class SDL_PT_material(_PropertiesPanel, bpy.types.Panel):
@@ -162,7 +215,8 @@ class SDL_PT_object(_PropertiesPanel, bpy.types.Panel):
             layout.label(text=f"From {obj['sdl_source']}")
 
 
-CLASSES = (SDL_PT_render, SDL_PT_material, SDL_PT_light, SDL_PT_world, SDL_PT_object)
+CLASSES = (SDL_PT_render, SDL_PT_surface, SDL_PT_material, SDL_PT_light, SDL_PT_world_surface, SDL_PT_world,
+           SDL_PT_object)
 
 
 def _cache_handlers() -> tuple:

@@ -22,6 +22,9 @@ MIN_IOU = 0.95
 #: twelve hairs; picked instances use the cube's and the ball's meshes.
 EXPECTED = {"instance on points": (25, 1), "joined with the grid": (26, 2), "picked from a collection": (25, 2),
             "collection instance": (2, 1), "hair particles": (12, 1)}
+#: The cases whose objects are built as rows of a ShapeTable (geometry nodes' own instances: no Python object
+#: per instance), not as a list of Shapes.
+AS_ROWS = {"instance on points", "joined with the grid"}
 
 
 def _check(proc) -> None:
@@ -34,6 +37,7 @@ def _check(proc) -> None:
         assert case["error"] is None and case["workbench"] > 400, (name, case)
         assert case["iou"] >= MIN_IOU, (name, case)
         assert (case["objects"], case["meshes"]) == EXPECTED[name], (name, case)
+        assert case["rows"] == (name in AS_ROWS), (name, case)
 
 
 def test_instances_in_the_bpy_module(tmp_path):

@@ -1,6 +1,7 @@
 """Instances, traced: each kind of instance Blender makes, rendered alone by Workbench and by SDL_RAYTRACER at
 160 x 120; prints ``RESULT {json}`` with each case's silhouette IoU, pixel counts, the objects traced and
-the distinct tracer meshes they use.
+the distinct tracer meshes they use, and whether the built objects are rows of a ShapeTable (with float32
+matrices, as Blender gives them) rather than a Shape each.
 
     blender -b --factory-startup --python-exit-code 1 --python instances.py -- ROOT
     python instances.py ROOT                     (the bpy module)
@@ -153,7 +154,9 @@ def measure(make) -> dict:
     workbench = render_rgba("BLENDER_WORKBENCH")[..., 3] > 0.5
     traced = render_rgba(engine.ENGINE_ID)[..., 3] > 0.5
     built = SceneBuilder(bpy.context.evaluated_depsgraph_get()).build(scene, skip_hidden_render=True)
-    return {"iou": round(iou(workbench, traced), 4), "workbench": int(workbench.sum()),
+    columns = getattr(built.objects, "columns", None)  # (read before anything makes the table into Shapes)
+    rows = columns is not None and str(columns.affines.dtype) == "float32"
+    return {"rows": rows, "iou": round(iou(workbench, traced), 4), "workbench": int(workbench.sum()),
             "traced": int(traced.sum()), "objects": engine.LAST_RENDER.get("objects"),
             "meshes": len({id(shape.mesh) for shape in built.objects}),
             "error": engine.LAST_RENDER.get("error")}

@@ -81,6 +81,14 @@ def _machine_latency() -> float:
     return time.monotonic() - sent
 
 
+def _python_start() -> float:
+    """How long this machine takes, now, to start a Python process that loads runpy (what ``python -m`` does
+    before the package's first line) and ends."""
+    started = time.monotonic()
+    subprocess.run([sys.executable, "-c", "import runpy"], check=True, env=_env())
+    return time.monotonic() - started
+
+
 def _duration(scene: Path, folder: Path) -> float:
     started = time.monotonic()
     subprocess.run([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(folder / "full.png"), "--width",
@@ -113,6 +121,30 @@ def test_sigint_and_sigterm_at_random_moments_end_the_run_at_once_and_keep_the_o
             f"{signal.Signals(signum).name} heard after {took:.2f} s (the machine's own latency: {latency:.2f} s)"
         assert output.read_bytes() == OLD
         assert err.strip().splitlines()[-1:] == ["interrupted"], err
+
+
+def test_signals_while_the_modules_load_end_the_run_at_once(tmp_path, stage):
+    """The first second and a half of a USD render after Python has started, in steps of 0.1 s: the tracer,
+    NumPy, Pillow, the C core and usd-core loading (a stretch random moments seldom hit).  Each signal ends the
+    run within half a second with 130 or 143, one "interrupted" line and the old output as it was.  (Before
+    the package's first line, a SIGINT is CPython's own KeyboardInterrupt: the moments start when a bare
+    interpreter, measured each time, has started and loaded runpy, as ``python -m`` does.)"""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    output = folder / "image.png"
+    for k in range(15):
+        output.write_bytes(OLD)
+        signum = (signal.SIGINT, signal.SIGTERM)[k % 2]
+        at = _python_start() + 0.1 * k
+        status, took, err = _run_and_signal(stage, output, signum, at)
+        assert sorted(p.name for p in folder.iterdir()) == ["image.png"] and output.read_bytes() == OLD
+        assert "Traceback" not in err, err
+        assert status in (128 + signum, -signum), (k, status, err)
+        latency = _machine_latency()
+        assert took <= HEARD_WITHIN + latency, \
+            f"{signal.Signals(signum).name} at {at:.2f} s heard after {took:.2f} s (machine: {latency:.2f} s)"
+        if status == 128 + signum:
+            assert err.strip().splitlines()[-1:] == ["interrupted"], err
 
 
 def test_sigkill_at_random_moments_leaves_only_the_old_output(tmp_path):

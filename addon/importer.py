@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from . import meshes, props
+from . import meshes, props, shader_nodes
 from .pure import convert, light_units, naming, primitives
 from .scene_build import (OBJ_FILE, OBJ_KIND, OBJ_MATRIX, OBJ_ORDER, OBJ_PARAM, OBJ_SHOWN, SDL_TO_BOOLEAN, flat)
 from .tracer import model, shapes
@@ -329,7 +329,7 @@ class Importer:
             sdl_material = sdl_materials[index]
             if previous is None:
                 mat = self.created.add("materials", bpy.data.materials.new(names[index]))
-                mat.use_nodes = True
+                shader_nodes.use_nodes(mat)
                 props.set_material(mat, sdl_material)
                 writer = props.PrincipledWriter.of(mat)
             else:
@@ -589,7 +589,7 @@ class Importer:
             if set_camera:
                 bl_scene.camera = cam_obj
             world = self.created.add("worlds", bpy.data.worlds.new(f"SDL world {os.path.basename(filepath)}"))
-            world.use_nodes = True
+            shader_nodes.use_nodes(world)
             props.set_world(world, scene.settings)
             bl_scene.world = world
             if settings is not None:
@@ -666,7 +666,7 @@ def default_material(created: Optional[_Created] = None):
     if created is not None:
         created.add("materials", mat)
     mat["sdl_default"] = True
-    mat.use_nodes = True
+    shader_nodes.use_nodes(mat)
     props.set_material(mat, model.Material())
     return mat
 

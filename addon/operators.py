@@ -184,7 +184,7 @@ class EXPORT_SCENE_OT_sdl(bpy.types.Operator, ExportHelper):
         try:
             warnings = exporter.export_sdl(context, self.filepath, conversion, use_selection=self.use_selection)
         except Exception as exc:  # noqa: BLE001 - reported in Blender's UI, never a traceback
-            if not isinstance(exc, (OSError, ValueError)):
+            if not isinstance(exc, (OSError, ValueError, errors.TracerError)):  # (a TracerError names the file)
                 traceback.print_exc()
             self.report({"ERROR"}, f"Cannot export {os.path.basename(self.filepath)}: {exc}")
             return {"CANCELLED"}

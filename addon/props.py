@@ -184,7 +184,7 @@ def exact_field(idblock, group, name: str) -> list[float]:
 # Materials
 
 def _principled(material):
-    if not material.use_nodes or material.node_tree is None:
+    if shader_nodes.node_tree(material) is None:
         return None
     for node in material.node_tree.nodes:
         if node.type == "BSDF_PRINCIPLED":
@@ -451,7 +451,7 @@ BLENDER_MIN_WEIGHT = 1e-3
 def apply_world_colors(world) -> None:
     background = tuple(world.sdl.background)
     world.color = background
-    if world.use_nodes and world.node_tree is not None:
+    if shader_nodes.node_tree(world) is not None:
         for node in world.node_tree.nodes:
             if node.type == "BACKGROUND":
                 node.inputs["Color"].default_value = (*background, 1.0)

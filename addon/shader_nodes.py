@@ -187,6 +187,23 @@ def _plain(value):
         return float(value)
 
 
+#: Blender 5.0 gives every material and world nodes, and warns that use_nodes goes in 6.0: read without it.
+NODES_ALWAYS = bpy.app.version >= (5, 0)
+
+
+def node_tree(owner):
+    """The node tree a material or world is traced from (None: it uses no nodes)."""
+    if NODES_ALWAYS or owner.use_nodes:
+        return owner.node_tree
+    return None
+
+
+def use_nodes(owner) -> None:
+    """Give a material or world its nodes (Blender 5.0: they always have them)."""
+    if not NODES_ALWAYS:
+        owner.use_nodes = True
+
+
 def active_output(tree):
     """The output node a material's or world's node tree is traced from (None: it has none): Cycles' choice,
     the active Material (World) Output among those for all engines or for Cycles."""
@@ -199,7 +216,7 @@ def active_output(tree):
 def material_shader(material, warnings: Optional[list] = None) -> whitted.Shader:
     """The shader tree of a Blender material (its nodes; without nodes, its viewport colour, metallic,
     roughness and specular as a Principled BSDF's).  Problems are appended to ``warnings``."""
-    if material.use_nodes and material.node_tree is not None:
+    if node_tree(material) is not None:
         reader = Reader(material)
         shader = reader.surface()
         if warnings is not None:
@@ -218,7 +235,7 @@ def material_fields(material, warnings: Optional[list] = None) -> dict:
 def world_color(world, warnings: Optional[list] = None) -> tuple[float, float, float]:
     """A Blender world's colour as Cycles lights with it: its Background node's Color x Strength (the one
     plugged into the active World Output), else the world's viewport colour."""
-    if world.use_nodes and world.node_tree is not None:
+    if node_tree(world) is not None:
         reader = Reader(world)
         output = active_output(world.node_tree)
         linked = reader._linked_node(output.inputs["Surface"]) if output is not None else None

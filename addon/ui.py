@@ -53,7 +53,7 @@ def draw_surface(layout, owner, sdl_wins: bool, plain: tuple) -> None:
     ``plain`` settings read instead."""
     if sdl_wins:  # (the greyed inputs below stay editable: unticking brings them back)
         layout.label(text="SDL settings are ticked: these nodes are not traced", icon="INFO")
-    tree = owner.node_tree if owner.use_nodes else None
+    tree = shader_nodes.node_tree(owner)
     if tree is None:
         layout.prop(owner, "use_nodes", icon="NODETREE")
         for name in plain:

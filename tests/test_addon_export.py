@@ -137,7 +137,7 @@ def test_hidden_objects_skipped_and_selection_option(tmp_path):
     assert len(export(tmp_path / "b.sdl", use_selection=True).shapes()) == 2
 
 
-def test_failed_export_writes_nothing(tmp_path):
+def test_failed_export_writes_nothing(tmp_path, capsys):
     import_sdl(SCENES / "lecture.sdl")
     target = tmp_path / "keep.sdl"
     target.write_text("sphere\n")
@@ -146,6 +146,10 @@ def test_failed_export_writes_nothing(tmp_path):
     # a mesh is written beside the scene first; when the scene file then cannot be written (its name is
     # taken by a folder), the mesh written for it is removed again and nothing else is left
     bpy.ops.mesh.primitive_monkey_add()
+    capsys.readouterr()
+    with pytest.raises(RuntimeError, match="Cannot export .*folder .* does not exist"):  # the mesh's folder
+        bpy.ops.export_scene.sdl(filepath=str(tmp_path / "missing" / "x.sdl"))
+    assert "Traceback" not in capsys.readouterr().err  # a user's mistake: the reason, in Blender's UI only
     (tmp_path / "blocked.sdl").mkdir()
     with pytest.raises(RuntimeError, match="Cannot export"):
         bpy.ops.export_scene.sdl(filepath=str(tmp_path / "blocked.sdl"))

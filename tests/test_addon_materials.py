@@ -7,6 +7,7 @@ import shutil
 
 import bpy
 import numpy as np
+import pytest
 from bpy_extras.object_utils import world_to_camera_view
 
 import tracer
@@ -136,3 +137,24 @@ def test_materials_imported_in_bulk_equal_materials_made_one_by_one(tmp_path, mo
             assert np.array_equal(np.array(getattr(made, name)), np.array(getattr(reference, name)))
         assert list(made[props.BASE_SHOWN]) == list(reference[props.BASE_SHOWN])
         bpy.data.materials.remove(reference)
+
+
+def test_reading_and_importing_materials_and_worlds_uses_no_deprecated_switch(recwarn):
+    """Blender 5.0 keeps use_nodes on for every material and world and warns that the switch goes in 6.0: the
+    add-on reads nodes there without it (so it keeps working in 6.0); before 5.0 it still honours the switch."""
+    fresh()
+    import_sdl(SCENES / "lecture.sdl")
+    made = bpy.data.materials.new("made in Blender")
+    made.use_nodes = True  # (the test's own use of the switch is not what is checked)
+    made.node_tree.nodes["Principled BSDF"].inputs["Metallic"].default_value = 1.0
+    world = bpy.data.worlds.new("made in Blender")
+    world.use_nodes = True
+    recwarn.clear()
+    import_sdl(SCENES / "lecture.sdl")
+    material = props.blender_material(made, [])[0]
+    settings = props.world_settings(world, 3)
+    for imported in bpy.data.materials:
+        props.blender_material(imported, [])
+    assert material.reflectivity == 1.0 and material.fresnel == "metal"  # read from the nodes
+    assert tuple(settings.background) == pytest.approx((0.05, 0.05, 0.05))  # the new world's Background node
+    assert [str(w.message) for w in recwarn if "use_nodes" in str(w.message)] == []

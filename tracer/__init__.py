@@ -8,6 +8,7 @@
 from . import startup as _startup
 
 if _startup.started_as_the_program():  # (before NumPy is imported: see tracer/startup.py)
+    _startup.hear_signals_at_once()  # (before any other import: tracer.signals takes over in a moment)
     from . import signals as _signals
 
     _signals.install_at_start()  # SIGINT and SIGTERM end the program at once until its command starts

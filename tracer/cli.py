@@ -614,10 +614,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return {"render": _render, "info": _info, "bench": _bench, "convert": _convert}[args.command](args)
     except signals.Interrupted as err:
         print("\ninterrupted", file=sys.stderr)
+        signals.end_interrupted_program(err.status)
         return err.status
     except RenderCancelled:  # (a TracerError: caught first)
         if signals.heard():  # the C core stopped for a signal, before Python's handler could say so
             print("\ninterrupted", file=sys.stderr)
+            signals.end_interrupted_program(128 + signals.heard())
             return 128 + signals.heard()
         print("error: cancelled", file=sys.stderr)
         return EXIT_INTERRUPTED

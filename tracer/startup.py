@@ -19,8 +19,6 @@ A program that imports the tracer as a library keeps its process as it is.
 """
 from __future__ import annotations
 
-import importlib.machinery
-import importlib.util
 import os
 import sys
 
@@ -38,6 +36,25 @@ def started_as_the_program() -> bool:
         argv = getattr(sys, "orig_argv", [])
         return "-m" in argv and argv[argv.index("-m") + 1:][:1] == ["tracer"]
     return bool(sys.argv) and os.path.basename(sys.argv[0]) == SCRIPT
+
+
+def hear_signals_at_once() -> None:
+    """SIGINT and SIGTERM end the program at once, with 128 + the signal and an ``interrupted`` line, from the
+    first line of the package on: tracer.signals does the same in its starting phase, but importing it (the
+    signal module's enums, typing) takes a few milliseconds, ten times that on a loaded machine, in which a
+    Ctrl-C would have been Python's KeyboardInterrupt and its traceback.  Nothing but the C module _signal."""
+    import _signal
+
+    def end(signum, frame):
+        try:
+            os.write(2, b"\ninterrupted\n")
+        except OSError:
+            pass
+        os._exit(128 + signum)
+
+    for signum in (_signal.SIGINT, _signal.SIGTERM):
+        if _signal.getsignal(signum) is not _signal.SIG_IGN:  # (a shell's `cmd &` ignores SIGINT: keep that)
+            _signal.signal(signum, end)
 
 
 def prepare_the_program() -> None:
@@ -62,6 +79,9 @@ class DeferredImports:
     def find_spec(self, name, path=None, target=None):
         if name not in self.names:
             return None
+        import importlib.machinery  # (here: the first milliseconds are for hear_signals_at_once)
+        import importlib.util
+
         spec = importlib.machinery.PathFinder.find_spec(name, path)
         if spec is None or not hasattr(spec.loader, "exec_module"):
             return None  # (found some other way: imported as usual)

@@ -30,6 +30,7 @@ void rt_interrupt_clear(void) { atomic_store(&rt_heard_signal, 0); }
 
 #ifndef _WIN32
 #include <errno.h>
+#include <fcntl.h>
 #include <pthread.h>
 #include <semaphore.h>
 #include <signal.h>
@@ -46,6 +47,9 @@ static _Atomic int64_t rt_grace_ms;
 static sem_t rt_wake;
 static char rt_held_path[RT_HELD_FILES][RT_HELD_PATH];
 static _Atomic int rt_held_used[RT_HELD_FILES];
+/* The program's standard error as it was at install: while a library's messages are held back (fd 2 pointed at
+ * a temporary file, tracer/diagnostics.py), the watchdog's line must still reach the user. */
+static _Atomic int rt_stderr_fd = -1;
 
 static void rt_on_signal(int sig)
 {
@@ -81,7 +85,8 @@ static void *rt_watchdog(void *unused)
             if (atomic_load(&rt_held_used[k]) == 1)
                 unlink(rt_held_path[k]);
         static const char said[] = "\ninterrupted\n";
-        ssize_t ignored = write(2, said, sizeof(said) - 1);
+        int fd = atomic_load(&rt_stderr_fd);
+        ssize_t ignored = write(fd >= 0 ? fd : 2, said, sizeof(said) - 1);
         (void)ignored;
         _exit(128 + atomic_load(&rt_heard_signal));
     }
@@ -93,6 +98,9 @@ static void *rt_watchdog(void *unused)
 int rt_interrupt_install(int64_t grace_ms)
 {
     atomic_store(&rt_grace_ms, grace_ms);
+    int old_fd = atomic_exchange(&rt_stderr_fd, fcntl(2, F_DUPFD_CLOEXEC, 3));
+    if (old_fd >= 0)
+        close(old_fd);
     if (!atomic_load(&rt_watchdog_running)) {
         if (sem_init(&rt_wake, 0, 0) != 0)
             return -1;

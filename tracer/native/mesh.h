@@ -212,10 +212,11 @@ static inline int mesh_entering(const MeshView *m, int64_t slot, const double *d
     return flip ? facing > 0.0 : facing < 0.0;
 }
 
-/* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
-static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+/* The unit geometric normal g (generic; zero for a degenerate triangle) of original triangle `tri`, on the
+ * side its corner normals c (filled in) point to; returns whether it has corner normals (smooth shading).
+ * (TriangleMesh.geometric_normals) */
+static inline int mesh_geometric_normal(const MeshView *m, int64_t tri, double c[3][3], double *g)
 {
-    double c[3][3], g[3];
     int has = mesh_corner_normals(m, tri, c);
     int flip = mesh_winding(m, tri, c, g);
     if (flip)
@@ -224,6 +225,14 @@ static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double
     double g_length = length3(g);
     for (int k = 0; k < 3; k++)
         g[k] = g_length > 0.0 ? g[k] / g_length : 0.0;
+    return has;
+}
+
+/* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
+static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+{
+    double c[3][3], g[3];
+    int has = mesh_geometric_normal(m, tri, c, g);
     double w0 = 1.0 - b1 - b2;
     double s[3];
     for (int k = 0; k < 3; k++)

@@ -45,7 +45,11 @@ POLYHEDRA = ("tetrahedron", "octahedron", "dodecahedron", "icosahedron", "buckyb
 
 def _solid(kind, matrix=None):
     """The Shape of one of these tests' kinds (a taperedCylinder of top radius TAPER, the WAISTS, the built-in
-    polyhedra with their meshes)."""
+    polyhedra with their meshes, and "octahedron mesh": a polyhedron's faces as a triangle mesh)."""
+    if kind.endswith(" mesh"):
+        solid = shape("mesh", matrix)
+        solid.mesh = builtin_mesh(kind.split()[0])
+        return solid
     if kind in WAISTS:
         solid = shape("hyperboloid", matrix)
         solid.parameters = (WAISTS[kind],)
@@ -162,9 +166,8 @@ def exact_hits(kind, origin, direction):
                                       o[0] ** 2 + o[1] ** 2 - k * o[2] ** 2 - w2)
         candidates += [(-1 - o[2]) / d[2], (1 - o[2]) / d[2]] if d[2] != 0 else []
         return _crossings(lambda t: _inside_quadric(kind, at(t)), candidates)
-    if kind in POLYHEDRA:  # the float face planes, exactly
-        normals, offsets = face_planes(kind)
-        planes = [(_mp(n), mpmath.mpf(float(off))) for n, off in zip(normals, offsets)]
+    if kind in POLYHEDRA or kind.endswith(" mesh"):  # the float face planes, or triangles, exactly
+        planes = _convex_planes(kind)
         candidates = [(off - sum(n[i] * o[i] for i in range(3))) / sum(n[i] * d[i] for i in range(3))
                       for n, off in planes if sum(n[i] * d[i] for i in range(3)) != 0]
 
@@ -173,6 +176,25 @@ def exact_hits(kind, origin, direction):
             return all(sum(n[i] * p[i] for i in range(3)) <= off for n, off in planes)
         return _crossings(inside, candidates)
     raise ValueError(kind)
+
+
+def _convex_planes(kind):
+    """A polyhedron's face planes (n, offset: n . p <= offset), or those of the triangles of a convex mesh
+    (n = E1 x E2 turned outward, from the float vertices), to 50 digits."""
+    if not kind.endswith(" mesh"):
+        normals, offsets = face_planes(kind)
+        return [(_mp(n), mpmath.mpf(float(off))) for n, off in zip(normals, offsets)]
+    mesh = builtin_mesh(kind.split()[0])
+    vertices = [_mp(v) for v in np.asarray(mesh.vertices, dtype=float)]
+    planes = []
+    for face, _ in mesh.faces:
+        for i in range(1, len(face) - 1):
+            a, b, c = vertices[face[0]], vertices[face[i]], vertices[face[i + 1]]
+            e1, e2 = [b[j] - a[j] for j in range(3)], [c[j] - a[j] for j in range(3)]
+            n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]]
+            offset = sum(n[j] * a[j] for j in range(3))
+            planes.append((n, offset) if offset > 0 else ([-x for x in n], -offset))  # (the centre is inside)
+    return planes
 
 
 def _inside_quadric(kind, point, strictly=False):
@@ -360,7 +382,8 @@ def _affine(seed, condition, size):
     return m
 
 
-SOLIDS = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus"]
+SOLIDS = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus", "paraboloid", "hyperboloid", "double cone",
+          "octahedron", "dodecahedron"]
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
@@ -372,7 +395,7 @@ def test_spawned_rays_never_find_their_surface_again(kind, seed, log_condition, 
     rng = np.random.default_rng(seed)
     # Rays from outside toward random points of the generic shape's extent.
     n = 64
-    targets = np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(0, 1, (n, 1))]
+    targets = np.c_[rng.uniform(-1, 1, (n, 2)), rng.uniform(-1 if kind in WAISTS else 0, 1, (n, 1))]
     _spawn_from_hits(kind, matrix, targets, 4.0 * size * 10.0 ** log_condition, rng)
 
 
@@ -394,10 +417,7 @@ def test_spawned_rays_near_a_cone_apex_never_find_their_surface_again(seed, log_
 def _spawn_from_hits(kind, matrix, generic_targets, distance, rng):
     """Rays from ``distance`` away toward the targets (generic points of ``kind`` under ``matrix``), and from
     each hit rays spawned outward and inward: none finds the surface it left."""
-    solid = shape(kind, matrix)
-    if kind == "taperedCylinder":
-        solid.parameters = (0.5,)
-    compiled = compile_scene(scene_of(solid))
+    compiled = compile_scene(scene_of(_solid(kind, matrix)))
     core = NativeTracer(compiled) if native.load_error is None else None
     targets = generic_targets @ matrix[:3, :3].T + matrix[:3, 3]
     away = rng.normal(size=targets.shape)
@@ -439,15 +459,20 @@ def _generic_rays(kind, family, rng, count):
         if family == "tangent":
             gap = 10.0 ** -(6 + 6 * trial / count) * (1 if trial % 2 else -1)
             rays.append(tangent_ray(kind, gap, rng))
-        elif family == "grazing" and kind in POLYHEDRA:  # across a face, near its point nearest the centre
-            angle = 10.0 ** -(3 + 9 * trial / count)
-            normals, offsets = face_planes(kind)
+        elif family == "grazing" and (kind in POLYHEDRA or kind.endswith(" mesh")):  # across a face, near its middle
+            # (a mesh counts a crossing up to its barycentric slack outside a triangle, ~1e-13 of its size
+            # (tracer.intersect.mesh, ROUNDING_FACTOR): a line that grazes a face at under ~1e-12 rad passes
+            # that close to the next face's edge and meets it there, slack / angle before the exact line
+            # enters: its meshes are taken down to 1e-11 rad.)
+            angle = 10.0 ** -(3 + (8 if kind.endswith(" mesh") else 9) * trial / count)
+            polyhedron = kind.split()[0]
+            normals, offsets = face_planes(polyhedron)
             face = trial % len(normals)
             n = normals[face] / np.linalg.norm(normals[face])
             along = np.cross(n, rng.normal(size=3))
             along /= np.linalg.norm(along)
             d = math.cos(angle) * along - math.sin(angle) * n
-            corners = np.asarray(builtin_mesh(kind).vertices, dtype=float)
+            corners = np.asarray(builtin_mesh(polyhedron).vertices, dtype=float)
             on_face = corners[np.abs(corners @ normals[face] - offsets[face]) <= 1e-9 * np.abs(offsets[face])]
             p = on_face.mean(axis=0) + 0.05 * np.cross(n, along) * np.ptp(on_face, axis=0).max()
             rays.append((p - rng.uniform(2, 6) * d, d))
@@ -488,7 +513,8 @@ def _exact_generic(matrix, origin, direction):
 
 BOUND_CASES = ([(k, "tangent") for k in ("sphere", "cube", "cylinder", "cone", "taperedCylinder", "torus",
                                          "paraboloid", "hyperboloid", "narrow hyperboloid")]
-               + [(k, "grazing") for k in ("cube", "square", "plane", "paraboloid", "hyperboloid") + POLYHEDRA]
+               + [(k, "grazing") for k in ("cube", "square", "plane", "paraboloid", "hyperboloid") + POLYHEDRA
+                  + ("octahedron mesh", "icosahedron mesh")]
                + [(k, "apex") for k in ("cone", "paraboloid", "narrow hyperboloid", "double cone")])
 
 
@@ -533,7 +559,7 @@ def test_claimed_bounds_hold_against_the_oracle(kind, family, backend):
 
 # ------------------------------------------------------------------------------------------------ lights on surfaces
 
-CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder"]
+CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "paraboloid", "octahedron", "icosahedron"]
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
@@ -544,16 +570,34 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
     # outer side of the tangent plane there: each feeler's segment touches the solid only at the light, so
     # no feeler is blocked, on either backend (the far end of the feeler is protected as its start is,
     # compile.blocks_between).
-    size = 10.0 ** log_size
-    matrix = _affine(seed, 10.0 ** log_condition, size)
-    solid = shape(kind, matrix)
-    if kind == "taperedCylinder":
-        solid.parameters = (0.5,)
-    compiled = compile_scene(scene_of(solid))
     rng = np.random.default_rng(seed)
-    targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))] @ matrix[:3, :3].T + matrix[:3, 3]
-    away = rng.normal(size=(8, 3))
-    eyes = targets + 4.0 * size * 10.0 ** log_condition * away / np.linalg.norm(away, axis=1, keepdims=True)
+    targets = np.c_[rng.uniform(-1, 1, (8, 2)), rng.uniform(0, 1, (8, 1))]
+    _lights_on_hits(kind, _affine(seed, 10.0 ** log_condition, 10.0 ** log_size), targets,
+                    10.0 ** (log_size + log_condition), rng)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2 ** 31), log_condition=st.floats(0, 6), log_size=st.floats(-6, 6),
+       log_distance=st.floats(-8, -2))
+def test_a_light_near_a_cone_apex_is_not_shadowed_by_it(seed, log_condition, log_size, log_distance):
+    # Lights on a cone's wall 1e-8 ... 1e-2 from its apex, where the wall's function is as small as the
+    # distance to the apex: seen from outside the tangent plane, no feeler is blocked (the point-error
+    # bounds reproject near the apex too).
+    rng = np.random.default_rng(seed)
+    around = rng.normal(size=(8, 3))
+    targets = np.array([0.0, 0.0, 1.0]) + 10.0 ** log_distance * around / np.linalg.norm(around, axis=1, keepdims=True)
+    _lights_on_hits("cone", _affine(seed, 10.0 ** log_condition, 10.0 ** log_size), targets,
+                    10.0 ** (log_size + log_condition), rng)
+
+
+def _lights_on_hits(kind, matrix, generic_targets, reach, rng):
+    """Lights where rays from ``4 reach`` away meet ``kind`` (under ``matrix``) aiming at the generic targets,
+    and from each, 32 feelers from points 0.5 ... 3 ``reach`` away on the outer side of the tangent plane
+    there: none is blocked, on either backend."""
+    compiled = compile_scene(scene_of(_solid(kind, matrix)))
+    targets = generic_targets @ matrix[:3, :3].T + matrix[:3, 3]
+    away = rng.normal(size=targets.shape)
+    eyes = targets + 4.0 * reach * away / np.linalg.norm(away, axis=1, keepdims=True)
     hit = first_hits(compiled, eyes, targets - eyes)
     rows = np.nonzero(hit.hit)[0]
     if rows.size == 0:
@@ -564,7 +608,7 @@ def test_a_light_on_a_surface_is_not_shadowed_by_it(kind, seed, log_condition, l
     for light, n in zip(lights, normal):
         w = rng.normal(size=(32, 3))
         w = np.where((w @ n < 0)[:, None], -w, w) + 0.2 * n * np.linalg.norm(w, axis=1, keepdims=True)
-        w *= size * 10.0 ** log_condition * rng.uniform(0.5, 3, (32, 1)) / np.linalg.norm(w, axis=1, keepdims=True)
+        w *= reach * rng.uniform(0.5, 3, (32, 1)) / np.linalg.norm(w, axis=1, keepdims=True)
         starts = light + w
         assert not occluded(compiled, starts, light - starts).any(), f"{kind}: the light's host shadows it"
         if core is not None:

@@ -291,9 +291,11 @@ class Primitive:
         """Fill in the bounds of ``hits`` (generic normals still) for world rays from ``origins``: ``error``,
         the rounding of t (plus the shape's own root error, where it has one), and ``offset``, how far the
         generic point may be from the surface (the shape's residual over |n|, its first-order distance, plus
-        the line's error; the C core's hit_bounds).  A mesh's triangles report no bend or residual: they keep
-        the unit-curvature floor of the bound and their point is off by the t error along the line.  (The
-        caller ignores floating-point warnings.)"""
+        the line's error; the C core's hit_bounds).  A mesh's triangle is flat: the line's error moves its
+        crossing by that error over the rate the line crosses the triangle's own plane (its winding normal's,
+        not the interpolated normal's: with that and a unit-curvature floor the bound was up to 5e8 times
+        short at grazing incidence); its offset keeps the floor's bound times |d|, which is at least the
+        line's error (the C core's hit_bounds).  (The caller ignores floating-point warnings.)"""
         linear, translation = self.inverse_norms
         raw_scale = linear * numerics.max_abs3(origins) + translation
         size = self.generic_size
@@ -306,11 +308,15 @@ class Primitive:
             hits.bend = 2.0 * length * dd / size
         elif hits.bend is None:  # a flat face
             hits.bend = 0.0
-        hits.error = hits.error + numerics.time_errors(error, hits, d_generic, size, nn, length)
+        bound = numerics.time_errors(error, hits, d_generic, size, nn, length)
         if mesh:
-            hits.offset = hits.error * np.sqrt(dd)
+            hits.offset = (hits.error + bound) * np.sqrt(dd)
+            winding = self._mesh.winding_normals(hits.part)
+            bound = numerics.crossing_shift(np.sqrt(numerics.dot3(winding, winding)) * (size * error),
+                                            np.abs(numerics.dot3(winding, d_generic[:, None, :])), 0.0)
         else:
             hits.offset = np.where(nn > 0.0, hits.offset / length, hits.offset) + size * error
+        hits.error = hits.error + bound
         hits.bend = None  # (read; take and the others need not carry it)
 
     def to_world(self, hits: HitArrays) -> None:

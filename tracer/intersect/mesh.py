@@ -215,6 +215,12 @@ class TriangleMesh:
         p0, p1, p2 = self._corners(tri)
         return p0, p1 - p0, p2 - p0
 
+    def winding_normals(self, tri: np.ndarray) -> np.ndarray:
+        """The winding normals E1 x E2 (tri.shape + (3,)) of triangles ``tri`` (original order; below 0: the
+        first), as the C core's mesh_winding forms them: the normal of the plane a hit's t was solved in."""
+        _, e1, e2 = self._frame(np.maximum(tri, 0).ravel())
+        return _cross(e1, e2).reshape(tri.shape + (3,))
+
     def _unit_corner_normals(self, tri: np.ndarray):
         """The three unit vertex normals of triangles ``tri`` ((n, 3) each; zero for a zero normal) and which
         triangles have normals at all (zeros for those that have not)."""

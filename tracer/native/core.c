@@ -272,17 +272,28 @@ static inline double prim_generic_ray(const double *inv, const double *o, const 
 /* A hit's bounds (Primitive.bound_hits): its t's error (plus the shape's own root error, where it has one)
  * and how far its generic point may be from the surface: the shape's residual over |n| (its first-order
  * distance) plus the line's error; the shading turns it into a world distance (world_unit_normal).  A
- * mesh's triangles report no bend or residual: they keep the unit-curvature floor of the bound and their
- * point is off by the t error along the line. */
-static inline void hit_bounds(const ErrorFrame *frame, const double *dg, int mesh, Hit *h)
+ * `mesh` triangle is flat: the line's error moves its crossing by that error over the rate the line crosses
+ * the triangle's own plane, its winding normal E1 x E2 (with the interpolated normal and a unit-curvature
+ * floor the bound was up to 5e8 times short at grazing incidence); its offset keeps the floor's bound times
+ * |d|, which is at least the line's error. */
+static inline void hit_bounds(const ErrorFrame *frame, const double *dg, const MeshView *mesh, Hit *h)
 {
     double error = point_error(frame, h->t);
     double nn = dot3(h->n, h->n), length = sqrt(nn);
     if (mesh)
         h->bend = 2.0 * length * frame->dd / frame->size;
-    h->err += time_error_of(frame, error, dg, h, nn, length);
-    double gap = nn > 0.0 ? h->offset / length : h->offset;
-    h->offset = mesh ? h->err * sqrt(frame->dd) : gap + frame->size * error;
+    double bound = time_error_of(frame, error, dg, h, nn, length);
+    if (mesh) {
+        h->offset = (h->err + bound) * sqrt(frame->dd);
+        double e1[3], e2[3], w[3];
+        mesh_edges(mesh, h->part, e1, e2);
+        cross3(e1, e2, w);
+        bound = crossing_shift(sqrt(dot3(w, w)) * (frame->size * error), fabs(dot3(w, dg)), 0.0);
+    } else {
+        double gap = nn > 0.0 ? h->offset / length : h->offset;
+        h->offset = gap + frame->size * error;
+    }
+    h->err += bound;
 }
 
 /* All hits of primitive p along the whole world line (Primitive.intersect), into out. */
@@ -314,7 +325,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     }
     ErrorFrame frame;
     error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
-    int mesh = D->prim_kind[p] == K_MESH;
+    const MeshView *mesh = D->prim_kind[p] == K_MESH ? &S->meshes[D->prim_aux[2 * p]] : NULL;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
         h->t += shift;
@@ -345,7 +356,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
             error_frame(o, og, dg, rounding, &frame);
-            hit_bounds(&frame, dg, 1, out);
+            hit_bounds(&frame, dg, &S->meshes[D->prim_aux[2 * p]], out);
         }
         return 1;
     }
@@ -371,7 +382,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
             out->t = t;
             out->shape = (int32_t)p;
             if (!feeler)
-                hit_bounds(&frame, dg, 0, out);
+                hit_bounds(&frame, dg, NULL, out);
             return 1;
         }
     }

@@ -40,8 +40,8 @@ ENGINE_ID = "SDL_RAYTRACER"
 #: how its scene was made ("full": built; "edit": the kept scene edited; "none": the kept scene as it was).
 LAST_RENDER: dict = {}
 #: The viewport's last change: seconds from view_update to the first block drawn ("first_block"), of which
-#: Blender's wait before it asked for the draw ("until_view_draw") and making the scene ("sync"; "scene" as in
-#: LAST_RENDER), and when it was drawn ("drawn_at", time.perf_counter).
+#: reading Blender's updates ("updates"), Blender's wait before it asked for the draw ("until_view_draw") and
+#: making the scene ("sync"; "scene" as in LAST_RENDER), and when it was drawn ("drawn_at", time.perf_counter).
 LAST_VIEW: dict = {}
 #: Seconds of tracing per viewport redraw.
 VIEWPORT_SLICE = 0.08
@@ -385,10 +385,12 @@ class SDLRenderEngine(bpy.types.RenderEngine):
     # -- viewport -------------------------------------------------------------------------------------
 
     def view_update(self, context, depsgraph):
+        told = time.perf_counter()
         self._live.take_updates(depsgraph)
         self._view_dirty = True
         if self._changed_at is None:
-            self._changed_at = time.perf_counter()
+            self._changed_at = told
+        self._updates_seconds = time.perf_counter() - told
 
     def view_draw(self, context, depsgraph):
         region = context.region
@@ -436,7 +438,8 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         if self._changed_at is not None:  # the first block since Blender said the scene changed
             what, seconds = self._live.last_sync
             LAST_VIEW.update({"first_block": drawn - self._changed_at, "sync": seconds, "scene": what,
-                              "drawn_at": drawn, "until_view_draw": entered - self._changed_at})
+                              "drawn_at": drawn, "until_view_draw": entered - self._changed_at,
+                              "updates": getattr(self, "_updates_seconds", 0.0)})
             self._changed_at = None
         first = f" | first block {LAST_VIEW['first_block']:.3f} s after the change" if LAST_VIEW else ""
         self.update_stats("", "SDL Ray Tracer" + first + " | " + (

@@ -97,6 +97,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--obj-sphere", default="8x4", help="segments x rings of the .obj's spheres (8x4)")
     parser.add_argument("--blender", action="store_true", help="also under Debian's blender -b")
+    parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "blender_import.json"),
+                        help="where the JSON goes (bench/results/blender_import.json)")
     parser.add_argument("--child", nargs=2, metavar=("KIND", "PATH"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -123,7 +125,10 @@ def main() -> None:
                         result = run_child(command + [kind, str(path)], env)
                         runs.setdefault(f"{host} {count}", {}).setdefault(kind, []).append(result)
                         print(host, count, kind, json.dumps(result), file=sys.stderr, flush=True)
-    summary: dict = {"obj_sphere": args.obj_sphere, "repeat": args.repeat, "runs": runs, "median_cpu": {},
+    import bpy  # (the host this ran in: the bpy module's version)
+
+    summary: dict = {"bpy": bpy.app.version_string, "obj_sphere": args.obj_sphere, "repeat": args.repeat,
+                     "runs": runs, "median_cpu": {},
                      "sdl_over_obj_cpu": {}}
     for key, kinds in runs.items():
         medians = {kind: statistics.median(r["cpu"] for r in results) for kind, results in kinds.items()}
@@ -134,9 +139,9 @@ def main() -> None:
                                             text=True).stdout.splitlines()[0]
     text = json.dumps(summary, indent=1)
     print(json.dumps({k: summary[k] for k in ("median_cpu", "sdl_over_obj_cpu")}, indent=1))
-    out = ROOT / "bench" / "results"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "blender_import.json").write_text(text + "\n")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text + "\n")
 
 
 if __name__ == "__main__":

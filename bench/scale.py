@@ -12,9 +12,9 @@ primitive per sphere), the same camera, lights, size and threads.
 For each row also, in a separate process of ours, the split of the time into read (parse the SDL and the
 mesh file), build (compile the scene: BVHs and tables; flatten it for the C core), trace and write (the PNG),
 and for meshes the bytes per triangle of what the tracer keeps (mesh arrays and BVH).  As a hardware anchor
-for the mesh rows: primary-ray throughput (rays per second, closest hit only, the image's camera rays) of
-Embree through the ``embreex`` package when it is installed, next to ours (the C core's first_hits) on the
-same rays.
+for the mesh rows: closest-hit rays per CPU second on one thread each, the image's camera rays, of Embree
+through the ``embreex`` package when it is installed and of ours (the C core's first_hits), interleaved
+(bench/embree_thread.py).
 
 Writes scale.json into --out and, with matplotlib, docs/performance-scale.png.
 """
@@ -92,7 +92,7 @@ def phases(sdl: Path, width: int, height: int, threads: int, out: Path) -> dict:
         scene = tracer.load(sdl)
         t1 = time.perf_counter()
         compiled = compile_scene(scene)
-        make_tracer(compiled, "c", threads)  # flattens the scene for the C core (kept on `compiled`)
+        core = make_tracer(compiled, "c", threads)  # flattens the scene for the C core (kept on `compiled`)
         t2 = time.perf_counter()
         result = render(compiled, width, height, backend="c", threads=threads)
         t3 = time.perf_counter()
@@ -114,53 +114,23 @@ def phases(sdl: Path, width: int, height: int, threads: int, out: Path) -> dict:
         kept = sum(nbytes for address, nbytes in own.items() if address not in source_buffers)
         source = sum(source_buffers.values())
         row["triangles"] = mesh.triangle_count
+        # (the C core's own four-wide copy of the tree, tracer/native/mesh_wide.h: 128 bytes a node; the
+        # scene's only mesh is the C core's mesh 0)
+        wide = 128 * core.mesh_wide_nodes(0) if hasattr(core, "mesh_wide_nodes") else 0
         row["bytes_per_triangle"] = {"bvh_and_tables": kept / mesh.triangle_count,
-                                     "mesh_data": source / mesh.triangle_count}
+                                     "mesh_data": source / mesh.triangle_count,
+                                     "wide_tree": wide / mesh.triangle_count}
         row["throughput"] = primary_ray_throughput(compiled, width, height, threads)
     return row
 
 
 def primary_ray_throughput(compiled, width: int, height: int, threads: int) -> dict:
-    """Camera rays per second, closest hit only: the C core's first_hits and (if installed) Embree's, on
-    the mesh alone (without the floor), the same rays."""
-    from tracer.camera import CameraFrame, scene_camera
-    from tracer.native.tracer import NativeTracer
+    """Closest-hit camera rays per CPU second on one thread each, ours (the C core's first_hits) and
+    Embree's (with embreex), on the mesh alone, the same rays, interleaved (bench/embree_thread.py).  Both
+    on one thread whatever --threads is: Embree's binding traces on the calling thread only."""
+    from embree_thread import per_thread
 
-    from dataclasses import replace
-
-    from tracer.compile import compile_scene
-
-    camera = scene_camera(compiled.scene, compiled, width / height)
-    frame = CameraFrame.from_camera(camera, width / height)
-    rows, cols = np.divmod(np.arange(width * height), width)
-    directions = frame.directions(rows, cols, height, width)
-    origins = np.ascontiguousarray(np.broadcast_to(frame.eye, directions.shape))
-    # The mesh alone (no floor), as Embree gets it.
-    mesh_shapes = [p.shape for p in compiled.primitives if p.triangle_mesh is not None]
-    ours = NativeTracer(compile_scene(replace(compiled.scene, objects=mesh_shapes[:1])), threads)
-    start = time.perf_counter()
-    hits = ours.first_hits(origins, directions)
-    out = {"rays": len(origins), "ours_rays_per_s": len(origins) / (time.perf_counter() - start),
-           "ours_hit_fraction": float(np.isfinite(hits["t"]).mean())}
-    try:
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh as EmbreeMesh
-    except ImportError:
-        out["embree"] = "embreex not installed (pip install embreex)"
-        return out
-    prim = next(p for p in compiled.primitives if p.triangle_mesh is not None)
-    tri_v, _ = prim.shape.mesh.triangles()
-    world = prim.shape.mesh.vertices @ prim.matrix[:3, :3].T + prim.matrix[:3, 3]
-    scene = rtcore_scene.EmbreeScene()
-    EmbreeMesh(scene, world.astype(np.float32), tri_v.astype(np.int32))
-    o32, d32 = origins.astype(np.float32), directions.astype(np.float32)
-    scene.run(o32[:1024], d32[:1024])  # builds Embree's BVH (timed apart)
-    start = time.perf_counter()
-    ids = scene.run(o32, d32)
-    seconds = time.perf_counter() - start
-    out.update(embree_rays_per_s=len(origins) / seconds, embree_hit_fraction=float((ids >= 0).mean()),
-               embree_note="embreex scene.run: one call, Embree's own threading, single precision")
-    return out
+    return per_thread(compiled, width, height, rounds=3)
 
 
 def main(argv=None) -> int:
@@ -243,12 +213,12 @@ def summary(row: dict) -> str:
         text += f"   [read {ph['read']:.2f} build {ph['build']:.2f} trace {ph['trace']:.2f} write {ph['write']:.2f}]"
     if "bytes_per_triangle" in ph:
         b = ph["bytes_per_triangle"]
-        text += f" {b['bvh_and_tables'] + b['mesh_data']:.0f} B/triangle"
+        text += f" {b['bvh_and_tables'] + b['mesh_data'] + b.get('wide_tree', 0):.0f} B/triangle"
     if "throughput" in ph:
         t = ph["throughput"]
-        text += f"   primary rays/s ours {t['ours_rays_per_s'] / 1e6:.1f} M"
-        if "embree_rays_per_s" in t:
-            text += f", Embree {t['embree_rays_per_s'] / 1e6:.1f} M"
+        text += f"   closest hit, one thread: ours {t['ours_rays_per_cpu_s'] / 1e6:.1f} M rays/CPU-s"
+        if "ratio" in t:
+            text += f", Embree {t['embree_rays_per_cpu_s'] / 1e6:.1f} M (ratio {t['ratio']:.2f})"
     return text
 
 

@@ -418,6 +418,9 @@ FUNCTIONS: tuple[Function, ...] = (
     _f("i64", "rt_build_mesh_bvh", "i64 n", "<f64 vertices", "<i32 tri", "i64 leaf_size", "i64 bins", "f64 pad",
        "i64 threads", ">i32 order", ">buffer nodes_out"),
     _f("void", "rt_free", "buffer buffer"),
+    _f("i64", "rt_mesh_wide_nodes", "chandle scene", "i64 mesh",
+       doc="nodes of the mesh's four-wide tree (mesh_wide.h; 128 bytes each), 0 where it is walked as a binary "
+           "tree, -1 for no such mesh"),
     _f("result", "rt_sdl_read", "text text", "i64 length", "str words", "i64 words_length", "<i32 codes",
        "i64 count", "<f64 defaults", "i64 shared_libm"),
     _f("void", "rt_sdl_free", "result res"),

@@ -124,6 +124,7 @@ typedef struct {
     int64_t n_lists;
     RawBuffer raw;
     int64_t *mesh_stack;
+    WideEntry *wide_stack;  /* the wide mesh walk's (mesh_wide.h) */
     TreeEntry *tree_stack;
     int64_t counts[N_COUNTS];
     int64_t last_blocker[SHADOW_CACHE];  /* per light: the object that last blocked a feeler, or -1 */
@@ -151,10 +152,13 @@ static int work_init(Work *w, const Scene *S)
     w->n_lists = 2 * S->csg_depth + 1;
     w->lists = (HitList *)calloc((size_t)w->n_lists, sizeof(HitList));
     w->mesh_stack = (int64_t *)malloc((size_t)(S->mesh_depth + 2) * sizeof(int64_t));
+    /* (a wide node is no deeper than its binary node; each leaves at most three children on the stack) */
+    w->wide_stack = (WideEntry *)malloc((size_t)(3 * S->mesh_depth + 4) * sizeof(WideEntry));
     w->tree_stack = (TreeEntry *)malloc((size_t)(S->tree_depth + 2) * sizeof(TreeEntry));
-    if (!w->lists || !w->mesh_stack || !w->tree_stack) {
+    if (!w->lists || !w->mesh_stack || !w->wide_stack || !w->tree_stack) {
         free(w->lists);
         free(w->mesh_stack);
+        free(w->wide_stack);
         free(w->tree_stack);
         return 0;
     }
@@ -168,6 +172,7 @@ static void work_free(Work *w)
     free(w->lists);
     free(w->raw.h);
     free(w->mesh_stack);
+    free(w->wide_stack);
     free(w->tree_stack);
 }
 
@@ -310,7 +315,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     int64_t n;
     if (RT_IS_MESH(D->prim_kind[p])) {
         const MeshView *m = &S->meshes[D->prim_aux[2 * p]];
-        n = mesh_all(m, og, dg, w->mesh_stack, &w->raw, &out->h, &out->cap);
+        n = mesh_all(m, og, dg, w->mesh_stack, w->wide_stack, &w->raw, &out->h, &out->cap);
         if (n < 0) {
             w->oom = 1;
             return 0;
@@ -350,7 +355,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         double og[3], dg[3];
         affine_point(inv, o, og);
         affine_vector(inv, d, dg);
-        if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, out))
+        if (!mesh_closest(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack, out))
             return 0;
         out->shape = (int32_t)p;
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
@@ -389,7 +394,40 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     return 0;
 }
 
-/* Is anything of primitive p on the ray with t_min < t < t_max? */
+/* Does the feeler o + t d end, at t_max, within the bounding sphere (Primitive.ends_within)? */
+static inline int feeler_ends_within(const double *sphere, const double *o, const double *d, double t_max)
+{
+    double apart[3];
+    for (int i = 0; i < 3; i++)
+        apart[i] = (o[i] + t_max * d[i]) - sphere[i];
+    return dot3(apart, apart) <= sphere[3] * sphere[3];
+}
+
+/* Has mesh primitive p a hit whose whole error interval lies between t_min and t_max (compile.blocks_between;
+ * Primitive.mesh_blocks_between)?  Its hits are taken first to last: one whose interval reaches t_max ends
+ * the search (a light on the mesh's surface is not shadowed by it), one that reaches t_min is passed. */
+static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double *o, const double *og,
+                               const double *dg, double t_min, double t_max)
+{
+    const MeshView *m = &S->meshes[S->d.prim_aux[2 * p]];
+    ErrorFrame frame;
+    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, &frame);
+    double lower = t_min;
+    Hit h;
+    while (mesh_closest(m, og, dg, lower, t_max, w->mesh_stack, w->wide_stack, &h)) {
+        hit_bounds(&frame, dg, m, &h);
+        if (!(h.t + h.err < t_max))
+            return 0;
+        if (h.t - h.err > t_min)
+            return 1;
+        lower = h.t;
+    }
+    return 0;
+}
+
+/* Is anything of primitive p on the ray with t_min < t < t_max, with its whole error interval?  A mesh is
+ * asked for any hit first, and for the intervals of its hits only where the feeler ends within its bounding
+ * sphere (where a light may sit on its surface). */
 static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
                          double t_max)
 {
@@ -401,7 +439,11 @@ static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, co
         double og[3], dg[3];
         affine_point(inv, o, og);
         affine_vector(inv, d, dg);
-        return mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack);
+        if (!mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack))
+            return 0;
+        if (!feeler_ends_within(D->prim_sphere + 4 * p, o, d, t_max))
+            return 1;
+        return mesh_blocks_between(S, w, p, o, og, dg, t_min, t_max);
     }
     Hit h;
     return prim_first(S, w, p, o, d, t_min, t_max, &h, 1);
@@ -1163,6 +1205,15 @@ static int restructure_tree(Scene *S, int64_t old_n, const int64_t *removed, int
     return 1;
 }
 
+/* How many nodes the four-wide tree of mesh `mesh` has (0: it is walked as a binary tree); -1 for no such mesh. */
+int64_t rt_mesh_wide_nodes(const void *scene, int64_t mesh)
+{
+    const Scene *S = (const Scene *)scene;
+    if (!S || mesh < 0 || mesh >= S->n_mesh_views)
+        return -1;
+    return S->meshes[mesh].wide ? S->meshes[mesh].n_wide : 0;
+}
+
 /* Releases a buffer the library allocated for the caller (rt_build_mesh_bvh's nodes). */
 void rt_free(void *buffer) { free(buffer); }
 
@@ -1172,6 +1223,8 @@ void rt_destroy(void *handle)
     if (!S)
         return;
     drop_tree(S);
+    for (int64_t k = 0; S->meshes && k < S->n_mesh_views; k++)
+        free(S->meshes[k].wide);
     free(S->meshes);
     free(S->sealed);
     free(S);
@@ -1303,6 +1356,32 @@ static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, in
     return 1;
 }
 
+/* Whether the view's binary tree (whose arrays are at the addresses of `nodes`) still has the first and last
+ * node it had when its wide tree was made: a mesh whose arrays were freed and others allocated at the same
+ * addresses is then not taken for the old one. */
+static int mesh_fingerprint_matches(const MeshView *old, const BvhNode *nodes, int64_t n)
+{
+    return memcmp(&old->fingerprint[0], &nodes[0], sizeof(BvhNode)) == 0 &&
+           memcmp(&old->fingerprint[1], &nodes[n - 1], sizeof(BvhNode)) == 0;
+}
+
+/* The view's wide tree (mesh_wide.h) in `mode`: kept when taken over from the old view, made when missing,
+ * dropped for the binary walk.  Without memory for it the binary walk is used. */
+static void mesh_take_wide(MeshView *m, int mode)
+{
+    m->wide_mode = mode;
+    if (mode == WIDE_OFF || m->n_nodes == 0) {
+        free(m->wide);
+        m->wide = NULL;
+        m->n_wide = 0;
+        return;
+    }
+    if (!m->wide)
+        m->wide = wide_build(m->nodes, m->n_nodes, &m->n_wide);
+    m->fingerprint[0] = m->nodes[0];
+    m->fingerprint[1] = m->nodes[m->n_nodes - 1];
+}
+
 /* The meshes' views of the description's arrays, each checked (a mesh whose arrays and counts are those of
  * the view it had before keeps that view's check).  0 (and the reason in `error`) when refused. */
 static int take_meshes(Scene *S, char *error, int64_t capacity)
@@ -1310,6 +1389,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
     const SceneDesc *D = &S->d;
     MeshView *old = S->meshes;
     int64_t n_old = S->n_mesh_views;
+    int wide_mode = wide_mode_from_environment();
     S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
     S->n_mesh_views = D->n_meshes;
     S->mesh_depth = 0;
@@ -1338,15 +1418,19 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
         m->dedupe = D->mesh_constants[3];
         m->dedupe_adjacent = D->mesh_constants[4];
         m->extent = D->mesh_extent[k];
-        const MeshView *seen = NULL;
+        MeshView *seen = NULL;
         for (int64_t j = 0; j < n_old && !seen; j++)
             if (old[j].nodes == m->nodes && old[j].n_nodes == m->n_nodes && old[j].n_tris == m->n_tris &&
                 old[j].n_vertices == m->n_vertices && old[j].n_normals == m->n_normals && old[j].order == m->order &&
                 old[j].tri_vertex == m->tri_vertex && old[j].tri_normal == m->tri_normal &&
-                old[j].vertices == m->vertices && old[j].normals == m->normals)
+                old[j].vertices == m->vertices && old[j].normals == m->normals &&
+                (m->n_nodes == 0 || mesh_fingerprint_matches(&old[j], m->nodes, m->n_nodes)))
                 seen = &old[j];
         if (seen) {
             m->depth = seen->depth;
+            m->wide = seen->wide;  /* (taken over: the old view is dropped below) */
+            m->n_wide = seen->n_wide;
+            seen->wide = NULL;
         } else {
             if (m->n_nodes < 0 || m->n_tris < 0 || m->n_vertices < 0 || m->n_normals < 0 ||
                 ((m->n_nodes || m->n_tris) && (!m->nodes || !m->order || !m->tri_vertex || !m->vertices)) ||
@@ -1373,7 +1457,10 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
         }
         if (m->depth > S->mesh_depth)
             S->mesh_depth = m->depth;
+        mesh_take_wide(m, wide_mode);
     }
+    for (int64_t j = 0; j < n_old; j++)
+        free(old[j].wide);
     free(old);
     return ok;
 }

@@ -15,10 +15,15 @@
 #include "core.h"
 #include "numeric.h"
 #include "bvh_build.h"
+#include "mesh_wide.h"
 
 typedef struct {
     const BvhNode *nodes;
     int64_t n_nodes;
+    WideNode *wide;  /* the same tree four children a node (mesh_wide.h; owned), or NULL: the binary walk */
+    int64_t n_wide;
+    int wide_mode;   /* WIDE_SCALAR or WIDE_SSE2 where there is a wide tree */
+    BvhNode fingerprint[2];  /* the first and last binary node when the wide tree was made */
     const int32_t *order;       /* leaf slot -> triangle */
     const int32_t *tri_vertex;  /* 3 per triangle */
     const int32_t *tri_normal;  /* 3 per triangle (below 0: the triangle has no normals), or NULL */
@@ -105,6 +110,35 @@ static inline void mesh_edges(const MeshView *m, int64_t tri, double *e1, double
         e1[k] = p1[k] - p0[k];
         e2[k] = p2[k] - p0[k];
     }
+}
+
+/* Whether the triangle in leaf slot i may be hit: mesh_triangle's quick rejection alone (its numbers, by its
+ * operations), without a branch, so that the loads of a leaf's triangles overlap (mesh_leaf_candidates). */
+static inline int mesh_triangle_may_hit(const MeshView *m, int64_t i, const MeshRay *r)
+{
+    const double *p0, *p1, *p2;
+    mesh_corners(m, m->order[i], &p0, &p1, &p2);
+    double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+    double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
+    double pvec[3], qvec[3];
+    cross3(r->d, e2, pvec);
+    double det = dot3(e1, pvec);
+    cross3(s, e1, qvec);
+    double inv_det = 1.0 / det;
+    double u = dot3(s, pvec) * inv_det;
+    double v = dot3(r->d, qvec) * inv_det;
+    double reject = 2.0 * m->barycentric_max;
+    return !((u < -reject) | (v < -reject) | (u + v > 1.0 + 2.0 * reject));
+}
+
+/* Bit k: the triangle in leaf slot first + k (k < count <= 64) may be hit (mesh_triangle_may_hit). */
+static inline uint64_t mesh_leaf_candidates(const MeshView *m, int64_t first, int64_t count, const MeshRay *r)
+{
+    uint64_t may = 0;
+    for (int64_t k = 0; k < count; k++)
+        may |= (uint64_t)mesh_triangle_may_hit(m, first + k, r) << k;
+    return may;
 }
 
 /* Moller-Trumbore against the triangle in leaf slot i. */
@@ -213,8 +247,8 @@ static inline int mesh_entering(const MeshView *m, int64_t slot, const double *d
 }
 
 /* The unit geometric normal g (generic; zero for a degenerate triangle) of original triangle `tri`, on the
- * side its corner normals c (filled in) point to; returns whether it has corner normals (smooth shading).
- * (TriangleMesh.geometric_normals) */
+ * side its corner normals c (filled in) point to, as mesh_normal_entering forms it; returns whether it has
+ * corner normals (smooth shading).  (TriangleMesh.geometric_normals) */
 static inline int mesh_geometric_normal(const MeshView *m, int64_t tri, double c[3][3], double *g)
 {
     int has = mesh_corner_normals(m, tri, c);
@@ -229,10 +263,21 @@ static inline int mesh_geometric_normal(const MeshView *m, int64_t tri, double c
 }
 
 /* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
-static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+/* mesh_normal, and whether a ray along d enters there (mesh_entering), from one set of corner normals. */
+static inline int mesh_normal_entering(const MeshView *m, int64_t tri, double b1, double b2, const double *d,
+                                       double *n)
 {
     double c[3][3], g[3];
-    int has = mesh_geometric_normal(m, tri, c, g);
+    int has = mesh_corner_normals(m, tri, c);
+    int flip = mesh_winding(m, tri, c, g);
+    double facing = d ? dot3(d, g) : 0.0;
+    int entering = flip ? facing > 0.0 : facing < 0.0;
+    if (flip)
+        for (int k = 0; k < 3; k++)
+            g[k] = -g[k];
+    double g_length = length3(g);
+    for (int k = 0; k < 3; k++)
+        g[k] = g_length > 0.0 ? g[k] / g_length : 0.0;
     double w0 = 1.0 - b1 - b2;
     double s[3];
     for (int k = 0; k < 3; k++)
@@ -247,6 +292,12 @@ static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double
         n[1] = g[1];
         n[2] = g[2];
     }
+    return entering;
+}
+
+static inline void mesh_normal(const MeshView *m, int64_t tri, double b1, double b2, double *n)
+{
+    mesh_normal_entering(m, tri, b1, b2, NULL, n);
 }
 
 static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, double b1, double b2, int entering, Hit *h)
@@ -262,9 +313,68 @@ static inline void mesh_fill_hit(const MeshView *m, int64_t slot, double t, doub
     h->err = 0.0;  /* the primitive adds the bound on t's rounding (core.c, tracer.numerics) */
 }
 
+/* mesh_fill_hit with the flag mesh_entering gives a ray along d, the corner normals found once. */
+static inline void mesh_fill_hit_along(const MeshView *m, int64_t slot, double t, double b1, double b2, const double *d,
+                                       Hit *h)
+{
+    int64_t tri = m->order[slot];
+    h->t = t;
+    h->entering = mesh_normal_entering(m, tri, b1, b2, d, h->n);
+    h->uv[0] = b1;
+    h->uv[1] = b2;
+    h->part = (int32_t)tri;
+    h->shape = -1;
+    h->err = 0.0;
+}
+
+/* The leaf's triangles in slot order: a hit with lower < t < *best_t becomes the best. */
+static inline void mesh_leaf_closest(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
+                                     double *best_t, double *best_b1, double *best_b2, int64_t *best_slot)
+{
+    /* (in runs of 64: first which may be hit, then those in slot order) */
+    for (int64_t start = first; start < first + count; start += 64) {
+        int64_t run = first + count - start < 64 ? first + count - start : 64;
+        for (uint64_t may = mesh_leaf_candidates(m, start, run, r); may; may &= may - 1) {
+            int64_t i = start + __builtin_ctzll(may);
+            double t, b1, b2;
+            if (mesh_triangle(m, i, r, &t, &b1, &b2) && t > lower && t < *best_t) {
+                *best_t = t;
+                *best_b1 = b1;
+                *best_b2 = b2;
+                *best_slot = i;
+            }
+        }
+    }
+}
+
+/* mesh_closest's walk of the wide tree (mesh_wide.h: the same leaves in the same order as the binary walk). */
+static inline void mesh_closest_wide(const MeshView *m, const MeshRay *r, const WideRay *wr, double lower,
+                                     WideEntry *stack, double *best_t, double *best_b1, double *best_b2,
+                                     int64_t *best_slot)
+{
+    int64_t top = 0;
+    WideEntry e = {0, 0, lower};
+    for (;;) {
+        if (e.count) {
+            mesh_leaf_closest(m, r, e.child, e.count, lower, best_t, best_b1, best_b2, best_slot);
+        } else {
+            const WideNode *node = &m->wide[e.child];
+            double near[WIDE_CHILDREN];
+            int mask = wide_hit(m->wide_mode, node, wr, lower, *best_t, near);
+            if (mask)
+                wide_push(node, mask, near, wr->octant, stack, &top);
+        }
+        do {
+            if (!top)
+                return;
+            e = stack[--top];
+        } while (e.near > *best_t);
+    }
+}
+
 /* The first hit with lower < t < upper (nearer child first, by the ray's own direction). */
 static int mesh_closest(const MeshView *m, const double *o, const double *d, double lower, double upper,
-                        int64_t *stack, Hit *out)
+                        int64_t *stack, WideEntry *wide_stack, Hit *out)
 {
     if (m->n_nodes == 0)
         return 0;
@@ -272,6 +382,11 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
     mesh_ray(&r, o, d);
     double best_t = upper, best_b1 = 0.0, best_b2 = 0.0;
     int64_t best_slot = -1, top = 0;
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
+        mesh_closest_wide(m, &r, &wr, lower, wide_stack, &best_t, &best_b1, &best_b2, &best_slot);
+        goto found;
+    }
     stack[top++] = 0;
     while (top) {
         int64_t node = stack[--top];
@@ -279,16 +394,7 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
         if (!slab_hit(nd, &r, lower, best_t))
             continue;
         if (nd->count) {
-            int64_t first = nd->offset, last = first + nd->count;
-            for (int64_t i = first; i < last; i++) {
-                double t, b1, b2;
-                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < best_t) {
-                    best_t = t;
-                    best_b1 = b1;
-                    best_b2 = b2;
-                    best_slot = i;
-                }
-            }
+            mesh_leaf_closest(m, &r, nd->offset, nd->count, lower, &best_t, &best_b1, &best_b2, &best_slot);
             continue;
         }
         int64_t near = nd->offset, far = nd->offset + 1;
@@ -298,19 +404,56 @@ static int mesh_closest(const MeshView *m, const double *o, const double *d, dou
         stack[top++] = far;
         stack[top++] = near;
     }
+found:
     if (best_slot < 0)
         return 0;
-    mesh_fill_hit(m, best_slot, best_t, best_b1, best_b2, mesh_entering(m, best_slot, d), out);
+    mesh_fill_hit_along(m, best_slot, best_t, best_b1, best_b2, d, out);
     return 1;
 }
 
-/* Any hit with lower < t < upper (shadow feelers). */
-static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack)
+static inline int mesh_leaf_any(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
+                                double upper)
+{
+    for (int64_t start = first; start < first + count; start += 64) {
+        int64_t run = first + count - start < 64 ? first + count - start : 64;
+        for (uint64_t may = mesh_leaf_candidates(m, start, run, r); may; may &= may - 1) {
+            double t, b1, b2;
+            if (mesh_triangle(m, start + __builtin_ctzll(may), r, &t, &b1, &b2) && t > lower && t < upper)
+                return 1;
+        }
+    }
+    return 0;
+}
+
+/* Any hit with lower < t < upper (shadow feelers); the leaves are tried nearer first on the wide walk (the
+ * answer does not depend on the order). */
+static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack,
+                    WideEntry *wide_stack)
 {
     if (m->n_nodes == 0)
         return 0;
     MeshRay r;
     mesh_ray(&r, o, d);
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
+        int64_t top = 0;
+        WideEntry e = {0, 0, lower};
+        for (;;) {
+            if (e.count) {
+                if (mesh_leaf_any(m, &r, e.child, e.count, lower, upper))
+                    return 1;
+            } else {
+                const WideNode *node = &m->wide[e.child];
+                double near[WIDE_CHILDREN];
+                int mask = wide_hit(m->wide_mode, node, &wr, lower, upper, near);
+                if (mask)
+                    wide_push(node, mask, near, wr.octant, wide_stack, &top);
+            }
+            if (!top)
+                return 0;
+            e = wide_stack[--top];
+        }
+    }
     int64_t top = 0;
     stack[top++] = 0;
     while (top) {
@@ -319,12 +462,8 @@ static int mesh_any(const MeshView *m, const double *o, const double *d, double 
         if (!slab_hit(nd, &r, lower, upper))
             continue;
         if (nd->count) {
-            int64_t first = nd->offset, last = first + nd->count;
-            for (int64_t i = first; i < last; i++) {
-                double t, b1, b2;
-                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && t > lower && t < upper)
-                    return 1;
-            }
+            if (mesh_leaf_any(m, &r, nd->offset, nd->count, lower, upper))
+                return 1;
             continue;
         }
         stack[top++] = nd->offset + 1;
@@ -409,34 +548,67 @@ static inline double dedupe_window(const MeshView *m, const RawHit *a, const Raw
     return (mesh_touching(m, a->slot, b->slot) ? m->dedupe_adjacent : m->dedupe) * scale;
 }
 
+/* Every crossing of the leaf's triangles, kept raw; 0 when memory ran out. */
+static inline int mesh_leaf_all(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, RawBuffer *raw)
+{
+    for (int64_t start = first; start < first + count; start += 64) {
+        int64_t run = first + count - start < 64 ? first + count - start : 64;
+        for (uint64_t may = mesh_leaf_candidates(m, start, run, r); may; may &= may - 1) {
+            int64_t i = start + __builtin_ctzll(may);
+            double t, b1, b2;
+            if (mesh_triangle(m, i, r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
+                return 0;
+        }
+    }
+    return 1;
+}
+
 /* Every crossing of the whole line, deduplicated and ordered as TriangleMesh.all_hits.  Grows
  * *out_buffer as needed and returns the count, or -1 when memory ran out. */
-static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int64_t *stack, RawBuffer *raw,
-                        Hit **out_buffer, int64_t *out_capacity)
+static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int64_t *stack, WideEntry *wide_stack,
+                        RawBuffer *raw, Hit **out_buffer, int64_t *out_capacity)
 {
     raw->n = 0;
     if (m->n_nodes == 0)
         return 0;
     MeshRay r;
     mesh_ray(&r, o, d);
-    int64_t top = 0;
-    stack[top++] = 0;
-    while (top) {
-        int64_t node = stack[--top];
-        const BvhNode *nd = &m->nodes[node];
-        if (!slab_hit(nd, &r, -INFINITY, INFINITY))
-            continue;
-        if (nd->count) {
-            int64_t first = nd->offset, last = first + nd->count;
-            for (int64_t i = first; i < last; i++) {
-                double t, b1, b2;
-                if (mesh_triangle(m, i, &r, &t, &b1, &b2) && !raw_push(raw, i, t, b1, b2))
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, -INFINITY, INFINITY, &wr)) {
+        /* every leaf the line meets, left first (the binary walk's order: octant 0's) */
+        int64_t top = 0;
+        WideEntry e = {0, 0, -INFINITY};
+        for (;;) {
+            if (e.count) {
+                if (!mesh_leaf_all(m, &r, e.child, e.count, raw))
                     return -1;
+            } else {
+                const WideNode *node = &m->wide[e.child];
+                double near[WIDE_CHILDREN];
+                int mask = wide_hit(m->wide_mode, node, &wr, -INFINITY, INFINITY, near);
+                if (mask)
+                    wide_push(node, mask, near, 0, wide_stack, &top);
             }
-            continue;
+            if (!top)
+                break;
+            e = wide_stack[--top];
         }
-        stack[top++] = nd->offset + 1;
-        stack[top++] = nd->offset;
+    } else {
+        int64_t top = 0;
+        stack[top++] = 0;
+        while (top) {
+            int64_t node = stack[--top];
+            const BvhNode *nd = &m->nodes[node];
+            if (!slab_hit(nd, &r, -INFINITY, INFINITY))
+                continue;
+            if (nd->count) {
+                if (!mesh_leaf_all(m, &r, nd->offset, nd->count, raw))
+                    return -1;
+                continue;
+            }
+            stack[top++] = nd->offset + 1;
+            stack[top++] = nd->offset;
+        }
     }
     int64_t n = raw->n;
     if (n == 0)

@@ -233,6 +233,14 @@ class NativeTracer:
             raise IndexError("primitive index out of range")
         return out
 
+    def mesh_wide_nodes(self, mesh: int) -> int:
+        """Nodes of mesh ``mesh``'s four-wide tree (tracer/native/mesh_wide.h, 128 bytes each), 0 where the C
+        core walks it as a binary tree (SDL_TRACER_MESH_BVH=binary, or boxes that do not nest)."""
+        count = library._lib.rt_mesh_wide_nodes(self._handle, int(mesh))
+        if count < 0:
+            raise IndexError(f"no mesh {mesh} in this scene")
+        return int(count)
+
     def object_hits(self, index: int, origin, direction) -> HitArrays:
         """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``
         (world normals, not unit, error bounds and offsets; only finite hits, so K is the number of hits)."""

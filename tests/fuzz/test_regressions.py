@@ -193,3 +193,13 @@ def test_an_output_name_that_starts_with_a_dash_is_a_file_name(tmp_path, name):
                       output=tmp_path / name, cwd=tmp_path)
     assert outcome.verdict == "image", outcome.describe()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([scene.name, name])
+
+
+def test_an_output_name_with_a_leading_space_is_shown_quoted(tmp_path):
+    """Fuzz seed 2853008671 (generators.output_name): a name past the file system's limit that began with a
+    space was shown as ``error:  name…``, where the space cannot be seen: such a name is shown in quotes."""
+    name = " " + "a" * 300 + ".tif"
+    outcome = run_cli(["render", _scene(tmp_path), "-o", name, "--width", 8, "--height", 6, "-q"],
+                      names=[f"' {'a' * 40}"], cwd=tmp_path)
+    assert outcome.verdict == "error", outcome.describe()
+    assert "File name too long" in outcome.stderr

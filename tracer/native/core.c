@@ -425,26 +425,33 @@ static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double 
     return 0;
 }
 
-/* Is anything of primitive p on the ray with t_min < t < t_max, with its whole error interval?  A mesh is
+/* Is anything of mesh primitive p on the ray with t_min < t < t_max, with its whole error interval?  It is
  * asked for any hit first, and for the intervals of its hits only where the feeler ends within its bounding
- * sphere (where a light may sit on its surface). */
+ * sphere (where a light may sit on its surface).  (Not inlined into prim_occludes: inlined, it made every
+ * feeler's walk 1.4 % longer, meshes or not.) */
+static __attribute__((noinline)) int mesh_occludes(const Scene *S, Work *w, int64_t p, const double *o,
+                                                   const double *d, double t_min, double t_max)
+{
+    const SceneDesc *D = &S->d;
+    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+        return 0;
+    const double *inv = D->prim_inverse + 16 * p;
+    double og[3], dg[3];
+    affine_point(inv, o, og);
+    affine_vector(inv, d, dg);
+    if (!mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack))
+        return 0;
+    if (!feeler_ends_within(D->prim_sphere + 4 * p, o, d, t_max))
+        return 1;
+    return mesh_blocks_between(S, w, p, o, og, dg, t_min, t_max);
+}
+
+/* Is anything of primitive p on the ray with t_min < t < t_max, with its whole error interval? */
 static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
                          double t_max)
 {
-    const SceneDesc *D = &S->d;
-    if (RT_IS_MESH(D->prim_kind[p])) {
-        if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
-            return 0;
-        const double *inv = D->prim_inverse + 16 * p;
-        double og[3], dg[3];
-        affine_point(inv, o, og);
-        affine_vector(inv, d, dg);
-        if (!mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack))
-            return 0;
-        if (!feeler_ends_within(D->prim_sphere + 4 * p, o, d, t_max))
-            return 1;
-        return mesh_blocks_between(S, w, p, o, og, dg, t_min, t_max);
-    }
+    if (RT_IS_MESH(S->d.prim_kind[p]))
+        return mesh_occludes(S, w, p, o, d, t_min, t_max);
     Hit h;
     return prim_first(S, w, p, o, d, t_min, t_max, &h, 1);
 }

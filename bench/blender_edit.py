@@ -298,6 +298,8 @@ def main() -> None:
     parser.add_argument("--measure", nargs="+", choices=sorted(CHILDREN), default=sorted(CHILDREN),
                         help="what to measure in the bpy module and blender -b (all by default)")
     parser.add_argument("--gui-counts", type=int, nargs="+", help="with --gui: only these counts in the window")
+    parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "blender_edit.json"),
+                        help="where the JSON goes (bench/results/blender_edit.json)")
     parser.add_argument("--blends", help="keep the imported .blend files in this folder (and reuse them)")
     parser.add_argument("--merge", action="store_true",
                         help="keep the other counts' runs already in bench/results/blender_edit.json")
@@ -349,9 +351,9 @@ def main() -> None:
                 result = run_child(command, blender_env, timeout=1200.0)
                 results.setdefault(f"gui {count}", {})["view"] = result
                 print("gui", count, json.dumps(result), file=sys.stderr, flush=True)
-    out = ROOT / "bench" / "results"
-    if args.merge and (out / "blender_edit.json").exists():  # (another run's counts, kept beside these)
-        results = {**json.loads((out / "blender_edit.json").read_text())["runs"], **results}
+    out = Path(args.out)
+    if args.merge and out.exists():  # (another run's counts, kept beside these)
+        results = {**json.loads(out.read_text())["runs"], **results}
     summary = {"runs": results, "median": {}}
     for key, kinds in results.items():
         medians = {}
@@ -379,8 +381,11 @@ def main() -> None:
         summary["blender"] = subprocess.run([blender, "--version"], capture_output=True,
                                             text=True).stdout.splitlines()[0]
     print(json.dumps(summary["median"], indent=1))
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "blender_edit.json").write_text(json.dumps(summary, indent=1) + "\n")
+    import bpy  # (the bpy module this ran with)
+
+    summary["bpy"] = bpy.app.version_string
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(summary, indent=1) + "\n")
 
 
 if __name__ == "__main__":

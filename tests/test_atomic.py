@@ -108,3 +108,47 @@ def test_write_errors_name_the_file_written(tmp_path):
             raise OSError(28, "No space left on device")
     assert error_message(caught.value, "scene.sdl") == f"{target}: no space left on the device"
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc", ".usd"])
+def test_a_usd_write_killed_as_usd_core_finishes_leaves_only_the_old_file(tmp_path, suffix):
+    """SIGKILL just after usd-core has written its file (the moment whose name it holds is fullest): the
+    user's folder holds the old file and nothing else (usd-core names its file and a temporary of its own
+    beside it, so they are made in a private folder elsewhere), and the next write removes that folder."""
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    pytest.importorskip("pxr")
+    target = tmp_path / f"scene{suffix}"
+    target.write_text("old")
+    code = ("import os, signal, sys\n"
+            "from pxr import Sdf\n"
+            "import tracer\n"
+            "from tracer.usd import save_usd\n"
+            "real_export, real_text = Sdf.Layer.Export, Sdf.Layer.ExportToString\n"
+            "def export(self, *args, **kwargs):\n"
+            "    real_export(self, *args, **kwargs)\n"
+            "    os.kill(os.getpid(), signal.SIGKILL)\n"
+            "def text(self):\n"
+            "    real_text(self)\n"
+            "    os.kill(os.getpid(), signal.SIGKILL)\n"
+            "Sdf.Layer.Export, Sdf.Layer.ExportToString = export, text\n"
+            "save_usd(tracer.parse_sdl('camera 0 0 6 0 0 0 0 1 0 40 sphere'), sys.argv[1])\n")
+    run = subprocess.run([sys.executable, "-c", code, str(target)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == -signal.SIGKILL, run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name] and target.read_text() == "old"
+    from tracer.atomic import PRIVATE_FOLDER, _process_gone
+    import tracer
+    from tracer.usd import save_usd
+
+    def dead_folders():
+        return [p for p in Path(tempfile.gettempdir()).iterdir()
+                if PRIVATE_FOLDER.fullmatch(p.name) and _process_gone(int(PRIVATE_FOLDER.fullmatch(p.name)["pid"]))]
+
+    assert suffix == ".usda" or dead_folders()  # (the killed run's crate file: outside the user's folder)
+    save_usd(tracer.parse_sdl("camera 0 0 6 0 0 0 0 1 0 40 sphere"), target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name] and target.read_bytes() != b"old"
+    assert dead_folders() == []

@@ -37,6 +37,8 @@ ROUND_TWO = [
     "light on a cube face: moved by +1e5",
     "light on a sphere",
     "light on a sphere: moved by +1e5",
+    "light on a mesh face",
+    "light on a mesh face: moved by +1e5",
     "light in the floor plane",
     "light in the floor plane: moved by +1e5",
     "light at 1e300",

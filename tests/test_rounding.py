@@ -559,7 +559,8 @@ def test_claimed_bounds_hold_against_the_oracle(kind, family, backend):
 
 # ------------------------------------------------------------------------------------------------ lights on surfaces
 
-CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "paraboloid", "octahedron", "icosahedron"]
+CONVEX = ["sphere", "cube", "cylinder", "cone", "taperedCylinder", "paraboloid", "octahedron", "icosahedron",
+          "octahedron mesh", "icosahedron mesh"]
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)

@@ -64,6 +64,12 @@ def _run_and_signal(scene: Path, output: Path, signum: int, after: float):
     return proc.returncode, time.monotonic() - sent, err.decode("utf-8", "replace")
 
 
+def _in_python_itself(err: str) -> bool:
+    """Whether a run's traceback is CPython's own, from a SIGINT that came while the interpreter was starting,
+    before the package's first line (no frame of the tracer in it): no program can hear a signal then."""
+    return "Traceback" in err and "KeyboardInterrupt" in err and f"{os.sep}tracer{os.sep}" not in err
+
+
 def _machine_latency() -> float:
     """How long this machine takes, now, from a SIGTERM to the end of a busy Python process that ends on it
     in a Python handler (as the tracer does: it must be given a core, run the handler and tear down): the
@@ -111,6 +117,8 @@ def test_sigint_and_sigterm_at_random_moments_end_the_run_at_once_and_keep_the_o
         status, took, err = _run_and_signal(scene, output, signum, rng.uniform(EARLIEST, span))
         leftovers = sorted(p.name for p in folder.iterdir() if p.name != "image.png")
         assert leftovers == [], leftovers
+        if _in_python_itself(err):  # (a loaded machine can take more than EARLIEST to start Python)
+            continue
         assert "Traceback" not in err, err
         if status == 0:  # it had finished: the new image, whole
             assert output.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -132,12 +140,16 @@ def test_signals_while_the_modules_load_end_the_run_at_once(tmp_path, stage):
     folder = tmp_path / "out"
     folder.mkdir()
     output = folder / "image.png"
+    skipped = 0
     for k in range(15):
         output.write_bytes(OLD)
         signum = (signal.SIGINT, signal.SIGTERM)[k % 2]
         at = _python_start() + 0.1 * k
         status, took, err = _run_and_signal(stage, output, signum, at)
         assert sorted(p.name for p in folder.iterdir()) == ["image.png"] and output.read_bytes() == OLD
+        if _in_python_itself(err):  # (the machine took longer than measured to start Python this time)
+            skipped += 1
+            continue
         assert "Traceback" not in err, err
         assert status in (128 + signum, -signum), (k, status, err)
         latency = _machine_latency()
@@ -145,6 +157,7 @@ def test_signals_while_the_modules_load_end_the_run_at_once(tmp_path, stage):
             f"{signal.Signals(signum).name} at {at:.2f} s heard after {took:.2f} s (machine: {latency:.2f} s)"
         if status == 128 + signum:
             assert err.strip().splitlines()[-1:] == ["interrupted"], err
+    assert skipped <= 2
 
 
 def test_sigkill_at_random_moments_leaves_only_the_old_output(tmp_path):

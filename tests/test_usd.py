@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 # usd-core is part of requirements-dev.txt: without it these tests fail (they are not optional).
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils, Vt
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils, Vt
 
 import tracer
 from tracer.camera import CameraFrame
@@ -722,14 +722,20 @@ def test_missing_reference_is_an_error_unless_lenient(tmp_path, capfd):
     assert capfd.readouterr().err == ""  # USD's own multi-line warning is held back
 
 
-def test_failed_write_leaves_nothing_behind(tmp_path, monkeypatch):
-    target = tmp_path / "scene.usda"
+@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
+def test_failed_write_leaves_nothing_behind(tmp_path, monkeypatch, suffix):
+    target = tmp_path / f"scene{suffix}"
     target.write_text("old")
     monkeypatch.setattr(Sdf.Layer, "Export", lambda self, *a, **k: False, raising=False)
-    with pytest.raises(TracerError):
+
+    def refuse(self):  # (text is written from the layer's string: usd-core raises its errors as exceptions)
+        raise Tf.ErrorException("refused")
+
+    monkeypatch.setattr(Sdf.Layer, "ExportToString", refuse, raising=False)
+    with pytest.raises((TracerError, Tf.ErrorException)):
         save_usd(tracer.parse_sdl("sphere"), target)
     assert target.read_text() == "old"
-    assert [p.name for p in tmp_path.iterdir()] == ["scene.usda"]
+    assert [p.name for p in tmp_path.iterdir()] == [target.name]
 
 
 def run(*args, cwd=None):

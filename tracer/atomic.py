@@ -8,7 +8,11 @@ folder is atomic), so a reader finds the old file or the whole new one, never ha
   then linked under a temporary name and renamed over the target.  Elsewhere, or on a file system without
   O_TMPFILE, it is a named temporary file as below.
 * :func:`replacing` gives the name of a new, empty temporary file beside the target, for writers that open
-  files by name (usd-core).
+  files by name.
+* :func:`through_private_folder` gives a name in a new folder of the system's temporary folder, for a writer
+  that must name its file and makes temporary files of its own beside it (usd-core's .usdc); the result is
+  then copied through :func:`writing`.  A kill -9 meanwhile leaves that private folder, never a file in the
+  target's folder; the next call removes private folders whose process is gone.
 
 A named temporary file is ``.NAME.<8 hex>-PID@HOST<suffix>``: NAME is the target's name, cut short if the
 whole would pass the file system's limit on a name (so a target of any valid length can be written), and
@@ -26,6 +30,8 @@ import errno
 import hashlib
 import os
 import re
+import shutil
+import tempfile
 from pathlib import Path
 from typing import IO, Iterator, Optional, Union
 
@@ -38,6 +44,8 @@ PathLike = Union[str, os.PathLike]
 #: the process id + "@" + a tag of the host + the suffix.
 TEMPORARY_NAME = re.compile(r"\.(?P<name>.+)\.[0-9a-f]{8}-(?P<pid>[0-9]+)@(?P<host>[0-9a-f]{6})"
                             r"(?P<suffix>\.[A-Za-z0-9]+)")
+#: A private folder of :func:`through_private_folder`: "sdl-tracer-" + process id + "@" + host tag + "-" + random.
+PRIVATE_FOLDER = re.compile(r"sdl-tracer-(?P<pid>[0-9]+)@(?P<host>[0-9a-f]{6})-.+")
 #: Temporary files being written now by this process: their path -> the target's (for messages).
 _TARGETS: dict[str, str] = {}
 #: Errors of open(O_TMPFILE) that mean "not here" (an old kernel, a file system without it): use a name.
@@ -225,3 +233,37 @@ def _link_into(fd: int, folder: int, target: Path) -> None:
 def naming_target(err: OSError, target: Path) -> OSError:
     """The same error about the user's file: the temporary file's name means nothing to them."""
     return type(err)(err.errno, err.strerror or str(err), str(target))
+
+
+@contextlib.contextmanager
+def through_private_folder(target: PathLike, suffix: str) -> Iterator[Path]:
+    """A file name ending in ``suffix`` in a new private folder of the system's temporary folder; when the
+    block ends without an error, that file's bytes become ``target`` (through :func:`writing`: no name in the
+    target's folder until complete).  The private folder is removed however the block ends, and is known to
+    the C watchdog meanwhile (its file is removed if the watchdog ends the process)."""
+    target = Path(target)
+    _check_folder(target)
+    _remove_stale_private_folders()
+    folder = Path(tempfile.mkdtemp(prefix=f"sdl-tracer-{os.getpid()}@{_host_tag()}-"))
+    try:
+        temp = folder / f"out{suffix}"
+        with signals.holding(str(temp)):
+            yield temp
+            with open(temp, "rb") as source, writing(target) as handle:
+                shutil.copyfileobj(source, handle, 1 << 20)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _remove_stale_private_folders() -> None:
+    """Remove private folders (:func:`through_private_folder`) of this host whose process is gone (killed)."""
+    host = _host_tag()
+    try:
+        entries = list(os.scandir(tempfile.gettempdir()))
+    except OSError:
+        return
+    for entry in entries:
+        found = PRIVATE_FOLDER.fullmatch(entry.name)
+        if found is not None and found["host"] == host and int(found["pid"]) != os.getpid() and \
+                _process_gone(int(found["pid"])):
+            shutil.rmtree(entry.path, ignore_errors=True)

@@ -228,7 +228,7 @@ REPLACED_BY_TARGET_ERROR = ("block_size", "progressive", "samples", "sampling")
 def _replaced_options_given(args) -> list[str]:
     """The options --target-error replaces that this command line set to something other than their default
     (one left at its default changes nothing, so it is not reported), as the user spelled them."""
-    defaults = build_parser().parse_args(["render", args.scene, "-o", args.output])
+    defaults = build_parser().parse_args(["render", args.scene, f"--output={args.output}"])
     return ["--" + name.replace("_", "-") for name in REPLACED_BY_TARGET_ERROR
             if getattr(args, name) != getattr(defaults, name)]
 
@@ -604,8 +604,19 @@ def _stdout_named():
         sys.stdout = stream
 
 
+def _dash_names_attached(argv: Sequence[str]) -> list[str]:
+    """``-o -x.png`` as ``--output=-x.png``: argparse takes a word after an option that starts with "-" for
+    another option (and stops with its usage), but a file name may start with one (fuzz seed 2817008540).
+    Only a word with a "." (an output's extension) is taken for a name: ``-o --width`` stays an error."""
+    argv = list(argv)
+    for k in range(len(argv) - 2, -1, -1):
+        if argv[k] in ("-o", "--output") and argv[k + 1].startswith("-") and "." in argv[k + 1]:
+            argv[k:k + 2] = [f"--output={argv[k + 1]}"]
+    return argv
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(_dash_names_attached(sys.argv[1:] if argv is None else argv))
     subject = getattr(args, "scene", None) or getattr(args, "source", None)
     try:
         with signals.working(_final_output(args)), np.errstate(all="ignore"), warnings_as_lines(sys.stderr), \

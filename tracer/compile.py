@@ -394,7 +394,9 @@ class Primitive:
 
     def occludes(self, origins, directions, t_min, t_max) -> np.ndarray:
         """Whether anything of this shape lies on each ray between t_min and t_max, with its whole error
-        interval (shadow feelers, see blocks_between; a mesh's hits are taken as exact there)."""
+        interval (shadow feelers, see blocks_between).  A mesh is asked for any hit first, and for the
+        intervals of its hits only where the feeler ends within its bounding sphere, where a light may sit on
+        its surface (a light on a mesh's face shadowed 12.7 % of a room's pixels; the C core's prim_occludes)."""
         if self._mesh is None:
             return blocks_between(self.intersect(origins, directions), t_min, t_max)
         blocked = np.zeros(origins.shape[0], dtype=bool)
@@ -402,6 +404,31 @@ class Primitive:
         if idx.size:
             o, d = self.to_generic(origins[idx], directions[idx])
             blocked[idx] = self._mesh.any_hit(o, d, t_min[idx], t_max[idx])
+            ends = origins[idx] + t_max[idx, None] * directions[idx] - self.center
+            near = blocked[idx] & (numerics.dot3(ends, ends) <= self.radius * self.radius)
+            if near.any():
+                rows = idx[near]
+                blocked[rows] = self.mesh_blocks_between(origins[rows], o[near], d[near], t_min[rows], t_max[rows])
+        return blocked
+
+    def mesh_blocks_between(self, origins, o, d, t_min, t_max) -> np.ndarray:
+        """Which world rays from ``origins`` (generic o + t d) meet this mesh with a hit whose whole error
+        interval lies between t_min and t_max (blocks_between).  Hits are taken first to last: one whose
+        interval reaches t_max ends the search, one that reaches t_min is passed (the C core's
+        mesh_blocks_between)."""
+        blocked = np.zeros(len(o), dtype=bool)
+        lower, todo = t_min.copy(), np.arange(len(o))
+        while todo.size:
+            h = self._mesh.closest_hits(o[todo], d[todo], lower[todo], t_max[todo])
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                self.bound_hits(origins[todo], o[todo], d[todo], h)
+            t, error = h.t[:, 0], h.error[:, 0]
+            before_end = np.isfinite(t) & (t + error < t_max[todo])
+            after_start = before_end & (t - error > t_min[todo])
+            blocked[todo[after_start]] = True
+            onward = before_end & ~after_start
+            lower[todo[onward]] = t[onward]
+            todo = todo[onward]
         return blocked
 
     def to_generic(self, origins, directions):

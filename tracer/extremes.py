@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from .compile import compile_scene
+from .geometry import builtin_mesh
 from .model import CSG, Camera, Light, Material, Scene, SceneObject, Settings, Shape
 from .render import render
 from .sdl.parser import load
@@ -111,10 +112,17 @@ def _room_shapes() -> list[Shape]:
 
 def light_on_surface(host: str, off: float = 0.0) -> Scene:
     """The room lit by a dim light from above and a bright one exactly on a surface (``host``: "cube" on a
-    face, "sphere" on a point, "floor" in the plane), or ``off`` units outside it along the normal there
-    (the plain twin: in exact arithmetic the same picture)."""
+    face, "sphere" on a point, "floor" in the plane, "mesh" on a face of an octahedron that is a triangle
+    mesh, in the cube's place), or ``off`` units outside it along the normal there (the plain twin: in exact
+    arithmetic the same picture)."""
     floor, cube, sphere = _room_shapes()
-    if host == "cube":  # a point of the face turned toward the camera, generic z = 1
+    if host == "mesh":
+        matrix = translation(-1.2, 0.75, -0.6) @ rotation(30, 0, 1, 0) @ scaling(0.7, 0.7, 0.7)
+        cube = Shape("mesh", matrix, cube.material)
+        cube.mesh = builtin_mesh("octahedron")
+        # the middle of the face x + y + z = 1
+        on, normal = _point(matrix, (1 / 3, 1 / 3, 1 / 3)), np.linalg.inv(matrix[:3, :3]).T @ (1.0, 1.0, 1.0)
+    elif host == "cube":  # a point of the face turned toward the camera, generic z = 1
         on, normal = _point(cube.matrix, (0.3, -0.2, 1.0)), cube.matrix[:3, :3] @ (0.0, 0.0, 1.0)
     elif host == "sphere":
         direction = np.array([0.45, 0.35, 0.82]) / np.linalg.norm([0.45, 0.35, 0.82])
@@ -252,6 +260,9 @@ CASES: dict[str, Callable[[], tuple[Scene, Scene]]] = {
     "light on a sphere": lambda: (light_on_surface("sphere", LIGHT_OFF), light_on_surface("sphere")),
     "light on a sphere: moved by +1e5": lambda: (light_on_surface("sphere", LIGHT_OFF),
                                                  moved(light_on_surface("sphere"), (1e5, 1e5, 1e5))),
+    "light on a mesh face": lambda: (light_on_surface("mesh", LIGHT_OFF), light_on_surface("mesh")),
+    "light on a mesh face: moved by +1e5": lambda: (light_on_surface("mesh", LIGHT_OFF),
+                                                    moved(light_on_surface("mesh"), (1e5, 1e5, 1e5))),
     "light in the floor plane": lambda: (light_on_surface("floor", LIGHT_OFF), light_on_surface("floor")),
     "light in the floor plane: moved by +1e5": lambda: (light_on_surface("floor", LIGHT_OFF),
                                                         moved(light_on_surface("floor"), (1e5, 1e5, 1e5))),

@@ -4,12 +4,22 @@ that a low-poly sphere's own flat facets do not cast stair-stepped shadows along
 
 The lift is computed in the mesh's generic coordinates (TriangleMesh.smooth_lift) and carried to the world
 by the primitive's matrix, written as the inverse of its inverse (Cramer's rule on the 3 x 3 part, as the C
-core has no forward matrices): tracer/native/shade.h computes the same numbers in the same order."""
+core has no forward matrices): tracer/native/shade.h computes the same numbers in the same order.
+
+The same interpolated normals bend the secondary rays of those hits (docs/tracer.md, "Shading normals and
+secondary rays"): near a smooth mesh's silhouette the mirror ray about the interpolated normal can point below
+the triangle's own plane, into the mesh (black speckles on a mirror sphere).  Such a ray is bent to leave
+just above the triangle's plane (:func:`bent_above`), and starts off the plane along its normal
+(:func:`geometric_normals`).  Transmitted rays are left as they are (docs/tracer.md says why)."""
 from __future__ import annotations
 
 import numpy as np
 
-from . import shapes
+from . import numerics, shapes
+
+#: How far (times its length) a bent secondary ray at least rises above the plane of the triangle hit
+#: (shade.h's MIN_RISE): about 0.06 degrees.
+MIN_RISE = 1e-3
 
 
 def world_vectors(inverse: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -47,4 +57,43 @@ def lifted_points(compiled, shape_index: np.ndarray, part: np.ndarray, uv: np.nd
         rows, lift = rows[has], lift[has]
         inverse = np.broadcast_to(prim.inverse[:3, :3], (len(rows), 3, 3))
         out[rows] = points[rows] + world_vectors(inverse, lift)
+    return out
+
+
+def geometric_normals(compiled, shape_index: np.ndarray, part: np.ndarray, directions: np.ndarray,
+                      facing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The unit world normals (n, 3) of the true surfaces hit, facing the rays (the planes of smooth mesh
+    triangles), and which rows are such hits; the other rows get their ``facing`` normals, which are the
+    geometric ones there (analytic shapes, flat triangles).  (shade.h's geometric_normal)"""
+    out = facing.copy()
+    smooth = np.zeros(len(shape_index), dtype=bool)
+    mesh_rows = np.nonzero(_MESH_CODES[compiled.table.kind[shape_index]])[0]
+    for index in np.unique(shape_index[mesh_rows]).tolist():
+        rows = mesh_rows[shape_index[mesh_rows] == index]
+        prim = compiled.primitives[index]
+        generic, _, has = prim.triangle_mesh.geometric_normals(part[rows])
+        world = numerics.normal_to_world(generic[has], prim.inverse[:3, :3])
+        rows = rows[has]
+        length = numerics.norm3(world)
+        usable = length > 0.0
+        rows, world = rows[usable], world[usable] / length[usable, None]
+        side = np.where(numerics.dot3(world, directions[rows]) > 0.0, -1.0, 1.0)
+        out[rows] = side[:, None] * world
+        smooth[rows] = True
+    return out, smooth
+
+
+def bent_above(rays: np.ndarray, normals: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``rays`` (n, 3), where ``rows`` (n,) and where one rises less than MIN_RISE times its length above the
+    plane of its unit normal, moved to rise exactly that much (its part along the plane kept) at its own
+    length (shade.h's bend_above); the rest as they are."""
+    rise = numerics.dot3(rays, normals)
+    length = numerics.norm3(rays)
+    bend = rows & (rise < MIN_RISE * length)
+    if not bend.any():
+        return rays
+    g, lifted = normals[bend], MIN_RISE * length[bend]
+    moved = (rays[bend] - rise[bend, None] * g) + lifted[:, None] * g
+    out = rays.copy()
+    out[bend] = moved * (length[bend] / numerics.norm3(moved))[:, None]
     return out

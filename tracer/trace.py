@@ -310,7 +310,7 @@ class Tracer:
         if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
             reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
                                                      hits.entering[idx], hits.obj[idx], weight[idx], roots[idx],
-                                                     limit[idx])
+                                                     limit[idx], (hits.shape[idx], hits.part[idx]))
             color[idx] += reflected
             color[idx] += transmitted
         return color
@@ -523,8 +523,10 @@ class Tracer:
         self._rays_used[roots[rows]] += 1
         return rows, self._rays_used[roots[rows]] + np.maximum(share, 0)
 
-    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight, roots, limit):
-        """The reflected and the transmitted colour, each already times its coefficient."""
+    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight, roots, limit,
+                   surface):
+        """The reflected and the transmitted colour, each already times its coefficient.  ``surface``: the
+        hits' (shape, part), for the true surface's normals (terminator.geometric_normals)."""
         settings = self.scene.settings
         mats = self.scene.materials
         n = point.shape[0]
@@ -539,6 +541,11 @@ class Tracer:
                                                  reflects | transmits)
             kr_max = kr_color.max(axis=1)
         reflected, transmitted = np.zeros_like(point), np.zeros_like(point)
+        # The true surface's normal: mirror rays start off it and must not cross it back (smooth mesh triangles).
+        wanted = np.nonzero(reflects | transmits)[0]
+        geometric, smooth = normal.copy(), np.zeros(n, dtype=bool)
+        geometric[wanted], smooth[wanted] = terminator.geometric_normals(
+            self.scene, surface[0][wanted], surface[1][wanted], direction[wanted], normal[wanted])
         # Snell's law first: under total internal reflection the transmitted ray is the mirror ray.
         rows = np.nonzero(transmits)[0]
         c1 = media.subset(rows).current_speed()
@@ -566,7 +573,7 @@ class Tracer:
         if mirror.size:
             reflected[mirror] = self._reflected(point[mirror], normal[mirror], direction[mirror], offset[mirror],
                                                 level, media.subset(mirror), mirror_weight[mirror], roots[mirror],
-                                                mirror_limit)
+                                                mirror_limit, (geometric[mirror], smooth[mirror]))
         transmitted[shared] = reflected[shared]
         taken, taken_limit = self._take_rays(want_through, roots, limit, through_weight, None, chain)
         refracted = ~tir[taken]
@@ -580,7 +587,7 @@ class Tracer:
         if bounce.size:  # total internal reflection: the light stays in the medium it came from
             transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
                                                   level, media.subset(bounce), through_weight[bounce],
-                                                  roots[bounce], bounce_limit)
+                                                  roots[bounce], bounce_limit, (geometric[bounce], smooth[bounce]))
         return kr_color * reflected, kt[:, None] * transmitted
 
     def _fresnel_weights(self, direction, normal, mat, media, entering, obj, kr, kt, rows_wanted):
@@ -609,7 +616,10 @@ class Tracer:
             kt[glass] = kt[glass] * (1.0 - reflectance)
         return kr_color, kt
 
-    def _reflected(self, point, normal, direction, offset, level, media, weight, roots, limit) -> np.ndarray:
-        r = reflect(direction, normal)
+    def _reflected(self, point, normal, direction, offset, level, media, weight, roots, limit, surface):
+        """The colours of the mirror rays about ``normal``; ``surface``: the true surface's normals, which
+        they start off and, where smooth (the second), are bent to leave (terminator.bent_above)."""
+        geometric, smooth = surface
+        r = terminator.bent_above(reflect(direction, normal), geometric, smooth)
         self.counts.reflection += point.shape[0]
-        return self.shade(point + offset * normal, r, level + 1, media, weight, roots, limit)
+        return self.shade(point + offset * geometric, r, level + 1, media, weight, roots, limit)

@@ -20,9 +20,11 @@ _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a pipe (FIFO)"), (stat.S_
 
 
 def shown_name(name: str, limit: int = 200) -> str:
-    """A file name as messages show it: control characters escaped, very long names cut in the middle."""
+    """A file name as messages show it: control characters escaped, very long names cut in the middle, and
+    one that starts or ends with white space in quotes (the space would not be seen)."""
     text = name if name.isprintable() else repr(name)[1:-1]
-    return text if len(text) <= limit else f"{text[:limit // 2]}…{text[-limit // 2:]}"
+    text = text if len(text) <= limit else f"{text[:limit // 2]}…{text[-limit // 2:]}"
+    return f"'{text}'" if text != text.strip() else text
 
 
 def check_name(path: PathLike, what: str) -> str:

@@ -82,6 +82,8 @@ def _child(argv: list[str], folder: Path, memory_bytes: int, cpu_seconds: float)
             os.close(out)
         sys.stdout = open(1, "w", closefd=False)
         sys.stderr = open(2, "w", closefd=False)
+        # The parent forked with both signals blocked (see Runner.start): one sent meanwhile is heard now.
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, signals.SIGNALS)
         if argv[0] == "differential-sdl":  # (generators.readers)
             code, detail = differential_sdl(argv[1], "--lenient" in argv)
             if detail:
@@ -119,9 +121,14 @@ class Runner:
         sys.stdout.flush()
         sys.stderr.flush()
         cpu_seconds = cpu_seconds or self.timeout
+        # Forked with SIGINT and SIGTERM blocked, so that one sent before the child has installed the program's
+        # handlers (on a loaded machine a child may wait 0.1 s for its first turn) waits for them instead of
+        # meeting the fuzz run's own (a KeyboardInterrupt and its traceback, in no real run of the program).
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, (signal.SIGINT, signal.SIGTERM))
         pid = os.fork()
         if pid == 0:
             _child(argv, folder, self.memory_bytes, cpu_seconds)
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         self.running[pid] = (time.monotonic(), argv, folder, token, [False], cpu_seconds, [signal_at, None])
 
     def wait_one(self):
@@ -198,7 +205,8 @@ def _litter(folder: Path, case) -> list[str]:
 
 def _judge_signal(case, outcome: Outcome, folder: Path) -> None:
     """A run sent a signal (generators.interrupt, kill): it ended by the signal's status (or finished first),
-    soon, with the old output intact or the whole new one, and nothing else left behind."""
+    soon, saying "interrupted" (when it ended by its own hand: 128 + the signal), with the old output intact
+    or the whole new one, and nothing else left behind."""
     signum = case.signal[0]
     output = folder / _output(case)
     data = output.read_bytes() if output.exists() else b""
@@ -210,6 +218,8 @@ def _judge_signal(case, outcome: Outcome, folder: Path) -> None:
         outcome.verdict, outcome.detail = "stray-output", (stray or ["a traceback"])[0][:200]
     elif outcome.returncode != 0 and not interrupted:
         outcome.verdict, outcome.detail = "bad-exit", f"exit {outcome.returncode} after {signal.Signals(signum).name}"
+    elif outcome.returncode == 128 + signum and lines[-1:] != ["interrupted"]:
+        outcome.verdict, outcome.detail = "bad-exit", f"{signal.Signals(signum).name} ended it without a word"
     elif interrupted and signum != signal.SIGKILL and latency is not None and latency > SIGNAL_LATENCY:
         outcome.verdict, outcome.detail = "hang", f"{signal.Signals(signum).name} heard after {latency:.2f} s"
     elif data != OLD_OUTPUT and (outcome.returncode != 0 or not data) and not _whole_image(output):

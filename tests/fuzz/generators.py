@@ -9,7 +9,8 @@ beside the mutations of the bundled files in mutate.py:
   their bytes cannot hold;
 * ``usd_hostile``: bytes that are not UTF-8, non-finite numbers where integers belong, composition cycles,
   booleans nested thousands deep, references fanning out;
-* ``interrupt`` and ``kill``: a render that a signal (SIGINT, SIGTERM; SIGKILL) reaches at a random moment;
+* ``interrupt`` and ``kill``: a render (of SDL or USD) or a convert to USD that a signal (SIGINT, SIGTERM;
+  SIGKILL) reaches at a random moment;
 * ``name``: output file names of every length up to the file system's limit, and past it;
 * ``edge``: polyhedra seen exactly along their edges, planes moved far along themselves: both backends;
 * ``readers``: grammar-aware SDL texts long enough for the C reader, read by both SDL readers and compared.
@@ -249,12 +250,45 @@ def _busy_scene(rng: random.Random) -> str:
             + f"reflectivity {k} transparency {k} speedOfLight 0.7\nsphere\npush scale 0.5 0.5 0.5 sphere pop\n")
 
 
+_BUSY_STAGES: dict[str, bytes] = {}
+
+
+def _busy_stage(text: str) -> bytes:
+    """The busy scene as a .usda stage (written once per text with tracer.usd, in the fuzz run's process)."""
+    if text not in _BUSY_STAGES:
+        import tempfile
+        from pathlib import Path
+
+        from tracer.sdl.parser import parse_sdl
+        from tracer.usd import save_usd
+
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "busy.usda"
+            save_usd(parse_sdl(text), path)
+            _BUSY_STAGES[text] = path.read_bytes()
+    return _BUSY_STAGES[text]
+
+
+def _many_spheres(count: int) -> str:
+    return CAMERA + "".join(f"push translate {k % 50 - 25} {k // 50 % 50 - 25} {-(k // 2500)} scale 0.3 0.3 0.3 "
+                            f"sphere pop\n" for k in range(count))
+
+
 def interrupt(rng: random.Random, name: str) -> Generated:
+    """A run a signal reaches at a random moment: a render of glass (from SDL or, reading it through usd-core,
+    from USD), or a convert of many spheres to USD (usd-core writing)."""
     signum = rng.choice([signal.SIGINT, signal.SIGTERM])
+    moment = (signum, rng.uniform(0.0, 1.5))
+    options = ["--width", "64", "--height", "48", "-q", "--threads", "1"]
+    what = rng.choice(["sdl", "sdl", "usd", "convert"])
+    if what == "convert":
+        files = {f"{name}.sdl": _many_spheres(rng.choice([2000, 5000])).encode()}
+        return Generated("interrupt", files, [], command="convert", output="out.usda", signal=moment,
+                         old_output=OLD_OUTPUT)
+    text = _busy_scene(rng)
+    files = {f"{name}.usda": _busy_stage(text)} if what == "usd" else {f"{name}.sdl": text.encode()}
     output = rng.choice(["out.png", "out.png", "out.bmp", "out.tif"])
-    return Generated("interrupt", {f"{name}.sdl": _busy_scene(rng).encode()},
-                     ["--width", "64", "--height", "48", "-q", "--threads", "1"], output=output,
-                     signal=(signum, rng.uniform(0.0, 1.5)), old_output=OLD_OUTPUT)
+    return Generated("interrupt", files, options, output=output, signal=moment, old_output=OLD_OUTPUT)
 
 
 def kill(rng: random.Random, name: str) -> Generated:

@@ -182,3 +182,24 @@ def test_convert_past_the_file_size_limit_names_the_destination(tmp_path, destin
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {out}:"), run.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.sdl"]
+
+
+@pytest.mark.parametrize("name", ["-.png", "--x.png", "-o.png"])
+def test_an_output_name_that_starts_with_a_dash_is_a_file_name(tmp_path, name):
+    """Fuzz seed 2817008540 (generators.output_name): ``-o -.png`` was taken by argparse for an option and
+    ended with its usage text, while any name the file system takes is a name a user may give."""
+    scene = _scene(tmp_path)
+    outcome = run_cli(["render", scene, "-o", name, "--width", 8, "--height", 6, "-q", "--target-error", "0.01"],
+                      output=tmp_path / name, cwd=tmp_path)
+    assert outcome.verdict == "image", outcome.describe()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([scene.name, name])
+
+
+def test_an_output_name_with_a_leading_space_is_shown_quoted(tmp_path):
+    """Fuzz seed 2853008671 (generators.output_name): a name past the file system's limit that began with a
+    space was shown as ``error:  name…``, where the space cannot be seen: such a name is shown in quotes."""
+    name = " " + "a" * 300 + ".tif"
+    outcome = run_cli(["render", _scene(tmp_path), "-o", name, "--width", 8, "--height", 6, "-q"],
+                      names=[f"' {'a' * 40}"], cwd=tmp_path)
+    assert outcome.verdict == "error", outcome.describe()
+    assert "File name too long" in outcome.stderr

@@ -433,14 +433,20 @@ class TriangleMesh:
         facing = dot3(directions, winding)
         return np.where(flip, facing > 0, facing < 0)
 
-    def _shading_normal(self, tri: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
-        """Unit shading normals for hits on triangles ``tri`` (original order) at barycentrics (b1, b2)."""
+    def geometric_normals(self, tri: np.ndarray):
+        """The unit geometric normals (generic, (n, 3); zero for a degenerate triangle) of triangles ``tri``
+        (original order), on the side their corner normals point to, the corner normals, and which triangles
+        have corner normals (are smooth-shaded).  (mesh.h's mesh_geometric_normal)"""
         _, e1, e2 = self._frame(tri)
         corners, has_normals = self._unit_corner_normals(tri)
         winding, flip = self._geometric(e1, e2, corners)
         geometric = np.where(flip[:, None], -winding, winding)
         length = _length(geometric)[:, None]
-        geometric = np.divide(geometric, length, out=np.zeros_like(geometric), where=length > 0)
+        return np.divide(geometric, length, out=np.zeros_like(geometric), where=length > 0), corners, has_normals
+
+    def _shading_normal(self, tri: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
+        """Unit shading normals for hits on triangles ``tri`` (original order) at barycentrics (b1, b2)."""
+        geometric, corners, has_normals = self.geometric_normals(tri)
         smooth = ((1.0 - b1 - b2)[:, None] * corners[0] + b1[:, None] * corners[1]) + b2[:, None] * corners[2]
         length = _length(smooth)
         # Use the interpolation only where it is meaningful and on the outer side of the face.

@@ -394,20 +394,64 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     return 0;
 }
 
-/* Is anything of primitive p on the ray with t_min < t < t_max? */
+/* Does the feeler o + t d end, at t_max, within the bounding sphere (Primitive.ends_within)? */
+static inline int feeler_ends_within(const double *sphere, const double *o, const double *d, double t_max)
+{
+    double apart[3];
+    for (int i = 0; i < 3; i++)
+        apart[i] = (o[i] + t_max * d[i]) - sphere[i];
+    return dot3(apart, apart) <= sphere[3] * sphere[3];
+}
+
+/* Has mesh primitive p a hit whose whole error interval lies between t_min and t_max (compile.blocks_between;
+ * Primitive.mesh_blocks_between)?  Its hits are taken first to last: one whose interval reaches t_max ends
+ * the search (a light on the mesh's surface is not shadowed by it), one that reaches t_min is passed. */
+static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double *o, const double *og,
+                               const double *dg, double t_min, double t_max)
+{
+    const MeshView *m = &S->meshes[S->d.prim_aux[2 * p]];
+    ErrorFrame frame;
+    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, &frame);
+    double lower = t_min;
+    Hit h;
+    while (mesh_closest(m, og, dg, lower, t_max, w->mesh_stack, w->wide_stack, &h)) {
+        hit_bounds(&frame, dg, m, &h);
+        if (!(h.t + h.err < t_max))
+            return 0;
+        if (h.t - h.err > t_min)
+            return 1;
+        lower = h.t;
+    }
+    return 0;
+}
+
+/* Is anything of mesh primitive p on the ray with t_min < t < t_max, with its whole error interval?  It is
+ * asked for any hit first, and for the intervals of its hits only where the feeler ends within its bounding
+ * sphere (where a light may sit on its surface).  (Not inlined into prim_occludes: inlined, it made every
+ * feeler's walk 1.4 % longer, meshes or not.) */
+static __attribute__((noinline)) int mesh_occludes(const Scene *S, Work *w, int64_t p, const double *o,
+                                                   const double *d, double t_min, double t_max)
+{
+    const SceneDesc *D = &S->d;
+    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+        return 0;
+    const double *inv = D->prim_inverse + 16 * p;
+    double og[3], dg[3];
+    affine_point(inv, o, og);
+    affine_vector(inv, d, dg);
+    if (!mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack))
+        return 0;
+    if (!feeler_ends_within(D->prim_sphere + 4 * p, o, d, t_max))
+        return 1;
+    return mesh_blocks_between(S, w, p, o, og, dg, t_min, t_max);
+}
+
+/* Is anything of primitive p on the ray with t_min < t < t_max, with its whole error interval? */
 static int prim_occludes(const Scene *S, Work *w, int64_t p, const double *o, const double *d, double t_min,
                          double t_max)
 {
-    const SceneDesc *D = &S->d;
-    if (RT_IS_MESH(D->prim_kind[p])) {
-        if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
-            return 0;
-        const double *inv = D->prim_inverse + 16 * p;
-        double og[3], dg[3];
-        affine_point(inv, o, og);
-        affine_vector(inv, d, dg);
-        return mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack);
-    }
+    if (RT_IS_MESH(S->d.prim_kind[p]))
+        return mesh_occludes(S, w, p, o, d, t_min, t_max);
     Hit h;
     return prim_first(S, w, p, o, d, t_min, t_max, &h, 1);
 }

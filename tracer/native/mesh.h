@@ -246,6 +246,22 @@ static inline int mesh_entering(const MeshView *m, int64_t slot, const double *d
     return flip ? facing > 0.0 : facing < 0.0;
 }
 
+/* The unit geometric normal g (generic; zero for a degenerate triangle) of original triangle `tri`, on the
+ * side its corner normals c (filled in) point to, as mesh_normal_entering forms it; returns whether it has
+ * corner normals (smooth shading).  (TriangleMesh.geometric_normals) */
+static inline int mesh_geometric_normal(const MeshView *m, int64_t tri, double c[3][3], double *g)
+{
+    int has = mesh_corner_normals(m, tri, c);
+    int flip = mesh_winding(m, tri, c, g);
+    if (flip)
+        for (int k = 0; k < 3; k++)
+            g[k] = -g[k];
+    double g_length = length3(g);
+    for (int k = 0; k < 3; k++)
+        g[k] = g_length > 0.0 ? g[k] / g_length : 0.0;
+    return has;
+}
+
 /* Unit shading normal (generic) of original triangle `tri` at barycentrics (b1, b2). */
 /* mesh_normal, and whether a ray along d enters there (mesh_entering), from one set of corner normals. */
 static inline int mesh_normal_entering(const MeshView *m, int64_t tri, double b1, double b2, const double *d,

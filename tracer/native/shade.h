@@ -167,15 +167,58 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
         color[c] += total[c];
 }
 
-/* The mirror ray of d about the facing normal, and where it starts (off the surface on the ray's side). */
-static inline void mirror_ray(const double *d, const double *facing, const double *point, double offset,
-                              double *mirror, double *start)
+/* tracer.terminator.geometric_normals for one hit: the unit world normal g of the true surface, facing the
+ * ray d (the plane of the smooth mesh triangle hit); returns 0 and g = facing for every other hit (analytic
+ * shapes, flat triangles: their shading normal is the geometric one). */
+static inline int geometric_normal(const Scene *S, const Hit *h, const double *d, const double *facing, double *g)
+{
+    const SceneDesc *D = &S->d;
+    double c[3][3], generic[3], world[3];
+    memcpy(g, facing, 3 * sizeof(double));
+    if (D->prim_kind[h->shape] != K_MESH ||
+        !mesh_geometric_normal(&S->meshes[D->prim_aux[2 * h->shape]], h->part, c, generic))
+        return 0;
+    normal_to_world(D->prim_inverse + 16 * h->shape, generic, world);
+    double length = norm3(world);
+    if (!(length > 0.0))
+        return 0;
+    for (int i = 0; i < 3; i++)
+        world[i] /= length;
+    double side = dot3(world, d) > 0.0 ? -1.0 : 1.0;
+    for (int i = 0; i < 3; i++)
+        g[i] = side * world[i];
+    return 1;
+}
+
+#define MIN_RISE 1e-3 /* tracer.terminator.MIN_RISE */
+
+/* tracer.terminator.bent_above for one ray: r, if it rises less than MIN_RISE |r| above the plane of unit
+ * normal g, moved to rise exactly that much (its part along the plane kept), at its own length. */
+static inline void bend_above(double *r, const double *g)
+{
+    double rise = dot3(r, g), length = norm3(r), moved[3];
+    if (!(rise < MIN_RISE * length))
+        return;
+    for (int i = 0; i < 3; i++)
+        moved[i] = (r[i] - rise * g[i]) + (MIN_RISE * length) * g[i];
+    double scale = length / norm3(moved);
+    for (int i = 0; i < 3; i++)
+        r[i] = moved[i] * scale;
+}
+
+/* The mirror ray of d about the facing normal, and where it starts: off the surface on the ray's side, along
+ * the geometric normal geo (which is `facing` except on smooth mesh triangles, where the ray is also bent to
+ * leave above the triangle's plane: about the interpolated normal it can point into the mesh). */
+static inline void mirror_ray(const double *d, const double *facing, const double *geo, int smooth,
+                              const double *point, double offset, double *mirror, double *start)
 {
     double dn = 2.0 * dot3(d, facing);
     for (int i = 0; i < 3; i++) {
         mirror[i] = d[i] - dn * facing[i];
-        start[i] = point[i] + offset * facing[i];
+        start[i] = point[i] + offset * geo[i];
     }
+    if (smooth)
+        bend_above(mirror, geo);
 }
 
 /* Tracer._fresnel_weights for one hit (tracer.fresnel): the mirror ray's weight per channel and the
@@ -251,6 +294,10 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
     double kr = D->mat_reflectivity[mat], kt = D->mat_transparency[mat];
     int reflects = use_reflection && kr >= D->min_reflectivity && kr > 0.0;
     int transmits = use_refraction && kt >= D->min_transparency && kt > 0.0;
+    if (!reflects && !transmits)
+        return;
+    double geo[3];  /* the true surface's normal: mirror rays start off it and must not cross it back */
+    int smooth = geometric_normal(S, h, d, facing, geo);
     /* the mirror ray's weight per channel and its largest (the Fresnel modes'), and the transmitted ray's */
     double kr_color[3] = {kr, kr, kr}, kr_max = kr;
     if (use_fresnel && (reflects || transmits) && D->mat_fresnel[mat] != FRESNEL_CONSTANT) {
@@ -288,7 +335,7 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
     int want_through = transmits && !shared && worth_tracing(w, through_weight);
     int64_t limit = w->ray_limit, chain = D->max_depth - level;
     if (want_mirror && take_ray(w, limit, want_through, mirror_weight, through_weight, chain)) {
-        mirror_ray(d, facing, point, offset, mirror, start);
+        mirror_ray(d, facing, geo, smooth, point, offset, mirror, start);
         w->counts[RAY_REFLECTION]++;
         self(S, w, start, mirror, level + 1, media, mirror_weight, mirrored);
         w->ray_limit = limit;
@@ -305,7 +352,7 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
         c[2] = mirrored[2];
     } else if (want_through && take_ray(w, limit, 0, through_weight, 0.0, chain)) {
         if (total_internal) {  /* total internal reflection: stays in the medium it came from */
-            mirror_ray(d, facing, point, offset, mirror, start);
+            mirror_ray(d, facing, geo, smooth, point, offset, mirror, start);
             w->counts[RAY_REFLECTION]++;
             self(S, w, start, mirror, level + 1, media, through_weight, c);
         } else {

@@ -16,7 +16,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .. import shapes
-from ..atomic import replacing
+from ..atomic import through_private_folder, writing
 from ..camera import CameraFrame, focal_length
 from ..errors import TracerError
 from ..geometry import builtin_mesh
@@ -483,8 +483,8 @@ def build_stage(scene: Scene, folder: PathLike = "."):
 
 
 def save_usd(scene: Scene, path: PathLike) -> None:
-    """Write the scene to ``path`` (.usda text, .usdc or .usd binary), atomically: a temporary file in the
-    same folder, then renamed over ``path``."""
+    """Write the scene to ``path`` (.usda text, .usdc or .usd binary), atomically: ``path`` is the old file
+    or the whole new one, and no other file is ever named in its folder (tracer.atomic)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in C.USD_EXTENSIONS:
@@ -492,9 +492,17 @@ def save_usd(scene: Scene, path: PathLike) -> None:
     stage = build_stage(scene, path.parent)
     # USD picks the format by the extension; for .usd it would follow $USD_DEFAULT_FILE_FORMAT: ask for crate.
     args = {"format": "usdc"} if suffix == ".usd" else {}
-    with replacing(path, suffix) as temp:
-        if not stage.GetRootLayer().Export(str(temp), args=args):
-            raise TracerError(f"{path}: USD could not write the file")
+    # No file of ours or usd-core's may be named in the user's folder before the new one is whole (a kill -9
+    # would leave it there): text is written through an anonymous file, a crate file (which usd-core can only
+    # write to a name, beside which it makes a temporary of its own) in a private folder elsewhere, then copied.
+    layer = stage.GetRootLayer()
+    if suffix == ".usda":
+        with writing(path, "w", encoding="utf-8") as handle:
+            handle.write(layer.ExportToString())
+    else:
+        with through_private_folder(path, suffix) as temp:
+            if not layer.Export(str(temp), args=args):
+                raise TracerError(f"{path}: USD could not write the file")
     # A layer of this name that USD still holds in memory would otherwise hide the new file from Open().
     from pxr import Sdf
     layer = Sdf.Layer.Find(str(path))

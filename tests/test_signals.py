@@ -140,13 +140,18 @@ def test_signals_while_the_modules_load_end_the_run_at_once(tmp_path, stage):
     folder = tmp_path / "out"
     folder.mkdir()
     output = folder / "image.png"
-    skipped = 0
+    skipped = finished = 0
     for k in range(15):
         output.write_bytes(OLD)
         signum = (signal.SIGINT, signal.SIGTERM)[k % 2]
         at = _python_start() + 0.1 * k
         status, took, err = _run_and_signal(stage, output, signum, at)
-        assert sorted(p.name for p in folder.iterdir()) == ["image.png"] and output.read_bytes() == OLD
+        assert sorted(p.name for p in folder.iterdir()) == ["image.png"]
+        if status == 0:  # (a quick machine had finished the render before this moment: the new image, whole)
+            assert output.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "Traceback" not in err, err
+            finished += 1
+            continue
+        assert output.read_bytes() == OLD
         if _in_python_itself(err):  # (the machine took longer than measured to start Python this time)
             skipped += 1
             continue
@@ -157,7 +162,7 @@ def test_signals_while_the_modules_load_end_the_run_at_once(tmp_path, stage):
             f"{signal.Signals(signum).name} at {at:.2f} s heard after {took:.2f} s (machine: {latency:.2f} s)"
         if status == 128 + signum:
             assert err.strip().splitlines()[-1:] == ["interrupted"], err
-    assert skipped <= 2
+    assert skipped <= 2 and 15 - finished - skipped >= 5, (finished, skipped)  # (most moments were heard)
 
 
 def test_sigkill_at_random_moments_leaves_only_the_old_output(tmp_path):

@@ -30,6 +30,8 @@ GENERATED = ("tree", "mesh_numbers", "usd_numbers", "image_format", "usd_hostile
              "edge", "readers")
 #: Classes that need usd-core (left out under make sanitize).
 NEEDS_USD = ("usd_numbers", "usd_hostile")
+#: Classes that read or write USD in some of their cases: without usd-core those cases are SDL ones.
+USD_SOMETIMES = ("interrupt", "kill")
 
 CAMERA = "camera 0 0 6  0 0 0  0 1 0  40\nlight 2 3 4  1 1 1\n"
 EXTREME = ("1e308", "-1e308", "1.7976931348623157e308", "1e151", "-1e151", "1e150", "1e-308", "5e-324", "0",
@@ -274,13 +276,14 @@ def _many_spheres(count: int) -> str:
                             f"sphere pop\n" for k in range(count))
 
 
-def interrupt(rng: random.Random, name: str) -> Generated:
+def interrupt(rng: random.Random, name: str, usd: bool = True) -> Generated:
     """A run a signal reaches at a random moment: a render of glass (from SDL or, reading it through usd-core,
-    from USD), or a convert of many spheres to USD (usd-core writing)."""
+    from USD), or a convert of many spheres to USD (usd-core writing); ``usd`` False: always the SDL render
+    (under the sanitizers usd-core cannot be loaded)."""
     signum = rng.choice([signal.SIGINT, signal.SIGTERM])
     moment = (signum, rng.uniform(0.0, 1.5))
     options = ["--width", "64", "--height", "48", "-q", "--threads", "1"]
-    what = rng.choice(["sdl", "sdl", "usd", "convert"])
+    what = rng.choice(["sdl", "sdl", "usd", "convert"]) if usd else "sdl"
     if what == "convert":
         files = {f"{name}.sdl": _many_spheres(rng.choice([2000, 5000])).encode()}
         return Generated("interrupt", files, [], command="convert", output="out.usda", signal=moment,
@@ -291,8 +294,8 @@ def interrupt(rng: random.Random, name: str) -> Generated:
     return Generated("interrupt", files, options, output=output, signal=moment, old_output=OLD_OUTPUT)
 
 
-def kill(rng: random.Random, name: str) -> Generated:
-    case = interrupt(rng, name)
+def kill(rng: random.Random, name: str, usd: bool = True) -> Generated:
+    case = interrupt(rng, name, usd)
     case.kind, case.signal = "kill", (signal.SIGKILL, case.signal[1])
     return case
 
@@ -401,6 +404,8 @@ def generated_case(seed: int, usd: bool = True) -> Generated:
     rng = random.Random(seed)
     kinds = GENERATED if usd else tuple(k for k in GENERATED if k not in NEEDS_USD)
     kind = rng.choice(kinds)
+    if kind in USD_SOMETIMES:
+        return GENERATORS[kind](rng, f"in{seed}", usd)
     return GENERATORS[kind](rng, f"in{seed}")
 
 

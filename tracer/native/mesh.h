@@ -112,24 +112,46 @@ static inline void mesh_edges(const MeshView *m, int64_t tri, double *e1, double
     }
 }
 
-/* Whether the triangle in leaf slot i may be hit: mesh_triangle's quick rejection alone (its numbers, by its
- * operations), without a branch, so that the loads of a leaf's triangles overlap (mesh_leaf_candidates). */
+/* Moller-Trumbore's first half against the triangle in leaf slot i: its corners and edges, the determinant
+ * and the barycentrics (u, v).  mesh_triangle_may_hit and mesh_triangle share it, so that the quick pass
+ * computes exactly the numbers the full test rejects by. */
+typedef struct {
+    const double *p0, *p1, *p2;
+    double e1[3], e2[3], qvec[3];
+    double det, inv_det, u, v;
+} MeshCrossing;
+
+static inline void mesh_crossing(const MeshView *m, int64_t i, const MeshRay *r, MeshCrossing *c)
+{
+    mesh_corners(m, m->order[i], &c->p0, &c->p1, &c->p2);
+    mesh_edges(m, m->order[i], c->e1, c->e2);
+    const double *p0 = c->p0;
+    double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
+    double pvec[3];
+    cross3(r->d, c->e2, pvec);
+    c->det = dot3(c->e1, pvec);
+    cross3(s, c->e1, c->qvec);
+    c->inv_det = 1.0 / c->det;
+    c->u = dot3(s, pvec) * c->inv_det;
+    c->v = dot3(r->d, c->qvec) * c->inv_det;
+}
+
+/* The slack mesh_triangle allows is at most barycentric_max (the cap), so a barycentric beyond twice that is
+ * a miss whatever the slack: rejected before the slack's square roots and divisions (most triangles of a
+ * leaf are).  Without a branch, so that the quick pass over a leaf overlaps its loads. */
+static inline int mesh_quickly_rejected(const MeshView *m, const MeshCrossing *c)
+{
+    double reject = 2.0 * m->barycentric_max;
+    return (c->u < -reject) | (c->v < -reject) | (c->u + c->v > 1.0 + 2.0 * reject);
+}
+
+/* Whether the triangle in leaf slot i may be hit: mesh_triangle's quick rejection alone
+ * (mesh_leaf_candidates). */
 static inline int mesh_triangle_may_hit(const MeshView *m, int64_t i, const MeshRay *r)
 {
-    const double *p0, *p1, *p2;
-    mesh_corners(m, m->order[i], &p0, &p1, &p2);
-    double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-    double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
-    double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
-    double pvec[3], qvec[3];
-    cross3(r->d, e2, pvec);
-    double det = dot3(e1, pvec);
-    cross3(s, e1, qvec);
-    double inv_det = 1.0 / det;
-    double u = dot3(s, pvec) * inv_det;
-    double v = dot3(r->d, qvec) * inv_det;
-    double reject = 2.0 * m->barycentric_max;
-    return !((u < -reject) | (v < -reject) | (u + v > 1.0 + 2.0 * reject));
+    MeshCrossing c;
+    mesh_crossing(m, i, r, &c);
+    return !mesh_quickly_rejected(m, &c);
 }
 
 /* Bit k: the triangle in leaf slot first + k (k < count <= 64) may be hit (mesh_triangle_may_hit). */
@@ -144,24 +166,13 @@ static inline uint64_t mesh_leaf_candidates(const MeshView *m, int64_t first, in
 /* Moller-Trumbore against the triangle in leaf slot i. */
 static inline int mesh_triangle(const MeshView *m, int64_t i, const MeshRay *r, double *t, double *b1, double *b2)
 {
-    const double *p0, *p1, *p2;
-    mesh_corners(m, m->order[i], &p0, &p1, &p2);
-    double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
-    double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
-    double s[3] = {r->o[0] - p0[0], r->o[1] - p0[1], r->o[2] - p0[2]};
-    double pvec[3], qvec[3];
-    cross3(r->d, e2, pvec);
-    double det = dot3(e1, pvec);
-    cross3(s, e1, qvec);
-    double inv_det = 1.0 / det;
-    double u = dot3(s, pvec) * inv_det;
-    double v = dot3(r->d, qvec) * inv_det;
-    /* The slack below is at most barycentric_max (the cap), so a barycentric beyond twice that is a miss
-     * whatever the slack: rejected here before the slack's square roots and divisions (most triangles of a
-     * leaf are). */
-    double reject = 2.0 * m->barycentric_max;
-    if (u < -reject || v < -reject || u + v > 1.0 + 2.0 * reject)
+    MeshCrossing c;
+    mesh_crossing(m, i, r, &c);
+    if (mesh_quickly_rejected(m, &c))
         return 0;
+    const double *p0 = c.p0, *p1 = c.p1, *p2 = c.p2;
+    const double *e1 = c.e1, *e2 = c.e2, *qvec = c.qvec;
+    double det = c.det, inv_det = c.inv_det, u = c.u, v = c.v;
     double tt = dot3(e2, qvec) * inv_det;
     /* The barycentric slack bounds the rounding of this ray and triangle (see ROUNDING_FACTOR in
      * mesh.py), capped for near-parallel rays; its scales are the largest vertex norm and the edges. */

@@ -244,7 +244,7 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
 {
     const SceneDesc *D = &S->d;
     const double *param = D->prim_param + PRIM_PARAMS * p;
-    const int64_t *aux = D->prim_aux + 2 * p;
+    const int32_t *aux = D->prim_aux + 2 * p;
     (void)param;
     (void)aux;
     *inside = 0;
@@ -912,7 +912,7 @@ static int pair_tree(Scene *S)
 
 /* An object's box as the slab test sees it: an axis whose bounds are in the wrong order is the slab between
  * them, one with a NaN bound is no constraint at all; and its centre (0 where not finite). */
-static void clean_box(const double *box, double *clean, double *centre)
+static void clean_box(const float *box, double *clean, double *centre)
 {
     for (int k = 0; k < 3; k++) {
         double lo = box[k], hi = box[3 + k];

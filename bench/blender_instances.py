@@ -18,6 +18,7 @@ bench/results/blender_instances.json.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import sys
 import threading
@@ -202,6 +203,20 @@ def _held(built, compiled, points: int) -> dict:
     return {name: round(size / points, 1) for name, size in held.items()}
 
 
+def _heap_free() -> int:
+    """Bytes malloc holds free in its heap (glibc's mallinfo2; -1 where there is none)."""
+    class MallInfo(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in
+                    ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                     "keepcost")]
+    try:
+        mallinfo = ctypes.CDLL("libc.so.6").mallinfo2
+    except (OSError, AttributeError):
+        return -1
+    mallinfo.restype = MallInfo
+    return int(mallinfo().fordblks)
+
+
 def _f12(size: str) -> dict:
     """The engine's whole render (build, compile, trace) at ``size`` (WxH): CPU seconds and resident growth."""
     import bpy
@@ -214,6 +229,10 @@ def _f12(size: str) -> dict:
     scene = bpy.context.scene
     scene.render.engine = engine.ENGINE_ID
     scene.sdl_render.block_size, scene.sdl_render.progressive = 1, False
+    # (what the heap holds free before: Blender leaves tens of MB free after evaluating the scene, which the
+    # render takes again without growing; given back first, malloc_trim, the growth is Blender's evaluation
+    # of the render's own depsgraph too)
+    heap_free = _heap_free()
     before_rss, before_cpu = _rss(), time.process_time()
     peak, done = [before_rss], threading.Event()
 
@@ -230,7 +249,7 @@ def _f12(size: str) -> dict:
         sampler.join()
     after = _rss()
     return {"seconds_cpu": round(time.process_time() - before_cpu, 2), "rss_growth": after - before_rss,
-            "rss_peak_growth": max(peak[0], after) - before_rss, "rays": engine.LAST_RENDER.get("rays"),
+            "rss_peak_growth": max(peak[0], after) - before_rss, "heap_free_before": heap_free, "rays": engine.LAST_RENDER.get("rays"),
             "error": engine.LAST_RENDER.get("error")}
 
 

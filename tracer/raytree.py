@@ -61,6 +61,11 @@ def _join_media(parts: list):
     return type(first)(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(first)))
 
 
+def _rows(shaded: Shaded, rows) -> Shaded:
+    return Shaded(**{f.name: (getattr(shaded, f.name).subset(rows) if f.name.endswith("media")
+                              else getattr(shaded, f.name)[rows]) for f in fields(Shaded)})
+
+
 def _join(parts: list[Shaded]) -> Shaded:
     if len(parts) == 1:
         return parts[0]
@@ -100,8 +105,10 @@ class _Generation:
                      "slot_hi", "both", "ratio"):
             setattr(self, name, np.concatenate([getattr(self, name), getattr(more, name)]))
 
-    def bounds_total(self) -> int:
-        return int(self.budget_lo.sum() - self.budget_hi.sum() + self.used_lo.sum() - self.used_hi.sum())
+
+def subtree_rays(levels_left: int) -> int:
+    """The most rays below a ray with ``levels_left`` levels under it (two children each: 2 + 4 + ...)."""
+    return (1 << (levels_left + 1)) - 2 if levels_left < 62 else np.iinfo(np.int64).max
 
 
 def mirror_share(budget: np.ndarray, both: np.ndarray, ratio: np.ndarray, chain: int) -> np.ndarray:
@@ -131,6 +138,8 @@ class RayTrees:
         first = self.tracer.shade_batch(origins, directions, self.level, media, weight)
         full = np.full(n, self.budget, dtype=np.int64)
         self.generations = [_Generation(first, np.full(n, -1, dtype=np.int64), full, full.copy())]
+        self.dirty = [True]  # per level: a bound it reads changed since it was last narrowed
+        self.narrowed = 0  # bounds that narrowed (they only narrow)
         while True:
             settled_before = self._settle()
             if self._grow():
@@ -147,17 +156,18 @@ class RayTrees:
     def _settle(self) -> int:
         """Narrow every bound once (from the leaves up, then from the roots down); returns a number that
         changes whenever a bound does (they only narrow)."""
-        for g in reversed(range(len(self.generations))):
-            self._narrow(g)
-        for g in range(len(self.generations)):
-            self._narrow(g)
-        return sum(gen.bounds_total() for gen in self.generations)
+        for order in (reversed(range(len(self.generations))), range(len(self.generations))):
+            for g in order:
+                if self.dirty[g]:
+                    self._narrow(g)
+        return self.narrowed
 
     def _used(self, g: int, slot: int, budget_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds on the rays the subtrees below the ``slot`` children of level ``g`` trace (a child not yet
-        traced: anything up to its budget)."""
+        traced: anything up to its budget, and up to a full tree to the depth limit)."""
         child = self.generations[g].child[:, slot]
-        lo, hi = np.zeros(child.shape[0], np.int64), budget_hi.copy()
+        full = subtree_rays(max(self.depth - (self.level + g + 1), 0))
+        lo, hi = np.zeros(child.shape[0], np.int64), np.minimum(budget_hi, full)
         rows = np.nonzero(child >= 0)[0]
         if rows.size:
             below = self.generations[g + 1]
@@ -184,7 +194,14 @@ class RayTrees:
         sub_lo, sub_hi = self._used(g, THROUGH, through_hi)
         used_lo = took_lo + np.where(through_sure, 1 + sub_lo, 0)
         used_hi = np.minimum(took_hi + np.where(through_maybe, 1 + sub_hi, 0), np.maximum(hi, 0))
-        gen.used_lo, gen.used_hi = np.maximum(gen.used_lo, used_lo), np.minimum(gen.used_hi, used_hi)
+        used_hi = np.minimum(used_hi, subtree_rays(max(chain, 0)))
+        self.dirty[g] = False
+        used_lo, used_hi = np.maximum(gen.used_lo, used_lo), np.minimum(gen.used_hi, used_hi)
+        changed = int(np.count_nonzero(used_lo != gen.used_lo) + np.count_nonzero(used_hi != gen.used_hi))
+        if changed and g > 0:
+            self.dirty[g - 1] = True
+        self.narrowed += changed
+        gen.used_lo, gen.used_hi = used_lo, used_hi
         gen.sure |= np.stack([mirror_sure, through_sure], axis=1)
         gen.maybe = np.stack([mirror_maybe, through_maybe], axis=1) | gen.sure
         gen.slot_lo = np.maximum(gen.slot_lo, np.stack([mirror_lo, through_lo], axis=1))
@@ -194,8 +211,13 @@ class RayTrees:
             for slot in (MIRROR, THROUGH):
                 rows = np.nonzero(gen.child[:, slot] >= 0)[0]
                 child = gen.child[rows, slot]
-                below.budget_lo[child] = np.maximum(below.budget_lo[child], gen.slot_lo[rows, slot])
-                below.budget_hi[child] = np.minimum(below.budget_hi[child], gen.slot_hi[rows, slot])
+                lo = np.maximum(below.budget_lo[child], gen.slot_lo[rows, slot])
+                hi = np.minimum(below.budget_hi[child], gen.slot_hi[rows, slot])
+                changed = int(np.count_nonzero(lo != below.budget_lo[child]) + np.count_nonzero(hi != below.budget_hi[child]))
+                if changed:
+                    self.dirty[g + 1] = True
+                    self.narrowed += changed
+                    below.budget_lo[child], below.budget_hi[child] = lo, hi
 
     def _undecided(self) -> bool:
         return any(bool((gen.maybe & ~gen.sure & gen.rays.want).any()) for gen in self.generations)
@@ -203,45 +225,61 @@ class RayTrees:
     # -- tracing -------------------------------------------------------------------------------------------
 
     def _grow(self) -> bool:
-        """Trace every wanted child that is surely within the budget and not traced yet, a level per batch
-        (CHUNK rays at most); returns whether any was."""
-        grew = False
-        for g in range(len(self.generations)):
-            gen = self.generations[g]
+        """Trace every wanted child that is surely within the budget and not traced yet, of every level, as one
+        batch (CHUNK rays at most per call); returns whether any was."""
+        parts = []  # (level index, parents, slots), mirror children first
+        for g, gen in enumerate(self.generations):
             ready = gen.sure & gen.rays.want & (gen.child < 0)
             mirror, through = np.nonzero(ready[:, MIRROR])[0], np.nonzero(ready[:, THROUGH])[0]
-            if mirror.size + through.size == 0:
-                continue
-            grew = True
-            parent = np.concatenate([mirror, through])
-            slot = np.concatenate([np.full(mirror.size, MIRROR), np.full(through.size, THROUGH)])
-            counts, bounce = self.tracer.counts, gen.rays.bounce[through]
-            counts.reflection += mirror.size + int(np.count_nonzero(bounce))
+            if mirror.size + through.size:
+                parts.append((g, np.concatenate([mirror, through]),
+                              np.concatenate([np.full(mirror.size, MIRROR), np.full(through.size, THROUGH)])))
+        if not parts:
+            return False
+        counts = self.tracer.counts
+        for g, parent, slot in parts:
+            rays = self.generations[g].rays
+            bounce = rays.bounce[parent[slot == THROUGH]]
+            counts.reflection += int(np.count_nonzero(slot == MIRROR)) + int(np.count_nonzero(bounce))
             counts.refraction += int(np.count_nonzero(~bounce))
-            if g + 1 == len(self.generations):
-                self.generations.append(None)
-            for begin in range(0, parent.size, CHUNK):
-                self._trace_children(g, parent[begin:begin + CHUNK], slot[begin:begin + CHUNK])
-        return grew
+        shaded = self._shade([self.generations[g].rays for g, _, _ in parts], parts)
+        begin = 0
+        for g, parent, slot in parts:
+            self._add(g, parent, slot, _rows(shaded, slice(begin, begin + parent.size)))
+            begin += parent.size
+        return True
 
-    def _trace_children(self, g: int, parent: np.ndarray, slot: np.ndarray) -> None:
-        """Trace the ``slot`` children of the rays ``parent`` of level ``g`` as one batch: level g + 1 grows."""
-        gen, rays = self.generations[g], self.generations[g].rays
-        media = _join_media([rays.media.subset(parent[slot == MIRROR]),
-                             rays.through_media.subset(parent[slot == THROUGH])])
-        order = np.argsort(slot, kind="stable")  # (mirror rows first, as media is joined)
-        parent, slot = parent[order], slot[order]
-        self.batches += 1
-        shaded = self.tracer.shade_batch(rays.start[parent, slot], rays.direction[parent, slot], self.level + g + 1,
-                                         media, rays.weight[parent, slot])
+    def _shade(self, rays: list[Shaded], parts) -> Shaded:
+        """The children ``parts`` of the levels, shaded: one batch, CHUNK rays a call."""
+        start = np.concatenate([r.start[parent, slot] for r, (_, parent, slot) in zip(rays, parts)])
+        direction = np.concatenate([r.direction[parent, slot] for r, (_, parent, slot) in zip(rays, parts)])
+        weight = np.concatenate([r.weight[parent, slot] for r, (_, parent, slot) in zip(rays, parts)])
+        level = np.concatenate([np.full(parent.size, self.level + g + 1) for g, parent, _ in parts])
+        media = _join_media([m for r, (_, parent, slot) in zip(rays, parts)
+                             for m in (r.media.subset(parent[slot == MIRROR]),
+                                       r.through_media.subset(parent[slot == THROUGH]))])
+        out = []
+        for begin in range(0, level.size, CHUNK):
+            rows = slice(begin, begin + CHUNK)
+            self.batches += 1
+            out.append(self.tracer.shade_batch(start[rows], direction[rows], level[rows], media.subset(rows),
+                                               weight[rows]))
+        return _join(out)
+
+    def _add(self, g: int, parent: np.ndarray, slot: np.ndarray, shaded: Shaded) -> None:
+        """Level g + 1 grows by the ``slot`` children of the rays ``parent`` of level g."""
+        gen = self.generations[g]
         new = _Generation(shaded, parent, gen.slot_lo[parent, slot].copy(), gen.slot_hi[parent, slot].copy())
-        below = self.generations[g + 1]
-        first = 0 if below is None else len(below)
-        gen.child[parent, slot] = first + np.arange(parent.size)
-        if below is None:
-            self.generations[g + 1] = new
+        if g + 1 == len(self.generations):
+            self.generations.append(new)
+            self.dirty.append(True)
         else:
+            below = self.generations[g + 1]
+            gen.child[parent, slot] = len(below) + np.arange(parent.size)
             below.extend(new)
+            self.dirty[g + 1] = True
+            return
+        gen.child[parent, slot] = np.arange(parent.size)
 
     # -- the results ---------------------------------------------------------------------------------------
 

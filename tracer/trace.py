@@ -106,6 +106,11 @@ def _take(best: SurfaceHits, rows: np.ndarray, h, source: np.ndarray, index: int
     best.offset[rows] = h.offset[source, 0]
 
 
+def _rows_of(hits: SurfaceHits, rows: np.ndarray) -> SurfaceHits:
+    """The hits of the rays ``rows``."""
+    return SurfaceHits(**{f.name: getattr(hits, f.name)[rows] for f in fields(SurfaceHits)})
+
+
 def _earliest_in_reach(scene, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
     """The rays ``rows`` have a tie: the first object in the scene with a hit before ``limit`` wins it."""
     for index, obj in enumerate(scene.objects):
@@ -258,6 +263,7 @@ class Tracer:
         #: ``cancel() -> bool``, asked now and then while a batch is traced: True stops it (RenderCancelled).
         self.cancel = None
         self._next_cancel_check = 0.0
+        self.depth = traced_depth(scene.settings.max_recursion_depth)  # (the deepest level shaded)
         #: The ray trees of the last batch shaded (tracer.raytree; its ``batches`` counts shade_batch calls).
         self.trees: RayTrees | None = None
 
@@ -272,15 +278,14 @@ class Tracer:
         generation of all the trees per batch, and each tree with the ray budget of a camera ray);
         ``weight``: each ray's share of its pixel (for the contribution cutoff; default 1)."""
         weight = np.ones(origins.shape[0]) if weight is None else weight
-        self.trees = RayTrees(self, level, traced_depth(self.scene.settings.max_recursion_depth),
-                              self.savings.ray_budget)
+        self.trees = RayTrees(self, level, self.depth, self.savings.ray_budget)
         return self.trees.trace(origins, directions, media, weight)
 
-    def shade_batch(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media,
+    def shade_batch(self, origins: np.ndarray, directions: np.ndarray, level, media: Media,
                     weight: np.ndarray) -> Shaded:
-        """One generation of ray trees: each ray's own colour (the background, or the local shading at its
-        first hit) and, where it hits below the depth limit, the children it wants (tracer.raytree traces
-        those and adds their colours)."""
+        """One batch of ray-tree nodes (``level``: theirs, one for all or one per ray): each ray's own colour
+        (the background, or the local shading at its first hit) and, where it hits below the depth limit, the
+        children it wants (tracer.raytree traces those and adds their colours)."""
         self._check_cancel()
         out = Shaded.empty(self.background, media)
         if origins.shape[0] == 0:
@@ -312,10 +317,15 @@ class Tracer:
                                                 hits.entering[idx], point)
             local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of, base)
         out.color[idx] = local
-        if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
+        if not self.effects & {"reflection", "refraction"}:
+            return out
+        deep = np.nonzero(np.broadcast_to(level, origins.shape[:1])[idx] < self.depth)[0]  # (hits above the limit)
+        if deep.size:
+            at = tuple(a[deep] for a in (point, facing, d, mat, offset))
+            idx, hits = idx[deep], _rows_of(hits, idx[deep])
             out.secondary[idx] = True
-            self._children(out, idx, (point, facing, d, mat, offset), media.subset(idx), hits.entering[idx],
-                           hits.obj[idx], weight[idx], (hits.shape[idx], hits.part[idx]))
+            self._children(out, idx, at, media.subset(idx), hits.entering, hits.obj, weight[idx],
+                           (hits.shape, hits.part))
         return out
 
     def _skip_shadow(self, mat, inside_of, light: int) -> np.ndarray:

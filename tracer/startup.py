@@ -90,8 +90,7 @@ def return_freed_memory() -> bool:
     except (OSError, AttributeError):
         return False
     del gnu_libc  # (musl has a mallopt that does nothing: only glibc's is asked)
-    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
-    return mallopt(M_MMAP_THRESHOLD, OWN_PAGES_FROM) == 1
+    return mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(OWN_PAGES_FROM)) == 1  # (int mallopt(int, int))
 
 
 def leave_out_openssl() -> None:

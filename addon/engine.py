@@ -312,6 +312,10 @@ class SDLRenderEngine(bpy.types.RenderEngine):
             self._live.clear()
             self._geometry.clear()
             LAST_RENDER["scene"] = "full"
+        if self.is_preview:
+            # A preview's scene is Blender's own (its hidden floor has a Checker Texture and a Math node this
+            # engine does not evaluate): nothing there for the user to act on, so nothing is said.
+            warnings = []
         for message in warnings:
             self.report({"WARNING"}, message)
         return tracer_scene, compiled, warnings

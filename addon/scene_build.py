@@ -27,7 +27,7 @@ import numpy as np
 
 from . import blender_lights, images, meshes, object_cache, props
 from .pure import convert
-from .tracer import model
+from .tracer import errors, model
 from .tracer.shapes import KINDS
 from .tracer.model import FaceList, MeshData
 
@@ -122,7 +122,11 @@ class SceneBuilder:
                     self._uv_materials.add(key)
                     sdl_material = dataclasses.replace(sdl_material, texture=1)
                     image = picture.path
-                    if picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
+                    if picture.datablock is not None:  # packed or generated: a file made of its pixels
+                        image = self._pixels_file(material, picture)
+                        if not image:  # (said why; drawn in its colour)
+                            sdl_material = dataclasses.replace(sdl_material, texture=0)
+                    elif picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
                         image = images.linear_copy(image)  # (as Cycles reads it; SDL keeps the file's values)
             else:
                 sdl_material = props.material_to_sdl(material)
@@ -138,6 +142,20 @@ class SceneBuilder:
                 sdl_material = dataclasses.replace(sdl_material, texture=number)
             self._materials[key] = sdl_material
         return self._materials[key]
+
+    def _pixels_file(self, material, picture) -> str:
+        """The file the tracer reads for a picture that has none of its own (packed or generated): its pixels
+        (made linear where Cycles would) in a temporary file; an export gets none, and says so."""
+        if self.mode == "EXPORT":  # (an exported scene must name a file that stays: unpack the image first)
+            self.warnings.append(f"{material.name}: {picture.datablock.name} is "
+                                 f"{'packed' if picture.datablock.packed_file is not None else 'generated'}: "
+                                 "exported without it (save or unpack the image to export it)")
+            return ""
+        try:
+            return images.pixels_copy(picture.datablock, linear=picture.srgb)
+        except errors.TracerError as err:
+            self.warnings.append(f"{material.name}: {err}: drawn without it")
+            return ""
 
     def _pixmap_number(self, wanted: int, image: str) -> int:
         """The scene's number for a material's image: its own number unless another image has it (materials
@@ -302,17 +320,51 @@ class SceneBuilder:
         """The tracer Scene of everything the depsgraph shows (its object instances).  Where geometry nodes
         make instances (and nothing needs the objects one by one: a Boolean, an export), the objects are a
         ShapeTable: a row per instance and material, no Python object per instance."""
-        # (sort key, what it made, its edit key): import order first (so that files round-trip in their own
-        # order), then by name, then as the depsgraph listed them; an _InstanceRun stands for the rows of
-        # consecutive instances of one instancer
+        self.cache.begin_build(self.depsgraph)
+        rows = self.mode != "EXPORT"  # (an export writes each instance's mesh file name: Shapes)
+        # Geometry nodes' instances read through their instancer's geometry where Blender has that (4.3+):
+        # only for rows, over the whole depsgraph (the reader counts each instancer's instances in order)
+        reader = _GeometryInstances() if rows and instances is None else None
+        warned = len(self.warnings)
+        made, lights, later = self._gather(instances, skip_hidden_render, selected_only, rows, reader)
+        if reader is not None and not reader.consistent():  # (never seen: a safety net) the plain reading
+            del self.warnings[warned:]
+            made, lights, later = self._gather(instances, skip_hidden_render, selected_only, rows, None)
+        for key, obj, matrix, edit_key in later:
+            made.append((key, self.object_node(obj, matrix), edit_key))
+        made = self._runs_placed(made)
+        made.sort(key=lambda entry: entry[0])
+        objects = self._objects(made)
+        #: for each object, the original Blender object's pointer, or ("instance", n) for an instance (the add-on's
+        #: live scene edits objects by these keys: addon/live_scene.py)
+        self._keys = [(nodes if isinstance(nodes, _InstanceRun) else len(nodes), edit_key) for _, nodes, edit_key in made]
+        lights.sort(key=lambda entry: entry[0])
+        self.light_objects = [obj for _, obj, _ in lights]  # (likewise, the lights' objects)
+        lights = [self.light(obj, matrix) for _, obj, matrix in lights]
+        self.cache.end_build()
+        world = scene.world
+        settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
+                                        if hasattr(scene, "sdl_render") else 3, self.warnings)
+        tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
+        tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
+        return tracer_scene
+
+    def _gather(self, instances, skip_hidden_render: bool, selected_only: bool, rows: bool, reader):
+        """One pass over the depsgraph's object instances: (made, lights, later) for build, each entry
+        (sort key, ...): import order first (so that files round-trip in their own order), then by name, then
+        as the depsgraph listed them; an _InstanceRun stands for the rows of consecutive instances of one
+        instancer.  ``reader`` (a _GeometryInstances, or None) gives the geometry-nodes instances it can read
+        without their objects."""
         made: list[tuple[tuple, object, object]] = []
         lights: list[tuple[tuple, object, np.ndarray]] = []
         later: list[tuple[tuple, object, np.ndarray, object]] = []
-        self.cache.begin_build(self.depsgraph)
         self._templates: dict[tuple, int] = {}
         self._template_parts: list[tuple] = []
-        rows = self.mode != "EXPORT"  # (an export writes each instance's mesh file name: Shapes)
         for count, inst in enumerate(instances if instances is not None else self.depsgraph.object_instances):
+            instancer = reader.instancer(inst) if reader is not None and inst.is_instance else None
+            if instancer is not None:  # (its object is not read: bpy would keep ~120 bytes for each read)
+                self._read_instance(made, count, inst, instancer, skip_hidden_render, selected_only)
+                continue
             obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
             original = obj.original
             if skip_hidden_render and original.hide_render:
@@ -346,24 +398,25 @@ class SceneBuilder:
             elif obj.type in GEOMETRY_TYPES:
                 later.append((key, stable, matrix, ("instance", count) if inst.is_instance else
                               original.as_pointer()))
-        for key, obj, matrix, edit_key in later:
-            made.append((key, self.object_node(obj, matrix), edit_key))
-        made = self._runs_placed(made)
-        made.sort(key=lambda entry: entry[0])
-        objects = self._objects(made)
-        #: for each object, the original Blender object's pointer, or ("instance", n) for an instance (the add-on's
-        #: live scene edits objects by these keys: addon/live_scene.py)
-        self._keys = [(nodes if isinstance(nodes, _InstanceRun) else len(nodes), edit_key) for _, nodes, edit_key in made]
-        lights.sort(key=lambda entry: entry[0])
-        self.light_objects = [obj for _, obj, _ in lights]  # (likewise, the lights' objects)
-        lights = [self.light(obj, matrix) for _, obj, matrix in lights]
-        self.cache.end_build()
-        world = scene.world
-        settings = props.world_settings(world, scene.sdl_render.max_recursion_depth
-                                        if hasattr(scene, "sdl_render") else 3, self.warnings)
-        tracer_scene = model.Scene(objects=objects, lights=lights, settings=settings)
-        tracer_scene.pixmaps = {number: image for image, number in self._pixmaps.items()}
-        return tracer_scene
+        return made, lights, later
+
+    def _read_instance(self, made: list, count: int, inst, instancer: "_Instancer", skip_hidden_render: bool,
+                       selected_only: bool) -> None:
+        """A geometry-nodes instance that ``instancer`` reads: its row of the instancer's run, as _gather
+        makes it, its object read only for the first instance of each geometry (its template)."""
+        matrix_world = inst.matrix_world  # (Blender's float32 product, as the plain reading has it)
+        reference = instancer.next(matrix_world)
+        original = instancer.original
+        if skip_hidden_render and original.hide_render or selected_only and not original.select_get():
+            return
+        template = instancer.templates.get(reference)
+        if template is None:
+            template = instancer.templates[reference] = self._instance_template(inst.object)
+        run = made[-1][1] if made else None
+        if not (isinstance(run, _InstanceRun) and run.pointer == instancer.pointer):
+            run = _InstanceRun(instancer.pointer)
+            made.append(((original.get(OBJ_ORDER, math.inf), original.name, count), run, None))
+        run.add(count, matrix_world, template)
 
     @property
     def object_keys(self) -> list:
@@ -489,6 +542,90 @@ class _InstanceRun:
                 builder.mesh_object_names[id(shape)] = name
             yield count, shapes
         self.target = None
+
+
+class _GeometryInstances:
+    """The geometry-nodes instances that can be read without their objects (Blender 4.3+: an evaluated
+    object's ``evaluated_geometry()``): for each instancer met, an _Instancer, or None where its instances
+    must be read one object at a time (older Blender; references to objects, collections or nested
+    instances; other instancing on the object)."""
+
+    def __init__(self):
+        self._instancers: dict[int, Optional[_Instancer]] = {}
+
+    def instancer(self, inst) -> Optional["_Instancer"]:
+        """The _Instancer that reads this depsgraph instance, or None."""
+        parent = inst.parent
+        if parent is None:
+            return None
+        pointer = parent.original.as_pointer()
+        if pointer not in self._instancers:
+            self._instancers[pointer] = _Instancer.of(parent)
+        return self._instancers[pointer]
+
+    def consistent(self) -> bool:
+        """Whether every instancer met its instances as its geometry lists them (see _Instancer.consistent)."""
+        return all(instancer is None or instancer.consistent() for instancer in self._instancers.values())
+
+
+#: The components of a geometry that Blender draws as instances of their own (besides an instance list)
+_OTHER_COMPONENTS = ("pointcloud", "curves", "volume", "grease_pencil")
+
+
+class _Instancer:
+    """A mesh object whose geometry nodes make instances of meshes (geometries holding a mesh and nothing
+    else): the depsgraph lists its instances in the order of its instance list, so the n-th instance met
+    is the list's n-th, and its geometry is the n-th reference index's.  Bytes kept per instance: none
+    but the 12 of its translation (for ``consistent``) until the build ends."""
+
+    def __init__(self, original, world: np.ndarray, references: np.ndarray, translations: np.ndarray):
+        self.original = original
+        self.pointer = original.as_pointer()
+        self.world = world  # (the instancer's world matrix)
+        self.references = references  # (per instance, its geometry's number)
+        self.translations = translations  # (per instance, in the instancer's frame)
+        self.met = array("f")  # (the translation of each instance met, as the depsgraph gave it)
+        self.templates: dict[int, int] = {}  # reference -> SceneBuilder template
+
+    @classmethod
+    def of(cls, parent) -> Optional["_Instancer"]:
+        original = parent.original
+        if not hasattr(parent, "evaluated_geometry") or parent.type != "MESH" or \
+                original.instance_type != "NONE" or len(original.particle_systems):
+            return None
+        geometry = parent.evaluated_geometry()
+        cloud = geometry.instances_pointcloud()
+        if cloud is None or any(getattr(geometry, name, None) is not None for name in _OTHER_COMPONENTS):
+            return None
+        for reference in geometry.instance_references():
+            if type(reference).__name__ != "GeometrySet" or reference.mesh is None or \
+                    reference.instances_pointcloud() is not None or \
+                    any(getattr(reference, name, None) is not None for name in _OTHER_COMPONENTS):
+                return None
+        count = len(cloud.points)
+        references = np.zeros(count, dtype=np.int32)
+        if ".reference_index" in cloud.attributes:
+            cloud.attributes[".reference_index"].data.foreach_get("value", references)
+        transforms = np.empty(count * 16, dtype=np.float32)
+        cloud.attributes["instance_transform"].data.foreach_get("value", transforms)
+        translations = transforms.reshape(count, 4, 4)[:, 3, :3].copy()  # (stored column after column)
+        return cls(original, matrix_np(parent.matrix_world), references, translations)
+
+    def next(self, matrix_world) -> int:
+        """The reference number of the next instance met, whose world matrix is ``matrix_world``."""
+        met = len(self.met) // 3
+        self.met.extend((matrix_world[0][3], matrix_world[1][3], matrix_world[2][3]))
+        return int(self.references[met]) if met < len(self.references) else 0
+
+    def consistent(self) -> bool:
+        """Whether the instances met were the instance list's, one for one, in its order: as many, each at
+        its own place (its translation, to float32's rounding of the instancer's matrix product)."""
+        met = np.frombuffer(self.met, dtype=np.float32).reshape(-1, 3).astype(np.float64)
+        if len(met) != len(self.references):
+            return False
+        expected = self.translations @ self.world[:3, :3].T + self.world[:3, 3]
+        scale = 1.0 + np.abs(expected).max(initial=0.0) + np.abs(self.world).max()
+        return bool(np.all(np.abs(met - expected) <= 1e-5 * scale))
 
 
 def usable_matrices(matrices: np.ndarray) -> np.ndarray:

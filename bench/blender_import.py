@@ -11,7 +11,8 @@ add-on shares one 64x32 sphere mesh among all its objects.
 
 Each import runs in its own process, in the bpy module (and with ``--blender`` under Debian's ``blender -b``
 too), into an empty file: ``bpy.ops.import_scene.sdl`` against ``bpy.ops.wm.obj_import``, CPU seconds of the
-operator call (the machine is shared: wall time is printed too), ours then theirs, repeated.  Prints the
+operator call (the machine is shared: wall time is printed too), ours then theirs, repeated; beside it the
+process's resident memory growth over the import, now and at its peak.  Prints the
 medians and the ratios as JSON and writes them to bench/results/blender_import.json.
 """
 from __future__ import annotations
@@ -61,6 +62,17 @@ def write_scenes(count: int, folder: Path, segments: int, rings: int) -> tuple[P
     return sdl, obj
 
 
+def _memory() -> dict:
+    """This process's resident size now and at its peak (/proc/self/status), bytes."""
+    fields = {}
+    with open("/proc/self/status") as status:
+        for line in status:
+            name, _, value = line.partition(":")
+            if name in ("VmRSS", "VmHWM"):
+                fields[name] = int(value.split()[0]) * 1024
+    return fields
+
+
 def child(kind: str, path: str) -> dict:
     """One import in this process (the bpy module, or Blender's Python under ``blender -b``)."""
     import time
@@ -73,13 +85,17 @@ def child(kind: str, path: str) -> dict:
     addon.register()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     addon.register()
+    before = _memory()["VmRSS"]
     started_cpu, started = time.process_time(), time.perf_counter()
     if kind == "sdl":
         result = bpy.ops.import_scene.sdl(filepath=path)
     else:
         result = bpy.ops.wm.obj_import(filepath=path)
     cpu, wall = time.process_time() - started_cpu, time.perf_counter() - started
-    return {"result": sorted(result), "cpu": round(cpu, 3), "wall": round(wall, 3), "objects": len(bpy.data.objects),
+    after = _memory()
+    return {"result": sorted(result), "cpu": round(cpu, 3), "wall": round(wall, 3),
+            "rss_growth_mb": round((after["VmRSS"] - before) / 2**20, 1),
+            "peak_growth_mb": round((after["VmHWM"] - before) / 2**20, 1), "objects": len(bpy.data.objects),
             "materials": len(bpy.data.materials), "meshes": len(bpy.data.meshes)}
 
 
@@ -134,11 +150,15 @@ def main() -> None:
         medians = {kind: statistics.median(r["cpu"] for r in results) for kind, results in kinds.items()}
         summary["median_cpu"][key] = medians
         summary["sdl_over_obj_cpu"][key] = round(medians["sdl"] / medians["obj"], 3)
+        peaks = {kind: statistics.median(r["peak_growth_mb"] for r in results) for kind, results in kinds.items()}
+        summary.setdefault("median_peak_growth_mb", {})[key] = peaks
+        summary.setdefault("sdl_over_obj_peak", {})[key] = round(peaks["sdl"] / max(peaks["obj"], 1e-9), 3)
     if "blender_b" in hosts:
         summary["blender"] = subprocess.run([blender, "--version"], capture_output=True,
                                             text=True).stdout.splitlines()[0]
     text = json.dumps(summary, indent=1)
-    print(json.dumps({k: summary[k] for k in ("median_cpu", "sdl_over_obj_cpu")}, indent=1))
+    print(json.dumps({k: summary[k] for k in ("median_cpu", "sdl_over_obj_cpu", "median_peak_growth_mb",
+                                             "sdl_over_obj_peak")}, indent=1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text + "\n")

@@ -9,8 +9,8 @@ holding its matrix and the number of the one MeshData they share), compile_scene
 an F12 (the engine's whole render, build and compile included).  Memory is the process's resident size
 before and after each step (/proc/self/statm) and, in a second pass, Python's own allocations per step
 (tracemalloc: slower, so its times are not reported).  The mesh once is its arrays plus its BVH, measured
-alone (one instance).  Of the build's bytes, what bpy itself keeps for each read of an instance's object
-is measured alone too (bpy_keeps_per_object_read).  Prints JSON and writes
+alone (one instance).  What bpy itself keeps for each read of an instance's object (which the build avoids
+where Blender 4.3+ lists the instances) is measured alone too (bpy_keeps_per_object_read).  Prints JSON and writes
 bench/results/blender_instances.json.
 """
 from __future__ import annotations
@@ -148,7 +148,8 @@ def _mesh_once() -> dict:
 def _bpy_object_reads() -> float:
     """Bytes per instance that bpy itself keeps, for good, when ``DepsgraphObjectInstance.object`` is read
     (each read of a geometry-nodes instance's object makes a Python object bpy never frees, in 4.5 and 5.0;
-    the scene build must read it once per instance: it is the only way to its geometry and materials)."""
+    the scene build reads it once per geometry where Blender lists the instances itself, 4.3+, and once per
+    instance before)."""
     import bpy
 
     depsgraph = bpy.context.evaluated_depsgraph_get()

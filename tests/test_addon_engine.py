@@ -436,3 +436,25 @@ def test_film_updates_are_spaced_by_what_they_cost():
     hidden = engine.FilmUpdates(show, enabled=False)
     hidden.last -= 1.0
     assert not hidden.offer(pass_done=True)
+
+
+def test_a_material_preview_is_traced_and_says_nothing_of_blenders_preview_scene():
+    """(In the bpy module a preview renders at once; Blender 3.4's `-b` queues it as a job.)
+    The Material tab's preview is rendered by this engine in Blender's own preview scene, whose hidden
+    floor uses nodes the engine does not evaluate: the preview shows the material, and no warning about
+    that floor reaches the user's status bar."""
+    fresh()
+    bpy.context.scene.render.engine = engine.ENGINE_ID
+    material = bpy.data.materials.new("Red")
+    material.use_nodes = True
+    material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.8, 0.02, 0.02, 1.0)
+    engine.LAST_RENDER.clear()
+    material.asset_generate_preview()  # (renders the preview at once, as the Material tab asks for it)
+    assert engine.LAST_RENDER.get("width"), "the preview was not traced by the engine"
+    assert engine.LAST_RENDER["warnings"] == []
+    size = material.preview.image_size[:]
+    pixels = list(material.preview.image_pixels_float)
+    red, green = pixels[0::4], pixels[1::4]
+    assert len(red) == size[0] * size[1] > 0
+    reddish = sum(r > 2 * g + 0.05 for r, g in zip(red, green))
+    assert reddish > 0.05 * len(red), "the preview does not show the red material"

@@ -107,9 +107,14 @@ def _decode_with_blender(path: Path) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
-#: The linear copies of sRGB pictures made so far (linear_copy): content digest -> file.
+#: The picture files made so far (linear_copy: content digest of the file; pixels_copy: of the texels) -> file.
 _linear: dict[bytes, str] = {}
 _linear_folder = None  # a tempfile.TemporaryDirectory, made on first use, removed at exit
+
+
+def _linear_from_srgb(stored: np.ndarray) -> np.ndarray:
+    """Stored sRGB values in [0, 1] made linear (the sRGB transfer curve undone), as Cycles reads them."""
+    return np.where(stored <= 0.04045, stored / 12.92, ((stored + 0.055) / 1.055) ** 2.4)
 
 
 def linear_copy(path: str) -> str:
@@ -117,21 +122,54 @@ def linear_copy(path: str) -> str:
     an sRGB Image Texture; the tracer, which uses a picture's values as they are stored (as SDL does), is
     given this copy for a Blender material's texture.  One copy per content, in a temporary folder.  (8 bits
     of linear values are coarse in the darkest tenth: a stored 10 of 255 becomes 1.)"""
-    global _linear_folder
     digest = _digest(Path(path))
     made = _linear.get(digest)
     if made is not None and os.path.isfile(made):
         return made
-    import tempfile
-
-    if _linear_folder is None:
-        _linear_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")
     stored = np.clip(decode(Path(path)), 0.0, 1.0)
-    linear = np.where(stored <= 0.04045, stored / 12.92, ((stored + 0.055) / 1.055) ** 2.4)
-    made = os.path.join(_linear_folder.name, digest.hex()[:24] + "-linear.png")
+    linear = _linear_from_srgb(stored)
+    made = os.path.join(_temporary_folder(), digest.hex()[:24] + "-linear.png")
     save_image(np.rint(linear[::-1] * 255.0).astype(np.uint8), made)  # (rows top first for the file)
     _linear[digest] = made
     return made
+
+
+def pixels_copy(image, linear: bool) -> str:
+    """An 8-bit picture file of a Blender image's own pixels (one packed into the .blend, or generated), for
+    the tracer, which reads pictures from files: its colours made linear first where ``linear`` (an sRGB
+    picture, as Cycles reads it).  One file per content, in the same temporary folder as linear_copy's;
+    the pixels are read again each time (a painted image changes without a new file)."""
+    width, height = image.size
+    channels = image.channels
+    if width * height == 0 or channels == 0:
+        raise errors.TracerError(f"picture {image.name} has no pixels")
+    if width * height > limits.MAX_TEXELS:
+        raise errors.TracerError(f"picture {image.name} of {width}x{height} pixels is too large for a texture")
+    pixels = np.empty(width * height * channels, dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    pixels = pixels.reshape(height, width, channels)
+    rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
+    stored = np.clip(rgb, 0.0, 1.0)
+    values = _linear_from_srgb(stored) if linear else stored
+    texels = np.rint(values[::-1] * 255.0).astype(np.uint8)  # (rows top first for the file)
+    digest = hashlib.sha256(texels.tobytes() + bytes(f"{width}x{height}", "ascii")).digest()
+    made = _linear.get(digest)
+    if made is not None and os.path.isfile(made):
+        return made
+    made = os.path.join(_temporary_folder(), digest.hex()[:24] + "-pixels.png")
+    save_image(texels, made)
+    _linear[digest] = made
+    return made
+
+
+def _temporary_folder() -> str:
+    """The folder of the picture files made here (removed at exit)."""
+    global _linear_folder
+    if _linear_folder is None:
+        import tempfile
+
+        _linear_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")
+    return _linear_folder.name
 
 
 def register() -> None:

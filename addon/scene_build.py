@@ -27,7 +27,7 @@ import numpy as np
 
 from . import blender_lights, images, meshes, object_cache, props
 from .pure import convert
-from .tracer import model
+from .tracer import errors, model
 from .tracer.compile import row_chunks
 from .tracer.shapes import KINDS
 from .tracer.model import FaceList, MeshData
@@ -123,7 +123,11 @@ class SceneBuilder:
                     self._uv_materials.add(key)
                     sdl_material = dataclasses.replace(sdl_material, texture=1)
                     image = picture.path
-                    if picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
+                    if picture.datablock is not None:  # packed or generated: a file made of its pixels
+                        image = self._pixels_file(material, picture)
+                        if not image:  # (said why; drawn in its colour)
+                            sdl_material = dataclasses.replace(sdl_material, texture=0)
+                    elif picture.srgb and self.mode != "EXPORT" and os.path.isfile(image):
                         image = images.linear_copy(image)  # (as Cycles reads it; SDL keeps the file's values)
             else:
                 sdl_material = props.material_to_sdl(material)
@@ -139,6 +143,20 @@ class SceneBuilder:
                 sdl_material = dataclasses.replace(sdl_material, texture=number)
             self._materials[key] = sdl_material
         return self._materials[key]
+
+    def _pixels_file(self, material, picture) -> str:
+        """The file the tracer reads for a picture that has none of its own (packed or generated): its pixels
+        (made linear where Cycles would) in a temporary file; an export gets none, and says so."""
+        if self.mode == "EXPORT":  # (an exported scene must name a file that stays: unpack the image first)
+            self.warnings.append(f"{material.name}: {picture.datablock.name} is "
+                                 f"{'packed' if picture.datablock.packed_file is not None else 'generated'}: "
+                                 "exported without it (save or unpack the image to export it)")
+            return ""
+        try:
+            return images.pixels_copy(picture.datablock, linear=picture.srgb)
+        except errors.TracerError as err:
+            self.warnings.append(f"{material.name}: {err}: drawn without it")
+            return ""
 
     def _pixmap_number(self, wanted: int, image: str) -> int:
         """The scene's number for a material's image: its own number unless another image has it (materials

@@ -158,3 +158,68 @@ def test_a_missing_picture_is_refused_by_strict_import_and_warned_by_lenient(tmp
     assert "error" not in engine.LAST_RENDER, engine.LAST_RENDER
     assert any("gone.png not found: drawn without it" in w for w in engine.LAST_RENDER["warnings"])
     assert "Traceback" not in out + err
+
+
+def test_a_packed_or_generated_picture_is_traced_as_the_same_picture_in_a_file(tmp_path):
+    """An Image Texture on Base Color whose picture is packed into the .blend, or made in Blender (a
+    generated image with its pixels painted in), renders exactly as the same picture read from its file,
+    with no warning; and a render does not leave Blender's images changed (no new datablock)."""
+    from tracer.imageio import save_image
+
+    from addon import engine
+    from blender_scripts.addon_env import fresh, render_rgba, set_resolution
+
+    rng = np.random.default_rng(7)
+    picture = rng.integers(0, 256, (16, 16, 3), dtype=np.uint8)  # (row 0 at the top)
+    save_image(picture, tmp_path / "noise.png")
+    fresh()
+    set_resolution(48, 48)
+    bpy.ops.mesh.primitive_plane_add(size=2)
+    plane = bpy.context.object
+    material = bpy.data.materials.new("pictured")
+    material.use_nodes = True
+    tree = material.node_tree
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    tree.links.new(texture.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    plane.data.materials.append(material)
+    bpy.ops.object.light_add(type="SUN")
+    bpy.ops.object.camera_add(location=(0.0, 0.0, 5.0))
+    scene = bpy.context.scene
+    scene.camera = bpy.context.object
+    scene.camera.data.type, scene.camera.data.ortho_scale = "ORTHO", 2.0
+    scene.render.engine = engine.ENGINE_ID
+    scene.sdl_render.block_size, scene.sdl_render.progressive = 1, False
+
+    def rendered(image):
+        texture.image = image
+        def pictures():  # (F12 makes Blender's own "Render Result")
+            return sorted(i.name for i in bpy.data.images if i.type != "RENDER_RESULT")
+
+        names = pictures()
+        rgba = render_rgba(engine.ENGINE_ID)
+        assert engine.LAST_RENDER["warnings"] == [], engine.LAST_RENDER["warnings"]
+        assert pictures() == names
+        return rgba
+
+    in_file = rendered(bpy.data.images.load(str(tmp_path / "noise.png")))
+    packed = bpy.data.images.load(str(tmp_path / "noise.png"), check_existing=False)
+    packed.pack()
+    (tmp_path / "noise.png").unlink()  # (the packed copy is all there is now)
+    generated = bpy.data.images.new("painted", 16, 16)
+    generated.pixels.foreach_set(np.concatenate([picture[::-1] / 255.0, np.ones((16, 16, 1))], axis=2)
+                                 .astype(np.float32).reshape(-1))
+    assert in_file[..., :3].std() > 0.05  # the picture's noise is in the render
+    assert np.array_equal(rendered(packed), in_file)
+    assert np.array_equal(rendered(generated), in_file)
+    # and a Rendered viewport of the packed picture settles: reading its pixels is no change Blender reports
+    from test_addon_updates import _Viewport
+
+    texture.image = packed
+    restarts = []
+    with _Viewport() as view:
+        for _ in range(3):
+            view.show()
+            view._view_dirty = False
+            bpy.context.evaluated_depsgraph_get()
+            restarts.append(view._view_dirty)
+    assert restarts[1:] == [False, False], restarts

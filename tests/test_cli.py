@@ -357,6 +357,40 @@ def test_deferred_numpy_parts_load_when_first_used_and_give_the_same_results():
     assert results["deferred"][1:] == results["plain"][1:]
 
 
+_FREED_THEN_MEASURED = """
+import importlib.util, re, sys
+spec = importlib.util.spec_from_file_location("startup", sys.argv[1])
+startup = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(startup)
+if sys.argv[2] == "returned" and not startup.return_freed_memory():
+    sys.exit(3)
+import numpy as np
+def resident():
+    return int(re.search(r"VmRSS:\\s+(\\d+)", open("/proc/self/status").read()).group(1)) * 1024
+first = np.ones(3 << 20)  # (24 MB, freed: glibc's default would now keep blocks below that on its heap)
+del first
+before = resident()
+temporary = np.ones(2 << 20)  # 16 MB
+del temporary
+print(resident() - before)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not os.confstr("CS_GNU_LIBC_VERSION"),
+                    reason="glibc's malloc only")
+def test_the_program_returns_freed_temporaries_to_the_system():
+    """The command line fixes the size from which glibc gives a block pages of its own (tracer/startup.py):
+    a 16 MB array freed after a 24 MB one goes back to the system at once, where glibc's own rule (the
+    plain process, which the test also runs, so that it shows the difference) keeps it resident."""
+    kept = {}
+    for mode in ("returned", "plain"):
+        proc = subprocess.run([sys.executable, "-c", _FREED_THEN_MEASURED, str(ROOT / "tracer" / "startup.py"), mode],
+                              capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        kept[mode] = int(proc.stdout)
+    assert kept["returned"] < 2 << 20 and kept["plain"] > 12 << 20, kept
+
+
 @pytest.mark.parametrize("options", [[], ["--block-size", "8", "--progressive"], ["--samples", "4"],
                                      ["--samples", "4", "--sampling", "adaptive"]])
 def test_the_png_written_band_by_band_is_the_rendered_image(tmp_path, options):

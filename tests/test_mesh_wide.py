@@ -1,9 +1,10 @@
 """The C core's four-wide mesh walk (tracer/native/mesh_wide.h) finds exactly what its binary walk finds.
 
-Each mesh is traced three ways, each made by the environment switch read when a scene is handed to the core:
+Each mesh is traced four ways, each made by the environment switch read when a scene is handed to the core:
 the binary tree (SDL_TRACER_MESH_BVH=binary, the walk the NumPy reference's tests pin down), the wide tree
-with SSE2 box tests (the default on x86-64), and the wide tree with its scalar box tests (SDL_TRACER_SIMD=0,
-the path of builds without SSE2).  First hits (time, normal, shape, object, entering), shadow feelers and
+with the box test the CPU allows (the default: AVX2 where the CPU has it, else SSE2 on x86-64), the wide tree
+with SSE2 box tests (SDL_TRACER_SIMD=sse2, the path of a CPU without AVX2), and the wide tree with its scalar
+box tests (SDL_TRACER_SIMD=0, the path of builds without SSE2).  First hits (time, normal, shape, object, entering), shadow feelers and
 whole-line hit lists (time, normal, part, barycentrics, error bound) must be equal bit for bit, on rays in
 general position, rays along the axes and through edges and vertices, rays with zero direction components,
 and rays that start inside the mesh's boxes; and so must rendered images of the bundled scenes with meshes.
@@ -24,7 +25,18 @@ from test_native import PAWN, ROOT, _cube_quads, _rays_at
 
 pytestmark = pytest.mark.skipif(native.load_error is not None, reason=f"C core not available: {native.load_error}")
 
-MODES = {"binary": {"SDL_TRACER_MESH_BVH": "binary"}, "sse2": {}, "scalar": {"SDL_TRACER_SIMD": "0"}}
+MODES = {"binary": {"SDL_TRACER_MESH_BVH": "binary"}, "best": {}, "sse2": {"SDL_TRACER_SIMD": "sse2"},
+         "scalar": {"SDL_TRACER_SIMD": "0"}}
+WIDE = ("best", "sse2", "scalar")
+
+
+def _cpu_has_avx2():
+    """What the default box test should be on this machine (Linux's /proc/cpuinfo; elsewhere not known)."""
+    try:
+        flags = next(line for line in open("/proc/cpuinfo") if line.startswith("flags")).split()
+    except (OSError, StopIteration):
+        return None
+    return "avx2" in flags
 
 
 def _torus(triangles: int) -> MeshData:
@@ -106,17 +118,17 @@ def test_wide_walks_find_what_the_binary_walk_finds(monkeypatch, mesh_kind):
     matrix = translation(0.3, -0.2, 0.1) @ rotation(37.0, *axis) @ scaling(1.2, 0.8, 1.0)
     tracers = _tracers(monkeypatch, lambda: scene_of(_mesh_shape(mesh, matrix)))
     assert tracers["binary"].mesh_wide_nodes(0) == 0
-    assert tracers["sse2"].mesh_wide_nodes(0) > 0 and tracers["scalar"].mesh_wide_nodes(0) > 0
+    assert all(tracers[name].mesh_wide_nodes(0) > 0 for name in WIDE)
     origins, directions = _rays(matrix[:3, 3], 1.5, seed=5)
     first = {name: t.first_hits(origins, directions) for name, t in tracers.items()}
     assert np.isfinite(first["binary"]["t"]).mean() > 0.01  # (the rays do meet the mesh)
     blocked = {name: t.occluded(origins, directions, t_max=2.0) for name, t in tracers.items()}
-    for name in ("sse2", "scalar"):
+    for name in WIDE:
         _assert_equal(first["binary"], first[name], f"first hits, {name}")
         assert np.array_equal(blocked["binary"], blocked[name]), f"shadow feelers, {name}"
     for o, d in zip(origins[::10], directions[::10]):
         reference = tracers["binary"].object_hits(0, o, d)
-        for name in ("sse2", "scalar"):
+        for name in WIDE:
             got = tracers[name].object_hits(0, o, d)
             for field in ("t", "normal", "part", "uv", "entering", "error"):
                 assert np.array_equal(getattr(reference, field), getattr(got, field)), f"all hits, {name}: {field}"
@@ -155,12 +167,12 @@ def test_ties_go_to_the_triangle_the_binary_walk_reaches_first(monkeypatch):
     # (both layers win somewhere: the order decides)
     tilted = first["binary"]["normal"][hit, 0] != 0.0
     assert 0.05 < tilted.mean() < 0.95
-    for name in ("sse2", "scalar"):
+    for name in WIDE:
         _assert_equal(first["binary"], first[name], f"first hits, {name}")
     # whole-line hits keep the first of coincident crossings in the binary walk's (left first) order
     for o, d in zip(origins[:400], directions[:400]):
         reference = tracers["binary"].object_hits(0, o, d)
-        for name in ("sse2", "scalar"):
+        for name in WIDE:
             got = tracers[name].object_hits(0, o, d)
             for field in ("t", "normal", "part", "uv"):
                 assert np.array_equal(getattr(reference, field), getattr(got, field)), f"all hits, {name}: {field}"
@@ -187,5 +199,23 @@ def test_bundled_scenes_with_meshes_render_the_same_images(monkeypatch, scene_fi
         _set_mode(monkeypatch, name)
         scene = tracer.load(ROOT / "scenes" / scene_file)
         images[name] = render(compile_scene(scene), 160, 120, backend="c", threads=1).image
-    for name in ("sse2", "scalar"):
+    for name in WIDE:
         assert np.array_equal(images["binary"], images[name]), name
+
+
+def test_the_box_test_is_the_best_the_cpu_has_unless_the_environment_says_otherwise(monkeypatch):
+    """AVX2 is chosen at run time where the CPU has it (this is what makes "best" above the AVX2 walk on such a
+    machine), SSE2 otherwise; SDL_TRACER_SIMD=sse2 and =0 force the others, whatever the CPU."""
+    import platform
+
+    tracers = _tracers(monkeypatch, lambda: scene_of(_mesh_shape(_one_triangle())))
+    if platform.machine().lower() not in ("x86_64", "amd64", "i386", "i686"):  # (no SSE2: scalar box tests)
+        assert [tracers[name].mesh_box_test() for name in MODES] == ["binary", "scalar", "scalar", "scalar"]
+        return
+    expected = {"binary": "binary", "sse2": "sse2", "scalar": "scalar"}
+    assert {name: tracers[name].mesh_box_test() for name in expected} == expected
+    has_avx2 = _cpu_has_avx2()
+    if has_avx2 is None:
+        assert tracers["best"].mesh_box_test() in ("avx2", "sse2")
+    else:
+        assert tracers["best"].mesh_box_test() == ("avx2" if has_avx2 else "sse2")

@@ -327,6 +327,8 @@ int64_t rt_build_mesh_bvh(int64_t n, const double *vertices, const int32_t *tri,
 void rt_free(void *buffer);
 /* nodes of the mesh's four-wide tree (mesh_wide.h; 128 bytes each), 0 where it is walked as a binary tree, -1 for no such mesh */
 int64_t rt_mesh_wide_nodes(const void *scene, int64_t mesh);
+/* how the scene's mesh walks test boxes (mesh_wide.h): 0 binary walk, 1 scalar, 2 SSE2, 3 AVX2 */
+int rt_mesh_box_test(const void *scene);
 SdlResult *rt_sdl_read(const char *text, int64_t length, const char *words, int64_t words_length, const int32_t *codes, int64_t count, const double *defaults, int64_t shared_libm);
 void rt_sdl_free(SdlResult *res);
 const char *rt_sdl_decline_names(void);
@@ -344,6 +346,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "9776ad0954b3ecc9"
+#define RT_CONTRACT_DIGEST "4c451ebf3bd85211"
 
 #endif

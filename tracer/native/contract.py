@@ -423,6 +423,8 @@ FUNCTIONS: tuple[Function, ...] = (
     _f("i64", "rt_mesh_wide_nodes", "chandle scene", "i64 mesh",
        doc="nodes of the mesh's four-wide tree (mesh_wide.h; 128 bytes each), 0 where it is walked as a binary "
            "tree, -1 for no such mesh"),
+    _f("int", "rt_mesh_box_test", "chandle scene",
+       doc="how the scene's mesh walks test boxes (mesh_wide.h): 0 binary walk, 1 scalar, 2 SSE2, 3 AVX2"),
     _f("result", "rt_sdl_read", "text text", "i64 length", "str words", "i64 words_length", "<i32 codes",
        "i64 count", "<f64 defaults", "i64 shared_libm"),
     _f("void", "rt_sdl_free", "result res"),

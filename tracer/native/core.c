@@ -103,6 +103,7 @@ typedef struct {
     int64_t n_loose;
     int64_t csg_depth;    /* most CSG nodes on one root-to-leaf path */
     int64_t mesh_depth;   /* deepest mesh BVH, in nodes */
+    int wide_mode;        /* how the mesh walks test boxes (mesh_wide.h), from the environment and the CPU */
     int64_t n_mesh_views;
     /* tracer.savings: objects x lights, a feeler from inside the object to the light is blocked (rt_set_sealed;
      * NULL: none known).  Which savings a trace uses is the trace's own (rt_trace's cutoff and flags). */
@@ -1231,6 +1232,14 @@ int64_t rt_mesh_wide_nodes(const void *scene, int64_t mesh)
     return S->meshes[mesh].wide ? S->meshes[mesh].n_wide : 0;
 }
 
+/* How the scene's mesh walks test boxes: its wide mode (mesh_wide.h: WIDE_OFF, _SCALAR, _SSE2 or _AVX2), read
+ * from the environment and the CPU when the scene was made; -1 for no scene. */
+int rt_mesh_box_test(const void *scene)
+{
+    const Scene *S = (const Scene *)scene;
+    return S ? S->wide_mode : -1;
+}
+
 /* Releases a buffer the library allocated for the caller (rt_build_mesh_bvh's nodes). */
 void rt_free(void *buffer) { free(buffer); }
 
@@ -1407,6 +1416,7 @@ static int take_meshes(Scene *S, char *error, int64_t capacity)
     MeshView *old = S->meshes;
     int64_t n_old = S->n_mesh_views;
     int wide_mode = wide_mode_from_environment();
+    S->wide_mode = wide_mode;
     S->meshes = (MeshView *)calloc((size_t)(D->n_meshes + 1), sizeof(MeshView));
     S->n_mesh_views = D->n_meshes;
     S->mesh_depth = 0;

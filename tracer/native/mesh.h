@@ -358,70 +358,6 @@ static inline void mesh_leaf_closest(const MeshView *m, const MeshRay *r, int64_
     }
 }
 
-/* mesh_closest's walk of the wide tree (mesh_wide.h: the same leaves in the same order as the binary walk). */
-static inline void mesh_closest_wide(const MeshView *m, const MeshRay *r, const WideRay *wr, double lower,
-                                     WideEntry *stack, double *best_t, double *best_b1, double *best_b2,
-                                     int64_t *best_slot)
-{
-    int64_t top = 0;
-    WideEntry e = {0, 0, lower};
-    for (;;) {
-        if (e.count) {
-            mesh_leaf_closest(m, r, e.child, e.count, lower, best_t, best_b1, best_b2, best_slot);
-        } else {
-            const WideNode *node = &m->wide[e.child];
-            double near[WIDE_CHILDREN];
-            int mask = wide_hit(m->wide_mode, node, wr, lower, *best_t, near);
-            if (mask)
-                wide_push(node, mask, near, wr->octant, stack, &top);
-        }
-        do {
-            if (!top)
-                return;
-            e = stack[--top];
-        } while (e.near > *best_t);
-    }
-}
-
-/* The first hit with lower < t < upper (nearer child first, by the ray's own direction). */
-static int mesh_closest(const MeshView *m, const double *o, const double *d, double lower, double upper,
-                        int64_t *stack, WideEntry *wide_stack, Hit *out)
-{
-    if (m->n_nodes == 0)
-        return 0;
-    MeshRay r;
-    mesh_ray(&r, o, d);
-    double best_t = upper, best_b1 = 0.0, best_b2 = 0.0;
-    int64_t best_slot = -1, top = 0;
-    WideRay wr;
-    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
-        mesh_closest_wide(m, &r, &wr, lower, wide_stack, &best_t, &best_b1, &best_b2, &best_slot);
-        goto found;
-    }
-    stack[top++] = 0;
-    while (top) {
-        int64_t node = stack[--top];
-        const BvhNode *nd = &m->nodes[node];
-        if (!slab_hit(nd, &r, lower, best_t))
-            continue;
-        if (nd->count) {
-            mesh_leaf_closest(m, &r, nd->offset, nd->count, lower, &best_t, &best_b1, &best_b2, &best_slot);
-            continue;
-        }
-        int64_t near = nd->offset, far = nd->offset + 1;
-        if (r.d[nd->axis] < 0.0) {
-            int64_t x = near; near = far; far = x;
-        }
-        stack[top++] = far;
-        stack[top++] = near;
-    }
-found:
-    if (best_slot < 0)
-        return 0;
-    mesh_fill_hit_along(m, best_slot, best_t, best_b1, best_b2, d, out);
-    return 1;
-}
-
 static inline int mesh_leaf_any(const MeshView *m, const MeshRay *r, int64_t first, int64_t count, double lower,
                                 double upper)
 {
@@ -432,53 +368,6 @@ static inline int mesh_leaf_any(const MeshView *m, const MeshRay *r, int64_t fir
             if (mesh_triangle(m, start + __builtin_ctzll(may), r, &t, &b1, &b2) && t > lower && t < upper)
                 return 1;
         }
-    }
-    return 0;
-}
-
-/* Any hit with lower < t < upper (shadow feelers); the leaves are tried nearer first on the wide walk (the
- * answer does not depend on the order). */
-static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack,
-                    WideEntry *wide_stack)
-{
-    if (m->n_nodes == 0)
-        return 0;
-    MeshRay r;
-    mesh_ray(&r, o, d);
-    WideRay wr;
-    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
-        int64_t top = 0;
-        WideEntry e = {0, 0, lower};
-        for (;;) {
-            if (e.count) {
-                if (mesh_leaf_any(m, &r, e.child, e.count, lower, upper))
-                    return 1;
-            } else {
-                const WideNode *node = &m->wide[e.child];
-                double near[WIDE_CHILDREN];
-                int mask = wide_hit(m->wide_mode, node, &wr, lower, upper, near);
-                if (mask)
-                    wide_push(node, mask, near, wr.octant, wide_stack, &top);
-            }
-            if (!top)
-                return 0;
-            e = wide_stack[--top];
-        }
-    }
-    int64_t top = 0;
-    stack[top++] = 0;
-    while (top) {
-        int64_t node = stack[--top];
-        const BvhNode *nd = &m->nodes[node];
-        if (!slab_hit(nd, &r, lower, upper))
-            continue;
-        if (nd->count) {
-            if (mesh_leaf_any(m, &r, nd->offset, nd->count, lower, upper))
-                return 1;
-            continue;
-        }
-        stack[top++] = nd->offset + 1;
-        stack[top++] = nd->offset;
     }
     return 0;
 }
@@ -574,6 +463,211 @@ static inline int mesh_leaf_all(const MeshView *m, const MeshRay *r, int64_t fir
     return 1;
 }
 
+/* The wide walks (mesh_wide.h: the same leaves in the same order as the binary walk) are written once, always
+ * inlined with `mode` the box test, and made twice: for the build's baseline (the scalar or SSE2 test the scene
+ * chose) and, where the compiler can, compiled for AVX2 with its test, called when the scene chose AVX2. */
+#define RT_WALK_INLINE inline __attribute__((always_inline))
+
+/* mesh_closest's walk of the wide tree. */
+static RT_WALK_INLINE void mesh_closest_wide_walk(int mode, const MeshView *m, const MeshRay *r, const WideRay *wr,
+                                                  double lower, WideEntry *stack, double *best_t, double *best_b1,
+                                                  double *best_b2, int64_t *best_slot)
+{
+    int64_t top = 0;
+    WideEntry e = {0, 0, lower};
+    for (;;) {
+        if (e.count) {
+            mesh_leaf_closest(m, r, e.child, e.count, lower, best_t, best_b1, best_b2, best_slot);
+        } else {
+            const WideNode *node = &m->wide[e.child];
+            double near[WIDE_CHILDREN];
+            int mask = wide_hit(mode, node, wr, lower, *best_t, near);
+            if (mask)
+                wide_push(node, mask, near, wr->octant, stack, &top);
+        }
+        do {
+            if (!top)
+                return;
+            e = stack[--top];
+        } while (e.near > *best_t);
+    }
+}
+
+/* mesh_any's: whether a leaf the ray meets has a hit with lower < t < upper (nearer leaves first; the answer
+ * does not depend on the order). */
+static RT_WALK_INLINE int mesh_any_wide_walk(int mode, const MeshView *m, const MeshRay *r, const WideRay *wr,
+                                             double lower, double upper, WideEntry *stack)
+{
+    int64_t top = 0;
+    WideEntry e = {0, 0, lower};
+    for (;;) {
+        if (e.count) {
+            if (mesh_leaf_any(m, r, e.child, e.count, lower, upper))
+                return 1;
+        } else {
+            const WideNode *node = &m->wide[e.child];
+            double near[WIDE_CHILDREN];
+            int mask = wide_hit(mode, node, wr, lower, upper, near);
+            if (mask)
+                wide_push(node, mask, near, wr->octant, stack, &top);
+        }
+        if (!top)
+            return 0;
+        e = stack[--top];
+    }
+}
+
+/* mesh_all's: every crossing of the leaves the line meets, left first (the binary walk's order: octant 0's),
+ * into raw; 0 when memory ran out. */
+static RT_WALK_INLINE int mesh_all_wide_walk(int mode, const MeshView *m, const MeshRay *r, const WideRay *wr,
+                                             WideEntry *stack, RawBuffer *raw)
+{
+    int64_t top = 0;
+    WideEntry e = {0, 0, -INFINITY};
+    for (;;) {
+        if (e.count) {
+            if (!mesh_leaf_all(m, r, e.child, e.count, raw))
+                return 0;
+        } else {
+            const WideNode *node = &m->wide[e.child];
+            double near[WIDE_CHILDREN];
+            int mask = wide_hit(mode, node, wr, -INFINITY, INFINITY, near);
+            if (mask)
+                wide_push(node, mask, near, 0, stack, &top);
+        }
+        if (!top)
+            return 1;
+        e = stack[--top];
+    }
+}
+
+#if RT_WIDE_AVX2
+RT_TARGET_AVX2 static void mesh_closest_wide_avx2(const MeshView *m, const MeshRay *r, const WideRay *wr,
+                                                  double lower, WideEntry *stack, double *best_t, double *best_b1,
+                                                  double *best_b2, int64_t *best_slot)
+{
+    mesh_closest_wide_walk(WIDE_AVX2, m, r, wr, lower, stack, best_t, best_b1, best_b2, best_slot);
+}
+
+RT_TARGET_AVX2 static int mesh_any_wide_avx2(const MeshView *m, const MeshRay *r, const WideRay *wr, double lower,
+                                             double upper, WideEntry *stack)
+{
+    return mesh_any_wide_walk(WIDE_AVX2, m, r, wr, lower, upper, stack);
+}
+
+RT_TARGET_AVX2 static int mesh_all_wide_avx2(const MeshView *m, const MeshRay *r, const WideRay *wr,
+                                             WideEntry *stack, RawBuffer *raw)
+{
+    return mesh_all_wide_walk(WIDE_AVX2, m, r, wr, stack, raw);
+}
+#endif
+
+/* The box test of the baseline walks: the scene's choice, AVX2 aside. */
+static inline int mesh_baseline_mode(const MeshView *m)
+{
+    return m->wide_mode == WIDE_SSE2 ? WIDE_SSE2 : WIDE_SCALAR;
+}
+
+static void mesh_closest_wide(const MeshView *m, const MeshRay *r, const WideRay *wr, double lower,
+                              WideEntry *stack, double *best_t, double *best_b1, double *best_b2, int64_t *best_slot)
+{
+#if RT_WIDE_AVX2
+    if (m->wide_mode == WIDE_AVX2) {
+        mesh_closest_wide_avx2(m, r, wr, lower, stack, best_t, best_b1, best_b2, best_slot);
+        return;
+    }
+#endif
+    mesh_closest_wide_walk(mesh_baseline_mode(m), m, r, wr, lower, stack, best_t, best_b1, best_b2, best_slot);
+}
+
+static int mesh_any_wide(const MeshView *m, const MeshRay *r, const WideRay *wr, double lower, double upper,
+                         WideEntry *stack)
+{
+#if RT_WIDE_AVX2
+    if (m->wide_mode == WIDE_AVX2)
+        return mesh_any_wide_avx2(m, r, wr, lower, upper, stack);
+#endif
+    return mesh_any_wide_walk(mesh_baseline_mode(m), m, r, wr, lower, upper, stack);
+}
+
+static int mesh_all_wide(const MeshView *m, const MeshRay *r, const WideRay *wr, WideEntry *stack, RawBuffer *raw)
+{
+#if RT_WIDE_AVX2
+    if (m->wide_mode == WIDE_AVX2)
+        return mesh_all_wide_avx2(m, r, wr, stack, raw);
+#endif
+    return mesh_all_wide_walk(mesh_baseline_mode(m), m, r, wr, stack, raw);
+}
+
+/* The first hit with lower < t < upper (nearer child first, by the ray's own direction). */
+static int mesh_closest(const MeshView *m, const double *o, const double *d, double lower, double upper,
+                        int64_t *stack, WideEntry *wide_stack, Hit *out)
+{
+    if (m->n_nodes == 0)
+        return 0;
+    MeshRay r;
+    mesh_ray(&r, o, d);
+    double best_t = upper, best_b1 = 0.0, best_b2 = 0.0;
+    int64_t best_slot = -1, top = 0;
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr)) {
+        mesh_closest_wide(m, &r, &wr, lower, wide_stack, &best_t, &best_b1, &best_b2, &best_slot);
+        goto found;
+    }
+    stack[top++] = 0;
+    while (top) {
+        int64_t node = stack[--top];
+        const BvhNode *nd = &m->nodes[node];
+        if (!slab_hit(nd, &r, lower, best_t))
+            continue;
+        if (nd->count) {
+            mesh_leaf_closest(m, &r, nd->offset, nd->count, lower, &best_t, &best_b1, &best_b2, &best_slot);
+            continue;
+        }
+        int64_t near = nd->offset, far = nd->offset + 1;
+        if (r.d[nd->axis] < 0.0) {
+            int64_t x = near; near = far; far = x;
+        }
+        stack[top++] = far;
+        stack[top++] = near;
+    }
+found:
+    if (best_slot < 0)
+        return 0;
+    mesh_fill_hit_along(m, best_slot, best_t, best_b1, best_b2, d, out);
+    return 1;
+}
+
+/* Any hit with lower < t < upper (shadow feelers); the leaves are tried nearer first on the wide walk (the
+ * answer does not depend on the order). */
+static int mesh_any(const MeshView *m, const double *o, const double *d, double lower, double upper, int64_t *stack,
+                    WideEntry *wide_stack)
+{
+    if (m->n_nodes == 0)
+        return 0;
+    MeshRay r;
+    mesh_ray(&r, o, d);
+    WideRay wr;
+    if (m->wide && wide_ray(r.o, r.inv, r.d, lower, upper, &wr))
+        return mesh_any_wide(m, &r, &wr, lower, upper, wide_stack);
+    int64_t top = 0;
+    stack[top++] = 0;
+    while (top) {
+        int64_t node = stack[--top];
+        const BvhNode *nd = &m->nodes[node];
+        if (!slab_hit(nd, &r, lower, upper))
+            continue;
+        if (nd->count) {
+            if (mesh_leaf_any(m, &r, nd->offset, nd->count, lower, upper))
+                return 1;
+            continue;
+        }
+        stack[top++] = nd->offset + 1;
+        stack[top++] = nd->offset;
+    }
+    return 0;
+}
+
 /* Every crossing of the whole line, deduplicated and ordered as TriangleMesh.all_hits.  Grows
  * *out_buffer as needed and returns the count, or -1 when memory ran out. */
 static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int64_t *stack, WideEntry *wide_stack,
@@ -586,24 +680,8 @@ static int64_t mesh_all(const MeshView *m, const double *o, const double *d, int
     mesh_ray(&r, o, d);
     WideRay wr;
     if (m->wide && wide_ray(r.o, r.inv, r.d, -INFINITY, INFINITY, &wr)) {
-        /* every leaf the line meets, left first (the binary walk's order: octant 0's) */
-        int64_t top = 0;
-        WideEntry e = {0, 0, -INFINITY};
-        for (;;) {
-            if (e.count) {
-                if (!mesh_leaf_all(m, &r, e.child, e.count, raw))
-                    return -1;
-            } else {
-                const WideNode *node = &m->wide[e.child];
-                double near[WIDE_CHILDREN];
-                int mask = wide_hit(m->wide_mode, node, &wr, -INFINITY, INFINITY, near);
-                if (mask)
-                    wide_push(node, mask, near, 0, wide_stack, &top);
-            }
-            if (!top)
-                break;
-            e = wide_stack[--top];
-        }
+        if (!mesh_all_wide(m, &r, &wr, wide_stack, raw))
+            return -1;
     } else {
         int64_t top = 0;
         stack[top++] = 0;

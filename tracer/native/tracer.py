@@ -241,6 +241,12 @@ class NativeTracer:
             raise IndexError(f"no mesh {mesh} in this scene")
         return int(count)
 
+    def mesh_box_test(self) -> str:
+        """How the C core's mesh walks test boxes in this scene (tracer/native/mesh_wide.h), chosen when it was
+        made: "avx2" where the CPU has AVX2, else "sse2" (also with SDL_TRACER_SIMD=sse2), "scalar"
+        (SDL_TRACER_SIMD=0, or a build without SSE2), "binary" (SDL_TRACER_MESH_BVH=binary: no wide tree)."""
+        return ("binary", "scalar", "sse2", "avx2")[library._lib.rt_mesh_box_test(self._handle)]
+
     def object_hits(self, index: int, origin, direction) -> HitArrays:
         """Whole-line hits of top-level object ``index`` for one ray, as ``compiled.objects[index].intersect``
         (world normals, not unit, error bounds and offsets; only finite hits, so K is the number of hits)."""

@@ -189,7 +189,8 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_param", "*f64", "PRIM_PARAMS: the values its kind's intersection takes (ShapeKind.traced), 0 after"),
     F("prim_aux", "*i32", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
-    F("prim_rounding", "*f64", "4: rounding / generic size, generic size, |inverse| and |translation| (numerics)"),
+    F("prim_rounding", "*f64", "4: inverse error, generic size, |inverse| and |translation| (numerics; "
+      "PrimitiveTable.rounding_terms): rounding / size is (hit_gamma + inverse error) / size"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64", section="triangle meshes (TriangleMesh.arrays(): per mesh, the address of each of "
       "its own arrays)"),
@@ -250,6 +251,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
     F("tol_hit_ulps", "f64", "CompiledScene.tolerances (tracer.numerics.Tolerances), field for field",
       section="tolerances: the compiled scene's, not constants (a measurement varies them)"),
+    F("hit_gamma", "f64", "numerics.gamma(tol_hit_ulps): every primitive's rounding before its inverse's"),
     F("tol_offset_ulps", "f64"),
     F("tol_torus_residual_ulps", "f64"),
     F("tol_torus_newton_steps", "i64"),

@@ -332,7 +332,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
                 agree_with_crossing(&out->h[i], dg);
     }
     ErrorFrame frame;
-    error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
+    error_frame(o, og, dg, D->prim_rounding + 4 * p, D->hit_gamma, &frame);
     const MeshView *mesh = D->prim_kind[p] == K_MESH ? &S->meshes[D->prim_aux[2 * p]] : NULL;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
@@ -363,7 +363,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         out->shape = (int32_t)p;
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
-            error_frame(o, og, dg, rounding, &frame);
+            error_frame(o, og, dg, rounding, D->hit_gamma, &frame);
             hit_bounds(&frame, dg, &S->meshes[D->prim_aux[2 * p]], out);
         }
         return 1;
@@ -376,7 +376,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     int n = D->prim_kind[p] == K_SPHERE ? hits_sphere(og, dg, buf) : analytic_hits(S, p, og, dg, buf, &inside);
     ErrorFrame frame;
     if (n)
-        error_frame(o, og, dg, rounding, &frame);
+        error_frame(o, og, dg, rounding, D->hit_gamma, &frame);
     for (int i = 0; i < n; i++) {
         double t = buf[i].t + shift;
         if (!(t > t_min && t < t_max))
@@ -414,7 +414,7 @@ static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double 
 {
     const MeshView *m = &S->meshes[S->d.prim_aux[2 * p]];
     ErrorFrame frame;
-    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, &frame);
+    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, S->d.hit_gamma, &frame);
     double lower = t_min;
     Hit h;
     while (mesh_closest(m, og, dg, lower, t_max, w->mesh_stack, w->wide_stack, &h)) {

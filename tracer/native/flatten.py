@@ -117,14 +117,6 @@ def _single_boxes(boxes: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rounding(table: PrimitiveTable, rows=slice(None)) -> np.ndarray:
-    """SceneDesc.prim_rounding of every row, or of ``rows``: (rounding / generic size, generic size, the two
-    inverse norms), rounding as Primitive.rounding."""
-    rounding = numerics.gamma(table.tolerances.hit_ulps) + table.inverse_error[rows]
-    size = table.generic_size[rows]
-    return np.concatenate([(rounding / size)[:, None], size[:, None], table.inverse_norms[rows]], axis=1)
-
-
 def _box(node, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
     """World box (lo, hi) that holds every surface point of the node's solid, or None if unbounded."""
     return fold_tree(node, lambda prim: _primitive_box(prim, lo, hi, bounded), _boolean_box)
@@ -153,7 +145,7 @@ class FlatScene:
         a["prim_sphere"] = table.spheres
         a["prim_param"] = table.parameters  # (PRIM_PARAMS per primitive: what its kind's intersection takes)
         a["prim_material"] = table.material_ids
-        a["prim_rounding"] = _rounding(table)
+        a["prim_rounding"] = table.rounding_terms  # (a view, as the inverses)
 
         # Polyhedra planes (one set per kind) and meshes (instances share one mesh).
         aux = np.zeros((n, 2), dtype=np.int32)
@@ -274,6 +266,7 @@ class FlatScene:
                        mesh_constants=self._mesh_constants(self._meshes))
         tol = compiled.tolerances
         scalars.update(tol_hit_ulps=float(tol.hit_ulps), tol_offset_ulps=float(tol.offset_ulps),
+                       hit_gamma=float(numerics.gamma(compiled.table.tolerances.hit_ulps)),
                        tol_torus_residual_ulps=float(tol.torus_residual_ulps),
                        tol_torus_newton_steps=int(tol.torus_newton_steps),
                        tol_torus_pair_shortcut=float(tol.torus_pair_shortcut), tol_square_edge=float(tol.square_edge))
@@ -302,8 +295,8 @@ class FlatScene:
         a, table = self.arrays, compiled.table
         touched_meshes = bool((a["prim_kind"][prims] == KIND_CODES["mesh"]).any())  # (before: was a mesh)
         a["prim_kind"][prims] = _CODE_OF_ENTRY[table.kind[prims]]
-        a["prim_rounding"].reshape(-1, 4)[prims] = _rounding(table, prims)
         for name, column, width in (("prim_inverse", table.inverses, 16), ("prim_sphere", table.spheres, 4),
+                                    ("prim_rounding", table.rounding_terms, 4),
                                     ("prim_param", table.parameters, PRIM_PARAMS),
                                     ("prim_material", table.material_ids, 1)):
             a[name].reshape(-1, width)[prims] = column[prims].reshape(-1, width)  # (no-ops where a is a view)

@@ -432,6 +432,39 @@ def test_instances_of_one_mesh_as_table_rows():
     assert np.all(np.abs(got["t"][hit] - ref.t[hit]) <= _time_tolerance(origins[0], directions[hit][0], ref.t[hit]))
 
 
+#: Python bytes a compiled instance of a mesh holds with what the C core is handed (tracemalloc, over
+#: compile_scene and the C core's scene): its primitive row 248 (inverse 128, box 48, sphere 32, rounding
+#: terms 32, parameter and kind), the flat tables beside it 45 and its object index 8; 368 when the flat
+#: tables copied the rounding terms and kept boxes in double, ~1000 when each instance is made a Shape.
+MAX_BYTES_PER_INSTANCE = 320
+
+
+@requires_core
+def test_instances_of_one_mesh_hold_few_bytes_each():
+    from tracer.model import Scene, TableRows
+    import tracemalloc
+
+    mesh = read_3vn(PAWN)
+    n = 20_000
+    matrices = np.zeros((n, 4, 4), dtype=np.float32)
+    matrices[:, 0, 0] = matrices[:, 1, 1] = matrices[:, 2, 2] = 0.3
+    matrices[:, 3, 3] = 1.0
+    matrices[:, :3, 3] = np.random.default_rng(5).uniform(-50, 50, (n, 3))
+    rows = TableRows()
+    rows.add_block(matrices, np.full(n, rows.part("mesh", mesh, Material())))
+    scene = Scene(objects=rows.table(), lights=[Light((0, 90, 0), (1, 1, 1))])
+    compile_scene(Scene(objects=[_mesh_shape(mesh)], lights=scene.lights))  # (the mesh's BVH, made once)
+    tracemalloc.start()
+    try:
+        compiled = compile_scene(scene)
+        NativeTracer(compiled, threads=1)
+        held = tracemalloc.get_traced_memory()[0] / n
+    finally:
+        tracemalloc.stop()
+    assert scene.objects.columns is not None  # (the rows stayed rows: no Shape made)
+    assert held <= MAX_BYTES_PER_INSTANCE, held
+
+
 @requires_core
 def test_glass_with_total_internal_reflection():
     # Light enters a slow glass block's slanted face and meets its flat faces beyond the critical angle.

@@ -995,8 +995,9 @@ _BOX_HI = np.array([_BOX_CORNERS[e.keyword].max(axis=0) if e.keyword in _BOX_COR
                     for e in shapes.REGISTRY])
 _BOX_SIZE = np.array([float(np.max(np.abs(_BOX_CORNERS[e.keyword]))) if e.keyword in _BOX_CORNERS else 1.0
                       for e in shapes.REGISTRY])
-#: Rows per batch of the table's stacked computations: their temporaries stay a few MB at any size.
-_CHUNK = 1 << 15
+#: Rows per batch of the table's stacked computations: their temporaries stay ~2 MB at any size (~250 bytes
+#: a row; at 1 << 15 rows they were 80 bytes an instance of a scene of 10^5, at the top of its memory).
+_CHUNK = 1 << 13
 
 
 def row_chunks(n: int):

@@ -18,7 +18,7 @@ transmits 95 %, double the rays at every level with weights the cutoff never sto
 The budget is shared down the tree: a ray's first child (the mirror ray), when a second is wanted too, may
 give its own subtree a part of what is left in proportion to its weight, but at least a chain as long as
 the levels left, and the second child gets everything left after the first's subtree (take_ray in
-tracer/native/shade.h and Tracer._take_rays: one rule, the same arithmetic).  A ray over the budget is not
+tracer/native/shade.h and tracer.raytree.mirror_share: one rule, the same arithmetic).  A ray over the budget is not
 traced: counted as skipped for "budget", which the command line reports in one warning.  No tree of
 materials whose reflectivity and transparency add up to at most 1 meets it at the default cutoff (such a tree
 has fewer than 2,200 rays worth tracing at any depth).

@@ -15,6 +15,7 @@ from .compile import CompiledScene
 from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
 from .model import MEDIA_DEPTH, traced_depth
+from .raytree import MIRROR, THROUGH, RayTrees, Shaded
 from .savings import SKIP_REASONS, RaySavings
 from .skippable import dark_materials, sealed_table
 
@@ -103,6 +104,11 @@ def _take(best: SurfaceHits, rows: np.ndarray, h, source: np.ndarray, index: int
     best.uv[rows] = h.uv[source, 0]
     best.error[rows] = h.error[source, 0]
     best.offset[rows] = h.offset[source, 0]
+
+
+def _rows_of(hits: SurfaceHits, rows: np.ndarray) -> SurfaceHits:
+    """The hits of the rays ``rows``."""
+    return SurfaceHits(**{f.name: getattr(hits, f.name)[rows] for f in fields(SurfaceHits)})
 
 
 def _earliest_in_reach(scene, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
@@ -257,7 +263,9 @@ class Tracer:
         #: ``cancel() -> bool``, asked now and then while a batch is traced: True stops it (RenderCancelled).
         self.cancel = None
         self._next_cancel_check = 0.0
-        self._rays_used = np.zeros(0, dtype=np.int64)  # per camera ray of the batch: secondary rays traced
+        self.depth = traced_depth(scene.settings.max_recursion_depth)  # (the deepest level shaded)
+        #: The ray trees of the last batch shaded (tracer.raytree; its ``batches`` counts shade_batch calls).
+        self.trees: RayTrees | None = None
 
     def camera_rays(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         n = origins.shape[0]
@@ -265,25 +273,27 @@ class Tracer:
         return self.shade(origins, directions, 0, Media.air(n), np.ones(n))
 
     def shade(self, origins: np.ndarray, directions: np.ndarray, level: int, media: Media,
-              weight: np.ndarray | None = None, roots: np.ndarray | None = None,
-              limit: np.ndarray | None = None) -> np.ndarray:
-        """Colours of the rays; ``weight``: each ray's share of its pixel (for the contribution cutoff;
-        default 1).  ``roots``: each ray's camera ray (an index into the batch's ray budget, see
-        :meth:`_take_rays`), and ``limit`` how far its descendants may bring that camera ray's count of
-        secondary rays; by default each ray is a camera ray of a new batch."""
-        n = origins.shape[0]
-        weight = np.ones(n) if weight is None else weight
-        if roots is None:
-            self._rays_used = np.zeros(n, dtype=np.int64)
-            roots, limit = np.arange(n), np.full(n, self.savings.ray_budget, dtype=np.int64)
+              weight: np.ndarray | None = None) -> np.ndarray:
+        """Colours of the rays at ``level`` in ``media``, each with the ray tree below it (tracer.raytree: a
+        generation of all the trees per batch, and each tree with the ray budget of a camera ray);
+        ``weight``: each ray's share of its pixel (for the contribution cutoff; default 1)."""
+        weight = np.ones(origins.shape[0]) if weight is None else weight
+        self.trees = RayTrees(self, level, self.depth, self.savings.ray_budget)
+        return self.trees.trace(origins, directions, media, weight)
+
+    def shade_batch(self, origins: np.ndarray, directions: np.ndarray, level, media: Media,
+                    weight: np.ndarray) -> Shaded:
+        """One batch of ray-tree nodes (``level``: theirs, one for all or one per ray): each ray's own colour
+        (the background, or the local shading at its first hit) and, where it hits below the depth limit, the
+        children it wants (tracer.raytree traces those and adds their colours)."""
         self._check_cancel()
-        color = np.broadcast_to(self.background, (n, 3)).copy()
-        if n == 0:
-            return color
+        out = Shaded.empty(self.background, media)
+        if origins.shape[0] == 0:
+            return out
         hits = first_hits(self.scene, origins, directions)
         idx = np.nonzero(hits.hit)[0]
         if idx.size == 0:
-            return color
+            return out
         o, d = origins[idx], directions[idx]
         t = hits.t[idx]
         point = o + t[:, None] * d
@@ -306,14 +316,17 @@ class Tracer:
                 base = terminator.lifted_points(self.scene, hits.shape[idx], hits.part[idx], hits.uv[idx],
                                                 hits.entering[idx], point)
             local += self._direct_light(point, facing, d, mat, diffuse, offset, inside_of, base)
-        color[idx] = local
-        if level < traced_depth(self.scene.settings.max_recursion_depth) and self.effects & {"reflection", "refraction"}:
-            reflected, transmitted = self._secondary(point, facing, d, mat, offset, level, media.subset(idx),
-                                                     hits.entering[idx], hits.obj[idx], weight[idx], roots[idx],
-                                                     limit[idx], (hits.shape[idx], hits.part[idx]))
-            color[idx] += reflected
-            color[idx] += transmitted
-        return color
+        out.color[idx] = local
+        if not self.effects & {"reflection", "refraction"}:
+            return out
+        deep = np.nonzero(np.broadcast_to(level, origins.shape[:1])[idx] < self.depth)[0]  # (hits above the limit)
+        if deep.size:
+            at = tuple(a[deep] for a in (point, facing, d, mat, offset))
+            idx, hits = idx[deep], _rows_of(hits, idx[deep])
+            out.secondary[idx] = True
+            self._children(out, idx, at, media.subset(idx), hits.entering, hits.obj, weight[idx],
+                           (hits.shape, hits.part))
+        return out
 
     def _skip_shadow(self, mat, inside_of, light: int) -> np.ndarray:
         """Rows whose feeler towards ``light`` need not be cast (counted per reason); they get no light."""
@@ -498,35 +511,13 @@ class Tracer:
         self.counts.skipped_cutoff += int(np.count_nonzero(wanted & ~keep))
         return keep
 
-    def _take_rays(self, wanted: np.ndarray, roots: np.ndarray, limit: np.ndarray, weight: np.ndarray,
-                   sibling_weight: np.ndarray | None, chain: int) -> tuple[np.ndarray, np.ndarray]:
-        """The ray budget (take_ray in tracer/native/shade.h: the same rule and arithmetic): of the rows
-        ``wanted``, those whose camera ray may still trace a secondary ray under its row's ``limit`` (the others
-        are counted as skipped for the budget), and for each of them the limit its descendants get.  Where a
-        second child is wanted too (``sibling_weight`` not None and a row's second child wanted), this first
-        child's descendants get a part of what is left after both rays in proportion to its ``weight``, but
-        at least a chain of ``chain`` rays; otherwise everything left.  The rows of a batch belong to
-        different camera rays, so the counts are updated all at once."""
-        rows = np.nonzero(wanted)[0]
-        left = limit[rows] - self._rays_used[roots[rows]]
-        over = left <= 0
-        self.counts.skipped_budget += int(np.count_nonzero(over))
-        rows, left = rows[~over], left[~over]
-        share = left - 1
-        if sibling_weight is not None:
-            both = sibling_weight[rows] >= 0  # (rows whose second child is not wanted carry -1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                ratio = weight[rows] / (weight[rows] + sibling_weight[rows])
-            ratio = np.where((ratio >= 0.0) & (ratio <= 1.0), ratio, 0.5)  # (weights of 0 or infinity: even)
-            by_weight = np.floor((left - 2).astype(np.float64) * ratio).astype(np.int64)
-            share = np.where(both, np.maximum(by_weight, np.minimum(left - 2, chain)), share)
-        self._rays_used[roots[rows]] += 1
-        return rows, self._rays_used[roots[rows]] + np.maximum(share, 0)
-
-    def _secondary(self, point, normal, direction, mat, offset, level, media, entering, obj, weight, roots, limit,
-                   surface):
-        """The reflected and the transmitted colour, each already times its coefficient.  ``surface``: the
-        hits' (shape, part), for the true surface's normals (terminator.geometric_normals)."""
+    def _children(self, out: Shaded, idx, at, media, entering, obj, weight, surface) -> None:
+        """The children the hits ``idx`` of ``out`` want, into ``out``: the mirror ray and the transmitted
+        one (under total internal reflection the mirror ray again), which of them pass the cutoff, their
+        weights and the weights of their colours.  ``at``: the hits' points, normals facing the rays, ray
+        directions, materials and offsets; ``surface``: their (shape, part), for the true surface's normals
+        (terminator.geometric_normals)."""
+        point, normal, direction, mat, offset = at
         settings = self.scene.settings
         mats = self.scene.materials
         n = point.shape[0]
@@ -540,7 +531,6 @@ class Tracer:
             kr_color, kt = self._fresnel_weights(direction, normal, mat, media, entering, obj, kr, kt,
                                                  reflects | transmits)
             kr_max = kr_color.max(axis=1)
-        reflected, transmitted = np.zeros_like(point), np.zeros_like(point)
         # The true surface's normal: mirror rays start off it and must not cross it back (smooth mesh triangles).
         wanted = np.nonzero(reflects | transmits)[0]
         geometric, smooth = normal.copy(), np.zeros(n, dtype=bool)
@@ -565,30 +555,24 @@ class Tracer:
         # The mirror ray is weighted by both coefficients where it also stands for the internal reflection.
         mirror_weight = weight * np.where(shared, kr_max + kt, kr_max)
         through_weight = weight * kt
-        want_mirror = self._worth_tracing(reflects, mirror_weight)
-        want_through = self._worth_tracing(transmits & ~shared, through_weight)
-        chain = traced_depth(settings.max_recursion_depth) - level
-        mirror, mirror_limit = self._take_rays(want_mirror, roots, limit, mirror_weight,
-                                               np.where(want_through, through_weight, -1.0), chain)
-        if mirror.size:
-            reflected[mirror] = self._reflected(point[mirror], normal[mirror], direction[mirror], offset[mirror],
-                                                level, media.subset(mirror), mirror_weight[mirror], roots[mirror],
-                                                mirror_limit, (geometric[mirror], smooth[mirror]))
-        transmitted[shared] = reflected[shared]
-        taken, taken_limit = self._take_rays(want_through, roots, limit, through_weight, None, chain)
-        refracted = ~tir[taken]
-        go, go_limit = taken[refracted], taken_limit[refracted]
-        if go.size:
-            self.counts.refraction += go.size
-            local = np.searchsorted(rows, go)
-            transmitted[go] = self.shade(point[go] - offset[go] * normal[go], through[local], level + 1,
-                                         after.subset(local), through_weight[go], roots[go], go_limit)
-        bounce, bounce_limit = taken[~refracted], taken_limit[~refracted]
-        if bounce.size:  # total internal reflection: the light stays in the medium it came from
-            transmitted[bounce] = self._reflected(point[bounce], normal[bounce], direction[bounce], offset[bounce],
-                                                  level, media.subset(bounce), through_weight[bounce],
-                                                  roots[bounce], bounce_limit, (geometric[bounce], smooth[bounce]))
-        return kr_color * reflected, kt[:, None] * transmitted
+        out.want[idx, MIRROR] = self._worth_tracing(reflects, mirror_weight)
+        out.want[idx, THROUGH] = self._worth_tracing(transmits & ~shared, through_weight)
+        out.weight[idx, MIRROR], out.weight[idx, THROUGH] = mirror_weight, through_weight
+        out.krc[idx], out.kt[idx], out.shared[idx], out.bounce[idx] = kr_color, kt, shared, tir
+        # The mirror ray leaves off the true surface, bent to leave it where smooth (terminator.bent_above);
+        # the transmitted ray starts on the far side, in the medium it enters.
+        mirror_start = point + offset * geometric
+        mirror = terminator.bent_above(reflect(direction, normal), geometric, smooth)
+        out.start[idx, MIRROR], out.direction[idx, MIRROR] = mirror_start, mirror
+        out.start[idx, THROUGH], out.direction[idx, THROUGH] = mirror_start, mirror
+        go = rows[~total_internal]
+        out.start[idx[go], THROUGH] = point[go] - offset[go] * normal[go]
+        out.direction[idx[go], THROUGH] = through[~total_internal]
+        media_through = Media(out.media.objects.copy(), out.media.speeds.copy(), out.media.depth.copy())
+        media_through.objects[idx[go]], media_through.speeds[idx[go]] = after.objects[~total_internal], \
+            after.speeds[~total_internal]
+        media_through.depth[idx[go]] = after.depth[~total_internal]
+        out.through_media = media_through
 
     def _fresnel_weights(self, direction, normal, mat, media, entering, obj, kr, kt, rows_wanted):
         """The mirror ray's weight per channel (N, 3) and the transmitted ray's (N,) where Material.fresnel
@@ -615,11 +599,3 @@ class Tracer:
             kr_color[glass] = (kr[glass] * reflectance)[:, None]
             kt[glass] = kt[glass] * (1.0 - reflectance)
         return kr_color, kt
-
-    def _reflected(self, point, normal, direction, offset, level, media, weight, roots, limit, surface):
-        """The colours of the mirror rays about ``normal``; ``surface``: the true surface's normals, which
-        they start off and, where smooth (the second), are bent to leave (terminator.bent_above)."""
-        geometric, smooth = surface
-        r = terminator.bent_above(reflect(direction, normal), geometric, smooth)
-        self.counts.reflection += point.shape[0]
-        return self.shade(point + offset * geometric, r, level + 1, media, weight, roots, limit)

@@ -83,7 +83,7 @@ typedef struct {
     const double *prim_inverse;              /* 16 per primitive */
     const double *prim_sphere;               /* 4: bounding-sphere centre, radius (inf: unbounded) */
     const double *prim_param;                /* PRIM_PARAMS: the values its kind's intersection takes (ShapeKind.traced), 0 after */
-    const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
+    const int32_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
     const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
     /* convex polyhedra: face planes n . p <= offset */
@@ -108,7 +108,7 @@ typedef struct {
     /* top-level objects */
     int64_t n_objects;
     const int64_t *object_ref;
-    const double *object_box;                /* 6: lo, hi (padded); ignored when not bounded */
+    const float *object_box;                 /* 6: lo, hi (padded, single precision rounded outward as the hierarchy's own boxes are); ignored when not bounded */
     const uint8_t *object_bounded;
     /* materials */
     int64_t n_materials;
@@ -346,6 +346,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "d522c43d1d535b24"
+#define RT_CONTRACT_DIGEST "4c451ebf3bd85211"
 
 #endif

@@ -253,7 +253,7 @@ static void fresnel_weights(const SceneDesc *D, const double *d, const Hit *h, i
     *kt = *kt * (1.0 - reflectance);
 }
 
-/* The ray budget (tracer.trace: Tracer._take_rays is the NumPy side, the same arithmetic): a camera ray's
+/* The ray budget (tracer.raytree is the NumPy side, the same arithmetic, breadth first): a camera ray's
  * tree traces at most Work.ray_budget reflected and transmitted rays, whatever the depth and the weights (two
  * mirrors of reflectivity 1 facing each other, or glass of reflectivity and transparency 0.95, double the rays
  * at every level, and the cutoff never stops them).  A ray's descendants may bring w->rays_used up to `limit`

@@ -16,7 +16,7 @@ from typing import Optional, Union
 import numpy as np
 
 from ..compile import (MAX_CSG_DEPTH, CompiledScene, Primitive, PrimitiveTable, boolean_box, boolean_depth,
-                       fold_tree)
+                       fold_tree, row_chunks)
 from .. import numerics, shapes
 from ..geometry.polyhedra import face_planes
 from ..intersect import mesh as mesh_module
@@ -117,6 +117,18 @@ def _single_boxes(boxes: np.ndarray) -> np.ndarray:
     return out
 
 
+def _object_boxes(table: PrimitiveTable, rows: Optional[np.ndarray] = None) -> np.ndarray:
+    """_single_boxes(_padded_boxes(table, rows)) (of every row when ``rows`` is None), the same numbers
+    computed a chunk of rows at a time: a chunk's temporaries stay in the cache, where the whole table's
+    (ten arrays of 12-48 bytes a row) were fresh pages, each faulted in and zeroed (0.55 s of the 10^6-sphere
+    build)."""
+    count = len(table) if rows is None else len(rows)
+    out = np.empty((count, 6), dtype=np.float32)
+    for part in row_chunks(count):
+        out[part] = _single_boxes(_padded_boxes(table, part if rows is None else rows[part]))
+    return out
+
+
 def _box(node, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
     """World box (lo, hi) that holds every surface point of the node's solid, or None if unbounded."""
     return fold_tree(node, lambda prim: _primitive_box(prim, lo, hi, bounded), _boolean_box)
@@ -178,7 +190,7 @@ class FlatScene:
         objects = compiled.objects
         index = objects.primitive_index
         if not objects.booleans:  # object k is primitive k: its tables are the primitives'
-            object_ref, object_box, bounded = index, _single_boxes(_padded_boxes(table)), prim_bounded
+            object_ref, object_box, bounded = index, _object_boxes(table), prim_bounded
         else:
             prim_box = _padded_boxes(table)
             prim_lo, prim_hi = prim_box[:, :3], prim_box[:, 3:]
@@ -334,7 +346,7 @@ class FlatScene:
         index = compiled.objects.primitive_index[objects]
         plain = index >= 0
         rows = index[plain]
-        object_box[objects[plain]] = _single_boxes(_padded_boxes(table, rows))
+        object_box[objects[plain]] = _object_boxes(table, rows)
         bounded[objects[plain]] = _BOUNDED[table.kind[rows]]
         if plain.all():
             return

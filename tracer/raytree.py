@@ -105,8 +105,8 @@ class _Generation:
 
     def extend(self, more: "_Generation") -> None:
         self.rays = _join([self.rays, more.rays])
-        for name in ("parent", "slot", "child", "budget_lo", "budget_hi", "used_lo", "used_hi", "sure", "maybe", "slot_lo",
-                     "slot_hi", "both", "ratio"):
+        for name in ("parent", "slot", "child", "budget_lo", "budget_hi", "used_lo", "used_hi", "sure", "maybe",
+                     "slot_lo", "slot_hi", "both", "ratio"):
             setattr(self, name, np.concatenate([getattr(self, name), getattr(more, name)]))
 
 

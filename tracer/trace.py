@@ -283,15 +283,13 @@ class Tracer:
         self.trees = RayTrees(self, level, self.depth, self.savings.ray_budget)
         try:
             return self.trees.trace(origins, directions, media, weight)
-        except TooManyRays:  # (trees too large to hold at once: their halves apart, the same rays and colours)
+        except TooManyRays:  # (trees too large to hold at once: in parts, the same rays and colours)
             pass
         for f in fields(RayCounts):  # (the rays of the attempt are not counted)
             setattr(self.counts, f.name, getattr(before, f.name))
-        half = n // 2
-        return np.concatenate([self.shade(origins[:half], directions[:half], level, media.subset(slice(0, half)),
-                                          weight[:half]),
-                               self.shade(origins[half:], directions[half:], level, media.subset(slice(half, n)),
-                                          weight[half:])])
+        bounds = np.linspace(0, n, min(n, 4) + 1).astype(int)  # (quarters: a tree of halves wastes more tries)
+        return np.concatenate([self.shade(origins[a:b], directions[a:b], level, media.subset(slice(a, b)), weight[a:b])
+                               for a, b in zip(bounds[:-1], bounds[1:])])
 
     def shade_batch(self, origins: np.ndarray, directions: np.ndarray, level, media: Media,
                     weight: np.ndarray) -> Shaded:

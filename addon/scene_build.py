@@ -28,6 +28,7 @@ import numpy as np
 from . import blender_lights, images, meshes, object_cache, props
 from .pure import convert
 from .tracer import errors, model
+from .tracer.compile import row_chunks
 from .tracer.shapes import KINDS
 from .tracer.model import FaceList, MeshData
 
@@ -490,7 +491,7 @@ class _InstanceRun:
         self.pointer = pointer  # (the instancer's original object)
         self.counts = array("q")
         self.templates = array("i")
-        self.matrices = array("d")  # 16 per instance, row after row
+        self.matrices = array("f")  # 16 per instance, row after row (Blender's are float32: held exactly)
 
     def add(self, count: int, matrix_world, template: int) -> None:
         self.counts.append(count)
@@ -501,14 +502,16 @@ class _InstanceRun:
     def finish(self, builder: SceneBuilder) -> None:
         """Drop the instances whose matrix cannot be traced, as SceneBuilder._usable does (its warnings, in
         order), and keep each one's matrix in the output frame."""
-        world = np.frombuffer(self.matrices, dtype=np.float64).reshape(-1, 4, 4)
-        usable = usable_matrices(world)
+        world = np.frombuffer(self.matrices, dtype=np.float32).reshape(-1, 4, 4)
+        usable = np.empty(len(world), dtype=bool)
+        for rows in row_chunks(len(world)):  # (float64 a chunk at a time: the tests as _usable makes them)
+            usable[rows] = usable_matrices(world[rows].astype(np.float64))
         for k in np.flatnonzero(~usable).tolist():  # (few: their messages, one by one)
-            builder._usable(world[k], builder._template_parts[self.templates[k]][1])
+            builder._usable(world[k].astype(np.float64), builder._template_parts[self.templates[k]][1])
         kept = np.flatnonzero(usable)
         self.counts = np.frombuffer(self.counts, dtype=np.int64)[kept]
         self.templates = np.frombuffer(self.templates, dtype=np.int32)[kept]
-        self.target = np.matmul(builder.to_target, world[kept])  # (the products Shape's matrix had)
+        self.target = _products(builder.to_target, world, kept)  # (the products Shape's matrix had)
         self.matrices = None
         parts = builder._template_parts
         self.part_counts = np.array([len(parts[t][0]) for t in range(len(parts))], dtype=np.int64)[self.templates]
@@ -529,15 +532,17 @@ class _InstanceRun:
         instance = self._row_instances()
         first_row = np.repeat(np.cumsum(self.part_counts) - self.part_counts, self.part_counts)
         part_index = np.arange(len(instance)) - first_row
-        rows.add_block(self.target[instance], flat[offsets[self.templates[instance]] + part_index])
+        one_each = len(instance) == len(self.target)  # (a part per instance: the rows are the instances)
+        rows.add_block(self.target if one_each else self.target[instance],
+                       flat[offsets[self.templates[instance]] + part_index])
         self.target = None  # (the table has them)
 
     def shapes_by_instance(self, builder: SceneBuilder):
         """(count, its Shapes) of each instance, as SceneBuilder.mesh_nodes makes them."""
         for count, template, matrix in zip(self.counts.tolist(), self.templates.tolist(), self.target):
             parts, _, name = builder._template_parts[template]
-            shapes = [builder.model.Shape("mesh", matrix=matrix, mesh=data, material=material, name=name)
-                      for data, material in parts]
+            shapes = [builder.model.Shape("mesh", matrix=matrix.astype(np.float64), mesh=data, material=material,
+                                          name=name) for data, material in parts]
             for shape in shapes:
                 builder.mesh_object_names[id(shape)] = name
             yield count, shapes
@@ -626,6 +631,19 @@ class _Instancer:
         expected = self.translations @ self.world[:3, :3].T + self.world[:3, 3]
         scale = 1.0 + np.abs(expected).max(initial=0.0) + np.abs(self.world).max()
         return bool(np.all(np.abs(met - expected) <= 1e-5 * scale))
+
+
+def _products(to_target: np.ndarray, world: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """``to_target @ world[kept]`` as float64 products (what a Shape's matrix is), a chunk at a time, kept as
+    float32 while every entry is one (Blender's float32 matrices under a render's identity), else float64:
+    64 bytes an instance, not 128 and a float64 copy of each matrix besides."""
+    out = np.empty((len(kept), 4, 4), dtype=np.float32)
+    for rows in row_chunks(len(kept)):
+        product = np.matmul(to_target, world[kept[rows]].astype(np.float64))
+        if out.dtype == np.float32 and not np.array_equal(product.astype(np.float32), product):
+            out = out.astype(np.float64)
+        out[rows] = product
+    return out
 
 
 def usable_matrices(matrices: np.ndarray) -> np.ndarray:

@@ -6,18 +6,22 @@ once, in the bpy module:
 
 Measured, each in its own step: the scene build (depsgraph -> tracer Scene: a ShapeTable, a row per instance
 holding its matrix and the number of the one MeshData they share), compile_scene (primitive rows, bounds, the mesh's BVH once, the object hierarchy) and
-an F12 (the engine's whole render, build and compile included).  Memory is the process's resident size
+an F12 (the engine's whole render, build and compile included; first, so that its growth is not memory the others freed;
+its peak sampled every 2 ms while it runs).  Memory is the process's resident size
 before and after each step (/proc/self/statm) and, in a second pass, Python's own allocations per step
 (tracemalloc: slower, so its times are not reported).  The mesh once is its arrays plus its BVH, measured
-alone (one instance).  What bpy itself keeps for each read of an instance's object (which the build avoids
+alone (one instance).  What a render holds per instance while it traces is counted from the arrays
+(held_per_instance: rows, primitive table, the C core's flat tables and object hierarchy).  What bpy itself keeps for each read of an instance's object (which the build avoids
 where Blender 4.3+ lists the instances) is measured alone too (bpy_keeps_per_object_read).  Prints JSON and writes
 bench/results/blender_instances.json.
 """
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
 import sys
+import threading
 import time
 import tracemalloc
 from pathlib import Path
@@ -141,8 +145,11 @@ def _mesh_once() -> dict:
     python = tracemalloc.get_traced_memory()[0]
     tracemalloc.stop()
     _mesh_once.kept = (compiled, built)  # (alive while the instances are compiled: their BVH is this one)
-    return {"triangles": int(len(mesh.faces)), "arrays": int(arrays), "compiled_python_allocated": int(python),
-            "rss_growth": _rss() - before}
+    traced = _arrays_bytes(vars(next(iter(compiled.table.meshes.values())).arrays()).values(), set())
+    # (compiled_python_allocated and rss_growth are ~0 when the F12 before made the mesh's BVH: it is found
+    # again by content; traced counts the mesh's arrays as the C core walks them, its BVH included)
+    return {"triangles": int(len(mesh.faces)), "arrays": int(arrays), "traced_arrays": int(traced),
+            "compiled_python_allocated": int(python), "rss_growth": _rss() - before}
 
 
 def _bpy_object_reads() -> float:
@@ -164,6 +171,88 @@ def _bpy_object_reads() -> float:
     return round(kept / count, 1)
 
 
+def _arrays_bytes(arrays, seen: set) -> int:
+    """The bytes of these NumPy arrays' own buffers, each buffer once (``seen``: the ids of the buffers counted
+    already; a view counts as its base)."""
+    total = 0
+    for array in arrays:
+        if not isinstance(array, np.ndarray):
+            continue
+        base = array
+        while isinstance(base.base, np.ndarray):
+            base = base.base
+        if id(base) not in seen:
+            seen.add(id(base))
+            total += base.nbytes
+    return total
+
+
+def _held(built, compiled, points: int) -> dict:
+    """Bytes per instance that a render holds while it traces, by what holds them (counted from the arrays,
+    not the resident size, which moves with what earlier steps freed): the scene's table of rows, the
+    compiled primitive table, the C core's flat tables beside it and its object hierarchy's pair records."""
+    from addon.tracer.native.tracer import NativeTracer, _flat_scene
+
+    seen: set = set()
+    table = _arrays_bytes(vars(built.objects.columns).values(), seen) if built.objects.columns is not None else 0
+    primitives = _arrays_bytes(vars(compiled.table).values(), seen)
+    flat = _arrays_bytes(_flat_scene(compiled).arrays.values(), seen)
+    pairs, items, _ = NativeTracer(compiled, threads=1).object_tree()
+    held = {"rows": table, "primitive_table": primitives, "flat_tables": flat,
+            "object_hierarchy": len(pairs) + 8 * len(items)}
+    return {name: round(size / points, 1) for name, size in held.items()}
+
+
+def _heap_free() -> int:
+    """Bytes malloc holds free in its heap (glibc's mallinfo2; -1 where there is none)."""
+    class MallInfo(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in
+                    ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                     "keepcost")]
+    try:
+        mallinfo = ctypes.CDLL("libc.so.6").mallinfo2
+    except (OSError, AttributeError):
+        return -1
+    mallinfo.restype = MallInfo
+    return int(mallinfo().fordblks)
+
+
+def _f12(size: str) -> dict:
+    """The engine's whole render (build, compile, trace) at ``size`` (WxH): CPU seconds and resident growth."""
+    import bpy
+
+    from addon import engine
+    from blender_scripts.addon_env import set_resolution
+
+    width, height = (int(v) for v in size.split("x"))
+    set_resolution(width, height)
+    scene = bpy.context.scene
+    scene.render.engine = engine.ENGINE_ID
+    scene.sdl_render.block_size, scene.sdl_render.progressive = 1, False
+    # (what the heap holds free before: Blender leaves tens of MB free after evaluating the scene, which the
+    # render takes again without growing; given back first, malloc_trim, the growth is Blender's evaluation
+    # of the render's own depsgraph too)
+    heap_free = _heap_free()
+    before_rss, before_cpu = _rss(), time.process_time()
+    peak, done = [before_rss], threading.Event()
+
+    def sample() -> None:  # (the resident size every 2 ms while the render runs: its peak)
+        while not done.wait(0.002):
+            peak[0] = max(peak[0], _rss())
+
+    sampler = threading.Thread(target=sample)
+    sampler.start()
+    try:
+        bpy.ops.render.render()
+    finally:
+        done.set()
+        sampler.join()
+    after = _rss()
+    return {"seconds_cpu": round(time.process_time() - before_cpu, 2), "rss_growth": after - before_rss,
+            "rss_peak_growth": max(peak[0], after) - before_rss, "heap_free_before": heap_free, "rays": engine.LAST_RENDER.get("rays"),
+            "error": engine.LAST_RENDER.get("error")}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--instances", type=int, default=100_000)
@@ -172,14 +261,18 @@ def main() -> None:
     args = parser.parse_args()
     import bpy
 
-    from addon import engine
     import addon.tracer.native  # noqa: F401  (the C core built before anything is measured)
 
     triangles, points = _scene(args.instances, args.triangles)
+    # (the F12 first, before the steps below free what its growth would take again: it grows by the mesh
+    # once, its BVH built, and what the instances cost)
+    f12 = _f12(args.render) if args.render != "none" else None
     mesh = _mesh_once()
     timed, kept = _steps(traced=False)
     del kept
-    traced, _ = _steps(traced=True)
+    traced, kept = _steps(traced=True)
+    held = _held(kept["build"], kept["compile"], points)
+    del kept
     steps = ("build", "compile")
     result = {"instances": points, "mesh_polygons": triangles, "blender": bpy.app.version_string,
               "timed": timed, "python_allocated": {k: traced[k]["python_allocated"] for k in steps},
@@ -189,20 +282,10 @@ def main() -> None:
     # (the mesh's BVH was built by _mesh_once and is found again: what build and compile add is per instance)
     result["bytes_per_instance_rss"] = round(sum(timed[k]["rss_growth"] for k in steps) / points, 1)
     result["bytes_per_instance_python"] = round(sum(result["python_allocated"].values()) / points, 1)
+    result["held_per_instance"] = held
     result["bpy_keeps_per_object_read"] = _bpy_object_reads()
-    if args.render != "none":
-        from blender_scripts.addon_env import set_resolution
-
-        width, height = (int(v) for v in args.render.split("x"))
-        set_resolution(width, height)
-        scene = bpy.context.scene
-        scene.render.engine = engine.ENGINE_ID
-        scene.sdl_render.block_size, scene.sdl_render.progressive = 1, False
-        before_rss, before_cpu = _rss(), time.process_time()
-        bpy.ops.render.render()
-        result["f12"] = {"seconds_cpu": round(time.process_time() - before_cpu, 2),
-                         "rss_growth": _rss() - before_rss, "rays": engine.LAST_RENDER.get("rays"),
-                         "error": engine.LAST_RENDER.get("error")}
+    if f12 is not None:
+        result["f12"] = f12
     text = json.dumps(result, indent=1)
     print(text)
     out = ROOT / "bench" / "results" / "blender_instances.json"

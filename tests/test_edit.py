@@ -285,7 +285,7 @@ def many_spheres(n: int = 400, seed: int = 1) -> Scene:
 def _pair_boxes(tracer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The C core's object hierarchy: per pair, its children's boxes (lo, hi: (P, 2, 3)), children and counts."""
     raw, items, root = tracer.object_tree()
-    record = np.dtype([("b", "<f8", (3, 2, 2)), ("child", "<i4", 2), ("count", "<i4", 2)])
+    record = np.dtype([("b", "<f4", (3, 2, 2)), ("child", "<i4", 2), ("count", "<i4", 2)])
     pairs = np.frombuffer(raw, dtype=record)
     boxes = pairs["b"].transpose(0, 3, 2, 1)  # [pair, child, lo/hi, axis]
     return boxes, pairs["child"], pairs["count"], items

@@ -392,6 +392,80 @@ def test_cook_torrance_and_every_shape_image():
 
 
 @requires_core
+def test_instances_of_one_mesh_as_table_rows():
+    """Instances as the add-on builds them from geometry nodes: rows of a table, one mesh under float32
+    matrices (turned, scaled and sheared), over a mirror, lit so that they shadow one another: C = NumPy,
+    image, rays and first hits."""
+    from tracer.model import Scene, TableRows
+
+    rng = np.random.default_rng(23)
+    n = 40
+    matrices = np.zeros((n, 4, 4))
+    for k in range(n):
+        turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        shear = np.eye(3)
+        shear[0, 1], shear[2, 0] = rng.uniform(-0.6, 0.6, 2)
+        matrices[k, :3, :3] = turn @ np.diag(rng.uniform(0.15, 0.5, 3)) @ shear
+        matrices[k, :3, 3] = rng.uniform(-4, 4), rng.uniform(0.3, 1.2), rng.uniform(-4, 2)
+        matrices[k, 3, 3] = 1.0
+    rows = TableRows()
+    floor = np.diag([6.0, 0.1, 6.0, 1.0]).astype(np.float32)[None]
+    rows.add_block(floor, [rows.part("cube", None, Material(diffuse=(0.4, 0.4, 0.5), reflectivity=0.5))])
+    pawn = rows.part("mesh", read_3vn(PAWN), Material(diffuse=(0.8, 0.3, 0.2), specular=(0.5, 0.5, 0.5)))
+    rows.add_block(matrices.astype(np.float32), np.full(n, pawn))
+    table = rows.table()
+    assert table.columns.affines.dtype == np.float32
+    scene = Scene(objects=table, lights=[Light((3, 8, 5), (1, 1, 1))], camera=Camera((0, 4, 10), (0, 0.5, 0),
+                                                                                     (0, 1, 0), 50))
+    c, numpy_image = _both(scene, 48, 36)
+    _assert_same_image(c, numpy_image)
+    rays = c.rays.as_dict()
+    assert rays["reflection"] > 0 and rays["shadow"] > 0
+    compiled, core = _core(scene)
+    origins = np.broadcast_to([0.0, 4.0, 10.0], (3000, 3)).copy()
+    directions = rng.normal(size=(3000, 3)) * 0.25 + (0.0, -0.35, -1.0)
+    ref, got = first_hits(compiled, origins, directions), core.first_hits(origins, directions)
+    hit = ref.hit
+    assert hit.sum() > 1000 and (ref.obj[hit] > 0).sum() > 100  # (the floor is object 0)
+    assert np.array_equal(np.isfinite(got["t"]), hit)
+    assert np.array_equal(got["obj"][hit], ref.obj[hit]) and np.array_equal(got["shape"][hit], ref.shape[hit])
+    assert np.all(np.abs(got["t"][hit] - ref.t[hit]) <= _time_tolerance(origins[0], directions[hit][0], ref.t[hit]))
+
+
+#: Python bytes a compiled instance of a mesh holds with what the C core is handed (tracemalloc, over
+#: compile_scene and the C core's scene): its primitive row 248 (inverse 128, box 48, sphere 32, rounding
+#: terms 32, parameter and kind), the flat tables beside it 45 and its object index 8; 368 when the flat
+#: tables copied the rounding terms and kept boxes in double, ~1000 when each instance is made a Shape.
+MAX_BYTES_PER_INSTANCE = 320
+
+
+@requires_core
+def test_instances_of_one_mesh_hold_few_bytes_each():
+    from tracer.model import Scene, TableRows
+    import tracemalloc
+
+    mesh = read_3vn(PAWN)
+    n = 20_000
+    matrices = np.zeros((n, 4, 4), dtype=np.float32)
+    matrices[:, 0, 0] = matrices[:, 1, 1] = matrices[:, 2, 2] = 0.3
+    matrices[:, 3, 3] = 1.0
+    matrices[:, :3, 3] = np.random.default_rng(5).uniform(-50, 50, (n, 3))
+    rows = TableRows()
+    rows.add_block(matrices, np.full(n, rows.part("mesh", mesh, Material())))
+    scene = Scene(objects=rows.table(), lights=[Light((0, 90, 0), (1, 1, 1))])
+    compile_scene(Scene(objects=[_mesh_shape(mesh)], lights=scene.lights))  # (the mesh's BVH, made once)
+    tracemalloc.start()
+    try:
+        compiled = compile_scene(scene)
+        NativeTracer(compiled, threads=1)
+        held = tracemalloc.get_traced_memory()[0] / n
+    finally:
+        tracemalloc.stop()
+    assert scene.objects.columns is not None  # (the rows stayed rows: no Shape made)
+    assert held <= MAX_BYTES_PER_INSTANCE, held
+
+
+@requires_core
 def test_glass_with_total_internal_reflection():
     # Light enters a slow glass block's slanted face and meets its flat faces beyond the critical angle.
     glass = dict(transparency=0.9, speed_of_light=0.6, diffuse=(0.05, 0.05, 0.05), ambient=(0, 0, 0),

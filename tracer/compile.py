@@ -652,7 +652,8 @@ class PrimitiveTable:
     its row, made only when asked for) and what flatten.py hands to the C core, computed once for all.
 
     ``inverses`` (N, 4, 4); ``inverse_error`` (N,) (numerics.inverse_rounding); ``inverse_norms`` (N, 2)
-    (Primitive.inverse_norms); ``generic_size`` (N,); ``spheres`` (N, 4), the world bounding spheres'
+    (Primitive.inverse_norms); ``generic_size`` (N,) (these three: the columns of ``rounding_terms`` (N, 4),
+    inverse error, generic size, the two norms); ``spheres`` (N, 4), the world bounding spheres'
     centres and radii (radius inf and centre 0 for unbounded shapes; ``centers`` and ``radii`` are views of
     it); ``boxes`` (N, 6), world boxes (lo, hi) the spheres are made round (of the generic box's corners, a
     polyhedron's vertices; for a mesh, MeshBound.world_box, which holds its vertices exactly; not padded,
@@ -680,8 +681,9 @@ class PrimitiveTable:
             matrices = _stack_checked(shapes)
         self._matrices = matrices
         self.inverses = np.empty((n, 4, 4))
-        self.inverse_error, self.inverse_norms = np.empty(n), np.empty((n, 2))
-        self.generic_size = np.ones(n)
+        self.rounding_terms = np.empty((n, 4))
+        self.rounding_terms[:, 1] = 1.0
+        self._rounding_views()
         self.spheres = np.zeros((n, 4))
         self.spheres[:, 3] = np.inf
         self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
@@ -757,9 +759,9 @@ class PrimitiveTable:
         self.material_ids = np.concatenate([self.material_ids[kept], np.asarray(added_material_ids, np.int32)])
         self.kind = grown(self.kind)
         self.parameters = grown(self.parameters, 0.0)
-        self.inverses, self.inverse_error, self.inverse_norms = (grown(self.inverses), grown(self.inverse_error),
-                                                                 grown(self.inverse_norms))
-        self.generic_size = grown(self.generic_size, 1.0)
+        self.inverses = grown(self.inverses)
+        self.rounding_terms = grown(self.rounding_terms, (0.0, 1.0, 0.0, 0.0))
+        self._rounding_views()
         self.spheres = grown(self.spheres)
         self.centers, self.radii = self.spheres[:, :3], self.spheres[:, 3]
         self.boxes = grown(self.boxes)
@@ -768,6 +770,12 @@ class PrimitiveTable:
         self._prune_meshes()
         if extra:
             self.refill(np.arange(len(kept), len(kept) + extra), self.shapes[len(kept):])
+
+    def _rounding_views(self) -> None:
+        """inverse_error, generic_size and inverse_norms as the columns of rounding_terms (what the C core
+        reads of each primitive, SceneDesc.prim_rounding: one table, not a copy beside these)."""
+        self.inverse_error, self.generic_size = self.rounding_terms[:, 0], self.rounding_terms[:, 1]
+        self.inverse_norms = self.rounding_terms[:, 2:]
 
     def _prune_meshes(self) -> None:
         """Forget the built meshes no row holds any longer (kept, an id freed could name another mesh later)."""
@@ -987,8 +995,9 @@ _BOX_HI = np.array([_BOX_CORNERS[e.keyword].max(axis=0) if e.keyword in _BOX_COR
                     for e in shapes.REGISTRY])
 _BOX_SIZE = np.array([float(np.max(np.abs(_BOX_CORNERS[e.keyword]))) if e.keyword in _BOX_CORNERS else 1.0
                       for e in shapes.REGISTRY])
-#: Rows per batch of the table's stacked computations: their temporaries stay a few MB at any size.
-_CHUNK = 1 << 15
+#: Rows per batch of the table's stacked computations: their temporaries stay ~2 MB at any size (~250 bytes
+#: a row; at 1 << 15 rows they were 80 bytes an instance of a scene of 10^5, at the top of its memory).
+_CHUNK = 1 << 13
 
 
 def row_chunks(n: int):

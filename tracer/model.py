@@ -644,8 +644,8 @@ class TableRows:
         self._single_parts.append(self.part(shape.kind, shape.mesh, shape.material, shape.parameters, shape.name))
 
     def add_block(self, matrices: np.ndarray, parts: np.ndarray) -> None:
-        """Rows under ``matrices`` ((k, 4, 4) affine float64: the bottom rows 0 0 0 1), row i of part
-        ``parts[i]`` (numbers from :meth:`part`)."""
+        """Rows under ``matrices`` ((k, 4, 4) affine, the bottom rows 0 0 0 1: float64, or float32 where
+        that is what they are), row i of part ``parts[i]`` (numbers from :meth:`part`)."""
         self._flush()
         self._blocks.append((matrices, np.asarray(parts, dtype=np.int32)))
 
@@ -659,17 +659,19 @@ class TableRows:
         of float32 values (as Blender's are), else as float64."""
         self._flush()
         n = sum(len(parts) for _, parts in self._blocks)
-        affines = np.empty((n, 12))
+        single = all(matrices.dtype == np.float32 for matrices, _ in self._blocks)
+        affines = np.empty((n, 12), dtype=np.float32 if single else np.float64)
         part_of_row = np.empty(n, dtype=np.int32)
         at = 0
         for matrices, parts in self._blocks:
-            affines[at:at + len(parts)] = matrices[:, :3, :].reshape(-1, 12)
+            affines[at:at + len(parts)].reshape(-1, 3, 4)[...] = matrices[:, :3, :]
             part_of_row[at:at + len(parts)] = parts
             at += len(parts)
         self._blocks = []
-        narrow = affines.astype(np.float32)
-        if np.array_equal(narrow, affines):
-            affines = narrow
+        if not single:  # (float32 blocks are float32 already; float64 ones may hold float32 values)
+            narrow = affines.astype(np.float32)
+            if np.array_equal(narrow, affines):
+                affines = narrow
         values = self._part_values
         meshes, mesh_number = [], {}
         for kind, mesh, *_ in values:

@@ -83,9 +83,9 @@ typedef struct {
     const double *prim_inverse;              /* 16 per primitive */
     const double *prim_sphere;               /* 4: bounding-sphere centre, radius (inf: unbounded) */
     const double *prim_param;                /* PRIM_PARAMS: the values its kind's intersection takes (ShapeKind.traced), 0 after */
-    const int64_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
+    const int32_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
-    const double *prim_rounding;             /* 4: rounding / generic size, generic size, |inverse| and |translation| (numerics) */
+    const double *prim_rounding;             /* 4: inverse error, generic size, |inverse| and |translation| (numerics; PrimitiveTable.rounding_terms): rounding / size is (hit_gamma + inverse error) / size */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
     /* triangle meshes (TriangleMesh.arrays(): per mesh, the address of each of its own arrays) */
@@ -108,7 +108,7 @@ typedef struct {
     /* top-level objects */
     int64_t n_objects;
     const int64_t *object_ref;
-    const double *object_box;                /* 6: lo, hi (padded); ignored when not bounded */
+    const float *object_box;                 /* 6: lo, hi (padded, single precision rounded outward as the hierarchy's own boxes are); ignored when not bounded */
     const uint8_t *object_bounded;
     /* materials */
     int64_t n_materials;
@@ -150,6 +150,7 @@ typedef struct {
     const double *noise_gradients;           /* 12 x 3: tracer.textures.noise.GRADIENTS */
     /* tolerances: the compiled scene's, not constants (a measurement varies them) */
     double tol_hit_ulps;                     /* CompiledScene.tolerances (tracer.numerics.Tolerances), field for field */
+    double hit_gamma;                        /* numerics.gamma(tol_hit_ulps): every primitive's rounding before its inverse's */
     double tol_offset_ulps;
     double tol_torus_residual_ulps;
     int64_t tol_torus_newton_steps;
@@ -220,6 +221,7 @@ typedef struct {
     X(SceneDesc, noise_perm) \
     X(SceneDesc, noise_gradients) \
     X(SceneDesc, tol_hit_ulps) \
+    X(SceneDesc, hit_gamma) \
     X(SceneDesc, tol_offset_ulps) \
     X(SceneDesc, tol_torus_residual_ulps) \
     X(SceneDesc, tol_torus_newton_steps) \
@@ -346,6 +348,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "d522c43d1d535b24"
+#define RT_CONTRACT_DIGEST "9721a2f241ca60a6"
 
 #endif

@@ -126,6 +126,7 @@ SCALARS = {
     "i32": ("int32_t", ctypes.c_int32, np.int32),
     "i64": ("int64_t", ctypes.c_int64, np.int64),
     "u64": ("uint64_t", ctypes.c_uint64, np.uint64),
+    "f32": ("float", ctypes.c_float, np.float32),
     "f64": ("double", ctypes.c_double, np.float64),
 }
 
@@ -186,9 +187,10 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_inverse", "*f64", "16 per primitive"),
     F("prim_sphere", "*f64", "4: bounding-sphere centre, radius (inf: unbounded)"),
     F("prim_param", "*f64", "PRIM_PARAMS: the values its kind's intersection takes (ShapeKind.traced), 0 after"),
-    F("prim_aux", "*i64", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
+    F("prim_aux", "*i32", "2: polyhedron (first plane, count) or mesh (mesh index, 0)"),
     F("prim_material", "*i32"),
-    F("prim_rounding", "*f64", "4: rounding / generic size, generic size, |inverse| and |translation| (numerics)"),
+    F("prim_rounding", "*f64", "4: inverse error, generic size, |inverse| and |translation| (numerics; "
+      "PrimitiveTable.rounding_terms): rounding / size is (hit_gamma + inverse error) / size"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64", section="triangle meshes (TriangleMesh.arrays(): per mesh, the address of each of "
       "its own arrays)"),
@@ -209,7 +211,8 @@ SCENE_DESC: tuple[Field, ...] = (
     F("csg_right", "*i64"),
     F("n_objects", "i64", section="top-level objects"),
     F("object_ref", "*i64"),
-    F("object_box", "*f64", "6: lo, hi (padded); ignored when not bounded"),
+    F("object_box", "*f32", "6: lo, hi (padded, single precision rounded outward as the hierarchy's own "
+      "boxes are); ignored when not bounded"),
     F("object_bounded", "*u8"),
     F("n_materials", "i64", section="materials"),
     F("mat_ambient", "*f64", "3 each"),
@@ -248,6 +251,7 @@ SCENE_DESC: tuple[Field, ...] = (
     F("noise_gradients", "*f64", "12 x 3: tracer.textures.noise.GRADIENTS"),
     F("tol_hit_ulps", "f64", "CompiledScene.tolerances (tracer.numerics.Tolerances), field for field",
       section="tolerances: the compiled scene's, not constants (a measurement varies them)"),
+    F("hit_gamma", "f64", "numerics.gamma(tol_hit_ulps): every primitive's rounding before its inverse's"),
     F("tol_offset_ulps", "f64"),
     F("tol_torus_residual_ulps", "f64"),
     F("tol_torus_newton_steps", "i64"),

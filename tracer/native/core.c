@@ -74,9 +74,11 @@ const char *rt_contract_digest(void) { return RT_CONTRACT_DIGEST; }
 
 /* ...and as it is traversed: one record per inner node holding both children's boxes, side by side so
  * that one pass of two-lane arithmetic tests both.  A child is a leaf (items[first : first + count]) when
- * its count is > 0, else the index of its own pair record. */
+ * its count is > 0, else the index of its own pair record.  The boxes are the built tree's own single
+ * precision ones (BvhNode: rounded outward), and a refit's rounded outward the same way: 64 bytes a
+ * record, one for each bounded object but one (a scene of 10^5 instances holds 10^5 of them). */
 typedef struct {
-    double b[3][2][2];    /* [axis][0: lo, 1: hi][child] */
+    float b[3][2][2];     /* [axis][0: lo, 1: hi][child] */
     int32_t child[2];     /* inner: pair index; leaf: first item */
     int32_t count[2];     /* leaf: items (> 0; -1: none left after removals); inner: 0 */
 } PairNode;
@@ -243,7 +245,7 @@ static int analytic_hits(const Scene *S, int64_t p, const double *o, const doubl
 {
     const SceneDesc *D = &S->d;
     const double *param = D->prim_param + PRIM_PARAMS * p;
-    const int64_t *aux = D->prim_aux + 2 * p;
+    const int32_t *aux = D->prim_aux + 2 * p;
     (void)param;
     (void)aux;
     *inside = 0;
@@ -330,7 +332,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
                 agree_with_crossing(&out->h[i], dg);
     }
     ErrorFrame frame;
-    error_frame(o, og, dg, D->prim_rounding + 4 * p, &frame);
+    error_frame(o, og, dg, D->prim_rounding + 4 * p, D->hit_gamma, &frame);
     const MeshView *mesh = D->prim_kind[p] == K_MESH ? &S->meshes[D->prim_aux[2 * p]] : NULL;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
@@ -361,7 +363,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         out->shape = (int32_t)p;
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
-            error_frame(o, og, dg, rounding, &frame);
+            error_frame(o, og, dg, rounding, D->hit_gamma, &frame);
             hit_bounds(&frame, dg, &S->meshes[D->prim_aux[2 * p]], out);
         }
         return 1;
@@ -374,7 +376,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     int n = D->prim_kind[p] == K_SPHERE ? hits_sphere(og, dg, buf) : analytic_hits(S, p, og, dg, buf, &inside);
     ErrorFrame frame;
     if (n)
-        error_frame(o, og, dg, rounding, &frame);
+        error_frame(o, og, dg, rounding, D->hit_gamma, &frame);
     for (int i = 0; i < n; i++) {
         double t = buf[i].t + shift;
         if (!(t > t_min && t < t_max))
@@ -412,7 +414,7 @@ static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double 
 {
     const MeshView *m = &S->meshes[S->d.prim_aux[2 * p]];
     ErrorFrame frame;
-    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, &frame);
+    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, S->d.hit_gamma, &frame);
     double lower = t_min;
     Hit h;
     while (mesh_closest(m, og, dg, lower, t_max, w->mesh_stack, w->wide_stack, &h)) {
@@ -587,6 +589,14 @@ static inline int box_hit(const double *lo, const double *hi, const double *o, c
     return near <= far;
 }
 
+#if defined(__SSE2__)
+/* Both children's planes of one side and axis, as two doubles (exact). */
+static inline __m128d pair_planes(const float *two)
+{
+    return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)two)));
+}
+#endif
+
 /* Which children of p the ray meets with lo <= t <= far (bit 0: child 0, bit 1: child 1), and where it
  * enters their boxes. */
 static inline int pair_hit(const PairNode *p, const RayBoxes *r, double lo, double far, double *near_out)
@@ -597,8 +607,8 @@ static inline int pair_hit(const PairNode *p, const RayBoxes *r, double lo, doub
         for (int i = 0; i < 3; i++) {
             __m128d o = _mm_set1_pd(r->o[i]), inv = _mm_set1_pd(r->inv[i]);
             int s = r->near_side[i];
-            __m128d tn = _mm_mul_pd(_mm_sub_pd(_mm_loadu_pd(p->b[i][s]), o), inv);
-            __m128d tf = _mm_mul_pd(_mm_sub_pd(_mm_loadu_pd(p->b[i][1 - s]), o), inv);
+            __m128d tn = _mm_mul_pd(_mm_sub_pd(pair_planes(p->b[i][s]), o), inv);
+            __m128d tf = _mm_mul_pd(_mm_sub_pd(pair_planes(p->b[i][1 - s]), o), inv);
             near = _mm_max_pd(tn, near);
             fr = _mm_min_pd(tf, fr);
         }
@@ -903,7 +913,7 @@ static int pair_tree(Scene *S)
 
 /* An object's box as the slab test sees it: an axis whose bounds are in the wrong order is the slab between
  * them, one with a NaN bound is no constraint at all; and its centre (0 where not finite). */
-static void clean_box(const double *box, double *clean, double *centre)
+static void clean_box(const float *box, double *clean, double *centre)
 {
     for (int k = 0; k < 3; k++) {
         double lo = box[k], hi = box[3 + k];
@@ -1040,8 +1050,8 @@ static void set_child_box(Scene *S, int64_t p, int c)
     double lo[3], hi[3];
     child_box(S, p, c, lo, hi);
     for (int i = 0; i < 3; i++) {
-        S->pairs[p].b[i][0][c] = lo[i];
-        S->pairs[p].b[i][1][c] = hi[i];
+        S->pairs[p].b[i][0][c] = bvh_single_below(lo[i]);
+        S->pairs[p].b[i][1][c] = bvh_single_above(hi[i]);
     }
 }
 

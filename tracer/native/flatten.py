@@ -102,12 +102,19 @@ def _padded_boxes(table: PrimitiveTable, rows=slice(None)) -> np.ndarray:
     return boxes
 
 
-def _rounding(table: PrimitiveTable, rows=slice(None)) -> np.ndarray:
-    """SceneDesc.prim_rounding of every row, or of ``rows``: (rounding / generic size, generic size, the two
-    inverse norms), rounding as Primitive.rounding."""
-    rounding = numerics.gamma(table.tolerances.hit_ulps) + table.inverse_error[rows]
-    size = table.generic_size[rows]
-    return np.concatenate([(rounding / size)[:, None], size[:, None], table.inverse_norms[rows]], axis=1)
+def _single_boxes(boxes: np.ndarray) -> np.ndarray:
+    """(P, 6) boxes (lo, hi) in single precision, each axis's bounds put in order (as the C core's slab test
+    takes them) and rounded outward, so that they still hold what they held: the C core's hierarchy keeps
+    its boxes so (bvh_build.h), and an object's box as a float is what that hierarchy is built from.  A NaN
+    bound stays NaN (no constraint on that axis)."""
+    lo, hi = np.minimum(boxes[:, :3], boxes[:, 3:]), np.maximum(boxes[:, :3], boxes[:, 3:])
+    out = np.empty((len(boxes), 6), dtype=np.float32)
+    with np.errstate(all="ignore"):  # (overflow to inf, NaN, denormals: rounded as they come)
+        for side, bound, toward in ((slice(0, 3), lo, -np.inf), (slice(3, 6), hi, np.inf)):
+            rounded = bound.astype(np.float32)
+            off = rounded > bound if toward < 0 else rounded < bound
+            out[:, side] = np.where(off, np.nextafter(rounded, np.float32(toward)), rounded)
+    return out
 
 
 def _box(node, lo: np.ndarray, hi: np.ndarray, bounded: np.ndarray):
@@ -138,10 +145,10 @@ class FlatScene:
         a["prim_sphere"] = table.spheres
         a["prim_param"] = table.parameters  # (PRIM_PARAMS per primitive: what its kind's intersection takes)
         a["prim_material"] = table.material_ids
-        a["prim_rounding"] = _rounding(table)
+        a["prim_rounding"] = table.rounding_terms  # (a view, as the inverses)
 
         # Polyhedra planes (one set per kind) and meshes (instances share one mesh).
-        aux = np.zeros((n, 2), dtype=np.int64)
+        aux = np.zeros((n, 2), dtype=np.int32)
         self._planes_of: dict[str, tuple[int, int]] = {}  # polyhedron kind -> (first plane, count)
         self._plane_blocks: list[np.ndarray] = []  # each kind's planes, in that order
         for kind in POLYHEDRON_KINDS:
@@ -167,25 +174,26 @@ class FlatScene:
             csg_right.append(right)
             return -len(csg_op)  # node k is ref -k - 1
 
-        prim_box, prim_bounded = _padded_boxes(table), _BOUNDED[table.kind]
-        prim_lo, prim_hi = prim_box[:, :3], prim_box[:, 3:]
+        prim_bounded = _BOUNDED[table.kind]
         objects = compiled.objects
         index = objects.primitive_index
         if not objects.booleans:  # object k is primitive k: its tables are the primitives'
-            object_ref, object_box, bounded = index, prim_box, prim_bounded
+            object_ref, object_box, bounded = index, _single_boxes(_padded_boxes(table)), prim_bounded
         else:
+            prim_box = _padded_boxes(table)
+            prim_lo, prim_hi = prim_box[:, :3], prim_box[:, 3:]
             plain = np.flatnonzero(index >= 0)
             object_ref = index.copy()
-            object_box = np.zeros((len(index), 6))
+            object_box = np.zeros((len(index), 6), dtype=np.float32)
             bounded = np.zeros(len(index), dtype=bool)
             bounded[plain] = prim_bounded[index[plain]]
-            object_box[plain] = prim_box[index[plain]]
+            object_box[plain] = _single_boxes(prim_box[index[plain]])
         for k, obj in objects.booleans.items():
             object_ref[k] = fold_tree(obj, lambda prim: prim.index, boolean_ref)
             box = _box(obj, prim_lo, prim_hi, prim_bounded)
             if box is not None:
                 bounded[k] = True
-                object_box[k, :3], object_box[k, 3:] = box
+                object_box[k] = _single_boxes(np.concatenate(box)[None])[0]
         a.update(csg_op=csg_op, csg_left=csg_left, csg_right=csg_right, object_ref=object_ref,
                  object_box=object_box, object_bounded=bounded)
         self._counts = dict(n_prims=n, n_csg=len(csg_op), n_objects=len(object_ref))
@@ -258,6 +266,7 @@ class FlatScene:
                        mesh_constants=self._mesh_constants(self._meshes))
         tol = compiled.tolerances
         scalars.update(tol_hit_ulps=float(tol.hit_ulps), tol_offset_ulps=float(tol.offset_ulps),
+                       hit_gamma=float(numerics.gamma(compiled.table.tolerances.hit_ulps)),
                        tol_torus_residual_ulps=float(tol.torus_residual_ulps),
                        tol_torus_newton_steps=int(tol.torus_newton_steps),
                        tol_torus_pair_shortcut=float(tol.torus_pair_shortcut), tol_square_edge=float(tol.square_edge))
@@ -286,8 +295,8 @@ class FlatScene:
         a, table = self.arrays, compiled.table
         touched_meshes = bool((a["prim_kind"][prims] == KIND_CODES["mesh"]).any())  # (before: was a mesh)
         a["prim_kind"][prims] = _CODE_OF_ENTRY[table.kind[prims]]
-        a["prim_rounding"].reshape(-1, 4)[prims] = _rounding(table, prims)
         for name, column, width in (("prim_inverse", table.inverses, 16), ("prim_sphere", table.spheres, 4),
+                                    ("prim_rounding", table.rounding_terms, 4),
                                     ("prim_param", table.parameters, PRIM_PARAMS),
                                     ("prim_material", table.material_ids, 1)):
             a[name].reshape(-1, width)[prims] = column[prims].reshape(-1, width)  # (no-ops where a is a view)
@@ -325,7 +334,7 @@ class FlatScene:
         index = compiled.objects.primitive_index[objects]
         plain = index >= 0
         rows = index[plain]
-        object_box[objects[plain]] = _padded_boxes(table, rows)
+        object_box[objects[plain]] = _single_boxes(_padded_boxes(table, rows))
         bounded[objects[plain]] = _BOUNDED[table.kind[rows]]
         if plain.all():
             return
@@ -337,7 +346,7 @@ class FlatScene:
             box = _box(compiled.objects.booleans[k], lo, hi, prim_bounded)
             bounded[k] = box is not None
             if box is not None:
-                object_box[k, :3], object_box[k, 3:] = box
+                object_box[k] = _single_boxes(np.concatenate(box)[None])[0]
 
     def _drop_unused_meshes(self, table: PrimitiveTable) -> bool:
         """Drop the meshes no primitive refers to any more (renumbering the others); whether any was."""

@@ -138,7 +138,8 @@ static inline double crossing_shift(double delta, double slope, double bend)
 }
 
 /* tracer.numerics.point_errors and time_errors for the hits of one generic ray, its per-ray parts computed
- * once.  `r` is the primitive's prim_rounding: rounding / size, size, |inverse|, |translation|. */
+ * once.  `r` is the primitive's prim_rounding: its inverse's error, size, |inverse|, |translation|; `gamma` the
+ * scene's hit_gamma (the primitive's rounding is gamma + its inverse's error, as Primitive.rounding). */
 typedef struct {
     double base;   /* the transformed origin's size before cancellation + |centred origin| + size */
     double reach;  /* max |d_generic| */
@@ -147,12 +148,13 @@ typedef struct {
     double size;
 } ErrorFrame;
 
-static inline void error_frame(const double *o, const double *og, const double *dg, const double *r, ErrorFrame *f)
+static inline void error_frame(const double *o, const double *og, const double *dg, const double *r, double gamma,
+                               ErrorFrame *f)
 {
     f->base = r[2] * max_abs3(o) + r[3] + max_abs3(og) + r[1];
     f->reach = max_abs3(dg);
     f->dd = dot3(dg, dg);
-    f->rate = r[0];
+    f->rate = (gamma + r[0]) / r[1];
     f->size = r[1];
 }
 

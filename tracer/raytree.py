@@ -25,7 +25,7 @@ import numpy as np
 #: call, and a cancel is heard between calls).
 CHUNK = 8192
 #: Most rays the trees of one batch may hold (~550 bytes each, ~290 MB): a batch whose trees grow past it is
-#: traced again in halves (TooManyRays), so deep glass over a whole tile does not take all memory.
+#: traced again in parts (TooManyRays, Tracer.shade), so deep glass over a whole tile does not take all memory.
 MAX_RAYS = 1 << 19
 MIRROR, THROUGH = 0, 1  # the two children of a node, in the recursion's order
 
@@ -126,7 +126,7 @@ def mirror_share(budget: np.ndarray, both: np.ndarray, ratio: np.ndarray, chain:
 
 
 class TooManyRays(Exception):
-    """The trees of a batch hold more than MAX_RAYS rays (the caller traces its halves apart)."""
+    """The trees of a batch hold more than MAX_RAYS rays (the caller traces it in parts)."""
 
 
 class RayTrees:
@@ -155,10 +155,14 @@ class RayTrees:
                 continue
             if not self._undecided():
                 break
-            if self._settle() == settled_before:  # (cannot happen: exact bounds decide every ray)
-                raise RuntimeError("ray tree: the budget bounds stopped narrowing")
+            if self._settle() == settled_before:  # (every level narrowed again: the bounds become exact in the end)
+                self.dirty = [True] * len(self.generations)
+                if self._settle() == settled_before:  # (cannot happen: exact bounds decide every ray)
+                    raise RuntimeError("ray tree: the budget bounds stopped narrowing")
         self._count_budget_skips()
-        return self._colors()
+        colors = self._colors()
+        self.generations, self.dirty = [], []  # (the trees can be large: not held past the batch)
+        return colors
 
     # -- the bounds ----------------------------------------------------------------------------------------
 

@@ -598,7 +598,10 @@ class _Instancer:
         if not hasattr(parent, "evaluated_geometry") or parent.type != "MESH" or \
                 original.instance_type != "NONE" or len(original.particle_systems):
             return None
-        geometry = parent.evaluated_geometry()
+        try:
+            geometry = parent.evaluated_geometry()
+        except (RuntimeError, ReferenceError):  # (not evaluated, or gone: read one object at a time)
+            return None
         cloud = geometry.instances_pointcloud()
         if cloud is None or any(getattr(geometry, name, None) is not None for name in _OTHER_COMPONENTS):
             return None

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from helpers import Camera, scaling, scene_of, shape, translation
-from tracer import native, trace
+from tracer import native, raytree, trace
 from tracer.compile import compile_scene
 from tracer.render import render
 from tracer.savings import RaySavings
@@ -101,3 +101,14 @@ def test_shade_traces_the_tree_of_each_ray_with_its_own_budget():
         color = alone.shade(origins[k:k + 1], directions[k:k + 1], 0, trace.Media.air(1))
         assert np.array_equal(color[0], colors[k])
     assert together.counts.reflection > 40 and together.counts.skipped_budget > 0
+
+
+def test_trees_too_large_to_hold_at_once_are_traced_in_parts(monkeypatch):
+    """Past raytree.MAX_RAYS rays a batch is traced again in halves: the same image and counts."""
+    scene = _nested_glass(0.95, 0.95, 0.5)
+    limited = replace(RaySavings(), ray_budget=400)
+    whole = render(scene, 8, 6, backend="numpy", savings=limited)
+    monkeypatch.setattr(raytree, "MAX_RAYS", 300)
+    parts = render(scene, 8, 6, backend="numpy", savings=limited)
+    assert whole.rays == parts.rays and whole.rays.reflection + whole.rays.refraction > 1000
+    assert np.array_equal(whole.image, parts.image)

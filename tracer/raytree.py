@@ -24,6 +24,9 @@ import numpy as np
 #: Most rays one call of ``shade_batch`` traces (a generation of a deep tree can be large: bounded memory per
 #: call, and a cancel is heard between calls).
 CHUNK = 8192
+#: Most rays the trees of one batch may hold (~550 bytes each, ~290 MB): a batch whose trees grow past it is
+#: traced again in parts (TooManyRays, Tracer.shade), so deep glass over a whole tile does not take all memory.
+MAX_RAYS = 1 << 19
 MIRROR, THROUGH = 0, 1  # the two children of a node, in the recursion's order
 
 
@@ -80,8 +83,9 @@ class _Generation:
     """The traced rays of one level of the trees: what ``shade_batch`` found, the parent of each (an index
     into the level above), its children (indices into the level below, -1: not traced), and the bounds."""
 
-    def __init__(self, shaded: Shaded, parent: np.ndarray, budget_lo: np.ndarray, budget_hi: np.ndarray):
-        self.rays, self.parent = shaded, parent
+    def __init__(self, shaded: Shaded, parent: np.ndarray, slot: np.ndarray, budget_lo: np.ndarray,
+                 budget_hi: np.ndarray):
+        self.rays, self.parent, self.slot = shaded, parent, slot  # slot: which child of its parent
         n = parent.shape[0]
         self.child = np.full((n, 2), -1, dtype=np.int64)
         self.budget_lo, self.budget_hi = budget_lo, budget_hi  # bounds on the rays its descendants may trace
@@ -101,8 +105,8 @@ class _Generation:
 
     def extend(self, more: "_Generation") -> None:
         self.rays = _join([self.rays, more.rays])
-        for name in ("parent", "child", "budget_lo", "budget_hi", "used_lo", "used_hi", "sure", "maybe", "slot_lo",
-                     "slot_hi", "both", "ratio"):
+        for name in ("parent", "slot", "child", "budget_lo", "budget_hi", "used_lo", "used_hi", "sure", "maybe",
+                     "slot_lo", "slot_hi", "both", "ratio"):
             setattr(self, name, np.concatenate([getattr(self, name), getattr(more, name)]))
 
 
@@ -121,6 +125,10 @@ def mirror_share(budget: np.ndarray, both: np.ndarray, ratio: np.ndarray, chain:
     return np.maximum(share, 0)
 
 
+class TooManyRays(Exception):
+    """The trees of a batch hold more than MAX_RAYS rays (the caller traces it in parts)."""
+
+
 class RayTrees:
     """The trees of a batch of rays at ``level`` (camera rays: 0), each with ``budget`` secondary rays, down to
     ``depth`` (traced_depth); ``tracer`` shades the batches and counts the rays."""
@@ -137,7 +145,8 @@ class RayTrees:
         self.batches += 1
         first = self.tracer.shade_batch(origins, directions, self.level, media, weight)
         full = np.full(n, self.budget, dtype=np.int64)
-        self.generations = [_Generation(first, np.full(n, -1, dtype=np.int64), full, full.copy())]
+        self.generations = [_Generation(first, np.full(n, -1, dtype=np.int64), np.zeros(n, np.int64), full,
+                                        full.copy())]
         self.dirty = [True]  # per level: a bound it reads changed since it was last narrowed
         self.narrowed = 0  # bounds that narrowed (they only narrow)
         while True:
@@ -146,10 +155,14 @@ class RayTrees:
                 continue
             if not self._undecided():
                 break
-            if self._settle() == settled_before:  # (cannot happen: exact bounds decide every ray)
-                raise RuntimeError("ray tree: the budget bounds stopped narrowing")
+            if self._settle() == settled_before:  # (every level narrowed again: the bounds become exact in the end)
+                self.dirty = [True] * len(self.generations)
+                if self._settle() == settled_before:  # (cannot happen: exact bounds decide every ray)
+                    raise RuntimeError("ray tree: the budget bounds stopped narrowing")
         self._count_budget_skips()
-        return self._colors()
+        colors = self._colors()
+        self.generations, self.dirty = [], []  # (the trees can be large: not held past the batch)
+        return colors
 
     # -- the bounds ----------------------------------------------------------------------------------------
 
@@ -202,22 +215,24 @@ class RayTrees:
             self.dirty[g - 1] = True
         self.narrowed += changed
         gen.used_lo, gen.used_hi = used_lo, used_hi
-        gen.sure |= np.stack([mirror_sure, through_sure], axis=1)
-        gen.maybe = np.stack([mirror_maybe, through_maybe], axis=1) | gen.sure
-        gen.slot_lo = np.maximum(gen.slot_lo, np.stack([mirror_lo, through_lo], axis=1))
-        gen.slot_hi = np.minimum(gen.slot_hi, np.stack([mirror_hi, through_hi], axis=1))
+        for slot, sure, maybe, slot_lo, slot_hi in ((MIRROR, mirror_sure, mirror_maybe, mirror_lo, mirror_hi),
+                                                    (THROUGH, through_sure, through_maybe, through_lo, through_hi)):
+            gen.sure[:, slot] |= sure
+            gen.maybe[:, slot] = maybe | gen.sure[:, slot]
+            np.maximum(gen.slot_lo[:, slot], slot_lo, out=gen.slot_lo[:, slot])
+            np.minimum(gen.slot_hi[:, slot], slot_hi, out=gen.slot_hi[:, slot])
         if g + 1 < len(self.generations):
-            below = self.generations[g + 1]
-            for slot in (MIRROR, THROUGH):
-                rows = np.nonzero(gen.child[:, slot] >= 0)[0]
-                child = gen.child[rows, slot]
-                lo = np.maximum(below.budget_lo[child], gen.slot_lo[rows, slot])
-                hi = np.minimum(below.budget_hi[child], gen.slot_hi[rows, slot])
-                changed = int(np.count_nonzero(lo != below.budget_lo[child]) + np.count_nonzero(hi != below.budget_hi[child]))
-                if changed:
-                    self.dirty[g + 1] = True
-                    self.narrowed += changed
-                    below.budget_lo[child], below.budget_hi[child] = lo, hi
+            self._hand_down(gen, self.generations[g + 1], g + 1)
+
+    def _hand_down(self, gen: _Generation, below: _Generation, g: int) -> None:
+        """The traced children (level ``g``) take their parents' bounds on their budgets."""
+        lo = np.maximum(below.budget_lo, gen.slot_lo[below.parent, below.slot])
+        hi = np.minimum(below.budget_hi, gen.slot_hi[below.parent, below.slot])
+        changed = int(np.count_nonzero(lo != below.budget_lo) + np.count_nonzero(hi != below.budget_hi))
+        if changed:
+            self.dirty[g] = True
+            self.narrowed += changed
+            below.budget_lo, below.budget_hi = lo, hi
 
     def _undecided(self) -> bool:
         return any(bool((gen.maybe & ~gen.sure & gen.rays.want).any()) for gen in self.generations)
@@ -236,6 +251,9 @@ class RayTrees:
                               np.concatenate([np.full(mirror.size, MIRROR), np.full(through.size, THROUGH)])))
         if not parts:
             return False
+        held = sum(len(gen) for gen in self.generations) + sum(parent.size for _, parent, _ in parts)
+        if held > MAX_RAYS and len(self.generations[0]) > 1:  # (one tree is traced whatever its size)
+            raise TooManyRays
         counts = self.tracer.counts
         for g, parent, slot in parts:
             rays = self.generations[g].rays
@@ -269,7 +287,7 @@ class RayTrees:
     def _add(self, g: int, parent: np.ndarray, slot: np.ndarray, shaded: Shaded) -> None:
         """Level g + 1 grows by the ``slot`` children of the rays ``parent`` of level g."""
         gen = self.generations[g]
-        new = _Generation(shaded, parent, gen.slot_lo[parent, slot].copy(), gen.slot_hi[parent, slot].copy())
+        new = _Generation(shaded, parent, slot, gen.slot_lo[parent, slot].copy(), gen.slot_hi[parent, slot].copy())
         if g + 1 == len(self.generations):
             self.generations.append(new)
             self.dirty.append(True)

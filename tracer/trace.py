@@ -7,7 +7,7 @@ Each effect runs only if the compiled scene says it is live, and every ray cast 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -15,7 +15,7 @@ from .compile import CompiledScene
 from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
 from .model import MEDIA_DEPTH, traced_depth
-from .raytree import MIRROR, THROUGH, RayTrees, Shaded
+from .raytree import MIRROR, THROUGH, RayTrees, Shaded, TooManyRays
 from .savings import SKIP_REASONS, RaySavings
 from .skippable import dark_materials, sealed_table
 
@@ -277,9 +277,19 @@ class Tracer:
         """Colours of the rays at ``level`` in ``media``, each with the ray tree below it (tracer.raytree: a
         generation of all the trees per batch, and each tree with the ray budget of a camera ray);
         ``weight``: each ray's share of its pixel (for the contribution cutoff; default 1)."""
-        weight = np.ones(origins.shape[0]) if weight is None else weight
+        n = origins.shape[0]
+        weight = np.ones(n) if weight is None else weight
+        before = replace(self.counts)
         self.trees = RayTrees(self, level, self.depth, self.savings.ray_budget)
-        return self.trees.trace(origins, directions, media, weight)
+        try:
+            return self.trees.trace(origins, directions, media, weight)
+        except TooManyRays:  # (trees too large to hold at once: in parts, the same rays and colours)
+            pass
+        for f in fields(RayCounts):  # (the rays of the attempt are not counted)
+            setattr(self.counts, f.name, getattr(before, f.name))
+        bounds = np.linspace(0, n, min(n, 4) + 1).astype(int)  # (quarters: a tree of halves wastes more tries)
+        return np.concatenate([self.shade(origins[a:b], directions[a:b], level, media.subset(slice(a, b)), weight[a:b])
+                               for a, b in zip(bounds[:-1], bounds[1:])])
 
     def shade_batch(self, origins: np.ndarray, directions: np.ndarray, level, media: Media,
                     weight: np.ndarray) -> Shaded:

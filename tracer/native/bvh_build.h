@@ -582,6 +582,16 @@ static void box_grow(double *lo, double *hi, const double *blo, const double *bh
 /* The bin of centre coordinate c in a node whose centres span [lo, lo + extent] along the axis; `scale` is
  * SAH_BINS / extent, divided once per node and axis (a division per object and axis took ~20 cycles in the
  * binning loop), the same number. */
+/* box_grow by a box kept in single precision (each bound widened to double exactly: the same numbers). */
+static void box_grow_single(double *lo, double *hi, const float *blo, const float *bhi)
+{
+    for (int i = 0; i < 3; i++) {
+        double l = blo[i], h = bhi[i];
+        lo[i] = l < lo[i] ? l : lo[i];
+        hi[i] = h > hi[i] ? h : hi[i];
+    }
+}
+
 static inline int64_t sah_bin(double c, double lo, double scale)
 {
     int64_t k = (int64_t)((c - lo) * scale);
@@ -589,10 +599,12 @@ static inline int64_t sah_bin(double c, double lo, double scale)
 }
 
 /* What an object build reads and rearranges: per position, the object (items), its box's centre (3) and its
- * box (6: lo, hi; NaN-free, lo <= hi).  A node over positions [start, end) permutes only those. */
+ * box (6: lo, hi; NaN-free, lo <= hi; the objects' boxes are single precision, and so kept: half the bytes of
+ * doubles to move in every pass over a node).  A node over positions [start, end) permutes only those. */
 typedef struct {
     int64_t *items;
-    double *centre, *boxes;
+    double *centre;
+    float *boxes;
 } ObjectInput;
 
 /* A split candidate: after bin `split` along `axis` (-1: none), at `cost`. */
@@ -620,13 +632,13 @@ static ObjectSplit object_best_split(const ObjectInput *in, int64_t start, int64
             box_empty(blo[k][j], bhi[k][j]);
     }
     for (int64_t i = start; i < end; i++) {
-        const double *box = in->boxes + 6 * i;
+        const float *box = in->boxes + 6 * i;
         for (int k = 0; k < 3; k++) {
             if (!spread[k])
                 continue;
             int64_t j = sah_bin(in->centre[3 * i + k], clo[k], scale[k]);
             count[k][j]++;
-            box_grow(blo[k][j], bhi[k][j], box, box + 3);
+            box_grow_single(blo[k][j], bhi[k][j], box, box + 3);
         }
     }
     for (int k = 0; k < 3; k++) {
@@ -687,14 +699,14 @@ static ObjectSplit object_best_split_few(const ObjectInput *in, int64_t start, i
         double rlo[3], rhi[3], llo[3], lhi[3];
         box_empty(rlo, rhi);
         for (int64_t p = n - 1; p > 0; p--) {
-            const double *box = in->boxes + 6 * order[p];
-            box_grow(rlo, rhi, box, box + 3);
+            const float *box = in->boxes + 6 * order[p];
+            box_grow_single(rlo, rhi, box, box + 3);
             right_area[p] = half_area(rlo, rhi);
         }
         box_empty(llo, lhi);
         for (int64_t p = 0; p < n - 1; p++) {
-            const double *box = in->boxes + 6 * order[p];
-            box_grow(llo, lhi, box, box + 3);
+            const float *box = in->boxes + 6 * order[p];
+            box_grow_single(llo, lhi, box, box + 3);
             if (bin[p + 1] == bin[p])
                 continue;
             double cost = half_area(llo, lhi) * (double)(p + 1) + right_area[p + 1] * (double)(n - p - 1);
@@ -711,7 +723,8 @@ static int64_t object_partition(const ObjectInput *in, int64_t start, int64_t en
                                 double scale)
 {
     int64_t *items = in->items;
-    double *centre = in->centre, *boxes = in->boxes;
+    double *centre = in->centre;
+    float *boxes = in->boxes;
     int axis = split.axis;
     int64_t i = start, j = end - 1;
     while (i <= j) {
@@ -726,7 +739,7 @@ static int64_t object_partition(const ObjectInput *in, int64_t start, int64_t en
             centre[3 * j + k] = c;
         }
         for (int k = 0; k < 6; k++) {
-            double c = boxes[6 * i + k];
+            float c = boxes[6 * i + k];
             boxes[6 * i + k] = boxes[6 * j + k];
             boxes[6 * j + k] = c;
         }
@@ -743,8 +756,8 @@ static int64_t object_split(const void *input, int64_t start, int64_t end, BvhNo
     box_empty(lo, hi);
     box_empty(clo, chi);
     for (int64_t i = start; i < end; i++) {
-        const double *box = in->boxes + 6 * i;
-        box_grow(lo, hi, box, box + 3);
+        const float *box = in->boxes + 6 * i;
+        box_grow_single(lo, hi, box, box + 3);
         box_grow(clo, chi, in->centre + 3 * i, in->centre + 3 * i);
     }
     memset(record, 0, sizeof(*record));

@@ -913,7 +913,7 @@ static int pair_tree(Scene *S)
 
 /* An object's box as the slab test sees it: an axis whose bounds are in the wrong order is the slab between
  * them, one with a NaN bound is no constraint at all; and its centre (0 where not finite). */
-static void clean_box(const float *box, double *clean, double *centre)
+static void clean_box(const float *box, float *clean, double *centre)
 {
     for (int k = 0; k < 3; k++) {
         double lo = box[k], hi = box[3 + k];
@@ -923,8 +923,8 @@ static void clean_box(const float *box, double *clean, double *centre)
         } else if (lo > hi) {
             double x = lo; lo = hi; hi = x;
         }
-        clean[k] = lo;
-        clean[3 + k] = hi;
+        clean[k] = (float)lo;  /* (exact: a float, or an infinity) */
+        clean[3 + k] = (float)hi;
         double c = 0.5 * (lo + hi);
         centre[k] = isfinite(c) ? c : 0.0;
     }
@@ -964,7 +964,7 @@ static int build_tree(Scene *S, int64_t threads)
     double *centre = (double *)malloc((size_t)(3 * nb + 1) * sizeof(double));
     /* The boxes as the slab test sees them (clean_box), like centre[] by position in items[] (the partition
      * moves them with their items): the passes over a node then read memory in order. */
-    double *boxes = (double *)malloc((size_t)(6 * nb + 1) * sizeof(double));
+    float *boxes = (float *)malloc((size_t)(6 * nb + 1) * sizeof(float));
     if (!S->unbounded || !S->items || !centre || !boxes) {
         free(centre);
         free(boxes);
@@ -1039,9 +1039,10 @@ static void child_box(const Scene *S, int64_t p, int c, double *lo, double *hi)
         return;
     }
     for (int64_t k = pair->child[c]; k < (int64_t)pair->child[c] + pair->count[c]; k++) {
-        double box[6], centre[3];
+        float box[6];
+        double centre[3];
         clean_box(S->d.object_box + 6 * S->items[k], box, centre);
-        box_grow(lo, hi, box, box + 3);
+        box_grow_single(lo, hi, box, box + 3);
     }
 }
 

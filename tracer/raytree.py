@@ -94,6 +94,7 @@ class _Generation:
         self.maybe = np.zeros((n, 2), bool)  # the child may be within the budget
         self.slot_lo = np.zeros((n, 2), np.int64)  # bounds on the children's budgets
         self.slot_hi = np.full((n, 2), np.iinfo(np.int64).max)
+        self.closed = np.zeros(n, bool)  # every bound of the row exact and both children decided: never changes
         w = shaded.weight
         self.both = shaded.want[:, MIRROR] & shaded.want[:, THROUGH] & (w[:, THROUGH] >= 0)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -106,7 +107,7 @@ class _Generation:
     def extend(self, more: "_Generation") -> None:
         self.rays = _join([self.rays, more.rays])
         for name in ("parent", "slot", "child", "budget_lo", "budget_hi", "used_lo", "used_hi", "sure", "maybe",
-                     "slot_lo", "slot_hi", "both", "ratio"):
+                     "slot_lo", "slot_hi", "closed", "both", "ratio"):
             setattr(self, name, np.concatenate([getattr(self, name), getattr(more, name)]))
 
 
@@ -175,64 +176,73 @@ class RayTrees:
                     self._narrow(g)
         return self.narrowed
 
-    def _used(self, g: int, slot: int, budget_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds on the rays the subtrees below the ``slot`` children of level ``g`` trace (a child not yet
-        traced: anything up to its budget, and up to a full tree to the depth limit)."""
-        child = self.generations[g].child[:, slot]
+    def _used(self, g: int, rows: np.ndarray, slot: int, budget_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds on the rays the subtrees below the ``slot`` children of the rows ``rows`` of level ``g`` trace
+        (a child not yet traced: anything up to its budget, and up to a full tree to the depth limit)."""
+        child = self.generations[g].child[rows, slot]
         full = subtree_rays(max(self.depth - (self.level + g + 1), 0))
         lo, hi = np.zeros(child.shape[0], np.int64), np.minimum(budget_hi, full)
-        rows = np.nonzero(child >= 0)[0]
-        if rows.size:
+        traced = np.nonzero(child >= 0)[0]
+        if traced.size:
             below = self.generations[g + 1]
-            lo[rows], hi[rows] = below.used_lo[child[rows]], below.used_hi[child[rows]]
+            lo[traced], hi[traced] = below.used_lo[child[traced]], below.used_hi[child[traced]]
         return lo, hi
 
     def _narrow(self, g: int) -> None:
-        """The recursion's budget rule (take_ray) on bounds: from the bounds on each node's budget and on what
-        its children's subtrees use, which children are surely / maybe within the budget, the bounds on their
-        budgets (handed down to traced children) and on what the node's descendants use."""
+        """The recursion's budget rule (take_ray) on bounds, for the rows of level ``g`` not closed: from the
+        bounds on each node's budget and on what its children's subtrees use, which children are surely / maybe
+        within the budget, the bounds on their budgets (handed down to traced children) and on what the node's
+        descendants use."""
         gen = self.generations[g]
-        rays, lo, hi = gen.rays, gen.budget_lo, gen.budget_hi
-        want_mirror, want_through = rays.want[:, MIRROR], rays.want[:, THROUGH]
+        self.dirty[g] = False
+        rows = np.nonzero(~gen.closed)[0]
+        if rows.size == 0:
+            return
+        lo, hi, both, ratio = gen.budget_lo[rows], gen.budget_hi[rows], gen.both[rows], gen.ratio[rows]
+        want = gen.rays.want[rows]
         chain = self.depth - (self.level + g)
-        mirror_lo = mirror_share(lo, gen.both, gen.ratio, chain)
-        mirror_hi = mirror_share(hi, gen.both, gen.ratio, chain)
-        mirror_sure, mirror_maybe = want_mirror & (lo > 0), want_mirror & (hi > 0)
-        sub_lo, sub_hi = self._used(g, MIRROR, mirror_hi)
+        mirror_lo, mirror_hi = mirror_share(lo, both, ratio, chain), mirror_share(hi, both, ratio, chain)
+        mirror_sure, mirror_maybe = want[:, MIRROR] & (lo > 0), want[:, MIRROR] & (hi > 0)
+        sub_lo, sub_hi = self._used(g, rows, MIRROR, mirror_hi)
         took_lo = np.where(mirror_sure, 1 + sub_lo, 0)  # rays the mirror child and its subtree take
         took_hi = np.where(mirror_maybe, 1 + sub_hi, 0)
         left_lo, left_hi = lo - took_hi, hi - took_lo  # what the transmitted ray finds left
-        through_sure, through_maybe = want_through & (left_lo > 0), want_through & (left_hi > 0)
+        through_sure, through_maybe = want[:, THROUGH] & (left_lo > 0), want[:, THROUGH] & (left_hi > 0)
         through_lo, through_hi = np.maximum(left_lo - 1, 0), np.maximum(left_hi - 1, 0)
-        sub_lo, sub_hi = self._used(g, THROUGH, through_hi)
-        used_lo = took_lo + np.where(through_sure, 1 + sub_lo, 0)
+        sub_lo, sub_hi = self._used(g, rows, THROUGH, through_hi)
+        used_lo = np.maximum(gen.used_lo[rows], took_lo + np.where(through_sure, 1 + sub_lo, 0))
         used_hi = np.minimum(took_hi + np.where(through_maybe, 1 + sub_hi, 0), np.maximum(hi, 0))
-        used_hi = np.minimum(used_hi, subtree_rays(max(chain, 0)))
-        self.dirty[g] = False
-        used_lo, used_hi = np.maximum(gen.used_lo, used_lo), np.minimum(gen.used_hi, used_hi)
-        changed = int(np.count_nonzero(used_lo != gen.used_lo) + np.count_nonzero(used_hi != gen.used_hi))
+        used_hi = np.minimum(np.minimum(used_hi, subtree_rays(max(chain, 0))), gen.used_hi[rows])
+        changed = int(np.count_nonzero(used_lo != gen.used_lo[rows]) + np.count_nonzero(used_hi != gen.used_hi[rows]))
         if changed and g > 0:
             self.dirty[g - 1] = True
         self.narrowed += changed
-        gen.used_lo, gen.used_hi = used_lo, used_hi
+        gen.used_lo[rows], gen.used_hi[rows] = used_lo, used_hi
+        exact = (lo == hi) & (used_lo == used_hi)
         for slot, sure, maybe, slot_lo, slot_hi in ((MIRROR, mirror_sure, mirror_maybe, mirror_lo, mirror_hi),
                                                     (THROUGH, through_sure, through_maybe, through_lo, through_hi)):
-            gen.sure[:, slot] |= sure
-            gen.maybe[:, slot] = maybe | gen.sure[:, slot]
-            np.maximum(gen.slot_lo[:, slot], slot_lo, out=gen.slot_lo[:, slot])
-            np.minimum(gen.slot_hi[:, slot], slot_hi, out=gen.slot_hi[:, slot])
+            sure = sure | gen.sure[rows, slot]
+            gen.sure[rows, slot], gen.maybe[rows, slot] = sure, maybe | sure
+            slot_lo = np.maximum(gen.slot_lo[rows, slot], slot_lo)
+            slot_hi = np.minimum(gen.slot_hi[rows, slot], slot_hi)
+            gen.slot_lo[rows, slot], gen.slot_hi[rows, slot] = slot_lo, slot_hi
+            traced = gen.child[rows, slot] >= 0
+            exact &= ~want[:, slot] | (traced & (slot_lo == slot_hi)) | ~(maybe | sure)
+        gen.closed[rows] = exact
         if g + 1 < len(self.generations):
             self._hand_down(gen, self.generations[g + 1], g + 1)
 
     def _hand_down(self, gen: _Generation, below: _Generation, g: int) -> None:
-        """The traced children (level ``g``) take their parents' bounds on their budgets."""
-        lo = np.maximum(below.budget_lo, gen.slot_lo[below.parent, below.slot])
-        hi = np.minimum(below.budget_hi, gen.slot_hi[below.parent, below.slot])
-        changed = int(np.count_nonzero(lo != below.budget_lo) + np.count_nonzero(hi != below.budget_hi))
+        """The traced children (level ``g``) not closed take their parents' bounds on their budgets."""
+        rows = np.nonzero(~below.closed)[0]
+        parent, slot = below.parent[rows], below.slot[rows]
+        lo = np.maximum(below.budget_lo[rows], gen.slot_lo[parent, slot])
+        hi = np.minimum(below.budget_hi[rows], gen.slot_hi[parent, slot])
+        changed = int(np.count_nonzero(lo != below.budget_lo[rows]) + np.count_nonzero(hi != below.budget_hi[rows]))
         if changed:
             self.dirty[g] = True
             self.narrowed += changed
-            below.budget_lo, below.budget_hi = lo, hi
+            below.budget_lo[rows], below.budget_hi[rows] = lo, hi
 
     def _undecided(self) -> bool:
         return any(bool((gen.maybe & ~gen.sure & gen.rays.want).any()) for gen in self.generations)

@@ -91,17 +91,23 @@ def _decode_with_blender(path: Path) -> np.ndarray:
     try:
         if loaded and image.is_float:
             image.colorspace_settings.name = "Non-Color"  # the stored values, not linearised ones
-        width, height = image.size
-        channels = image.channels
-        if width * height == 0 or channels == 0:
-            raise errors.TracerError(f"{path}: cannot read texture image (Blender could not decode it)")
-        if width * height > limits.MAX_TEXELS:
-            raise errors.TracerError(f"{path}: image of {width}x{height} pixels is too large for a texture")
-        pixels = np.empty(width * height * channels, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
+        return _rgb(image, f"{path}: cannot read texture image (Blender could not decode it)", f"{path}: image")
     finally:
         if loaded:
             bpy.data.images.remove(image)
+
+
+def _rgb(image, empty: str, named: str) -> np.ndarray:
+    """A Blender image's pixels as (height, width, 3) float32, row 0 at the bottom; ``empty``: the message
+    when it has none, ``named``: how the message of one too large to be a texture names it."""
+    width, height = image.size
+    channels = image.channels
+    if width * height == 0 or channels == 0:
+        raise errors.TracerError(empty)
+    if width * height > limits.MAX_TEXELS:
+        raise errors.TracerError(f"{named} of {width}x{height} pixels is too large for a texture")
+    pixels = np.empty(width * height * channels, dtype=np.float32)
+    image.pixels.foreach_get(pixels)
     pixels = pixels.reshape(height, width, channels)
     rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
     return np.ascontiguousarray(rgb)
@@ -139,20 +145,10 @@ def pixels_copy(image, linear: bool) -> str:
     the tracer, which reads pictures from files: its colours made linear first where ``linear`` (an sRGB
     picture, as Cycles reads it).  One file per content, in the same temporary folder as linear_copy's;
     the pixels are read again each time (a painted image changes without a new file)."""
-    width, height = image.size
-    channels = image.channels
-    if width * height == 0 or channels == 0:
-        raise errors.TracerError(f"picture {image.name} has no pixels")
-    if width * height > limits.MAX_TEXELS:
-        raise errors.TracerError(f"picture {image.name} of {width}x{height} pixels is too large for a texture")
-    pixels = np.empty(width * height * channels, dtype=np.float32)
-    image.pixels.foreach_get(pixels)
-    pixels = pixels.reshape(height, width, channels)
-    rgb = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
-    stored = np.clip(rgb, 0.0, 1.0)
+    stored = np.clip(_rgb(image, f"picture {image.name} has no pixels", f"picture {image.name}"), 0.0, 1.0)
     values = _linear_from_srgb(stored) if linear else stored
     texels = np.rint(values[::-1] * 255.0).astype(np.uint8)  # (rows top first for the file)
-    digest = hashlib.sha256(texels.tobytes() + bytes(f"{width}x{height}", "ascii")).digest()
+    digest = hashlib.sha256(texels.tobytes() + bytes("x".join(map(str, texels.shape)), "ascii")).digest()
     made = _linear.get(digest)
     if made is not None and os.path.isfile(made):
         return made

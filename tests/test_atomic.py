@@ -137,16 +137,19 @@ def test_a_usd_write_killed_as_usd_core_finishes_leaves_only_the_old_file(tmp_pa
             "    os.kill(os.getpid(), signal.SIGKILL)\n"
             "Sdf.Layer.Export, Sdf.Layer.ExportToString = export, text\n"
             "save_usd(tracer.parse_sdl('camera 0 0 6 0 0 0 0 1 0 40 sphere'), sys.argv[1])\n")
-    run = subprocess.run([sys.executable, "-c", code, str(target)], capture_output=True, text=True, timeout=120)
-    assert run.returncode == -signal.SIGKILL, run.stderr
+    child = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    _, stderr = child.communicate(timeout=120)
+    assert child.returncode == -signal.SIGKILL, stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == [target.name] and target.read_text() == "old"
     from tracer.atomic import PRIVATE_FOLDER, _process_gone
     import tracer
     from tracer.usd import save_usd
 
-    def dead_folders():
+    def dead_folders():  # (the killed run's: another test run on this machine may have its own meanwhile)
         return [p for p in Path(tempfile.gettempdir()).iterdir()
-                if PRIVATE_FOLDER.fullmatch(p.name) and _process_gone(int(PRIVATE_FOLDER.fullmatch(p.name)["pid"]))]
+                if PRIVATE_FOLDER.fullmatch(p.name) and int(PRIVATE_FOLDER.fullmatch(p.name)["pid"]) == child.pid
+                and _process_gone(child.pid)]
 
     assert suffix == ".usda" or dead_folders()  # (the killed run's crate file: outside the user's folder)
     save_usd(tracer.parse_sdl("camera 0 0 6 0 0 0 0 1 0 40 sphere"), target)

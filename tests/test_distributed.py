@@ -344,7 +344,7 @@ def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
     still stop with its one line, no worker's traceback or log, no image and no process left behind."""
     out = tmp_path / "big.png"
     command = [sys.executable, "-m", "tracer", "render", str(SCENES / "glass.sdl"), "-o", str(out), "--width",
-               "3000", "--height", "2000", "--samples", "4", "--scheduler", "local:2", "-q"]
+               "3000", "--height", "2000", "--samples", "16", "--scheduler", "local:2", "-q"]
     render = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                               start_new_session=True)
     try:
@@ -361,6 +361,7 @@ def test_ctrl_c_to_the_process_group_is_one_line_and_exit_130(tmp_path):
         while max(sum(p.cpu_times()[:2]) for p in workers) < 4 and render.poll() is None \
                 and time.monotonic() < deadline:
             time.sleep(0.2)
+        assert render.poll() is None, "the render ended before its workers were tracing: make it larger"
         os.killpg(render.pid, signal.SIGINT)
         _, stderr = render.communicate(timeout=PROCESS_LIMIT)
     finally:

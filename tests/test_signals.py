@@ -54,9 +54,10 @@ def stage(tmp_path_factory) -> Path:
     return path
 
 
-def _run_and_signal(scene: Path, output: Path, signum: int, after: float):
-    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(output), "--width", "160",
-                             "--height", "120", "-q"], stderr=subprocess.PIPE, cwd=ROOT, env=_env())
+def _run_and_signal(scene: Path, output: Path, signum: int, after: float, size: tuple[int, int] = (160, 120)):
+    proc = subprocess.Popen([sys.executable, "-m", "tracer", "render", str(scene), "-o", str(output), "--width",
+                             str(size[0]), "--height", str(size[1]), "-q"], stderr=subprocess.PIPE, cwd=ROOT,
+                            env=_env())
     time.sleep(after)
     sent = time.monotonic()
     proc.send_signal(signum)
@@ -145,9 +146,10 @@ def test_signals_while_the_modules_load_end_the_run_at_once(tmp_path, stage):
         output.write_bytes(OLD)
         signum = (signal.SIGINT, signal.SIGTERM)[k % 2]
         at = _python_start() + 0.1 * k
-        status, took, err = _run_and_signal(stage, output, signum, at)
+        # (480 x 360: the render outlasts the moments, ~0.8 s after the start at 160 x 120 on a quiet machine)
+        status, took, err = _run_and_signal(stage, output, signum, at, size=(480, 360))
         assert sorted(p.name for p in folder.iterdir()) == ["image.png"]
-        if status == 0:  # (a quick machine had finished the render before this moment: the new image, whole)
+        if status == 0:  # (a quicker machine had finished the render before this moment: the new image, whole)
             assert output.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "Traceback" not in err, err
             finished += 1
             continue

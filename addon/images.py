@@ -114,8 +114,8 @@ def _rgb(image, empty: str, named: str) -> np.ndarray:
 
 
 #: The picture files made so far (linear_copy: content digest of the file; pixels_copy: of the texels) -> file.
-_linear: dict[bytes, str] = {}
-_linear_folder = None  # a tempfile.TemporaryDirectory, made on first use, removed at exit
+_made: dict[bytes, str] = {}
+_made_folder = None  # a tempfile.TemporaryDirectory, made on first use, removed at exit
 
 
 def _linear_from_srgb(stored: np.ndarray) -> np.ndarray:
@@ -123,21 +123,31 @@ def _linear_from_srgb(stored: np.ndarray) -> np.ndarray:
     return np.where(stored <= 0.04045, stored / 12.92, ((stored + 0.055) / 1.055) ** 2.4)
 
 
+def _texels(rgb: np.ndarray, linear: bool) -> np.ndarray:
+    """8-bit texels of (height, width, 3) values (row 0 at the bottom), rows top first as a file has them;
+    made linear first where ``linear``."""
+    stored = np.clip(rgb, 0.0, 1.0)
+    values = _linear_from_srgb(stored) if linear else stored
+    return np.rint(values[::-1] * 255.0).astype(np.uint8)
+
+
+def _picture_file(digest: bytes, suffix: str, texels) -> str:
+    """The picture file of the content ``digest``: the one made before, or ``texels()`` written now."""
+    made = _made.get(digest)
+    if made is not None and os.path.isfile(made):
+        return made
+    made = os.path.join(_temporary_folder(), digest.hex()[:24] + suffix)
+    save_image(texels(), made)
+    _made[digest] = made
+    return made
+
+
 def linear_copy(path: str) -> str:
     """An 8-bit picture file holding ``path``'s colours made linear (the sRGB curve undone), as Cycles reads
     an sRGB Image Texture; the tracer, which uses a picture's values as they are stored (as SDL does), is
     given this copy for a Blender material's texture.  One copy per content, in a temporary folder.  (8 bits
     of linear values are coarse in the darkest tenth: a stored 10 of 255 becomes 1.)"""
-    digest = _digest(Path(path))
-    made = _linear.get(digest)
-    if made is not None and os.path.isfile(made):
-        return made
-    stored = np.clip(decode(Path(path)), 0.0, 1.0)
-    linear = _linear_from_srgb(stored)
-    made = os.path.join(_temporary_folder(), digest.hex()[:24] + "-linear.png")
-    save_image(np.rint(linear[::-1] * 255.0).astype(np.uint8), made)  # (rows top first for the file)
-    _linear[digest] = made
-    return made
+    return _picture_file(_digest(Path(path)), "-linear.png", lambda: _texels(decode(Path(path)), linear=True))
 
 
 def pixels_copy(image, linear: bool) -> str:
@@ -145,27 +155,19 @@ def pixels_copy(image, linear: bool) -> str:
     the tracer, which reads pictures from files: its colours made linear first where ``linear`` (an sRGB
     picture, as Cycles reads it).  One file per content, in the same temporary folder as linear_copy's;
     the pixels are read again each time (a painted image changes without a new file)."""
-    stored = np.clip(_rgb(image, f"picture {image.name} has no pixels", f"picture {image.name}"), 0.0, 1.0)
-    values = _linear_from_srgb(stored) if linear else stored
-    texels = np.rint(values[::-1] * 255.0).astype(np.uint8)  # (rows top first for the file)
+    texels = _texels(_rgb(image, f"picture {image.name} has no pixels", f"picture {image.name}"), linear)
     digest = hashlib.sha256(texels.tobytes() + bytes("x".join(map(str, texels.shape)), "ascii")).digest()
-    made = _linear.get(digest)
-    if made is not None and os.path.isfile(made):
-        return made
-    made = os.path.join(_temporary_folder(), digest.hex()[:24] + "-pixels.png")
-    save_image(texels, made)
-    _linear[digest] = made
-    return made
+    return _picture_file(digest, "-pixels.png", lambda: texels)
 
 
 def _temporary_folder() -> str:
     """The folder of the picture files made here (removed at exit)."""
-    global _linear_folder
-    if _linear_folder is None:
+    global _made_folder
+    if _made_folder is None:
         import tempfile
 
-        _linear_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")
-    return _linear_folder.name
+        _made_folder = tempfile.TemporaryDirectory(prefix="sdl-raytracer-")
+    return _made_folder.name
 
 
 def register() -> None:

@@ -103,8 +103,8 @@ class Reader:
         if vector is not None and not (vector[0].bl_idname == "ShaderNodeUVMap" or
                                        (vector[0].bl_idname == "ShaderNodeTexCoord" and vector[1].name == "UV")):
             self._warn(f"{node.name}: looked up through the UV map, not {vector[0].name}")
-        srgb = image.colorspace_settings.name.lower() in ("srgb", "srgb display")  # (values that Cycles linearises)
-        srgb = srgb and not image.is_float
+        # Values that Cycles makes linear: an sRGB picture's, unless it is a float one (linear already)
+        srgb = image.colorspace_settings.name.lower() in ("srgb", "srgb display") and not image.is_float
         if not in_file:  # packed into the .blend, or generated: its pixels, as Blender holds them
             return Picture("", srgb, image)
         return Picture(bpy.path.abspath(image.filepath, library=image.library), srgb)

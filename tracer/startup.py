@@ -88,12 +88,12 @@ def return_freed_memory() -> bool:
     import ctypes  # (the C core is loaded with ctypes too)
 
     try:
-        mallopt = ctypes.CDLL(None).mallopt
-        gnu_libc = ctypes.CDLL(None).gnu_get_libc_version
-    except (OSError, AttributeError):
+        libc = ctypes.CDLL(None)
+    except OSError:
         return False
-    del gnu_libc  # (musl has a mallopt that does nothing: only glibc's is asked)
-    return mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(OWN_PAGES_FROM)) == 1  # (int mallopt(int, int))
+    if not (hasattr(libc, "mallopt") and hasattr(libc, "gnu_get_libc_version")):  # (musl's mallopt does nothing)
+        return False
+    return libc.mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(OWN_PAGES_FROM)) == 1  # (int mallopt(int, int))
 
 
 def leave_out_openssl() -> None:

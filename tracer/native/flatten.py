@@ -117,6 +117,11 @@ def _single_boxes(boxes: np.ndarray) -> np.ndarray:
     return out
 
 
+def _single_box(box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """One box (lo, hi) as _single_boxes makes them: (6,) float32."""
+    return _single_boxes(np.concatenate(box)[None])[0]
+
+
 def _object_boxes(table: PrimitiveTable, rows: Optional[np.ndarray] = None) -> np.ndarray:
     """_single_boxes(_padded_boxes(table, rows)) (of every row when ``rows`` is None), the same numbers
     computed a chunk of rows at a time: a chunk's temporaries stay in the cache, where the whole table's
@@ -205,7 +210,7 @@ class FlatScene:
             box = _box(obj, prim_lo, prim_hi, prim_bounded)
             if box is not None:
                 bounded[k] = True
-                object_box[k] = _single_boxes(np.concatenate(box)[None])[0]
+                object_box[k] = _single_box(box)
         a.update(csg_op=csg_op, csg_left=csg_left, csg_right=csg_right, object_ref=object_ref,
                  object_box=object_box, object_bounded=bounded)
         self._counts = dict(n_prims=n, n_csg=len(csg_op), n_objects=len(object_ref))
@@ -358,7 +363,7 @@ class FlatScene:
             box = _box(compiled.objects.booleans[k], lo, hi, prim_bounded)
             bounded[k] = box is not None
             if box is not None:
-                object_box[k] = _single_boxes(np.concatenate(box)[None])[0]
+                object_box[k] = _single_box(box)
 
     def _drop_unused_meshes(self, table: PrimitiveTable) -> bool:
         """Drop the meshes no primitive refers to any more (renumbering the others); whether any was."""

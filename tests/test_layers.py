@@ -44,7 +44,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("SDL statements", ("tracer.sdl", "tracer.sdl.statements", "tracer.sdl.lights")),
     ("C library", ("tracer.native", "tracer.native.build", "tracer.native.contract")),
     ("readers", ("tracer.meshio", "tracer.sdl", "tracer.sdl.*", "tracer.usd", "tracer.usd.*")),
-    ("compile", ("tracer.compile", "tracer.skippable", "tracer.query")),
+    ("compile", ("tracer.compile", "tracer.batches", "tracer.skippable", "tracer.query")),
     ("NumPy tracer", ("tracer.raytree", "tracer.trace")),
     ("C tracer", ("tracer.native.flatten", "tracer.native.tracer")),
     ("render", ("tracer.backend", "tracer.edit", "tracer.edit_ledger", "tracer.tiles", "tracer.target",
@@ -59,7 +59,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
 #: The NumPy reference path: imports nothing of the C core.  The first group not even through other modules.
 REFERENCE_ALONE = ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*", "tracer.lights",
                    "tracer.fresnel", "tracer.terminator")
-REFERENCE = REFERENCE_ALONE + ("tracer.trace", "tracer.raytree", "tracer.skippable")
+REFERENCE = REFERENCE_ALONE + ("tracer.trace", "tracer.raytree", "tracer.skippable", "tracer.batches")
 C_CORE = ("tracer.native", "tracer.native.*")
 BLENDER = ("bpy", "bpy_extras", "mathutils", "gpu", "gpu_extras", "bmesh", "bl_math", "aud", "idprop",
            "addon_utils")

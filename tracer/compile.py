@@ -21,6 +21,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from . import numerics, shapes
+from .batches import leaf_hits, lines_near_sphere
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
@@ -32,18 +33,6 @@ from .model import (CSG, FRESNEL_MODES, MESH_KINDS, POLYHEDRON_KINDS, FaceList, 
                     SceneObject, Shape, ShapeColumns, ShapeTable, matrices_of_affines as _matrices_of_affines,
                     parameter_rows)
 from .transforms import transform_points
-
-
-def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Which lines pass within ``radius`` of ``center`` (all of them for an infinite radius)."""
-    if not np.isfinite(radius):
-        return np.ones(origins.shape[0], dtype=bool)
-    to_center = center - origins
-    dd = numerics.dot3(directions, directions)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        along = numerics.dot3(to_center, directions) / dd
-    perp = to_center - along[:, None] * directions
-    return numerics.dot3(perp, perp) <= radius * radius
 
 
 #: Closed analytic shapes whose normals must agree with their entering flags (ShapeKind.normals_agree).
@@ -223,6 +212,7 @@ class Primitive:
         self = cls.__new__(cls)
         shape = table.shapes[index]
         self.shape, self.index, self.kind = shape, index, shape.kind
+        self.table = table  # (whose rows tracer.batches traces many at once)
         self.material_id = int(table.material_ids[index])
         self.matrix = shape.matrix
         self.inverse = table.inverses[index]
@@ -243,6 +233,26 @@ class Primitive:
         self.__dict__["generic_size"] = float(table.generic_size[index])
         linear, translation = table.inverse_norms[index].tolist()
         self.__dict__["inverse_norms"] = (linear, translation)
+        return self
+
+    @classmethod
+    def of_rows(cls, table: "PrimitiveTable", rows: np.ndarray) -> "Primitive":
+        """Rows ``rows`` of the table, all of one kind with the same traced parameters and none a mesh, as one
+        Primitive whose numbers are per ray: ray i meets primitive rows[i].  Its arithmetic is that of each
+        row's own Primitive (numerics applies a matrix per ray, in the same order), so that many top-level
+        primitives are traced as one batch of (ray, primitive) pairs with the same bits (tracer.batches).  The
+        caller has culled the pairs by their bounding spheres: may_hit passes every ray."""
+        first = cls.of_row(table, int(rows[0]))
+        self = cls.__new__(cls)
+        self.__dict__.update(first.__dict__)  # kind, family, planes, size: the same for every row
+        self.index = rows[:, None]
+        self.material_id = None
+        self.inverse = table.inverses[rows]
+        self.normal_matrix = self.inverse[:, None, :3, :3]
+        self.inverse_error = table.inverse_error[rows][:, None]
+        self.__dict__["inverse_norms"] = (table.inverse_norms[rows, 0], table.inverse_norms[rows, 1])
+        self.center, self.radius = None, np.inf
+        self.__dict__["box"] = None
         return self
 
     @property
@@ -364,7 +374,7 @@ class Primitive:
             local.t = local.t + shift[:, None]
             self.bound_hits(origins[idx], centred, d, local)
             self.to_world(local)
-        local.shape[np.isfinite(local.t)] = self.index
+        np.copyto(local.shape, self.index, where=np.isfinite(local.t))  # (an index per ray: of_rows)
         if self.thin:
             local = sheet_to_pairs(local)
         if idx.size == n:
@@ -472,8 +482,13 @@ class CSGNode:
         return lines_near_sphere(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
-        return fold_tree(self, lambda prim: prim.intersect(origins, directions),
-                         lambda node, left, right: combine(node.op, left, right))
+        known = leaf_hits(list(self.leaves()), origins, directions)
+
+        def hits_of(prim: Primitive) -> HitArrays:
+            hits = known.get(id(prim))
+            return prim.intersect(origins, directions) if hits is None else hits
+
+        return fold_tree(self, hits_of, lambda node, left, right: combine(node.op, left, right))
 
 
     def first_hit(self, origins, directions, t_min, t_max) -> HitArrays:
@@ -787,6 +802,10 @@ class PrimitiveTable:
     def __len__(self) -> int:
         return len(self.shapes)
 
+    def primitives_of_rows(self, rows: np.ndarray) -> Primitive:
+        """Rows of one kind and parameters as one Primitive with numbers per ray (Primitive.of_rows)."""
+        return Primitive.of_rows(self, rows)
+
     def matrix_rows(self, rows) -> np.ndarray:
         """The (k, 4, 4) matrices of these rows (a slice or an index array)."""
         m = self._matrices
@@ -1059,6 +1078,8 @@ class CompiledObjects(Sequence):
         self.primitives = primitives
         self.primitive_index = primitive_index
         self.booleans = booleans
+        #: tracer.batches.batches_of's grouping of these objects, once made (None: to be made again)
+        self._batches = None
 
     def __len__(self) -> int:
         return len(self.primitive_index)

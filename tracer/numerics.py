@@ -34,18 +34,19 @@ def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def affine_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """``matrix`` (4 x 4, the last row 0 0 0 1) applied to (..., 3) points, each coordinate summed left to
+    """``matrix`` (4 x 4, the last row 0 0 0 1; or (..., 4, 4), one per point) applied to (..., 3) points, each coordinate summed left to
     right as the C core's affine_point: a matrix product goes through BLAS, whose kernels group the terms
     their own way and may fuse a product into a sum.  Where the result decides a hit (a generic ray's origin
     9e15 from the shape, a ray through an edge shared by two faces), both backends must round alike."""
-    return np.stack([points[..., 0] * matrix[i, 0] + points[..., 1] * matrix[i, 1] + points[..., 2] * matrix[i, 2]
-                     + matrix[i, 3] for i in range(3)], axis=-1)
+    return np.stack([points[..., 0] * matrix[..., i, 0] + points[..., 1] * matrix[..., i, 1]
+                     + points[..., 2] * matrix[..., i, 2] + matrix[..., i, 3] for i in range(3)], axis=-1)
 
 
 def linear_vectors(matrix: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """The 3 x 3 part of ``matrix`` applied to (..., 3) vectors, as affine_points (the C core's affine_vector)."""
-    return np.stack([vectors[..., 0] * matrix[i, 0] + vectors[..., 1] * matrix[i, 1] + vectors[..., 2] * matrix[i, 2]
-                     for i in range(3)], axis=-1)
+    """The 3 x 3 part of ``matrix`` (one, or one per vector) applied to (..., 3) vectors, as affine_points (the
+    C core's affine_vector)."""
+    return np.stack([vectors[..., 0] * matrix[..., i, 0] + vectors[..., 1] * matrix[..., i, 1]
+                     + vectors[..., 2] * matrix[..., i, 2] for i in range(3)], axis=-1)
 
 
 #: Vectors whose squared length might leave the normal range are scaled by a power of two first (norm3).
@@ -197,8 +198,10 @@ def time_errors(error: np.ndarray, hits, direction: np.ndarray, size: float, nn:
 
 def normal_to_world(normal: np.ndarray, normal_matrix: np.ndarray) -> np.ndarray:
     """Generic normals (..., 3) through the inverse-transpose, n M^-1 with M^-1's linear part
-    ``normal_matrix``, summed as the C core's normal_to_world."""
-    return normal[..., 0:1] * normal_matrix[0] + normal[..., 1:2] * normal_matrix[1] + normal[..., 2:3] * normal_matrix[2]
+    ``normal_matrix`` (3 x 3, or one per ray: (N, 1, 3, 3) for normals (N, K, 3)), summed as the C core's
+    normal_to_world."""
+    return (normal[..., 0:1] * normal_matrix[..., 0, :] + normal[..., 1:2] * normal_matrix[..., 1, :]
+            + normal[..., 2:3] * normal_matrix[..., 2, :])
 
 
 def world_offsets(gap: np.ndarray, normal: np.ndarray, world: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from .batches import batches_of
 from .compile import CompiledScene
 from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
@@ -68,33 +69,76 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
     """The first hit of each ray: the nearest, unless another hit lies within the error interval of every hit
     found (its t at most the least t + error, the *reach*); then, of those, the hit of the object that comes
     first in the scene, however the two round.  Coplanar faces (a decal on a wall) look the same from any
-    position, on both backends (the C core's scene_first); only rays with such a tie are asked again."""
+    position, on both backends (the C core's scene_first); only rays with such a tie are asked again.
+
+    Objects are asked one by one, in scene order, each only for hits up to the reach so far (a hit beyond it
+    changes neither the nearest nor whether there is a tie), and many primitives of one kind at once
+    (tracer.batches), which gives the same hits: neither the least t nor whether another lies within reach of it
+    depends on the order, and a tie goes to the first object in the scene."""
     n = origins.shape[0]
     t_min = np.broadcast_to(np.asarray(t_min, dtype=float), (n,))
     best = SurfaceHits(hit=np.zeros(n, bool), t=np.full(n, np.inf), normal=np.zeros((n, 3)),
                        entering=np.zeros(n, bool), shape=np.full(n, -1), obj=np.full(n, -1),
                        part=np.full(n, -1), uv=np.zeros((n, 2)), error=np.zeros(n), offset=np.zeros(n))
-    second, reach = np.full(n, np.inf), np.full(n, np.inf)
-    for index, obj in enumerate(scene.objects):
-        h = obj.first_hit(origins, directions, t_min, np.nextafter(reach, np.inf))  # hits up to the reach
-        t = h.t[:, 0]
-        closer = t < best.t
-        second = np.where(closer, np.minimum(second, best.t), np.minimum(second, t))
-        reach = np.minimum(reach, t + h.error[:, 0])
-        if closer.any():
-            rows = np.nonzero(closer)[0]
-            _take(best, rows, h, rows, index)
-    tie = np.nonzero((best.obj >= 0) & (second <= reach))[0]
+    nearest = _Nearest(best, np.full(n, np.inf), np.full(n, np.inf))
+    batches, alone = batches_of(scene.objects, scene.table)
+    every_ray = np.arange(n)
+    for index in alone.tolist():
+        h = scene.objects[index].first_hit(origins, directions, t_min, np.nextafter(nearest.reach, np.inf))
+        nearest.offer(every_ray, index, h)
+    for batch in batches:
+        for rays, objects, h in batch.first_hits(origins, directions, t_min, np.nextafter(nearest.reach, np.inf),
+                                                 every_ray):
+            nearest.offer_many(rays, objects, h)
+    tie = np.nonzero((best.obj >= 0) & (nearest.second <= nearest.reach))[0]
     if tie.size:
-        _earliest_in_reach(scene, best, tie, origins, directions, t_min, np.nextafter(reach, np.inf))
+        _earliest_in_reach(scene, best, tie, origins, directions, t_min, np.nextafter(nearest.reach, np.inf))
     best.hit = np.isfinite(best.t)
     length = numerics.norm3(best.normal)[:, None]  # (a shape scaled by 1e-200: |n M^-1|^2 overflows)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
     return best
 
 
-def _take(best: SurfaceHits, rows: np.ndarray, h, source: np.ndarray, index: int) -> None:
-    """Rays ``rows`` of ``best`` take the first hits ``source`` of ``h``, those of object ``index``."""
+@dataclass
+class _Nearest:
+    """What first_hits has found so far: the best hit of each ray, the least t of the other hits (``second``)
+    and the least t + error of all (``reach``)."""
+
+    best: SurfaceHits
+    second: np.ndarray
+    reach: np.ndarray
+
+    def offer(self, rays: np.ndarray, objects, h) -> None:
+        """First hits ``h`` (K = 1) of the objects ``objects`` (one, or one per ray) for the rays ``rays``
+        (each at most once)."""
+        best = self.best
+        t = h.t[:, 0]
+        best_t = best.t[rays]
+        closer = t < best_t  # (a hit at the same t as the best is a tie: _earliest_in_reach decides it)
+        self.second[rays] = np.where(closer, np.minimum(self.second[rays], best_t), np.minimum(self.second[rays], t))
+        self.reach[rays] = np.minimum(self.reach[rays], t + h.error[:, 0])
+        if closer.any():
+            chosen = np.nonzero(closer)[0]
+            _take(best, rays[chosen], h, chosen, objects if np.ndim(objects) == 0 else objects[chosen])
+
+    def offer_many(self, rays: np.ndarray, objects: np.ndarray, h) -> None:
+        """As offer, with any number of hits per ray: each ray's least (t, object) is offered, the others are
+        counted in ``second`` and ``reach``."""
+        order = np.lexsort((objects, h.t[:, 0], rays))
+        rays, objects = rays[order], objects[order]
+        h = h.subset(order)
+        leads = np.ones(rays.size, dtype=bool)
+        leads[1:] = rays[1:] != rays[:-1]
+        rest = np.nonzero(~leads)[0]
+        np.minimum.at(self.second, rays[rest], h.t[rest, 0])
+        np.minimum.at(self.reach, rays[rest], h.t[rest, 0] + h.error[rest, 0])
+        lead = np.nonzero(leads)[0]
+        self.offer(rays[lead], objects[lead], h.subset(lead))
+
+
+def _take(best: SurfaceHits, rows: np.ndarray, h, source: np.ndarray, index) -> None:
+    """Rays ``rows`` of ``best`` take the first hits ``source`` of ``h``, those of object ``index`` (one, or one
+    per row)."""
     best.t[rows] = h.t[source, 0]
     best.normal[rows] = h.normal[source, 0]
     best.entering[rows] = h.entering[source, 0]
@@ -113,11 +157,21 @@ def _rows_of(hits: SurfaceHits, rows: np.ndarray) -> SurfaceHits:
 
 def _earliest_in_reach(scene, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
     """The rays ``rows`` have a tie: the first object in the scene with a hit before ``limit`` wins it."""
-    for index, obj in enumerate(scene.objects):
+    batches, alone = batches_of(scene.objects, scene.table)
+    for batch in batches:
+        for rays, objects, h in batch.first_hits(origins, directions, t_min, limit, rows):
+            earlier = objects < best.obj[rays]
+            order = np.lexsort((objects, rays))
+            order = order[earlier[order]]
+            leads = np.ones(order.size, dtype=bool)
+            leads[1:] = rays[order][1:] != rays[order][:-1]
+            first = order[leads]
+            _take(best, rays[first], h, first, objects[first])
+    for index in alone.tolist():
         rows = rows[index < best.obj[rows]]
         if rows.size == 0:
             break
-        h = obj.first_hit(origins[rows], directions[rows], t_min[rows], limit[rows])
+        h = scene.objects[index].first_hit(origins[rows], directions[rows], t_min[rows], limit[rows])
         found = np.nonzero(np.isfinite(h.t[:, 0]))[0]
         _take(best, rows[found], h, found, index)
 
@@ -129,12 +183,19 @@ def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
     n = origins.shape[0]
     t_max = np.broadcast_to(np.asarray(t_max, dtype=float), (n,))
     blocked = np.zeros(n, dtype=bool)
-    for obj in scene.objects:
+    batches, alone = batches_of(scene.objects, scene.table)
+    for index in alone.tolist():
+        open_rays = np.nonzero(~blocked)[0]
+        if open_rays.size == 0:
+            return blocked
+        m = open_rays.size
+        blocked[open_rays] = scene.objects[index].occludes(origins[open_rays], directions[open_rays], np.zeros(m),
+                                                           t_max[open_rays])
+    for batch in batches:
         open_rays = np.nonzero(~blocked)[0]
         if open_rays.size == 0:
             break
-        m = open_rays.size
-        blocked[open_rays] = obj.occludes(origins[open_rays], directions[open_rays], np.zeros(m), t_max[open_rays])
+        blocked[open_rays] = batch.blocked(origins, directions, t_max, open_rays)
     return blocked
 
 

@@ -231,6 +231,7 @@ ambient 0.2 0.2 0.2 diffuse 0.8 0.7 0.6 specular 0.5 0.5 0.5 specularExponent 30
 push translate 0 1 0 sphere pop
 push translate -1.5 0.5 1 scale 0.5 0.5 0.5 cube pop
 push rotate -90 1 0 0 scale 10 10 1 square pop
+reflectivity 0.8 push translate 1.5 0.6 1.2 scale 0.6 0.6 0.6 sphere pop
 """)
 
 
@@ -243,7 +244,7 @@ def test_c_and_numpy_agree_bit_for_bit_with_every_light():
     n = tracer.render(scene, 80, 60, backend="numpy")
     assert np.array_equal(c.image, n.image)
     assert c.rays.as_dict() == n.rays.as_dict() and c.rays.skipped() == n.rays.skipped()
-    assert {"physical-lights", "soft-shadows"} <= set(c.stats()["effects"])
+    assert {"physical-lights", "soft-shadows", "seen-lights"} <= set(c.stats()["effects"])
 
 
 def test_renders_are_reproducible_and_tile_independent(backend):
@@ -259,6 +260,59 @@ def test_only_scenes_with_physical_lights_pay_for_them():
     assert not effects & {"physical-lights", "soft-shadows"}
     hard = compile_scene(lit(Light((0, 3, 0), (1, 1, 1), kind="sphere", samples=16))).effects
     assert "physical-lights" in hard and "soft-shadows" not in hard  # (no radius: one feeler, samples unused)
+
+
+# ------------------------------------------------------------------------------------------------ seen lights
+
+MIRROR = dict(ambient=(0.0, 0.0, 0.0), diffuse=(0.0, 0.0, 0.0), specular=(0.0, 0.0, 0.0), reflectivity=1.0)
+GLOW = (0.1, 0.2, 0.05)
+
+
+def overhead_panel(direction=(0, -1, 0)):
+    """A 2 x 1 area light 1.5 above a mirror floor, facing down."""
+    return Light((0.0, 1.5, 0.0), GLOW, kind="area", direction=direction, axis=(1, 0, 0), size=(2.0, 1.0),
+                 samples=4)
+
+
+def test_a_mirror_shows_an_area_light_as_cycles_does(backend):
+    """A ray reflected up from the mirror meets the panel's front: it sees pi times the light's colour (its
+    radiance; a white diffuse surface under a sky of it would look the same), only where the panel is."""
+    scene = scene_of(floor(**MIRROR), lights=[overhead_panel()], background=(0.0, 0.0, 0.0),
+                     global_ambient=(0.0, 0.0, 0.0))
+    colour, t = shade_down(backend, scene, [-0.9, 0.0, 0.9, 1.1], zs=(0.0, 0.45, 0.55))
+    panel = np.pi * np.array(GLOW)
+    for row, z in enumerate((0.0, 0.45, 0.55)):
+        for column, x in enumerate((-0.9, 0.0, 0.9, 1.1)):
+            expected = panel if abs(x) <= 1.0 and abs(z) <= 0.5 else np.zeros(3)
+            np.testing.assert_array_equal(colour[row, column], expected, err_msg=f"x {x} z {z}")
+
+
+def test_the_camera_and_the_back_of_a_panel_do_not_see_it(backend):
+    scene = scene_of(floor(**MIRROR), lights=[overhead_panel()], background=(0.0, 0.0, 0.0),
+                     global_ambient=(0.0, 0.0, 0.0))
+    t = make_tracer(compile_scene(scene), backend, threads=1)
+    looking_up = t.camera_rays(np.array([[0.0, 0.5, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    assert looking_up.max() == 0.0  # (Cycles' area lights are not seen by the camera)
+    upside_down = scene_of(floor(**MIRROR), lights=[overhead_panel(direction=(0, 1, 0))],
+                           background=(0.0, 0.0, 0.0), global_ambient=(0.0, 0.0, 0.0))
+    colour, _ = shade_down(backend, upside_down, [0.0])
+    assert colour.max() == 0.0  # (its back is not seen, as it does not light that way)
+
+
+def test_an_object_in_front_of_the_panel_hides_it(backend):
+    ball = shape("sphere", translation(0, 1.0, 0) @ scaling(0.2, 0.2, 0.2), ambient=(0, 0, 0), diffuse=(0, 0, 0),
+                 specular=(0, 0, 0))
+    scene = scene_of(floor(**MIRROR), ball, lights=[overhead_panel()], background=(0.0, 0.0, 0.0),
+                     global_ambient=(0.0, 0.0, 0.0))
+    colour, _ = shade_down(backend, scene, [0.0, 0.5], height=0.5)
+    np.testing.assert_array_equal(colour[0, 0], np.zeros(3))  # (the ball, black, is nearer)
+    np.testing.assert_array_equal(colour[0, 1], np.pi * np.array(GLOW))
+
+
+def test_only_scenes_that_can_see_an_area_light_pay_for_it():
+    assert "seen-lights" not in compile_scene(lit(overhead_panel())).effects  # (nothing reflects)
+    assert "seen-lights" not in compile_scene(scene_of(floor(**MIRROR), lights=[Light((0, 3, 0), (1, 1, 1))])).effects
+    assert "seen-lights" in compile_scene(scene_of(floor(**MIRROR), lights=[overhead_panel()])).effects
 
 
 # ------------------------------------------------------------------------------------------------ SDL

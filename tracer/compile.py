@@ -1186,6 +1186,8 @@ def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_bo
         effects.add("smooth-terminator")
     if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
         effects.add("fresnel")
+    if effects & {"reflection", "refraction"} and any(light.kind == "area" for light in scene.lights):
+        effects.add("seen-lights")  # (area lights seen in mirrors and through glass, as Cycles' are)
     return frozenset(effects)
 
 

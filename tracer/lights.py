@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import LIGHT_KINDS, Light
-from .numerics import norm3
+from .numerics import dot3, norm3
 
 #: Each kind's code in the tables (the C core's LIGHT_* codes).
 LIGHT_CODES = {kind: code for code, kind in enumerate(LIGHT_KINDS)}
@@ -92,6 +92,30 @@ def _param(light: Light) -> list[float]:
         ellipse = light.shape == "ellipse"
         return [width * height * (math.pi / 4.0 if ellipse else 1.0), float(ellipse), 0.0, 0.0]
     return [0.0, 0.0, 0.0, 0.0]
+
+
+def seen_lights(table: LightTable, origins: np.ndarray, directions: np.ndarray,
+                t_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which rays meet the front of an area light before ``t_max`` (Cycles' area lights are seen by glossy and
+    transmission rays, not by the camera's), and the nearest one's radiance in the tracer's units: pi times its
+    colour (its colour is what the Lambert sum of a diffuse surface takes, radiance over pi, so that a white
+    surface under a sky of it would look like it).  The C core's seen_light, in its order of operations."""
+    n = origins.shape[0]
+    seen, color, nearest = np.zeros(n, dtype=bool), np.zeros((n, 3)), np.array(t_max, dtype=float)
+    for light in np.flatnonzero(table.kind == AREA).tolist():
+        normal, u, v = table.frame[light, :3], table.frame[light, 3:6], table.frame[light, 6:9]
+        position = table.position[light]
+        facing = dot3(directions, normal)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t = dot3(position - origins, normal) / facing
+            q = origins + t[:, None] * directions - position
+            a, b = dot3(q, u) / dot3(u, u), dot3(q, v) / dot3(v, v)
+            inside = a * a + b * b <= 1.0 if table.param[light, 1] != 0.0 else (np.abs(a) <= 1.0) & (np.abs(b) <= 1.0)
+        met = (facing < 0.0) & (t > 0.0) & (t < nearest) & inside
+        nearest[met] = t[met]
+        seen |= met
+        color[met] = np.pi * table.color[light]
+    return seen, color
 
 
 # ------------------------------------------------------------------------------------------------ sampling

@@ -362,6 +362,11 @@ class Tracer:
         if origins.shape[0] == 0:
             return out
         hits = first_hits(self.scene, origins, directions)
+        if "seen-lights" in self.effects:  # (a reflected or refracted ray may see an area light instead)
+            seen, radiance = lights.seen_lights(self.scene.lights, origins, directions, hits.t)
+            seen &= np.broadcast_to(level, origins.shape[:1]) > 0
+            out.color[seen] = radiance[seen]
+            hits.hit &= ~seen
         idx = np.nonzero(hits.hit)[0]
         if idx.size == 0:
             return out

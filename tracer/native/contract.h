@@ -10,7 +10,7 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
-       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024 };
+       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024, FX_SEEN_LIGHTS = 2048 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
@@ -348,6 +348,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "9721a2f241ca60a6"
+#define RT_CONTRACT_DIGEST "ce6624cc8115dfd3"
 
 #endif

@@ -43,7 +43,7 @@ CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
            # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
-           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv")
+           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv", "seen-lights")
 #: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
 LIGHT_KINDS = _model.LIGHT_KINDS
 #: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).

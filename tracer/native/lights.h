@@ -126,6 +126,34 @@ static double visible_share(const Scene *S, Work *w, const ShadePoint *p, int64_
     return unblocked / (double)n;
 }
 
+/* tracer.lights.seen_lights: whether a reflected or refracted ray meets the front of an area light before
+ * t_max (Cycles' area lights are seen by glossy and transmission rays, not by the camera's); then `out` is the
+ * nearest one's radiance in the tracer's units: pi times its colour (its colour is what the Lambert sum of a
+ * diffuse surface takes, radiance over pi, so that a white surface under a sky of it would look like it). */
+static int seen_light(const SceneDesc *D, const double *o, const double *d, double t_max, double *out)
+{
+    int seen = 0;
+    for (int64_t l = 0; l < D->n_lights; l++) {
+        if (D->light_kind[l] != LIGHT_AREA)
+            continue;
+        const double *normal = D->light_frame + 9 * l, *u = normal + 3, *v = normal + 6;
+        const double *pos = D->light_pos + 3 * l;
+        double facing = dot3(d, normal), to[3] = {pos[0] - o[0], pos[1] - o[1], pos[2] - o[2]};
+        double t = dot3(to, normal) / facing, q[3];
+        for (int i = 0; i < 3; i++)
+            q[i] = o[i] + t * d[i] - pos[i];
+        double a = dot3(q, u) / dot3(u, u), b = dot3(q, v) / dot3(v, v);
+        int inside = D->light_param[4 * l + 1] != 0.0 ? a * a + b * b <= 1.0 : fabs(a) <= 1.0 && fabs(b) <= 1.0;
+        if (facing < 0.0 && t > 0.0 && t < t_max && inside) {  /* (its back, or its plane, is not seen) */
+            t_max = t;
+            seen = 1;
+            for (int c = 0; c < 3; c++)
+                out[c] = M_PI_VALUE * D->light_color[3 * l + c];
+        }
+    }
+    return seen;
+}
+
 /* Tracer._area_light: the sum over the light's stratified sample points. */
 static void area_light(const Scene *S, Work *w, const ShadePoint *p, int64_t l, int use_shadows,
                        int use_cook_torrance, double *total)

@@ -375,7 +375,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
            double weight, double *out,
            const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
            const int use_refraction, const int use_textures, const int use_physical, const int use_fresnel,
-           const int use_terminator, ShadeFn self)
+           const int use_terminator, const int use_seen_lights, ShadeFn self)
 {
     const SceneDesc *D = &S->d;
     out[0] = D->background[0];
@@ -387,7 +387,10 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     }
     Hit h;
     int64_t obj;
-    if (!scene_first(S, w, o, d, &h, &obj))
+    int found = scene_first(S, w, o, d, &h, &obj);
+    if (use_seen_lights && level > 0 && seen_light(D, o, d, found ? h.t : INFINITY, out))
+        return;
+    if (!found)
         return;
     ShadePoint p;
     for (int i = 0; i < 3; i++)

@@ -26,60 +26,51 @@ from .model import MESH_KINDS
 BATCH_MIN = 8
 #: (ray, primitive) pairs culled or traced at a time: bounds the temporaries (some 200 bytes a pair).
 PAIRS_AT_ONCE = 1 << 15
-
+#: The most members asked at a time for shadow feelers (PrimitiveBatch.blocked).
+MOST_BLOCKERS_AT_ONCE = 64
 _MESH_CODES = [code for code, entry in enumerate(shapes.REGISTRY) if entry.keyword in MESH_KINDS]
-
-
-def lines_near_sphere(center, radius: float, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Which lines pass within ``radius`` of ``center`` (all of them for an infinite radius).  Broadcasts: lines
-    (N, 1, 3) and spheres (P, 3), (P,) give (N, P) (tracer.batches)."""
-    if np.ndim(radius) == 0 and not np.isfinite(radius):
-        return np.ones(origins.shape[0], dtype=bool)
-    to_center = center - origins
-    dd = numerics.dot3(directions, directions)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        along = numerics.dot3(to_center, directions) / dd
-    perp = to_center - along[..., None] * directions
-    return numerics.dot3(perp, perp) <= radius * radius
 
 
 @dataclass(frozen=True)
 class PrimitiveBatch:
-    """Top-level objects ``objects`` (ascending), plain primitives of one kind with the same traced parameters,
-    whose table rows are ``rows``."""
+    """Top-level objects ``objects`` (their indices in the scene, ascending): plain primitives of one kind with
+    the same traced parameters, whose table rows are ``rows``."""
 
     objects: np.ndarray
     rows: np.ndarray
     table: "PrimitiveTable"
 
-    def pairs(self, origins: np.ndarray, directions: np.ndarray,
-              rays: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """(ray, member) index pairs, a chunk at a time: the rays ``rays`` whose line passes a member's bounding
-        sphere (every member of an unbounded kind), ray-major."""
-        table, count = self.table, len(self.rows)
-        centers, radii = table.centers[self.rows], table.radii[self.rows]
+    def pairs(self, origins: np.ndarray, directions: np.ndarray, rays: np.ndarray,
+              members: slice = slice(None)) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """(ray, member) index pairs, a chunk at a time: the rays ``rays`` whose line passes the bounding sphere
+        of a member in ``members`` (every such member, for an unbounded kind), ray-major."""
+        table, chosen = self.table, np.arange(len(self.rows))[members]
+        centers, radii = table.centers[self.rows[chosen]], table.radii[self.rows[chosen]]
         bounded = bool(np.isfinite(radii[0]))  # (one kind: all bounded or none)
-        step = max(1, PAIRS_AT_ONCE // count)
+        step = max(1, PAIRS_AT_ONCE // chosen.size)
         for start in range(0, rays.size, step):
             chunk = rays[start:start + step]
             if bounded:
-                near = lines_near_sphere(centers, radii, origins[chunk][:, None], directions[chunk][:, None])
+                near = numerics.lines_near_spheres(centers, radii, origins[chunk][:, None], directions[chunk][:, None])
             else:
-                near = np.ones((chunk.size, count), dtype=bool)
+                near = np.ones((chunk.size, chosen.size), dtype=bool)
             at, member = np.nonzero(near)
             for first in range(0, at.size, PAIRS_AT_ONCE):
                 part = slice(first, first + PAIRS_AT_ONCE)
-                yield chunk[at[part]], member[part]
+                yield chunk[at[part]], chosen[member[part]]
 
     def members(self, member: np.ndarray) -> "Primitive":
         """The members ``member`` as one Primitive with numbers per pair."""
         return self.table.primitives_of_rows(self.rows[member])
 
-    def first_hits(self, origins, directions, t_min, t_max,
-                   rays: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, HitArrays]]:
-        """For each chunk of pairs: (ray, object, hits) of the pairs with a first hit t_min < t < t_max (K = 1,
-        as Primitive.first_hit gives it)."""
+    def first_hits(self, origins, directions, t_min, t_max, rays: np.ndarray,
+                   before: Optional[np.ndarray] = None) -> Iterator[tuple[np.ndarray, np.ndarray, HitArrays]]:
+        """For each chunk of pairs: (ray, object, hits) of the pairs that have a first hit t_min < t < t_max
+        (K = 1, as Primitive.first_hit gives it); ``before`` (per ray): only objects before that index."""
         for ray, member in self.pairs(origins, directions, rays):
+            if before is not None:
+                earlier = self.objects[member] < before[ray]
+                ray, member = ray[earlier], member[earlier]
             if ray.size == 0:
                 continue
             hits = self.members(member).first_hit(origins[ray], directions[ray], t_min[ray], t_max[ray])
@@ -88,15 +79,34 @@ class PrimitiveBatch:
                 yield ray[found], self.objects[member[found]], hits.subset(found)
 
     def blocked(self, origins, directions, t_max, rays: np.ndarray) -> np.ndarray:
-        """Which of the rays ``rays`` (a subset of the feelers) some member blocks (Primitive.occludes)."""
+        """Which of the rays ``rays`` (feelers) some member blocks (Primitive.occludes): the members asked in
+        blocks of 1, 2, 4, ... (at most MOST_BLOCKERS_AT_ONCE), each block for the feelers still open: the first
+        blockers often block them all (a floor under the whole scene)."""
         blocked = np.zeros(origins.shape[0], dtype=bool)
-        for ray, member in self.pairs(origins, directions, rays):
-            open_pairs = ~blocked[ray]
-            ray, member = ray[open_pairs], member[open_pairs]
-            if ray.size:
-                hit = self.members(member).occludes(origins[ray], directions[ray], np.zeros(ray.size), t_max[ray])
-                blocked[ray[hit]] = True
+        first, size = 0, 1
+        while first < len(self.rows):
+            open_rays = rays[~blocked[rays]]
+            if open_rays.size == 0:
+                break
+            block = slice(first, first + size)
+            first, size = first + size, min(2 * size, MOST_BLOCKERS_AT_ONCE)
+            for ray, member in self.pairs(origins, directions, open_rays, block):
+                open_pairs = ~blocked[ray]
+                ray, member = ray[open_pairs], member[open_pairs]
+                if ray.size:
+                    hit = self.members(member).occludes(origins[ray], directions[ray], np.zeros(ray.size),
+                                                        t_max[ray])
+                    blocked[ray[hit]] = True
         return blocked[rays]
+
+
+def firsts(rays: np.ndarray, *keys: np.ndarray) -> np.ndarray:
+    """Positions of each ray's first entry in the order of ``keys`` (the first key the last decided, as
+    np.lexsort); ``rays`` and the keys are one entry each per pair."""
+    order = np.lexsort((*keys, rays))
+    leads = np.ones(order.size, dtype=bool)
+    leads[1:] = rays[order][1:] != rays[order][:-1]
+    return order[leads]
 
 
 def _groups(rows: np.ndarray, table: "PrimitiveTable") -> list[np.ndarray]:
@@ -114,9 +124,10 @@ def _groups(rows: np.ndarray, table: "PrimitiveTable") -> list[np.ndarray]:
 
 
 def batches_of(objects, table: Optional["PrimitiveTable"]) -> tuple[list[PrimitiveBatch], np.ndarray]:
-    """The batches of a compiled scene's top-level objects, and the indices (ascending) of the objects traced
-    one by one.  Kept on ``objects`` (a CompiledObjects) until an edit forgets them."""
-    kept = getattr(objects, "_batches", None)
+    """The batches of a compiled scene's top-level objects, and the indices (ascending) of the objects asked one
+    by one.  The grouping is kept on ``objects`` (a CompiledObjects) until an edit forgets it
+    (CompiledObjects.forget_batches)."""
+    kept = getattr(objects, "batches", None)
     if kept is not None:
         return kept
     primitive_index = getattr(objects, "primitive_index", None)
@@ -129,13 +140,14 @@ def batches_of(objects, table: Optional["PrimitiveTable"]) -> tuple[list[Primiti
             alone[plain[members]] = False
     kept = (batches, np.nonzero(alone)[0])
     if primitive_index is not None:
-        objects._batches = kept
+        objects.batches = kept
     return kept
 
 
 def leaf_hits(leaves: list["Primitive"], origins: np.ndarray, directions: np.ndarray) -> dict[int, HitArrays]:
     """The whole-line hits (Primitive.intersect) of those of a boolean's leaves that come in batches, by
-    id(leaf): a boolean of 2,048 spheres asks 2,048 times otherwise."""
+    id(leaf): a boolean of 2,048 spheres asks 2,048 times otherwise.  The hits of a batch's members lie in one
+    table of rows, member after member (each leaf's a view of its rows)."""
     table = getattr(leaves[0], "table", None) if leaves else None
     if table is None or len(leaves) < BATCH_MIN or any(getattr(leaf, "table", None) is not table for leaf in leaves):
         return {}
@@ -146,18 +158,14 @@ def leaf_hits(leaves: list["Primitive"], origins: np.ndarray, directions: np.nda
         batch = PrimitiveBatch(members, rows[members], table)
         nowhere = np.zeros((0, 3))
         slots = leaves[members[0]].intersect(nowhere, nowhere).slots  # (the kind's)
-        whole = [HitArrays.empty(n, slots) for _ in members]
+        stacked = HitArrays.empty(len(members) * n, slots)
         for ray, member in batch.pairs(origins, directions, np.arange(n)):
-            if ray.size == 0:
-                continue
-            hits = batch.members(member).intersect(origins[ray], directions[ray])
-            order = np.argsort(member, kind="stable")
-            ends = np.flatnonzero(np.diff(member[order])) + 1
-            for run in np.split(order, ends):
-                full, mine = whole[member[run[0]]], ray[run]
+            if ray.size:
+                hits = batch.members(member).intersect(origins[ray], directions[ray])
                 for name in _HIT_FIELDS:
-                    getattr(full, name)[mine] = getattr(hits, name)[run]
-        found.update((id(leaves[position]), full) for position, full in zip(members.tolist(), whole))
+                    getattr(stacked, name)[member * n + ray] = getattr(hits, name)
+        for j, position in enumerate(members.tolist()):
+            found[id(leaves[position])] = stacked.subset(slice(j * n, (j + 1) * n))
     return found
 
 

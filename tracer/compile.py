@@ -21,7 +21,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from . import numerics, shapes
-from .batches import leaf_hits, lines_near_sphere
+from .batches import leaf_hits
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
@@ -244,9 +244,9 @@ class Primitive:
         caller has culled the pairs by their bounding spheres: may_hit passes every ray."""
         first = cls.of_row(table, int(rows[0]))
         self = cls.__new__(cls)
-        self.__dict__.update(first.__dict__)  # kind, family, planes, size: the same for every row
+        self.__dict__.update(first.__dict__)  # kind, registry entry, parameters, planes, size: every row's
         self.index = rows[:, None]
-        self.material_id = None
+        self.material_id = self.matrix = None  # (per row: read from the table where needed)
         self.inverse = table.inverses[rows]
         self.normal_matrix = self.inverse[:, None, :3, :3]
         self.inverse_error = table.inverse_error[rows][:, None]
@@ -446,7 +446,7 @@ class Primitive:
 
     def may_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Rays whose line passes within the bounding sphere (all rays for unbounded shapes)."""
-        return lines_near_sphere(self.center, self.radius, origins, directions)
+        return numerics.lines_near_spheres(self.center, self.radius, origins, directions)
 
 
 class CSGNode:
@@ -479,7 +479,7 @@ class CSGNode:
                 yield node
 
     def may_hit(self, origins, directions):
-        return lines_near_sphere(self.center, self.radius, origins, directions)
+        return numerics.lines_near_spheres(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
         known = leaf_hits(list(self.leaves()), origins, directions)
@@ -1078,8 +1078,12 @@ class CompiledObjects(Sequence):
         self.primitives = primitives
         self.primitive_index = primitive_index
         self.booleans = booleans
-        #: tracer.batches.batches_of's grouping of these objects, once made (None: to be made again)
-        self._batches = None
+        #: tracer.batches.batches_of's grouping of these objects, once made
+        self.batches = None
+
+    def forget_batches(self) -> None:
+        """The grouping made again when next asked for (an edit may have changed a primitive's kind)."""
+        self.batches = None
 
     def __len__(self) -> int:
         return len(self.primitive_index)

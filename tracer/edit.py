@@ -390,7 +390,7 @@ class EditableScene:
         for p in positions:
             if p in compiled.objects.booleans:
                 compiled.objects.booleans[p] = self._boolean_node(p)
-        compiled.objects._batches = None  # (a row may have changed kind: tracer.batches groups by kind)
+        compiled.objects.forget_batches()
 
     def _boolean_node(self, position: int) -> CSGNode:
         counter = iter(range(int(self._starts[position]), int(self._starts[position + 1])))

@@ -55,6 +55,19 @@ _SQUARE_LO, _SQUARE_HI = 2.0 ** -900, 2.0 ** 900
 FEELER_REACH = 2.0 ** 64
 
 
+def lines_near_spheres(center, radius, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Which lines pass within ``radius`` of ``center`` (all of them for an infinite radius).  Broadcasts:
+    lines (N, 1, 3) and spheres (P, 3), (P,) give (N, P) (tracer.batches)."""
+    if np.ndim(radius) == 0 and not np.isfinite(radius):
+        return np.ones(origins.shape[0], dtype=bool)
+    to_center = center - origins
+    dd = dot3(directions, directions)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = dot3(to_center, directions) / dd
+    perp = to_center - along[..., None] * directions
+    return dot3(perp, perp) <= radius * radius
+
+
 def norm3(v: np.ndarray) -> np.ndarray:
     """Euclidean lengths over the last axis (of length 3) that cannot overflow or underflow: where |v|^2 leaves
     [2^-900, 2^900] the vector is scaled by the power of two nearest its largest component first, which

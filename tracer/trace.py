@@ -11,7 +11,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from .batches import batches_of
+from .batches import batches_of, firsts
 from .compile import CompiledScene
 from .errors import RenderCancelled
 from . import fresnel, lights, numerics, terminator
@@ -92,7 +92,8 @@ def first_hits(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray
             nearest.offer_many(rays, objects, h)
     tie = np.nonzero((best.obj >= 0) & (nearest.second <= nearest.reach))[0]
     if tie.size:
-        _earliest_in_reach(scene, best, tie, origins, directions, t_min, np.nextafter(nearest.reach, np.inf))
+        _earliest_in_reach(scene, (batches, alone), best, tie, origins, directions, t_min,
+                           np.nextafter(nearest.reach, np.inf))
     best.hit = np.isfinite(best.t)
     length = numerics.norm3(best.normal)[:, None]  # (a shape scaled by 1e-200: |n M^-1|^2 overflows)
     best.normal = np.divide(best.normal, length, out=np.zeros_like(best.normal), where=length > 0)
@@ -109,8 +110,8 @@ class _Nearest:
     reach: np.ndarray
 
     def offer(self, rays: np.ndarray, objects, h) -> None:
-        """First hits ``h`` (K = 1) of the objects ``objects`` (one, or one per ray) for the rays ``rays``
-        (each at most once)."""
+        """First hits ``h`` (K = 1) of the objects ``objects`` (one, or one per ray: np.ndim tells) for the rays
+        ``rays`` (each at most once)."""
         best = self.best
         t = h.t[:, 0]
         best_t = best.t[rays]
@@ -123,16 +124,13 @@ class _Nearest:
 
     def offer_many(self, rays: np.ndarray, objects: np.ndarray, h) -> None:
         """As offer, with any number of hits per ray: each ray's least (t, object) is offered, the others are
-        counted in ``second`` and ``reach``."""
-        order = np.lexsort((objects, h.t[:, 0], rays))
-        rays, objects = rays[order], objects[order]
-        h = h.subset(order)
-        leads = np.ones(rays.size, dtype=bool)
-        leads[1:] = rays[1:] != rays[:-1]
-        rest = np.nonzero(~leads)[0]
+        counted in ``second`` and ``reach``.  (Errors are never NaN: a NaN reach would shut out the objects
+        after it, in the order they were asked; np.minimum keeps it, as the C core's nan_min does.)"""
+        lead = firsts(rays, objects, h.t[:, 0])
+        rest = np.ones(rays.size, dtype=bool)
+        rest[lead] = False
         np.minimum.at(self.second, rays[rest], h.t[rest, 0])
         np.minimum.at(self.reach, rays[rest], h.t[rest, 0] + h.error[rest, 0])
-        lead = np.nonzero(leads)[0]
         self.offer(rays[lead], objects[lead], h.subset(lead))
 
 
@@ -155,17 +153,14 @@ def _rows_of(hits: SurfaceHits, rows: np.ndarray) -> SurfaceHits:
     return SurfaceHits(**{f.name: getattr(hits, f.name)[rows] for f in fields(SurfaceHits)})
 
 
-def _earliest_in_reach(scene, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
-    """The rays ``rows`` have a tie: the first object in the scene with a hit before ``limit`` wins it."""
-    batches, alone = batches_of(scene.objects, scene.table)
-    for batch in batches:
-        for rays, objects, h in batch.first_hits(origins, directions, t_min, limit, rows):
-            earlier = objects < best.obj[rays]
-            order = np.lexsort((objects, rays))
-            order = order[earlier[order]]
-            leads = np.ones(order.size, dtype=bool)
-            leads[1:] = rays[order][1:] != rays[order][:-1]
-            first = order[leads]
+def _earliest_in_reach(scene, grouped, best: SurfaceHits, rows, origins, directions, t_min, limit) -> None:
+    """The rays ``rows`` have a tie: the first object in the scene with a hit before ``limit`` wins it.
+    ``grouped``: the batches and the objects asked alone (tracer.batches.batches_of)."""
+    batches, alone = grouped
+    for batch in batches:  # (only objects before each ray's best so far can win: the others are not asked)
+        for rays, objects, h in batch.first_hits(origins, directions, t_min, limit, rows, before=best.obj):
+            first = firsts(rays, objects)
+            first = first[objects[first] < best.obj[rays[first]]]  # (an earlier chunk may have found one)
             _take(best, rays[first], h, first, objects[first])
     for index in alone.tolist():
         rows = rows[index < best.obj[rows]]
@@ -187,7 +182,7 @@ def occluded(scene: CompiledScene, origins: np.ndarray, directions: np.ndarray,
     for index in alone.tolist():
         open_rays = np.nonzero(~blocked)[0]
         if open_rays.size == 0:
-            return blocked
+            break
         m = open_rays.size
         blocked[open_rays] = scene.objects[index].occludes(origins[open_rays], directions[open_rays], np.zeros(m),
                                                            t_max[open_rays])

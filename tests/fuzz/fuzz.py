@@ -222,7 +222,7 @@ def _judge_signal(case, outcome: Outcome, folder: Path) -> None:
         outcome.verdict, outcome.detail = "bad-exit", f"{signal.Signals(signum).name} ended it without a word"
     elif interrupted and signum != signal.SIGKILL and latency is not None and latency > SIGNAL_LATENCY:
         outcome.verdict, outcome.detail = "hang", f"{signal.Signals(signum).name} heard after {latency:.2f} s"
-    elif data != OLD_OUTPUT and (outcome.returncode != 0 or not data) and not _whole_image(output):
+    elif data != OLD_OUTPUT and (outcome.returncode != 0 or not data) and not _whole_output(output):
         outcome.verdict, outcome.detail = "bad-exit", "the output is neither the old one nor a whole new one"
     elif _litter(folder, case):
         outcome.verdict, outcome.detail = "bad-exit", f"left {_litter(folder, case)}"
@@ -230,8 +230,19 @@ def _judge_signal(case, outcome: Outcome, folder: Path) -> None:
         outcome.verdict, outcome.detail = ("error" if interrupted else "image"), ""
 
 
-def _whole_image(path: Path) -> bool:
+def _whole_output(path: Path) -> bool:
+    """Whether ``path`` is a whole output: an image Pillow reads, a USD stage usd-core opens, an SDL file the
+    tracer reads (a kill just after the output was put in place leaves the whole new file and a -9 status)."""
     try:
+        if path.suffix in (".usda", ".usdc", ".usd"):
+            from pxr import Usd
+
+            return bool(Usd.Stage.Open(str(path)))
+        if path.suffix == ".sdl":
+            from tracer.sdl.parser import load
+
+            load(path, strict=True)
+            return True
         from PIL import Image
 
         with Image.open(path) as picture:

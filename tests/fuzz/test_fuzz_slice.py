@@ -135,3 +135,31 @@ def test_the_translation_names_the_users_file():
     assert error_message(MemoryError(), "scene.sdl").startswith("scene.sdl: not enough memory")
     assert error_message(ValueError("a bug")) is None  # not the input's fault: left to show itself
     assert len(error_message(TracerError("x" * 10**6))) < 700
+
+
+@pytest.mark.skipif(SANITIZED, reason="under make sanitize: no usd-core")
+@pytest.mark.parametrize("name", ["out.usda", "out.sdl"])
+def test_a_kill_after_the_whole_output_was_put_in_place_is_judged_kept(tmp_path, name):
+    """Fuzz input 3001026276: SIGKILL reached a convert after it had put its whole out.usda in place (the same
+    bytes as a convert left alone writes); the judge read it as a half-written image.  A whole USD or SDL
+    output with a -9 status is a kept promise; a truncated one is not."""
+    import signal
+
+    from fuzz import _judge_signal
+    from harness import Outcome
+    from mutate import Case
+    from tracer import cli
+
+    source = tmp_path / "in.sdl"
+    source.write_text("light 1 2 3 1 1 1\nsphere\npush translate 2 0 0 cube pop\n")
+    assert cli.main(["convert", str(source), str(tmp_path / name)]) == 0
+    case = Case("kill", {"in.sdl": source.read_bytes()}, command="convert")
+    case.signal, case.output = (signal.SIGKILL, 0.1), name
+    whole = Outcome("", -signal.SIGKILL, "", 0.2, 0)
+    _judge_signal(case, whole, tmp_path)
+    assert whole.ok, whole.detail
+    data = (tmp_path / name).read_bytes()
+    (tmp_path / name).write_bytes(data[: len(data) // 2])
+    cut = Outcome("", -signal.SIGKILL, "", 0.2, 0)
+    _judge_signal(case, cut, tmp_path)
+    assert cut.verdict == "bad-exit", cut.detail

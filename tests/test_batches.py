@@ -95,7 +95,7 @@ def test_the_scene_is_traced_in_batches(compiled):
     assert sum(len(b.objects) for b in found) == 16 + 8 + 8
     assert set(alone.tolist()).isdisjoint(np.concatenate([b.objects for b in found]).tolist())
     boolean = compiled.objects[int(alone[-1])]
-    assert len(batches.leaf_hits(list(boolean.leaves()), *_rays(4, 0))) == 25  # (the ball and its 24 dents)
+    assert len(batches.LeafHits(list(boolean.leaves()), *_rays(4, 0))) == 25  # (the ball and its 24 dents)
 
 
 @pytest.mark.parametrize("count, pairs_at_once", [(4000, None), (300, 7)])
@@ -129,6 +129,26 @@ def test_coincident_spheres_tie_to_the_first(compiled):
     group = (hits.obj >= first_ball) & (hits.obj < first_ball + 8)
     assert group.sum() > 50
     assert set(hits.obj[group].tolist()) == {first_ball}
+
+
+def test_a_booleans_leaves_in_blocks_give_the_same_hits(compiled, monkeypatch):
+    """Leaves intersected a block of 8 at a time (LEAF_ROWS bounds what is held) and all at once, against one
+    by one: the boolean's hits are the same."""
+    boolean = compiled.objects[int(batches.batches_of(compiled.objects, compiled.table)[1][-1])]
+    rng = np.random.default_rng(4)
+    origins = rng.uniform(-4, 4, (500, 3)) + np.array([0, 3, 6])
+    directions = rng.uniform(-0.5, 0.5, (500, 3)) + np.array([0, 0.6, 2.2]) - origins  # (at the boolean)
+    whole = boolean.intersect(origins, directions)
+    monkeypatch.setattr(batches, "LEAF_ROWS", 8 * 500)
+    blocks = batches.LeafHits(list(boolean.leaves()), origins, directions)
+    assert len({id(block) for block in blocks.waiting.values()}) == 4  # (25 leaves: 8 + 8 + 8 + 1)
+    in_blocks = boolean.intersect(origins, directions)
+    monkeypatch.setattr(batches, "BATCH_MIN", 10 ** 9)
+    alone = boolean.intersect(origins, directions)
+    assert np.isfinite(whole.t).sum() > 100
+    for name in ("t", "normal", "entering", "shape", "part", "error", "offset"):
+        np.testing.assert_array_equal(getattr(whole, name), getattr(alone, name), err_msg=name)
+        np.testing.assert_array_equal(getattr(in_blocks, name), getattr(alone, name), err_msg=name)
 
 
 def test_the_image_is_the_same(compiled, monkeypatch):

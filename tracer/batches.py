@@ -28,6 +28,8 @@ BATCH_MIN = 8
 PAIRS_AT_ONCE = 1 << 15
 #: The most members asked at a time for shadow feelers (PrimitiveBatch.blocked).
 MOST_BLOCKERS_AT_ONCE = 64
+#: The most (ray, leaf) rows of a boolean's batched leaves held at once (LeafHits): some 100 bytes each.
+LEAF_ROWS = 1 << 18
 _MESH_CODES = [code for code, entry in enumerate(shapes.REGISTRY) if entry.keyword in MESH_KINDS]
 
 
@@ -144,29 +146,55 @@ def batches_of(objects, table: Optional["PrimitiveTable"]) -> tuple[list[Primiti
     return kept
 
 
-def leaf_hits(leaves: list["Primitive"], origins: np.ndarray, directions: np.ndarray) -> dict[int, HitArrays]:
-    """The whole-line hits (Primitive.intersect) of those of a boolean's leaves that come in batches, by
-    id(leaf): a boolean of 2,048 spheres asks 2,048 times otherwise.  The hits of a batch's members lie in one
-    table of rows, member after member (each leaf's a view of its rows)."""
-    table = getattr(leaves[0], "table", None) if leaves else None
-    if table is None or len(leaves) < BATCH_MIN or any(getattr(leaf, "table", None) is not table for leaf in leaves):
-        return {}
-    rows = np.array([leaf.index for leaf in leaves])
-    n = origins.shape[0]
-    found: dict[int, HitArrays] = {}
-    for members in _groups(rows, table):
-        batch = PrimitiveBatch(members, rows[members], table)
+class LeafHits:
+    """The whole-line hits (Primitive.intersect) of those of a boolean's leaves that come in batches: a boolean of
+    2,048 spheres asks 2,048 times otherwise.  A batch's members are intersected a block at a time, when the
+    first leaf of the block is asked for (fold_tree asks left to right), into one table of rows, member after
+    member; each leaf's hits (a view of its rows) are handed out once, so a block is freed as the fold goes on:
+    at most LEAF_ROWS rows of a boolean's leaves are held beyond the fold's own."""
+
+    def __init__(self, leaves: list["Primitive"], origins: np.ndarray, directions: np.ndarray):
+        self.origins, self.directions = origins, directions
+        self.waiting: dict[int, tuple] = {}  # id(leaf) -> (its batch, the block of members it is in)
+        self.ready: dict[int, HitArrays] = {}
+        table = getattr(leaves[0], "table", None) if leaves else None
+        if table is None or len(leaves) < BATCH_MIN or any(getattr(leaf, "table", None) is not table
+                                                          for leaf in leaves):
+            return
+        rows = np.array([leaf.index for leaf in leaves])
+        per_block = max(BATCH_MIN, LEAF_ROWS // max(1, origins.shape[0]))
+        for positions in _groups(rows, table):
+            batch = PrimitiveBatch(positions, rows[positions], table)
+            for first in range(0, positions.size, per_block):
+                block = (batch, np.arange(first, min(first + per_block, positions.size)),
+                         [id(leaves[p]) for p in positions[first:first + per_block].tolist()])
+                for key in block[2]:
+                    self.waiting[key] = block
+
+    def __len__(self) -> int:
+        return len(self.waiting) + len(self.ready)
+
+    def pop(self, leaf: "Primitive") -> Optional[HitArrays]:
+        """The leaf's hits (once), or None for a leaf not in a batch."""
+        block = self.waiting.get(id(leaf))
+        if block is not None:
+            self._intersect(*block)
+        return self.ready.pop(id(leaf), None)
+
+    def _intersect(self, batch: PrimitiveBatch, members: np.ndarray, keys: list[int]) -> None:
+        origins, directions = self.origins, self.directions
+        n = origins.shape[0]
         nowhere = np.zeros((0, 3))
-        slots = leaves[members[0]].intersect(nowhere, nowhere).slots  # (the kind's)
-        stacked = HitArrays.empty(len(members) * n, slots)
-        for ray, member in batch.pairs(origins, directions, np.arange(n)):
+        slots = batch.members(members[:1]).intersect(nowhere, nowhere).slots  # (the kind's)
+        stacked = HitArrays.empty(members.size * n, slots)
+        for ray, member in batch.pairs(origins, directions, np.arange(n), slice(members[0], members[-1] + 1)):
             if ray.size:
                 hits = batch.members(member).intersect(origins[ray], directions[ray])
                 for name in _HIT_FIELDS:
-                    getattr(stacked, name)[member * n + ray] = getattr(hits, name)
-        for j, position in enumerate(members.tolist()):
-            found[id(leaves[position])] = stacked.subset(slice(j * n, (j + 1) * n))
-    return found
+                    getattr(stacked, name)[(member - members[0]) * n + ray] = getattr(hits, name)
+        for j, key in enumerate(keys):
+            del self.waiting[key]
+            self.ready[key] = stacked.subset(slice(j * n, (j + 1) * n))
 
 
 #: What Primitive.intersect copies into the rows of the rays it culled (the others have no hits).

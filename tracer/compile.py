@@ -21,7 +21,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from . import numerics, shapes
-from .batches import leaf_hits
+from .batches import LeafHits
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
 from .geometry import builtin_mesh
@@ -482,10 +482,10 @@ class CSGNode:
         return numerics.lines_near_spheres(self.center, self.radius, origins, directions)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> HitArrays:
-        known = leaf_hits(list(self.leaves()), origins, directions)
+        known = LeafHits(list(self.leaves()), origins, directions)
 
         def hits_of(prim: Primitive) -> HitArrays:
-            hits = known.get(id(prim))
+            hits = known.pop(prim)
             return prim.intersect(origins, directions) if hits is None else hits
 
         return fold_tree(self, hits_of, lambda node, left, right: combine(node.op, left, right))

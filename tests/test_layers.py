@@ -36,7 +36,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("base", ("tracer.errors", "tracer.shapes", "tracer.numerics", "tracer.threads", "tracer.startup",
               "tracer.bulk", "tracer.atomic", "tracer.userfiles", "tracer.png", "tracer.imageio",
               "tracer.transforms", "tracer.sampling", "tracer.appearance", "tracer.savings", "tracer.signals",
-              "tracer.diagnostics")),
+              "tracer.diagnostics", "tracer.instances")),
     ("model", ("tracer.meshdata", "tracer.geometry", "tracer.geometry.*", "tracer.model", "tracer.camera")),
     ("NumPy geometry", ("tracer.intersect", "tracer.intersect.*", "tracer.textures", "tracer.textures.*",
                         "tracer.lights", "tracer.fresnel", "tracer.terminator")),

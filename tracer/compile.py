@@ -12,7 +12,7 @@ import operator
 import os
 import weakref
 from collections.abc import Sequence
-from dataclasses import astuple, dataclass, field
+from dataclasses import astuple, dataclass, field, replace
 from functools import cached_property
 from itertools import chain, repeat
 from operator import attrgetter
@@ -20,7 +20,7 @@ from typing import Callable, Optional, Union
 
 import numpy as np
 
-from . import numerics, shapes
+from . import instances, numerics, shapes
 from .batches import LeafHits
 from .bulk import collector_paused, one_blas_thread
 from .errors import SceneError, TracerError
@@ -982,6 +982,133 @@ class PrimitiveTable:
             self._keep_bounds(rows[part], world.min(axis=1), world.max(axis=1))
 
 
+
+class InstancedTable(PrimitiveTable):
+    """The PrimitiveTable of a ShapeTable whose matrices are single precision (Blender's): its mesh rows are
+    *instance rows* (tracer.instances), which hold no inverse, rounding or bounds of their own but their
+    float32 affine (the scene's row, not copied) and their world box in single precision (``object_boxes``,
+    what the C core's hierarchy is built from); both backends compute the rest from those when asked, the
+    same way.  10^5 instances of a mesh then cost ~30 compiled bytes each instead of 248.
+
+    ``slot`` (N,) int32: each row's index into ``stored``, the PrimitiveTable of the other rows (analytic
+    shapes, and any mesh row whose cofactor inverse or box is not finite), or -1 for an instance row.
+    ``object_boxes`` (N, 6) float32: every row's padded world box rounded outward (flatten's object boxes).
+    The NumPy path reads every row's numbers as a PrimitiveTable's (``inverses``, ``rounding_terms``,
+    ``spheres``, ``boxes`` and their views), made for all rows when it first asks.  Never edited in place:
+    tracer.edit makes a table into Shapes first."""
+
+    def __init__(self, shapes: "_RowShapes", kind: np.ndarray, parameters: np.ndarray, material_ids: np.ndarray):
+        columns = shapes.columns
+        n = len(shapes)
+        self.shapes = shapes
+        self.tolerances = numerics.TOLERANCES
+        self.material_ids = material_ids
+        self.kind = np.asarray(kind, dtype=np.int16)
+        self.meshes: dict[int, object] = {}
+        self._mesh_owners: dict[int, MeshData] = {}
+        self.affines = columns.affines
+        traced = _traced_parameters(self.kind, parameters)
+        # (the table's own where they are what the kinds trace, as a mesh's zeros: not held twice)
+        self.parameters = parameters if np.array_equal(traced, parameters) else traced
+        self.object_boxes = np.empty((n, 6), dtype=np.float32)
+        #: each instance row's mesh's generic size (MeshBound.generic_size), by id of its built TriangleMesh
+        self.generic_sizes: dict[int, float] = {}
+        instance = np.zeros(n, dtype=bool)
+        for mesh, rows in self.mesh_groups():
+            self._build_mesh(mesh)
+            built = self.meshes[id(mesh)]
+            bound = mesh_bound(mesh, built)
+            self.generic_sizes[id(built)] = bound.generic_size
+            for part in row_chunks(len(rows)):
+                chosen = rows[part]
+                affines = self.affines[chosen]
+                inverse = instances.affine_inverses(affines)
+                error = instances.affine_inverse_rounding(inverse, affines)
+                matrix = _matrices_of_affines(affines)
+                with np.errstate(all="ignore"):
+                    lo, hi = bound.world_box(matrix[:, :3, :3], matrix[:, :3, 3])
+                    boxes = instances.single_boxes(instances.padded_boxes(lo, hi))
+                # (a row whose numbers are not all finite is stored, and checked as any other shape is)
+                instance[chosen] = (np.isfinite(inverse).all(axis=(1, 2)) & np.isfinite(error)
+                                    & np.isfinite(boxes).all(axis=1))
+                self.object_boxes[chosen] = boxes
+        stored = np.flatnonzero(~instance)
+        self.slot = np.full(n, -1, dtype=np.int32)
+        self.slot[stored] = np.arange(len(stored), dtype=np.int32)
+        subset = _row_subset(columns, stored)
+        self.stored = PrimitiveTable(_RowShapes(subset), self.kind[stored], subset.parameters, subset.affines,
+                                     material_ids[stored])
+        for part in row_chunks(len(stored)):
+            boxes = self.stored.boxes[part]
+            self.object_boxes[stored[part]] = instances.single_boxes(instances.padded_boxes(boxes[:, :3],
+                                                                                          boxes[:, 3:]))
+
+    def refill(self, rows, shapes) -> None:
+        raise TypeError("an InstancedTable is not edited in place (tracer.edit compiles the scene's Shapes)")
+
+    resize = refill
+
+    def mesh_groups(self) -> list[tuple[MeshData, np.ndarray]]:
+        """PrimitiveTable.mesh_groups, made anew when asked (a few milliseconds for 10^5 rows), not kept: the
+        index arrays would be 8 bytes an instance."""
+        return self._groups(MESH_KINDS)
+
+    def instance_rows(self) -> np.ndarray:
+        """The rows whose numbers are computed from their affines, in order."""
+        return np.flatnonzero(self.slot < 0)
+
+    def _every_row(self) -> dict[str, np.ndarray]:
+        """Every row's numbers as a PrimitiveTable holds them (the stored rows' copied, the instance rows'
+        computed), made when first asked for and kept."""
+        kept = self.__dict__.get("_every_row_arrays")
+        if kept is not None:
+            return kept
+        n = len(self)
+        stored = np.flatnonzero(self.slot >= 0)
+        out = {"inverses": np.empty((n, 4, 4)), "rounding_terms": np.empty((n, 4)), "spheres": np.empty((n, 4)),
+               "boxes": np.empty((n, 6))}
+        for name in out:
+            out[name][stored] = getattr(self.stored, name)
+        for mesh, rows in self.mesh_groups():
+            rows = rows[self.slot[rows] < 0]
+            size = self.generic_sizes[id(self.meshes[id(mesh)])]
+            for part in row_chunks(len(rows)):
+                chosen = rows[part]
+                affines = self.affines[chosen]
+                inverse = instances.affine_inverses(affines)
+                out["inverses"][chosen] = inverse
+                terms = out["rounding_terms"][chosen]
+                terms[:, 0] = instances.affine_inverse_rounding(inverse, affines)
+                terms[:, 1] = size
+                terms[:, 2], terms[:, 3] = instances.inverse_norms(inverse)
+                out["rounding_terms"][chosen] = terms
+                out["spheres"][chosen] = instances.spheres_of_boxes(self.object_boxes[chosen])
+                out["boxes"][chosen] = self.object_boxes[chosen]
+        self.__dict__["_every_row_arrays"] = out
+        return out
+
+    inverses = property(lambda self: self._every_row()["inverses"])
+    rounding_terms = property(lambda self: self._every_row()["rounding_terms"])
+    spheres = property(lambda self: self._every_row()["spheres"])
+    boxes = property(lambda self: self._every_row()["boxes"])
+    inverse_error = property(lambda self: self.rounding_terms[:, 0])
+    generic_size = property(lambda self: self.rounding_terms[:, 1])
+    inverse_norms = property(lambda self: self.rounding_terms[:, 2:])
+    centers = property(lambda self: self.spheres[:, :3])
+    radii = property(lambda self: self.spheres[:, 3])
+
+
+def _row_subset(columns: ShapeColumns, rows: np.ndarray) -> ShapeColumns:
+    """The ShapeColumns of these rows of a table (their own sources, meshes and materials; no names)."""
+    def take(array):
+        return None if array is None else array[rows]
+
+    return replace(columns, kinds=columns.kinds[rows], affines=columns.affines[rows],
+                   material_ids=columns.material_ids[rows], parameters=columns.parameters[rows],
+                   lines=take(columns.lines), columns=take(columns.columns), names=None,
+                   mesh_ids=take(columns.mesh_ids))
+
+
 #: Index of each kind in the shape registry (PrimitiveTable.kind).
 _KIND_INDEX = {e.keyword: i for i, e in enumerate(shapes.REGISTRY)}
 _KEYWORDS = tuple(e.keyword for e in shapes.REGISTRY)
@@ -1551,6 +1678,13 @@ def _material_ids(materials: tuple[Material, ...]) -> tuple[np.ndarray, list[Mat
     return number[which], list(map(materials.__getitem__, first[order].tolist()))
 
 
+def _has_instance_rows(columns: _Columns, kind: np.ndarray) -> bool:
+    """Whether the shapes are a ShapeTable of single-precision matrices with mesh rows (InstancedTable)."""
+    table = columns.table
+    return (table is not None and table.affines.dtype == np.float32
+            and bool(np.isin(kind, list(_MESH_CODES)).any()))
+
+
 def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
     """Compile ``scene`` (``columns``: what compile_scene's content key gathered, when the caller has it).
 
@@ -1561,7 +1695,8 @@ def _compile(scene: Scene, columns: Optional[_Columns] = None) -> CompiledScene:
         columns = _content(scene)[1]
     shapes = columns.shapes
     kind, material_ids, materials, parameters = columns.arrays()
-    table = PrimitiveTable(shapes, kind, parameters, columns.matrices, material_ids)
+    table = (InstancedTable(shapes, kind, parameters, material_ids) if _has_instance_rows(columns, kind) else
+             PrimitiveTable(shapes, kind, parameters, columns.matrices, material_ids))
     primitives = PrimitiveList(table)
     objects = _compile_objects(scene.objects, primitives, columns.any_boolean)
     material_table = MaterialTable(materials or [Material()])

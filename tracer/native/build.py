@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SOURCES = ("core.c", "core.h", "contract.h", "numeric.h", "shapes.h", "mesh.h", "csg.h", "texture.h", "shade.h", "lights.h",
+SOURCES = ("core.c", "core.h", "contract.h", "numeric.h", "prims.h", "shapes.h", "mesh.h", "csg.h", "texture.h", "shade.h", "lights.h",
            "scan.h", "bvh_build.h", "mesh_wide.h", "sdl_read.h", "interrupt.h")
 #: The library's file name: CMake (see CMakeLists.txt) and this module use the same one.
 LIBRARY_NAME = "_core.dll" if sys.platform == "win32" else "_core.so"

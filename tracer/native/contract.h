@@ -86,12 +86,17 @@ typedef struct {
     const int32_t *prim_aux;                 /* 2: polyhedron (first plane, count) or mesh (mesh index, 0) */
     const int32_t *prim_material;
     const double *prim_rounding;             /* 4: inverse error, generic size, |inverse| and |translation| (numerics; PrimitiveTable.rounding_terms): rounding / size is (hit_gamma + inverse error) / size */
+    int64_t instance_rows;                   /* how many rows are instance rows (tracer.instances: numbers computed from their affine); 0: the four fields below are not read, and a primitive's row in the three above is its index */
+    const int32_t *prim_slot;                /* per primitive: its row in prim_inverse, prim_sphere and prim_rounding, or -1 for an instance row */
+    const float *instance_affine;            /* 12 per primitive: its matrix's top three rows (read for instance rows) */
+    const float *instance_box;               /* 6 per primitive: its padded world box as object_box's (read for instance rows) */
     /* convex polyhedra: face planes n . p <= offset */
     const double *planes;                    /* 4 per plane: normal, offset */
     /* triangle meshes (TriangleMesh.arrays(): per mesh, the address of each of its own arrays) */
     int64_t n_meshes;
     const int64_t *mesh_info;                /* 4 per mesh: node, triangle, vertex and normal counts */
     const double *mesh_extent;
+    const double *mesh_generic_size;         /* per mesh: its largest |vertex coordinate| (MeshBound.generic_size): an instance row's generic size */
     double mesh_constants[5];                /* tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT */
     const uint8_t *const *mesh_nodes;        /* per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each */
     const int32_t *const *mesh_order;        /* per mesh: leaf slot -> triangle */
@@ -166,10 +171,15 @@ typedef struct {
     X(SceneDesc, prim_aux) \
     X(SceneDesc, prim_material) \
     X(SceneDesc, prim_rounding) \
+    X(SceneDesc, instance_rows) \
+    X(SceneDesc, prim_slot) \
+    X(SceneDesc, instance_affine) \
+    X(SceneDesc, instance_box) \
     X(SceneDesc, planes) \
     X(SceneDesc, n_meshes) \
     X(SceneDesc, mesh_info) \
     X(SceneDesc, mesh_extent) \
+    X(SceneDesc, mesh_generic_size) \
     X(SceneDesc, mesh_constants) \
     X(SceneDesc, mesh_nodes) \
     X(SceneDesc, mesh_order) \
@@ -348,6 +358,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "ce6624cc8115dfd3"
+#define RT_CONTRACT_DIGEST "58d30be8fe05280b"
 
 #endif

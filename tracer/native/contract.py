@@ -191,11 +191,19 @@ SCENE_DESC: tuple[Field, ...] = (
     F("prim_material", "*i32"),
     F("prim_rounding", "*f64", "4: inverse error, generic size, |inverse| and |translation| (numerics; "
       "PrimitiveTable.rounding_terms): rounding / size is (hit_gamma + inverse error) / size"),
+    F("instance_rows", "i64", "how many rows are instance rows (tracer.instances: numbers computed from their "
+      "affine); 0: the four fields below are not read, and a primitive's row in the three above is its index"),
+    F("prim_slot", "*i32", "per primitive: its row in prim_inverse, prim_sphere and prim_rounding, or -1 for an "
+      "instance row"),
+    F("instance_affine", "*f32", "12 per primitive: its matrix's top three rows (read for instance rows)"),
+    F("instance_box", "*f32", "6 per primitive: its padded world box as object_box's (read for instance rows)"),
     F("planes", "*f64", "4 per plane: normal, offset", section="convex polyhedra: face planes n . p <= offset"),
     F("n_meshes", "i64", section="triangle meshes (TriangleMesh.arrays(): per mesh, the address of each of "
       "its own arrays)"),
     F("mesh_info", "*i64", "4 per mesh: node, triangle, vertex and normal counts"),
     F("mesh_extent", "*f64"),
+    F("mesh_generic_size", "*f64", "per mesh: its largest |vertex coordinate| (MeshBound.generic_size): an "
+      "instance row's generic size"),
     F("mesh_constants", "f64", "tracer.intersect.mesh: ROUNDING_FACTOR, BARYCENTRIC_EPSILON_MAX, "
       "PARALLEL_EPSILON, DEDUPE_RELATIVE, DEDUPE_RELATIVE_ADJACENT", length=5),
     F("mesh_nodes", "**u8", "per mesh: its BvhNode records (bvh_build.h; tracer.intersect.mesh.NODE), 32 bytes each"),

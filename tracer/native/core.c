@@ -21,6 +21,7 @@
 #include "core.h"
 #include "interrupt.h"
 #include "numeric.h"
+#include "prims.h"
 #include "shapes.h"
 #include "mesh.h"
 #include "csg.h"
@@ -310,9 +311,10 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
     const SceneDesc *D = &S->d;
     out->n = 0;
     out->inside = 0;
-    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+    double own_sphere[4], own_inverse[16], own_rounding[4];
+    if (!prim_may_hit(prim_sphere_of(D, p, own_sphere), o, d))
         return 1;
-    const double *inv = D->prim_inverse + 16 * p;
+    const double *inv = prim_inverse_of(D, p, own_inverse);
     double og[3], dg[3];
     double shift = prim_generic_ray(inv, o, d, og, dg);
     int64_t n;
@@ -332,7 +334,7 @@ static int prim_hits(const Scene *S, Work *w, int64_t p, const double *o, const 
                 agree_with_crossing(&out->h[i], dg);
     }
     ErrorFrame frame;
-    error_frame(o, og, dg, D->prim_rounding + 4 * p, D->hit_gamma, &frame);
+    error_frame(o, og, dg, prim_rounding_of(D, p, inv, own_rounding), D->hit_gamma, &frame);
     const MeshView *mesh = D->prim_kind[p] == K_MESH ? &S->meshes[D->prim_aux[2 * p]] : NULL;
     for (int64_t i = 0; i < n; i++) {
         Hit *h = &out->h[i];
@@ -351,9 +353,10 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
                       double t_max, Hit *out, int feeler)
 {
     const SceneDesc *D = &S->d;
-    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+    double own_sphere[4], own_inverse[16], own_rounding[4];
+    if (!prim_may_hit(prim_sphere_of(D, p, own_sphere), o, d))
         return 0;
-    const double *inv = D->prim_inverse + 16 * p, *rounding = D->prim_rounding + 4 * p;
+    const double *inv = prim_inverse_of(D, p, own_inverse);
     if (RT_IS_MESH(D->prim_kind[p])) {
         double og[3], dg[3];
         affine_point(inv, o, og);
@@ -363,7 +366,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
         out->shape = (int32_t)p;
         if (!feeler) {  /* (meshes are traced from the transformed origin itself, not a centred one) */
             ErrorFrame frame;
-            error_frame(o, og, dg, rounding, D->hit_gamma, &frame);
+            error_frame(o, og, dg, prim_rounding_of(D, p, inv, own_rounding), D->hit_gamma, &frame);
             hit_bounds(&frame, dg, &S->meshes[D->prim_aux[2 * p]], out);
         }
         return 1;
@@ -376,7 +379,7 @@ static int prim_first(const Scene *S, Work *w, int64_t p, const double *o, const
     int n = D->prim_kind[p] == K_SPHERE ? hits_sphere(og, dg, buf) : analytic_hits(S, p, og, dg, buf, &inside);
     ErrorFrame frame;
     if (n)
-        error_frame(o, og, dg, rounding, D->hit_gamma, &frame);
+        error_frame(o, og, dg, prim_rounding_of(D, p, inv, own_rounding), D->hit_gamma, &frame);
     for (int i = 0; i < n; i++) {
         double t = buf[i].t + shift;
         if (!(t > t_min && t < t_max))
@@ -409,12 +412,13 @@ static inline int feeler_ends_within(const double *sphere, const double *o, cons
 /* Has mesh primitive p a hit whose whole error interval lies between t_min and t_max (compile.blocks_between;
  * Primitive.mesh_blocks_between)?  Its hits are taken first to last: one whose interval reaches t_max ends
  * the search (a light on the mesh's surface is not shadowed by it), one that reaches t_min is passed. */
-static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double *o, const double *og,
-                               const double *dg, double t_min, double t_max)
+static int mesh_blocks_between(const Scene *S, Work *w, int64_t p, const double *inv, const double *o,
+                               const double *og, const double *dg, double t_min, double t_max)
 {
     const MeshView *m = &S->meshes[S->d.prim_aux[2 * p]];
+    double own_rounding[4];
     ErrorFrame frame;
-    error_frame(o, og, dg, S->d.prim_rounding + 4 * p, S->d.hit_gamma, &frame);
+    error_frame(o, og, dg, prim_rounding_of(&S->d, p, inv, own_rounding), S->d.hit_gamma, &frame);
     double lower = t_min;
     Hit h;
     while (mesh_closest(m, og, dg, lower, t_max, w->mesh_stack, w->wide_stack, &h)) {
@@ -436,17 +440,19 @@ static __attribute__((noinline)) int mesh_occludes(const Scene *S, Work *w, int6
                                                    const double *d, double t_min, double t_max)
 {
     const SceneDesc *D = &S->d;
-    if (!prim_may_hit(D->prim_sphere + 4 * p, o, d))
+    double own_sphere[4], own_inverse[16];
+    const double *sphere = prim_sphere_of(D, p, own_sphere);
+    if (!prim_may_hit(sphere, o, d))
         return 0;
-    const double *inv = D->prim_inverse + 16 * p;
+    const double *inv = prim_inverse_of(D, p, own_inverse);
     double og[3], dg[3];
     affine_point(inv, o, og);
     affine_vector(inv, d, dg);
     if (!mesh_any(&S->meshes[D->prim_aux[2 * p]], og, dg, t_min, t_max, w->mesh_stack, w->wide_stack))
         return 0;
-    if (!feeler_ends_within(D->prim_sphere + 4 * p, o, d, t_max))
+    if (!feeler_ends_within(sphere, o, d, t_max))
         return 1;
-    return mesh_blocks_between(S, w, p, o, og, dg, t_min, t_max);
+    return mesh_blocks_between(S, w, p, inv, o, og, dg, t_min, t_max);
 }
 
 /* Is anything of primitive p on the ray with t_min < t < t_max, with its whole error interval? */
@@ -771,7 +777,8 @@ static int scene_occluded(const Scene *S, Work *w, const double *o, const double
  * world along the gradient n by |n| / |n M^-1|, exactly for a plane (tracer.numerics.world_offsets). */
 static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
 {
-    normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, n);
+    double own[16];
+    normal_to_world(prim_inverse_of(&S->d, h->shape, own), h->n, n);
     double length = norm3(n);  /* (a shape scaled by 1e-200: |n M^-1|^2 overflows) */
     if (length > 0.0) {
         n[0] /= length;
@@ -1280,6 +1287,10 @@ static int prim_ok(const SceneDesc *D, int64_t p, char *error, int64_t capacity)
     if (RT_IS_MESH(kind) && (D->prim_aux[2 * p] < 0 || D->prim_aux[2 * p] >= D->n_meshes))
         REFUSE("primitive %lld refers to mesh %lld of %lld", (long long)p, (long long)D->prim_aux[2 * p],
                (long long)D->n_meshes);
+    if (D->instance_rows && (D->prim_slot[p] < -1 || D->prim_slot[p] >= D->n_prims - D->instance_rows ||
+                             (D->prim_slot[p] < 0 && !RT_IS_MESH(kind))))
+        REFUSE("primitive %lld has row %d of %lld (an instance row must be a mesh)", (long long)p,
+               (int)D->prim_slot[p], (long long)(D->n_prims - D->instance_rows));
     return 1;
 }
 
@@ -1830,7 +1841,8 @@ int64_t rt_object_hits(void *scene, int64_t object, const double *origin, const 
         entering[i] = (int8_t)h->entering;
         double unit[3];
         offset[i] = world_unit_normal(S, h, unit);
-        normal_to_world(S->d.prim_inverse + 16 * h->shape, h->n, normal + 3 * i);
+        double own[16];
+        normal_to_world(prim_inverse_of(&S->d, h->shape, own), h->n, normal + 3 * i);
         shape[i] = h->shape;
         part[i] = h->part;
         uv[2 * i] = h->uv[0];

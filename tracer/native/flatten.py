@@ -15,10 +15,11 @@ from typing import Optional, Union
 
 import numpy as np
 
-from ..compile import (MAX_CSG_DEPTH, CompiledScene, Primitive, PrimitiveTable, boolean_box, boolean_depth,
-                       fold_tree, row_chunks)
+from ..compile import (MAX_CSG_DEPTH, CompiledScene, InstancedTable, Primitive, PrimitiveTable, boolean_box,
+                       boolean_depth, fold_tree, row_chunks)
 from .. import numerics, shapes
 from ..geometry.polyhedra import face_planes
+from ..instances import padded_boxes, single_boxes
 from ..intersect import mesh as mesh_module
 from ..intersect.mesh import NODE, MeshArrays
 from ..model import MESH_KINDS, POLYHEDRON_KINDS, SHAPE_KINDS, traced_depth
@@ -27,9 +28,6 @@ from .contract import EFFECT_BITS, KIND_CODES, OP_CODES, SceneDesc
 
 #: Effects the C core implements; any other live effect sends the scene to the NumPy path.
 HANDLED_EFFECTS = frozenset(EFFECT_BITS) | {"csg"} | {f"shape:{kind}" for kind in KIND_CODES}
-#: Relative padding of the objects' world boxes: far above the rounding of any hit, and of the shapes'
-#: own edge tolerances (1e-12 of their size), far below anything that costs time.
-BOX_PADDING = 1e-8
 
 #: The tracer.intersect.mesh constants the C core reads (SceneDesc.mesh_constants, in this order).
 MESH_CONSTANTS = ("ROUNDING_FACTOR", "BARYCENTRIC_EPSILON_MAX", "PARALLEL_EPSILON", "DEDUPE_RELATIVE",
@@ -88,49 +86,26 @@ _HAS_AUX = np.array([e.keyword in POLYHEDRON_KINDS or e.keyword in MESH_KINDS fo
 
 
 def _padded_boxes(table: PrimitiveTable, rows=slice(None)) -> np.ndarray:
-    """The primitives' world boxes (P, 6: lo, hi), padded relatively (meaningless for unbounded shapes):
-    by BOX_PADDING times the largest coordinate's size plus the box's longest side.  (The maxima over the
-    three axes spelt out: NumPy's reductions over rows of three take several times longer.)  Of every
-    row, or of ``rows``."""
-    lo, hi = table.boxes[rows, :3], table.boxes[rows, 3:]
-    size, side = np.maximum(np.abs(lo), np.abs(hi)), hi - lo
-    pad = BOX_PADDING * (np.maximum(np.maximum(size[:, 0], size[:, 1]), size[:, 2])
-                         + np.maximum(np.maximum(side[:, 0], side[:, 1]), side[:, 2]))
-    boxes = np.empty((len(lo), 6))
-    np.subtract(lo, pad[:, None], out=boxes[:, :3])
-    np.add(hi, pad[:, None], out=boxes[:, 3:])
-    return boxes
-
-
-def _single_boxes(boxes: np.ndarray) -> np.ndarray:
-    """(P, 6) boxes (lo, hi) in single precision, each axis's bounds put in order (as the C core's slab test
-    takes them) and rounded outward, so that they still hold what they held: the C core's hierarchy keeps
-    its boxes so (bvh_build.h), and an object's box as a float is what that hierarchy is built from.  A NaN
-    bound stays NaN (no constraint on that axis)."""
-    lo, hi = np.minimum(boxes[:, :3], boxes[:, 3:]), np.maximum(boxes[:, :3], boxes[:, 3:])
-    out = np.empty((len(boxes), 6), dtype=np.float32)
-    with np.errstate(all="ignore"):  # (overflow to inf, NaN, denormals: rounded as they come)
-        for side, bound, toward in ((slice(0, 3), lo, -np.inf), (slice(3, 6), hi, np.inf)):
-            rounded = bound.astype(np.float32)
-            off = rounded > bound if toward < 0 else rounded < bound
-            out[:, side] = np.where(off, np.nextafter(rounded, np.float32(toward)), rounded)
-    return out
+    """The primitives' world boxes (P, 6: lo, hi), padded (instances.padded_boxes; meaningless for unbounded
+    shapes).  Of every row, or of ``rows``."""
+    boxes = table.boxes
+    return padded_boxes(boxes[rows, :3], boxes[rows, 3:])
 
 
 def _single_box(box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """One box (lo, hi) as _single_boxes makes them: (6,) float32."""
-    return _single_boxes(np.concatenate(box)[None])[0]
+    """One box (lo, hi) as instances.single_boxes makes them: (6,) float32."""
+    return single_boxes(np.concatenate(box)[None])[0]
 
 
 def _object_boxes(table: PrimitiveTable, rows: Optional[np.ndarray] = None) -> np.ndarray:
-    """_single_boxes(_padded_boxes(table, rows)) (of every row when ``rows`` is None), the same numbers
+    """single_boxes(_padded_boxes(table, rows)) (of every row when ``rows`` is None), the same numbers
     computed a chunk of rows at a time: a chunk's temporaries stay in the cache, where the whole table's
     (ten arrays of 12-48 bytes a row) were fresh pages, each faulted in and zeroed (0.55 s of the 10^6-sphere
     build)."""
     count = len(table) if rows is None else len(rows)
     out = np.empty((count, 6), dtype=np.float32)
     for part in row_chunks(count):
-        out[part] = _single_boxes(_padded_boxes(table, part if rows is None else rows[part]))
+        out[part] = single_boxes(_padded_boxes(table, part if rows is None else rows[part]))
     return out
 
 
@@ -158,11 +133,17 @@ class FlatScene:
         table = compiled.table
         n = len(table)
         a["prim_kind"] = _CODE_OF_ENTRY[table.kind]
-        a["prim_inverse"] = table.inverses.reshape(n, 16)  # (a view: the C core reads the table's own inverses)
-        a["prim_sphere"] = table.spheres
         a["prim_param"] = table.parameters  # (PRIM_PARAMS per primitive: what its kind's intersection takes)
         a["prim_material"] = table.material_ids
-        a["prim_rounding"] = table.rounding_terms  # (a view, as the inverses)
+        stored = table.stored if isinstance(table, InstancedTable) else table
+        # (views: the C core reads the table's own inverses and rounding terms; of an InstancedTable, its
+        # stored rows' only, and each instance row's affine and box)
+        a["prim_inverse"] = stored.inverses.reshape(len(stored), 16)
+        a["prim_sphere"] = stored.spheres
+        a["prim_rounding"] = stored.rounding_terms
+        self._instance_rows = n - len(stored)
+        if self._instance_rows:
+            a.update(prim_slot=table.slot, instance_affine=table.affines, instance_box=table.object_boxes)
 
         # Polyhedra planes (one set per kind) and meshes (instances share one mesh).
         aux = np.zeros((n, 2), dtype=np.int32)
@@ -178,6 +159,7 @@ class FlatScene:
         for data, rows in table.mesh_groups():  # (in order of first use)
             aux[rows, 0] = self._mesh_number(table.meshes[id(data)])
         a["prim_aux"] = aux
+        self._generic_sizes = getattr(table, "generic_sizes", {})  # (an InstancedTable's, by TriangleMesh id)
         a["planes"] = np.concatenate(self._plane_blocks) if self._plane_blocks else np.zeros((0, 4))
         self._flatten_meshes(self._meshes)
 
@@ -195,7 +177,8 @@ class FlatScene:
         objects = compiled.objects
         index = objects.primitive_index
         if not objects.booleans:  # object k is primitive k: its tables are the primitives'
-            object_ref, object_box, bounded = index, _object_boxes(table), prim_bounded
+            object_box = table.object_boxes if isinstance(table, InstancedTable) else _object_boxes(table)
+            object_ref, bounded = index, prim_bounded
         else:
             prim_box = _padded_boxes(table)
             prim_lo, prim_hi = prim_box[:, :3], prim_box[:, 3:]
@@ -204,7 +187,7 @@ class FlatScene:
             object_box = np.zeros((len(index), 6), dtype=np.float32)
             bounded = np.zeros(len(index), dtype=bool)
             bounded[plain] = prim_bounded[index[plain]]
-            object_box[plain] = _single_boxes(prim_box[index[plain]])
+            object_box[plain] = single_boxes(prim_box[index[plain]])
         for k, obj in objects.booleans.items():
             object_ref[k] = fold_tree(obj, lambda prim: prim.index, boolean_ref)
             box = _box(obj, prim_lo, prim_hi, prim_bounded)
@@ -213,7 +196,8 @@ class FlatScene:
                 object_box[k] = _single_box(box)
         a.update(csg_op=csg_op, csg_left=csg_left, csg_right=csg_right, object_ref=object_ref,
                  object_box=object_box, object_bounded=bounded)
-        self._counts = dict(n_prims=n, n_csg=len(csg_op), n_objects=len(object_ref))
+        self._counts = dict(n_prims=n, n_csg=len(csg_op), n_objects=len(object_ref),
+                            instance_rows=self._instance_rows)
         self._take_materials(compiled)
         self._take_lights(compiled)
         self.desc = SceneDesc()
@@ -310,6 +294,8 @@ class FlatScene:
         effects or pictures changed; or the rows written, in place) and the lights (``lights``), the
         description pointed anew.  Returns whether the mesh tables changed."""
         a, table = self.arrays, compiled.table
+        if self._instance_rows:
+            raise TypeError("a scene with instance rows is not edited in place (tracer.edit compiles Shapes)")
         touched_meshes = bool((a["prim_kind"][prims] == KIND_CODES["mesh"]).any())  # (before: was a mesh)
         a["prim_kind"][prims] = _CODE_OF_ENTRY[table.kind[prims]]
         for name, column, width in (("prim_inverse", table.inverses, 16), ("prim_sphere", table.spheres, 4),
@@ -445,6 +431,7 @@ class FlatScene:
         a = self.arrays
         a["mesh_info"] = [(len(m.nodes), len(m.tri_order), len(m.vertices), len(m.normals)) for m in meshes]
         a["mesh_extent"] = [float(m.extent) for m in meshes]
+        a["mesh_generic_size"] = [self._generic_sizes.get(id(mesh), 1.0) for mesh in self._mesh_owners]
         kept = []
         for field, column in MESH_ADDRESSES.items():
             arrays = [getattr(m, column) for m in meshes]

@@ -122,6 +122,74 @@ static inline void generic_to_world_vector(const double *a, const double *v, dou
     out[2] = (c02 * v[0] + c12 * v[1] + c22 * v[2]) / det;
 }
 
+/* An instance row's numbers (tracer.instances), from its float32 affine `a` (3 rows of 4) and box, operation
+ * for operation as the NumPy path computes them for all its rows at once. */
+
+/* The inverse (row-major 4x4) by cofactors: the adjugate over the determinant, the translation carried back. */
+static inline void instance_inverse(const float *a32, double *inv)
+{
+    double a[12];
+    for (int k = 0; k < 12; k++)
+        a[k] = a32[k];
+#define A(r, c) a[4 * (r) + (c)]
+    double adj[3][3] = {
+        {A(1, 1) * A(2, 2) - A(1, 2) * A(2, 1), A(0, 2) * A(2, 1) - A(0, 1) * A(2, 2), A(0, 1) * A(1, 2) - A(0, 2) * A(1, 1)},
+        {A(1, 2) * A(2, 0) - A(1, 0) * A(2, 2), A(0, 0) * A(2, 2) - A(0, 2) * A(2, 0), A(0, 2) * A(1, 0) - A(0, 0) * A(1, 2)},
+        {A(1, 0) * A(2, 1) - A(1, 1) * A(2, 0), A(0, 1) * A(2, 0) - A(0, 0) * A(2, 1), A(0, 0) * A(1, 1) - A(0, 1) * A(1, 0)}};
+    double det = A(0, 0) * adj[0][0] + A(0, 1) * adj[1][0] + A(0, 2) * adj[2][0];
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++)
+            inv[4 * i + j] = adj[i][j] / det;
+        inv[4 * i + 3] = -(inv[4 * i] * A(0, 3) + inv[4 * i + 1] * A(1, 3) + inv[4 * i + 2] * A(2, 3));
+    }
+#undef A
+    inv[12] = inv[13] = inv[14] = 0.0;
+    inv[15] = 1.0;
+}
+
+/* Its rounding terms (PrimitiveTable.rounding_terms): the inverse's relative residual (the largest of
+ * |inverse @ matrix - I| over |inverse| @ |matrix|, the bottom row exact), the generic size, the norms. */
+static inline void instance_rounding(const double *inv, const float *a32, double generic_size, double *r)
+{
+    double error = 0.0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 4; j++) {
+            double m0 = a32[j], m1 = a32[4 + j], m2 = a32[8 + j];
+            const double *row = inv + 4 * i;
+            double product = row[0] * m0 + row[1] * m1 + row[2] * m2;
+            double magnitude = fabs(row[0]) * fabs(m0) + fabs(row[1]) * fabs(m1) + fabs(row[2]) * fabs(m2);
+            if (j == 3) {
+                product = product + row[3];
+                magnitude = magnitude + fabs(row[3]);
+            }
+            double residual = fabs(product - (i == j ? 1.0 : 0.0));
+            double relative = magnitude > 0.0 ? residual / magnitude : 0.0;
+            error = relative > error ? relative : error;
+        }
+    double sums[3], moves[3];
+    for (int i = 0; i < 3; i++) {
+        sums[i] = fabs(inv[4 * i]) + fabs(inv[4 * i + 1]) + fabs(inv[4 * i + 2]);
+        moves[i] = fabs(inv[4 * i + 3]);
+    }
+    r[0] = error;
+    r[1] = generic_size;
+    r[2] = fmax(fmax(sums[0], sums[1]), sums[2]);
+    r[3] = fmax(fmax(moves[0], moves[1]), moves[2]);
+}
+
+/* A bounding sphere (centre, radius) round a single-precision box (lo, hi): the radius half its diagonal,
+ * padded by tracer.instances.SPHERE_PADDING. */
+static inline void instance_sphere(const float *box, double *sphere)
+{
+    double e[3];
+    for (int i = 0; i < 3; i++) {
+        double lo = box[i], hi = box[3 + i];
+        sphere[i] = 0.5 * (lo + hi);
+        e[i] = hi - lo;
+    }
+    sphere[3] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) * 0.5 * (1 + 1e-9);
+}
+
 /* tracer.numerics.crossing_shift: how far (in t) a crossing of a line with a surface G = 0 can move when G
  * along the line is off by `delta`, where the line crosses at rate `slope` (|dG/dt|) and G bends by `bend`
  * (|d^2G/dt^2|): at most delta slope / (slope^2 - bend delta), which is delta / slope on a flat face and at

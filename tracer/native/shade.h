@@ -122,7 +122,8 @@ static inline void feeler_base(const Scene *S, const Hit *h, const double *point
     if (D->prim_kind[h->shape] != K_MESH || !h->entering ||
         !mesh_smooth_lift(&S->meshes[D->prim_aux[2 * h->shape]], h->part, h->uv[0], h->uv[1], lift))
         return;
-    generic_to_world_vector(D->prim_inverse + 16 * h->shape, lift, world);
+    double own[16];
+    generic_to_world_vector(prim_inverse_of(D, h->shape, own), lift, world);
     for (int i = 0; i < 3; i++)
         base[i] = point[i] + world[i];
 }
@@ -178,7 +179,8 @@ static inline int geometric_normal(const Scene *S, const Hit *h, const double *d
     if (D->prim_kind[h->shape] != K_MESH ||
         !mesh_geometric_normal(&S->meshes[D->prim_aux[2 * h->shape]], h->part, c, generic))
         return 0;
-    normal_to_world(D->prim_inverse + 16 * h->shape, generic, world);
+    double own[16];
+    normal_to_world(prim_inverse_of(D, h->shape, own), generic, world);
     double length = norm3(world);
     if (!(length > 0.0))
         return 0;

@@ -322,7 +322,8 @@ static void texture_color(const Scene *S, int64_t shape, const double *point, in
         return;
     }
     double generic[3];
-    affine_point(D->prim_inverse + 16 * shape, point, generic);
+    double own[16];
+    affine_point(prim_inverse_of(D, shape, own), point, generic);
     const double *q = D->mat_tex_param + TEX_PARAMS * mat;
     switch (texture) {
     case -1: tex_checkerboard(q, generic, out); return;

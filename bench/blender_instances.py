@@ -196,6 +196,9 @@ def _held(built, compiled, points: int) -> dict:
     seen: set = set()
     table = _arrays_bytes(vars(built.objects.columns).values(), seen) if built.objects.columns is not None else 0
     primitives = _arrays_bytes(vars(compiled.table).values(), seen)
+    stored = getattr(compiled.table, "stored", None)  # (an InstancedTable's table of its stored rows)
+    if stored is not None:
+        primitives += _arrays_bytes(vars(stored).values(), seen)
     flat = _arrays_bytes(_flat_scene(compiled).arrays.values(), seen)
     pairs, items, _ = NativeTracer(compiled, threads=1).object_tree()
     held = {"rows": table, "primitive_table": primitives, "flat_tables": flat,

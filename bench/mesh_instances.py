@@ -4,14 +4,15 @@ what geometry nodes' Instance on Points hands the tracer through the add-on (ben
 measures that inside bpy).
 
     python bench/mesh_instances.py [--instances 100000] [--triangles 10000] [--repeat 2] [--against DIR]
-                                   [--render 160x120]
+                                   [--render 160x120] [--rows]
 
 Each measurement runs in a fresh process, this checkout and ``--against DIR`` (another checkout, e.g.
 /work/main) in turn, so that both see the same load: CPU seconds of ``compile_scene`` (the mesh's BVH is
 built first by a compile of one instance, not timed, as a file's mesh is found again by content), and of a
 C render at ``--render`` (to see that cheaper bounds do not cost tracing time).  A second process per side
 counts, with tracemalloc, the bytes per instance the scene model (Shapes and their matrices) and the
-compiled scene keep.  Prints JSON and writes bench/results/mesh_instances.json.
+compiled scene keep.  Prints JSON and writes bench/results/mesh_instances.json (with ``--rows``, the
+instances as a table's float32 rows, as the add-on hands them over: mesh_instance_rows.json).
 """
 from __future__ import annotations
 
@@ -60,7 +61,7 @@ def uv_sphere(triangles):
     return MeshData(vertices, vertices.copy(), faces, origin="bench:uv_sphere")
 
 
-def make_scene(instances, triangles):
+def make_scene(instances, triangles, rows=False):
     rng = np.random.default_rng(1)
     mesh = uv_sphere(triangles)
     side = max(1, round(instances ** 0.5))
@@ -75,7 +76,12 @@ def make_scene(instances, triangles):
         matrix = np.eye(4)
         matrix[:3, :3] = rotation * rng.uniform(0.6, 1.4, size=3)
         matrix[:3, 3] = (3.0 * (i % side - side / 2), 3.0 * (i // side - side / 2), 0.0)
-        objects.append(Shape("mesh", matrix, material, mesh=mesh))
+        objects.append(matrix if rows else Shape("mesh", matrix, material, mesh=mesh))
+    if rows:  # (as the add-on hands over geometry nodes' instances: float32 matrices, rows of a table)
+        from tracer.model import TableRows
+        table = TableRows()
+        table.add_block(np.array(objects, dtype=np.float32), np.full(instances, table.part("mesh", mesh, material)))
+        objects = table.table()
     camera = Camera(eye=(0.0, -side * 2.0, side * 1.5), look=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0))
     return Scene(objects=objects, lights=[Light(position=(side, -side, side * 2.0), color=(1.0, 1.0, 1.0))],
                  camera=camera)
@@ -88,9 +94,9 @@ import tracer.native
 from tracer.bulk import one_blas_thread
 from tracer.compile import compile_scene
 from tracer.render import render
-instances, triangles, width, height = (int(a) for a in sys.argv[1:5])
-scene = make_scene(instances, triangles)
-warm = compile_scene(dataclasses.replace(scene, objects=scene.objects[:1]))
+instances, triangles, width, height, rows = (int(a) for a in sys.argv[1:6])
+scene = make_scene(instances, triangles, rows)
+warm = compile_scene(make_scene(1, triangles))
 with one_blas_thread():
     cpu = time.process_time()
     compiled = compile_scene(scene)
@@ -107,19 +113,18 @@ _MEMORY = _SCENE + """
 import dataclasses, gc, json, tracemalloc
 import tracer.native
 from tracer.compile import compile_scene
-instances, triangles = (int(a) for a in sys.argv[1:3])
+instances, triangles, rows = (int(a) for a in sys.argv[1:4])
 probe = make_scene(1, triangles)
 tracemalloc.start()
-scene = make_scene(instances, triangles)
+scene = make_scene(instances, triangles, rows)
 gc.collect()
 model = tracemalloc.get_traced_memory()[0]
 tracemalloc.stop()
-warm = compile_scene(dataclasses.replace(scene, objects=scene.objects[:1]))
+warm = compile_scene(probe)
 tracemalloc.start()
 compiled = compile_scene(scene)
 gc.collect()
 kept, peak = tracemalloc.get_traced_memory()
-mesh = scene.objects[0].mesh
 print(json.dumps({"model_per_instance": model / instances, "compiled_per_instance": kept / instances,
                   "compile_peak_per_instance": peak / instances}))
 """
@@ -139,6 +144,8 @@ def main(argv=None) -> int:
     p.add_argument("--triangles", type=int, default=10_000)
     p.add_argument("--repeat", type=int, default=2)
     p.add_argument("--render", default="160x120", help="the C render's size, or 'none'")
+    p.add_argument("--rows", action="store_true", help="the instances as rows of a table of float32 matrices, "
+                   "as the add-on hands over geometry nodes' instances (compile.InstancedTable)")
     p.add_argument("--against", type=Path, help="another checkout to measure in turn with this one")
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     args = p.parse_args(argv)
@@ -147,19 +154,20 @@ def main(argv=None) -> int:
     runs = {side: [] for side in sides}
     for _ in range(args.repeat):
         for side, checkout in sides.items():
-            runs[side].append(run_child(_TIMED, checkout, args.instances, args.triangles, width, height))
+            runs[side].append(run_child(_TIMED, checkout, args.instances, args.triangles, width, height,
+                                        int(args.rows)))
     result = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M:%S"), "instances": args.instances,
-              "triangles": args.triangles, "render": args.render, "sides": {k: str(v) for k, v in sides.items()}}
+              "triangles": args.triangles, "render": args.render, "rows": args.rows, "sides": {k: str(v) for k, v in sides.items()}}
     for side, checkout in sides.items():
         row = {key: [r[key] for r in runs[side]] for key in ("compile_cpu", "render_cpu", "image_sum")}
         row["compile_cpu_median"] = statistics.median(row["compile_cpu"])
         row["render_cpu_median"] = statistics.median(row["render_cpu"])
-        row.update(run_child(_MEMORY, checkout, args.instances, args.triangles))
+        row.update(run_child(_MEMORY, checkout, args.instances, args.triangles, int(args.rows)))
         result[side] = row
     text = json.dumps(result, indent=1)
     print(text)
     args.out.mkdir(exist_ok=True)
-    (args.out / "mesh_instances.json").write_text(text + "\n")
+    (args.out / ("mesh_instance_rows.json" if args.rows else "mesh_instances.json")).write_text(text + "\n")
     return 0
 
 

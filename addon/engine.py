@@ -368,7 +368,11 @@ class SDLRenderEngine(bpy.types.RenderEngine):
         LAST_RENDER.update({"rays": counts, "seconds": round(tracer.seconds, 6), "passes": tracer.passes,
                             "tiles_done": tracer.done, "tiles_total": len(tracer.items),
                             "backend": tracer.backend_name, "objects": len(tracer_scene.objects),
-                            "lights": len(tracer_scene.lights), "warnings": list(warnings)})
+                            "lights": len(tracer_scene.lights), "warnings": list(warnings),
+                            # (the meshes traced, each held once whatever its instances; how many of those
+                            # are instance rows: docs/tracer.md, "Instance rows")
+                            "meshes": len(tracer.compiled.table.meshes),
+                            "instance_rows": int((getattr(tracer.compiled.table, "slot", np.zeros(0)) < 0).sum())})
         total = sum(counts.values())
         reached = ""
         if estimate is not None:

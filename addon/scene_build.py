@@ -368,7 +368,11 @@ class SceneBuilder:
                 continue
             obj = inst.object  # (for an instance, Blender's one object that each instance in turn is)
             original = obj.original
-            if skip_hidden_render and original.hide_render:
+            # (an instance shows, as Blender renders it, while its instancer does, whether its object does or
+            # not: a particle's or collection's source object is often hidden)
+            hidden = inst.parent is not None and inst.parent.original.hide_render if inst.is_instance else \
+                original.hide_render
+            if skip_hidden_render and hidden:
                 continue
             if not inst.is_instance and not getattr(inst, "show_self", True):
                 continue  # an instancer that does not show itself (Show Instancer off; particles, vertices...)
@@ -392,6 +396,17 @@ class SceneBuilder:
                                  self.object_node(obj, matrix_np(inst.matrix_world), own=False), ("instance", count)))
                 continue
             key = (original.get(OBJ_ORDER, math.inf), original.name, count)
+            if rows and inst.is_instance and obj.type in GEOMETRY_TYPES and self.generic(obj) is None:
+                # particles, collection instances, instancing by vertices or faces: a mesh's instances are rows
+                # of a run, as geometry nodes' are (a generic shape stays a Shape: its kind is not a mesh)
+                pointer = (inst.parent.original.as_pointer() if inst.parent is not None else 0,
+                           original.as_pointer())
+                run = made[-1][1] if made else None
+                if not (isinstance(run, _InstanceRun) and run.pointer == pointer):
+                    run = _InstanceRun(pointer)
+                    made.append((key, run, None))
+                run.add(count, inst.matrix_world, self._instance_template(obj, own=True))
+                continue
             matrix = matrix_np(inst.matrix_world)
             stable = inst.instance_object if inst.is_instance else obj  # (the instanced object itself)
             if obj.type == "LIGHT":
@@ -425,16 +440,18 @@ class SceneBuilder:
         return [key for made, edit_key in self._keys
                 for key in (made.keys() if isinstance(made, _InstanceRun) else [edit_key] * made)]
 
-    def _instance_template(self, obj) -> int:
-        """The number of what a geometry-nodes instance is made of (its meshes and materials, the names it
-        goes by): the same for every instance of one evaluated geometry with the same materials."""
+    def _instance_template(self, obj, own: bool = False) -> int:
+        """The number of what an instance is made of (its meshes and materials, the names it goes by): the same
+        for every instance of one evaluated geometry with the same materials.  ``own``: the instance is an
+        object's own geometry (a particle, a collection instance: its meshes are the object's, read once for
+        both), not one geometry nodes made."""
         slots = tuple(_material_key(slot.material) for slot in obj.material_slots)
         data = obj.data
-        key = (data.as_pointer() if data is not None else id(obj), slots, obj.name)
+        key = (data.as_pointer() if data is not None else id(obj), slots, obj.name, own)
         number = self._templates.get(key)
         if number is None:
             number = self._templates[key] = len(self._template_parts)
-            self._template_parts.append((self.mesh_parts(obj, own=False), obj.name, obj.original.name))
+            self._template_parts.append((self.mesh_parts(obj, own=own), obj.name, obj.original.name))
         return number
 
     def _runs_placed(self, made: list) -> list:
@@ -483,12 +500,13 @@ class SceneBuilder:
 
 
 class _InstanceRun:
-    """Consecutive geometry-nodes instances of one instancer: per instance its count in the depsgraph's
-    iteration (its edit key), its matrix and its template (SceneBuilder._instance_template), gathered as
-    numbers, not objects."""
+    """Consecutive geometry-nodes instances of one instancer, or instances of one mesh object by one instancer
+    (particles, collection instances, instancing by vertices or faces): per instance its count in the
+    depsgraph's iteration (its edit key), its matrix and its template (SceneBuilder._instance_template),
+    gathered as numbers, not objects."""
 
-    def __init__(self, pointer: int):
-        self.pointer = pointer  # (the instancer's original object)
+    def __init__(self, pointer):
+        self.pointer = pointer  # (the instancer's original object; with the instanced object's, a pair)
         self.counts = array("q")
         self.templates = array("i")
         self.matrices = array("f")  # 16 per instance, row after row (Blender's are float32: held exactly)

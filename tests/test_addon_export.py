@@ -137,6 +137,23 @@ def test_hidden_objects_skipped_and_selection_option(tmp_path):
     assert len(export(tmp_path / "b.sdl", use_selection=True).shapes()) == 2
 
 
+def test_instances_of_a_hidden_object_are_exported_as_rendered(tmp_path):
+    """Hair particles of a cone hidden from the render: the render shows the twelve cones, so does the export
+    (the cone itself not)."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=4, size=4)
+    grid = bpy.context.object
+    bpy.ops.mesh.primitive_cone_add(radius1=0.3, depth=0.6, location=(30, 0, 0))
+    cone = bpy.context.object
+    cone.hide_render = True
+    settings = grid.modifiers.new("hair", "PARTICLE_SYSTEM").particle_system.settings
+    settings.type, settings.count, settings.render_type, settings.instance_object = "HAIR", 12, "OBJECT", cone
+    grid.show_instancer_for_render = False
+    shapes = export(tmp_path / "hair.sdl").shapes()
+    cones = [s for s in shapes if len(s.mesh.vertices) == len(cone.data.vertices)]
+    assert len(cones) == 12
+    assert all(np.abs(s.matrix[:3, 3]).max() < 3 for s in cones)  # (on the grid, not where the cone is)
+
+
 def test_failed_export_writes_nothing(tmp_path, capsys):
     import_sdl(SCENES / "lecture.sdl")
     target = tmp_path / "keep.sdl"

@@ -155,13 +155,10 @@ def measure(make) -> dict:
     s.block_size, s.progressive, s.samples, s.max_recursion_depth = 1, False, 1, 0
     workbench = render_rgba("BLENDER_WORKBENCH")[..., 3] > 0.5
     traced = render_rgba(engine.ENGINE_ID)[..., 3] > 0.5
-    built = SceneBuilder(bpy.context.evaluated_depsgraph_get()).build(scene, skip_hidden_render=True)
-    columns = getattr(built.objects, "columns", None)  # (read before anything makes the table into Shapes)
-    rows = columns is not None and str(columns.affines.dtype) == "float32"
-    return {"rows": rows, "iou": round(iou(workbench, traced), 4), "workbench": int(workbench.sum()),
-            "traced": int(traced.sum()), "objects": engine.LAST_RENDER.get("objects"),
-            "meshes": len({id(shape.mesh) for shape in built.objects}),
-            "error": engine.LAST_RENDER.get("error")}
+    done = engine.LAST_RENDER  # (what the render traced: its objects, meshes and instance rows)
+    return {"rows": done.get("instance_rows"), "iou": round(iou(workbench, traced), 4),
+            "workbench": int(workbench.sum()), "traced": int(traced.sum()), "objects": done.get("objects"),
+            "meshes": done.get("meshes"), "error": done.get("error")}
 
 
 def kept_by_a_build(points: int = 30) -> dict:

@@ -117,3 +117,21 @@ def test_many_instances_hold_no_per_row_inverse_in_the_c_core():
     assert len(arrays["prim_inverse"]) == 16 and len(arrays["prim_rounding"]) == 4
     assert arrays["prim_slot"].base is compiled.table.slot or arrays["prim_slot"] is compiled.table.slot
     assert np.shares_memory(arrays["object_box"], compiled.table.object_boxes)
+
+
+@pytest.mark.parametrize("scale", [1e-30, 1e-6, 1.0, 1e6, 1e30])
+def test_instance_rows_at_the_extremes_trace_alike_in_both_backends(scale):
+    """Instances squashed nearly flat, turned, and the whole scene at scales from 1e-30 to 1e30 (float32's
+    range): the C core's per-visit numbers are the NumPy path's, bit for bit (the same image and rays)."""
+    matrices = _affines(12, 17, scale=(0.8, 1.6))
+    matrices[::3, :3, 1] *= np.float32(1e-5)  # (nearly singular: a condition number of ~10^5)
+    matrices[:, :3, :] *= np.float32(scale)
+    scene = _scene(matrices, floor=False)
+    scene.camera = Camera((0, 4 * scale, 10 * scale), (0, 0.5 * scale, 0), (0, 1, 0), 50)
+    scene.lights = [Light((3 * scale, 8 * scale, 5 * scale), (1, 1, 1))]
+    table = compile_scene(scene).table
+    assert isinstance(table, InstancedTable) and (table.slot < 0).all()
+    c = render(scene, 48, 36, backend="c")
+    n = render(scene, 48, 36, backend="numpy")
+    assert np.array_equal(c.image, n.image) and c.rays.as_dict() == n.rays.as_dict()
+    assert c.rays.shadow > 100  # (a shadow ray from each point the camera sees on an instance)

@@ -9,7 +9,8 @@ measures that inside bpy).
 Each measurement runs in a fresh process, this checkout and ``--against DIR`` (another checkout, e.g.
 /work/main) in turn, so that both see the same load: CPU seconds of ``compile_scene`` (the mesh's BVH is
 built first by a compile of one instance, not timed, as a file's mesh is found again by content), and of a
-C render at ``--render`` (to see that cheaper bounds do not cost tracing time).  A second process per side
+C render at ``--render`` (to see that cheaper bounds do not cost tracing time), and the resident size's peak
+growth from the compile to the render's end, per instance (the scene's making before it not counted).  A second process per side
 counts, with tracemalloc, the bytes per instance the scene model (Shapes and their matrices) and the
 compiled scene keep.  Prints JSON and writes bench/results/mesh_instances.json (with ``--rows``, the
 instances as a table's float32 rows, as the add-on hands them over: mesh_instance_rows.json).
@@ -97,6 +98,18 @@ from tracer.render import render
 instances, triangles, width, height, rows = (int(a) for a in sys.argv[1:6])
 scene = make_scene(instances, triangles, rows)
 warm = compile_scene(make_scene(1, triangles))
+
+
+def resident(field):
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) * 1024 for line in status if line.startswith(field))
+
+
+import ctypes
+ctypes.CDLL("libc.so.6").malloc_trim(0)  # (what the scene's making freed given back: else the compile reuses it)
+with open("/proc/self/clear_refs", "w") as refs:  # (the peak from here on: the scene's making is not counted)
+    refs.write("5")
+before = resident("VmRSS:")
 with one_blas_thread():
     cpu = time.process_time()
     compiled = compile_scene(scene)
@@ -105,6 +118,7 @@ cpu = time.process_time()
 result = render(scene, width, height, backend="c", threads=1) if width else None
 render_cpu = time.process_time() - cpu
 print(json.dumps({"compile_cpu": compile_cpu, "render_cpu": render_cpu,
+                  "peak_growth_per_instance": (resident("VmHWM:") - before) / instances,
                   "image_sum": float(result.image.sum()) if result else None}))
 """
 
@@ -159,7 +173,8 @@ def main(argv=None) -> int:
     result = {"machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M:%S"), "instances": args.instances,
               "triangles": args.triangles, "render": args.render, "rows": args.rows, "sides": {k: str(v) for k, v in sides.items()}}
     for side, checkout in sides.items():
-        row = {key: [r[key] for r in runs[side]] for key in ("compile_cpu", "render_cpu", "image_sum")}
+        row = {key: [r[key] for r in runs[side]] for key in ("compile_cpu", "render_cpu", "image_sum",
+                                                              "peak_growth_per_instance")}
         row["compile_cpu_median"] = statistics.median(row["compile_cpu"])
         row["render_cpu_median"] = statistics.median(row["render_cpu"])
         row.update(run_child(_MEMORY, checkout, args.instances, args.triangles, int(args.rows)))

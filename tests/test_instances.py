@@ -135,3 +135,17 @@ def test_instance_rows_at_the_extremes_trace_alike_in_both_backends(scale):
     n = render(scene, 48, 36, backend="numpy")
     assert np.array_equal(c.image, n.image) and c.rays.as_dict() == n.rays.as_dict()
     assert c.rays.shadow > 100  # (a shadow ray from each point the camera sees on an instance)
+
+
+def test_one_row_asked_for_computes_that_row_alone():
+    """A query or a pass that makes one primitive (Primitive.of_row) gets the numbers every row would have,
+    without the table making and keeping them for all its rows."""
+    table = compile_scene(_scene(_affines(50, 9))).table
+    one = {i: table.numbers_of(i) for i in (0, 7, 50)}
+    many = table.numbers_of(np.array([50, 0, 7]))
+    assert "_every_row_arrays" not in vars(table)
+    every = {name: getattr(table, name) for name in ("inverses", "rounding_terms", "spheres", "boxes")}
+    for name, column in every.items():
+        for i in (0, 7, 50):
+            assert np.array_equal(one[i][name], column[i]), (name, i)
+        assert np.array_equal(many[name], column[[50, 0, 7]]), name

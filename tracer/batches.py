@@ -47,7 +47,8 @@ class PrimitiveBatch:
         """(ray, member) index pairs, a chunk at a time: the rays ``rays`` whose line passes the bounding sphere
         of a member in ``members`` (every such member, for an unbounded kind), ray-major."""
         table, chosen = self.table, np.arange(len(self.rows))[members]
-        centers, radii = table.centers[self.rows[chosen]], table.radii[self.rows[chosen]]
+        spheres = table.numbers_of(self.rows[chosen], ("spheres",))["spheres"]
+        centers, radii = spheres[:, :3], spheres[:, 3]
         bounded = bool(np.isfinite(radii[0]))  # (one kind: all bounded or none)
         step = max(1, PAIRS_AT_ONCE // chosen.size)
         for start in range(0, rays.size, step):

@@ -215,10 +215,12 @@ class Primitive:
         self.table = table  # (whose rows tracer.batches traces many at once)
         self.material_id = int(table.material_ids[index])
         self.matrix = shape.matrix
-        self.inverse = table.inverses[index]
+        numbers = table.numbers_of(index)
+        self.inverse = numbers["inverses"]
         self.normal_matrix = self.inverse[:3, :3]
         self._take_kind(table.tolerances)
-        self.inverse_error = float(table.inverse_error[index])
+        terms, sphere, box = numbers["rounding_terms"], numbers["spheres"], numbers["boxes"]
+        self.inverse_error = float(terms[0])
         self._mesh = table.meshes.get(id(shape.mesh)) if shape.kind in MESH_KINDS else None
         self._planes = None
         if shape.kind in POLYHEDRON_KINDS:
@@ -226,12 +228,12 @@ class Primitive:
             from .geometry.polyhedra import face_planes
             self._planes = face_planes(shape.kind)
         bounded = self.bounded
-        self.center = table.centers[index] if bounded else None
-        self.radius = float(table.radii[index]) if bounded else np.inf
-        self.__dict__["box"] = (table.boxes[index, :3], table.boxes[index, 3:]) if bounded else None
+        self.center = sphere[:3] if bounded else None
+        self.radius = float(sphere[3]) if bounded else np.inf
+        self.__dict__["box"] = (box[:3], box[3:]) if bounded else None
         # (the cached properties' values, from the table)
-        self.__dict__["generic_size"] = float(table.generic_size[index])
-        linear, translation = table.inverse_norms[index].tolist()
+        self.__dict__["generic_size"] = float(terms[1])
+        linear, translation = terms[2:].tolist()
         self.__dict__["inverse_norms"] = (linear, translation)
         return self
 
@@ -247,10 +249,12 @@ class Primitive:
         self.__dict__.update(first.__dict__)  # kind, registry entry, parameters, planes, size: every row's
         self.index = rows[:, None]
         self.material_id = self.matrix = None  # (per row: read from the table where needed)
-        self.inverse = table.inverses[rows]
+        numbers = table.numbers_of(rows)
+        self.inverse = numbers["inverses"]
         self.normal_matrix = self.inverse[:, None, :3, :3]
-        self.inverse_error = table.inverse_error[rows][:, None]
-        self.__dict__["inverse_norms"] = (table.inverse_norms[rows, 0], table.inverse_norms[rows, 1])
+        terms = numbers["rounding_terms"]
+        self.inverse_error = terms[:, 0][:, None]
+        self.__dict__["inverse_norms"] = (terms[:, 2], terms[:, 3])
         self.center, self.radius = None, np.inf
         self.__dict__["box"] = None
         return self
@@ -802,6 +806,11 @@ class PrimitiveTable:
     def __len__(self) -> int:
         return len(self.shapes)
 
+    def numbers_of(self, rows, names=None) -> dict[str, np.ndarray]:
+        """The inverses, rounding terms, spheres and boxes (or those ``names`` of them) of these rows (an
+        index: views of its rows; or an index array)."""
+        return {name: getattr(self, name)[rows] for name in names or _NUMBERS}
+
     def primitives_of_rows(self, rows: np.ndarray) -> Primitive:
         """Rows of one kind and parameters as one Primitive with numbers per ray (Primitive.of_rows)."""
         return Primitive.of_rows(self, rows)
@@ -1057,33 +1066,51 @@ class InstancedTable(PrimitiveTable):
         """The rows whose numbers are computed from their affines, in order."""
         return np.flatnonzero(self.slot < 0)
 
+    def numbers_of(self, rows, names=None) -> dict[str, np.ndarray]:
+        """PrimitiveTable.numbers_of: of these rows alone (a query, a pass, the NumPy path's one primitive),
+        not of every row (what the NumPy path's whole traces read, made once and kept)."""
+        kept = self.__dict__.get("_every_row_arrays")
+        if kept is not None:
+            return {name: kept[name][rows] for name in names or _NUMBERS}
+        chosen = np.atleast_1d(np.asarray(rows))
+        out = _empty_numbers(len(chosen))
+        slot = self.slot[chosen]
+        stored = slot >= 0
+        for name in _NUMBERS:
+            out[name][stored] = getattr(self.stored, name)[slot[stored]]
+        at = np.flatnonzero(~stored)
+        sizes = [self.generic_sizes[id(self.meshes[id(self.mesh_of(i))])] for i in chosen[at].tolist()]
+        self._instance_numbers(chosen[at], np.asarray(sizes), out, at)
+        return out if np.ndim(rows) else {name: array[0] for name, array in out.items()}
+
+    def _instance_numbers(self, rows: np.ndarray, sizes, out: dict, at) -> None:
+        """The numbers of instance rows ``rows`` (their meshes' generic sizes ``sizes``) into ``out``'s
+        arrays at ``at`` (tracer.instances, as numeric.h's instance_* compute them)."""
+        affines = self.affines[rows]
+        inverse = instances.affine_inverses(affines)
+        terms = np.empty((len(rows), 4))
+        terms[:, 0] = instances.affine_inverse_rounding(inverse, affines)
+        terms[:, 1] = sizes
+        terms[:, 2], terms[:, 3] = instances.inverse_norms(inverse)
+        out["inverses"][at], out["rounding_terms"][at] = inverse, terms
+        out["spheres"][at] = instances.spheres_of_boxes(self.object_boxes[rows])
+        out["boxes"][at] = self.object_boxes[rows]
+
     def _every_row(self) -> dict[str, np.ndarray]:
         """Every row's numbers as a PrimitiveTable holds them (the stored rows' copied, the instance rows'
         computed), made when first asked for and kept."""
         kept = self.__dict__.get("_every_row_arrays")
         if kept is not None:
             return kept
-        n = len(self)
         stored = np.flatnonzero(self.slot >= 0)
-        out = {"inverses": np.empty((n, 4, 4)), "rounding_terms": np.empty((n, 4)), "spheres": np.empty((n, 4)),
-               "boxes": np.empty((n, 6))}
-        for name in out:
+        out = _empty_numbers(len(self))
+        for name in _NUMBERS:
             out[name][stored] = getattr(self.stored, name)
         for mesh, rows in self.mesh_groups():
             rows = rows[self.slot[rows] < 0]
             size = self.generic_sizes[id(self.meshes[id(mesh)])]
             for part in row_chunks(len(rows)):
-                chosen = rows[part]
-                affines = self.affines[chosen]
-                inverse = instances.affine_inverses(affines)
-                out["inverses"][chosen] = inverse
-                terms = out["rounding_terms"][chosen]
-                terms[:, 0] = instances.affine_inverse_rounding(inverse, affines)
-                terms[:, 1] = size
-                terms[:, 2], terms[:, 3] = instances.inverse_norms(inverse)
-                out["rounding_terms"][chosen] = terms
-                out["spheres"][chosen] = instances.spheres_of_boxes(self.object_boxes[chosen])
-                out["boxes"][chosen] = self.object_boxes[chosen]
+                self._instance_numbers(rows[part], size, out, rows[part])
         self.__dict__["_every_row_arrays"] = out
         return out
 
@@ -1096,6 +1123,15 @@ class InstancedTable(PrimitiveTable):
     inverse_norms = property(lambda self: self.rounding_terms[:, 2:])
     centers = property(lambda self: self.spheres[:, :3])
     radii = property(lambda self: self.spheres[:, 3])
+
+
+#: What PrimitiveTable.numbers_of gives of each row.
+_NUMBERS = ("inverses", "rounding_terms", "spheres", "boxes")
+
+
+def _empty_numbers(n: int) -> dict[str, np.ndarray]:
+    return {"inverses": np.empty((n, 4, 4)), "rounding_terms": np.empty((n, 4)), "spheres": np.empty((n, 4)),
+            "boxes": np.empty((n, 6))}
 
 
 def _row_subset(columns: ShapeColumns, rows: np.ndarray) -> ShapeColumns:

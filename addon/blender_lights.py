@@ -7,9 +7,13 @@
   sphere light of its radius, a spot light, a sun, an area light; those with an extent cast soft shadows
   with the scene's Light Samples shadow rays.
 * Every light keeps its object's name (Light.name), which SDL export writes and import gives back.
+* Every light keeps what Cycles lets a user switch off per light (``switches``): its data's Cast Shadow and its
+  object's Ray Visibility for Diffuse, Glossy and Transmission (Light.cast_shadow, visible_*).  SDL and USD
+  do not carry them (an export writes the light as if they were on, with a warning).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Optional
 
@@ -29,10 +33,25 @@ def is_sdl_light(data) -> bool:
     return data.get("sdl_color") is not None
 
 
+def switches(obj_eval) -> dict:
+    """The Light switches of a light object, as Cycles reads them: its data's Cast Shadow (``use_shadow``),
+    its object's Ray Visibility (``visible_diffuse``, ``visible_glossy``, ``visible_transmission``: Blender
+    3.0+); on where Blender lacks one."""
+    return dict(cast_shadow=bool(getattr(obj_eval.data, "use_shadow", True)),
+                visible_diffuse=bool(getattr(obj_eval, "visible_diffuse", True)),
+                visible_glossy=bool(getattr(obj_eval, "visible_glossy", True)),
+                visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)))
+
+
 def tracer_light(obj_eval, matrix_world: np.ndarray, to_target: np.ndarray, samples: int,
                  warnings: Optional[list] = None) -> Light:
     """The tracer Light of a light object at ``matrix_world`` (Blender's axes), in the frame ``to_target``
-    maps Blender's world to."""
+    maps Blender's world to, with its switches."""
+    return dataclasses.replace(_light(obj_eval, matrix_world, to_target, samples, warnings), **switches(obj_eval))
+
+
+def _light(obj_eval, matrix_world: np.ndarray, to_target: np.ndarray, samples: int,
+           warnings: Optional[list] = None) -> Light:
     data = obj_eval.data
     name = obj_eval.original.name
     if is_sdl_light(data):

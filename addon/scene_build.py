@@ -315,7 +315,11 @@ class SceneBuilder:
 
     def light(self, obj_eval, matrix_world: np.ndarray):
         samples = self.depsgraph.scene.sdl_render.light_samples if hasattr(self.depsgraph.scene, "sdl_render") else 16
-        return blender_lights.tracer_light(obj_eval, matrix_world, self.to_target, samples, self.warnings)
+        light = blender_lights.tracer_light(obj_eval, matrix_world, self.to_target, samples, self.warnings)
+        if self.mode == "EXPORT" and light.switched:  # (SDL has no words for them)
+            self.warnings.append(f"{light.name}: Cast Shadow and Ray Visibility are not written: the light is "
+                                 f"written as one that casts shadows and every ray sees")
+        return light
 
     def build(self, scene, instances=None, skip_hidden_render: bool = False, selected_only: bool = False):
         """The tracer Scene of everything the depsgraph shows (its object instances).  Where geometry nodes

@@ -95,3 +95,34 @@ def test_a_light_made_in_blender_is_in_blender_units_and_keeps_its_name(tmp_path
     back = bpy.data.objects["Key Light"].data
     assert back.type == "POINT" and back.energy == pytest.approx(1000.0, rel=1e-5)
     assert tuple(back.color) == pytest.approx((1.0, 0.5, 0.25))
+
+
+def test_cycles_light_switches_become_the_lights_switches(tmp_path):
+    """Cast Shadow (light data) and Ray Visibility (the object's Diffuse, Glossy, Transmission) switch the
+    same off in the tracer; SDL has no words for them: an export writes the light, with a warning."""
+    fresh()
+    bpy.ops.mesh.primitive_cube_add()
+    bpy.ops.object.light_add(type="AREA", location=(0.0, 0.0, 3.0))
+    panel = bpy.context.object
+    panel.name = "Panel"
+    panel.visible_glossy = False
+    bpy.ops.object.light_add(type="POINT", location=(1.0, 2.0, 3.0))
+    bulb = bpy.context.object
+    bulb.name = "Bulb"
+    bulb.data.use_shadow = False
+    bulb.visible_diffuse = False
+    bulb.visible_transmission = False
+    bpy.ops.object.light_add(type="SUN")
+    bpy.context.object.name = "Sun"
+    scene, _ = engine.build_scene(bpy.context.evaluated_depsgraph_get(), "RENDER")
+    switches = {light.name: (light.cast_shadow, light.visible_diffuse, light.visible_glossy,
+                             light.visible_transmission) for light in scene.lights}
+    assert switches == {"Panel": (True, True, False, True), "Bulb": (False, False, True, False),
+                        "Sun": (True, True, True, True)}
+    out = tmp_path / "switched.sdl"
+    assert bpy.ops.export_scene.sdl(filepath=str(out)) == {"FINISHED"}
+    written = {light.name: light for light in tracer.load(str(out)).lights}
+    assert set(written) == {"Panel", "Bulb", "Sun"}  # (every light written, as the light)
+    assert all(light.cast_shadow and light.visible_glossy for light in written.values())
+    _, warnings = engine.build_scene(bpy.context.evaluated_depsgraph_get(), "EXPORT")
+    assert sorted(w.split(":")[0] for w in warnings if "Cast Shadow" in w) == ["Bulb", "Panel"]

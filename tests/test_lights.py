@@ -4,6 +4,7 @@ a disk behind an edge), C = NumPy bit for bit, shadow rays counted, and the SDL 
 names."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -313,6 +314,254 @@ def test_only_scenes_that_can_see_an_area_light_pay_for_it():
     assert "seen-lights" not in compile_scene(lit(overhead_panel())).effects  # (nothing reflects)
     assert "seen-lights" not in compile_scene(scene_of(floor(**MIRROR), lights=[Light((0, 3, 0), (1, 1, 1))])).effects
     assert "seen-lights" in compile_scene(scene_of(floor(**MIRROR), lights=[overhead_panel()])).effects
+
+
+# ------------------------------------------------------------------------------------------------ switches
+# (Cycles' per-light switches: Cast Shadow, Ray Visibility's Diffuse, Glossy, Transmission; docs/tracer.md)
+
+SWITCHES = ("cast_shadow", "visible_diffuse", "visible_glossy", "visible_transmission")
+
+
+def shade_rays(backend, scene, origins, directions):
+    """Colours of camera rays (N, 3), and the tracer (for its ray counts)."""
+    t = make_tracer(compile_scene(scene), backend, threads=1)
+    return t.camera_rays(np.asarray(origins, float), np.asarray(directions, float)), t
+
+
+def switched(light, *off):
+    """The light with the switches ``off`` off."""
+    return dataclasses.replace(light, **{name: False for name in off})
+
+
+def switch_showcase(*lights):
+    """A mirror floor, a glass ball under an area light, a diffuse cube, a shiny ball, a Cook-Torrance ball;
+    lit by ``lights`` (default: the area light, an SDL point light and a soft sphere light)."""
+    glass = dict(ambient=(0, 0, 0), diffuse=(0, 0, 0), reflectivity=1.0, transparency=1.0, speed_of_light=1 / 1.5,
+                 fresnel="dielectric")
+    objects = [floor(ambient=(0.1, 0.1, 0.1), diffuse=(0.3, 0.3, 0.3), reflectivity=0.6),
+               shape("sphere", translation(0.2, 0.9, 0.2) @ scaling(0.6, 0.6, 0.6), **glass),
+               shape("cube", translation(1.6, 0.5, -1.0) @ scaling(0.5, 0.5, 0.5), diffuse=(0.8, 0.5, 0.3)),
+               shape("sphere", translation(1.3, 0.6, 1.4) @ scaling(0.6, 0.6, 0.6), diffuse=(0.2, 0.2, 0.6),
+                     specular=(0.8, 0.8, 0.8), specular_exponent=40.0),
+               shape("sphere", translation(-1.5, 0.6, 1.2) @ scaling(0.6, 0.6, 0.6), diffuse=(0.5, 0.2, 0.2),
+                     specular=(0.6, 0.6, 0.6), specular_fraction=0.7, surface_roughness=0.3)]
+    lights = lights or (Light((0.0, 2.8, 0.0), (2.0, 2.0, 2.0), kind="area", direction=(0, -1, 0), axis=(1, 0, 0),
+                              size=(2.0, 1.5), samples=4),
+                        Light((-3.0, 5.0, 4.0), (0.4, 0.4, 0.4)),
+                        Light((3.0, 4.0, 3.0), (12.0, 12.0, 12.0), kind="sphere", radius=0.3, samples=4))
+    return scene_of(*objects, lights=list(lights), camera=Camera((0.0, 3.0, 6.0), (0.0, 0.5, 0.0), view_angle=50.0),
+                    background=(0.1, 0.1, 0.2), global_ambient=(0.05, 0.05, 0.05))
+
+
+CASES = [(name,) for name in SWITCHES] + [("visible_diffuse", "visible_glossy"), ("mixed",)]
+
+
+@pytest.mark.parametrize("off", CASES, ids=["+".join(case) for case in CASES])
+def test_switched_off_lights_trace_alike_on_both_backends(off):
+    from tracer import native
+    if native.load_error is not None:
+        pytest.skip(f"C core not available: {native.load_error}")
+    lights = switch_showcase().lights
+    if off == ("mixed",):  # (each light another switch off)
+        lights = [switched(lights[0], "visible_glossy", "cast_shadow"), switched(lights[1], "visible_diffuse"),
+                  switched(lights[2], "cast_shadow", "visible_glossy")]
+    else:
+        lights = [switched(light, *off) for light in lights]
+    scene = switch_showcase(*lights)
+    c = tracer.render(scene, 64, 48, backend="c")
+    n = tracer.render(scene, 64, 48, backend="numpy")
+    assert np.array_equal(c.image, n.image)
+    assert c.rays.as_dict() == n.rays.as_dict() and c.rays.skipped() == n.rays.skipped()
+    effects = set(c.stats()["effects"])
+    if off == ("cast_shadow",):  # (no light casts shadows: neither shadows nor switches to read)
+        assert not effects & {"shadows", "light-switches"}
+    else:
+        assert "light-switches" in effects
+    default = tracer.render(switch_showcase(), 64, 48, backend="c")
+    assert not np.array_equal(c.image, default.image)  # (the switch changes the picture)
+    dark = {"visible_diffuse", "visible_glossy"} <= set(off)  # (lights that add nothing send no feelers)
+    assert (c.rays.shadow == 0) == ("cast_shadow" in off or dark)
+
+
+def occluded_floor(light, xs, with_occluder=True, backend="numpy"):
+    """Rays down at the floor under a light 3 above it, from below a black ball that stands in the way of the
+    light at x = 0."""
+    ball = shape("sphere", translation(0, 2.0, 0) @ scaling(0.4, 0.4, 0.4), ambient=(0, 0, 0), diffuse=(0, 0, 0))
+    scene = lit(light, objects=[ball] if with_occluder else [])
+    return shade_down(backend, scene, xs, height=1.0)
+
+
+LIGHTS_ABOVE = {
+    "point": Light((0.0, 3.0, 0.0), (1.0, 1.0, 1.0)),
+    "sphere": Light((0.0, 3.0, 0.0), (9.0, 9.0, 9.0), kind="sphere", radius=0.2, samples=8),
+    "spot": Light((0.0, 3.0, 0.0), (9.0, 9.0, 9.0), kind="spot", direction=(0, -1, 0), spot_size=120.0),
+    "sun": Light((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), kind="sun", direction=(0, -1, 0), angle=2.0, samples=8),
+    "area": Light((0.0, 3.0, 0.0), (16.0, 16.0, 16.0), kind="area", direction=(0, -1, 0), size=(0.5, 0.5),
+                  samples=8),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(LIGHTS_ABOVE))
+def test_a_light_that_casts_no_shadow_lights_a_point_behind_an_occluder(backend, kind):
+    xs = [0.0, 0.05, 1.5]
+    light = LIGHTS_ABOVE[kind]
+    shadowed, t = occluded_floor(light, xs, backend=backend)
+    assert shadowed[0, 0].max() == 0.0 and t.counts.shadow > 0  # (in the ball's shadow)
+    free, t = occluded_floor(switched(light, "cast_shadow"), xs, backend=backend)
+    clear, _ = occluded_floor(light, xs, with_occluder=False, backend=backend)
+    assert free[0, 0].min() > 0.0
+    np.testing.assert_array_equal(free, clear)  # (lit as if nothing were in the way)
+    assert t.counts.shadow == 0
+
+
+def test_only_the_lights_that_cast_shadows_send_feelers(backend):
+    xs = np.linspace(-1, 1, 5)
+    both = lit(switched(Light((0, 3, 0), (1, 1, 1)), "cast_shadow"), Light((1, 3, 0), (1, 1, 1)))
+    _, t = shade_down(backend, both, xs)
+    assert t.counts.shadow == len(xs)  # (the second light's only)
+    assert {"shadows", "light-switches"} <= compile_scene(both).effects
+    none = lit(*(switched(Light((x, 3, 0), (1, 1, 1)), "cast_shadow") for x in (0, 1)))
+    colour, t = shade_down(backend, none, xs)
+    assert t.counts.shadow == 0 and colour.min() > 0.0
+    assert "shadows" not in compile_scene(none).effects  # (the scene pays nothing for shadows)
+    assert "light-switches" not in compile_scene(none).effects  # (nor for reading switches that change nothing)
+
+
+@pytest.mark.parametrize("kind", ["point", "sphere", "area"])
+def test_a_light_left_out_of_diffuse_leaves_a_diffuse_surface_black(backend, kind):
+    xs = np.linspace(-1, 1, 5)
+    light = LIGHTS_ABOVE[kind]
+    colour, _ = shade_down(backend, lit(light), xs)
+    assert colour.min() > 0.0
+    colour, t = shade_down(backend, lit(switched(light, "visible_diffuse")), xs)
+    assert colour.max() == 0.0
+    assert t.counts.shadow == 0 and t.counts.skipped_dark_material == len(xs)  # (no feeler for nothing)
+    # beside another light it changes nothing of that one's light
+    other = Light((0.5, 2.0, 0.0), (0.5, 0.5, 0.5))
+    with_other, _ = shade_down(backend, lit(switched(light, "visible_diffuse"), other), xs)
+    np.testing.assert_array_equal(with_other, shade_down(backend, lit(other), xs)[0])
+
+
+SHINY = dict(ambient=(0.0, 0.0, 0.0), diffuse=(0.4, 0.4, 0.4), specular=(0.9, 0.9, 0.9), specular_exponent=30.0)
+COOK_TORRANCE = dict(SHINY, specular_fraction=0.6, surface_roughness=0.2)
+
+
+@pytest.mark.parametrize("kind", ["point", "sphere", "area"])
+@pytest.mark.parametrize("material", [SHINY, COOK_TORRANCE], ids=["blinn", "cook-torrance"])
+def test_a_light_left_out_of_glossy_leaves_no_highlight(backend, kind, material):
+    xs = np.linspace(-0.5, 0.5, 5)
+    light = LIGHTS_ABOVE[kind]
+    shiny = scene_of(floor(**material), lights=[light], background=(0, 0, 0), global_ambient=(0, 0, 0))
+    highlit, _ = shade_down(backend, shiny, xs)
+    matte = scene_of(floor(**{**material, "specular": (0.0, 0.0, 0.0), "specular_fraction": 0.0}), lights=[light],
+                     background=(0, 0, 0), global_ambient=(0, 0, 0))
+    diffuse_only, _ = shade_down(backend, matte, xs)
+    assert (highlit[0, 2] > diffuse_only[0, 2] + 0.1).all()  # (the highlight right under the light)
+    shiny.lights = [switched(light, "visible_glossy")]
+    np.testing.assert_array_equal(shade_down(backend, shiny, xs)[0], diffuse_only)
+    # and the highlight alone where the light is left out of diffuse
+    shiny.lights = [switched(light, "visible_diffuse")]
+    glossy_only, _ = shade_down(backend, shiny, xs)
+    assert (glossy_only[0, 2] > 0.1).all() and (glossy_only < highlit).all()
+
+
+EMBER = (0.3, 0.2, 0.1)
+
+
+def panel_under_a_ceiling(*off):
+    """The mirror floor under overhead_panel (its switches ``off`` off), under an emissive ceiling 2.5 up."""
+    ceiling = shape("square", translation(0, 2.5, 0) @ rotation(90, 1, 0, 0) @ scaling(50, 50, 1),
+                    ambient=(0, 0, 0), diffuse=(0, 0, 0), emissive=EMBER)
+    return scene_of(floor(**MIRROR), ceiling, lights=[switched(overhead_panel(), *off)], background=(0.0, 0.0, 0.0),
+                    global_ambient=(0.0, 0.0, 0.0))
+
+
+def test_a_light_left_out_of_glossy_is_not_seen_in_a_mirror(backend):
+    xs, zs = [-0.9, 0.0, 0.9, 1.1], [0.0, 0.45, 0.55]
+    panel = np.pi * np.array(GLOW)
+    seen, _ = shade_down(backend, panel_under_a_ceiling(), xs, zs=zs, height=1.0)
+    for row, z in enumerate(zs):
+        for column, x in enumerate(xs):
+            expected = panel if abs(x) <= 1.0 and abs(z) <= 0.5 else np.array(EMBER)
+            np.testing.assert_array_equal(seen[row, column], expected, err_msg=f"x {x} z {z}")
+    unseen, _ = shade_down(backend, panel_under_a_ceiling("visible_glossy"), xs, zs=zs, height=1.0)
+    np.testing.assert_array_equal(unseen, np.broadcast_to(EMBER, unseen.shape))  # (the ceiling behind it)
+    # (a mirror ray is no transmission ray)
+    still, _ = shade_down(backend, panel_under_a_ceiling("visible_transmission"), xs, zs=zs, height=1.0)
+    np.testing.assert_array_equal(still, seen)
+
+
+def glass_slab_under_the_panel(*off):
+    """A clear slab (transparency 1, the speed of light outside it: rays go straight through) between the floor
+    and overhead_panel (its switches ``off`` off)."""
+    slab = shape("cube", translation(0, 0.8, 0) @ scaling(3.0, 0.1, 3.0), ambient=(0, 0, 0), diffuse=(0, 0, 0),
+                 transparency=1.0)
+    return scene_of(slab, lights=[switched(overhead_panel(), *off)], background=BACKDROP,
+                    global_ambient=(0.0, 0.0, 0.0))
+
+
+BACKDROP = (0.05, 0.1, 0.15)
+
+
+def test_a_light_left_out_of_transmission_is_not_seen_through_glass(backend):
+    origins = [(x, 0.2, z) for x in (0.0, 0.9, 1.2) for z in (0.0, 0.4)]
+    up = np.tile([0.0, 1.0, 0.0], (len(origins), 1))
+    under = np.array([abs(x) <= 1.0 and abs(z) <= 0.5 for x, _, z in origins])
+    seen, t = shade_rays(backend, glass_slab_under_the_panel(), origins, up)
+    assert t.counts.refraction == 2 * len(origins)
+    np.testing.assert_array_equal(seen[under], np.broadcast_to(np.pi * np.array(GLOW), seen[under].shape))
+    np.testing.assert_array_equal(seen[~under], np.broadcast_to(BACKDROP, seen[~under].shape))
+    unseen, _ = shade_rays(backend, glass_slab_under_the_panel("visible_transmission"), origins, up)
+    np.testing.assert_array_equal(unseen, np.broadcast_to(BACKDROP, unseen.shape))
+    still, _ = shade_rays(backend, glass_slab_under_the_panel("visible_glossy"), origins, up)
+    np.testing.assert_array_equal(still, seen)  # (a refracted ray is no glossy ray)
+
+
+def test_only_scenes_that_switch_something_off_read_the_switches():
+    mirror_floor = floor(**{**MIRROR, "diffuse": (0.5, 0.5, 0.5)})
+    bulb = Light((0, 3, 0), (1, 1, 1))
+    assert "light-switches" not in compile_scene(scene_of(mirror_floor, lights=[overhead_panel(), bulb])).effects
+    for off in SWITCHES:
+        effects = compile_scene(scene_of(mirror_floor, lights=[switched(overhead_panel(), off), bulb])).effects
+        # (a mirror alone has no refracted rays: the transmission switch changes nothing there)
+        assert ("light-switches" in effects) == (off != "visible_transmission"), off
+    wholly_off = compile_scene(lit(switched(Light((0, 3, 0), (1, 1, 1)), "visible_diffuse", "visible_glossy")))
+    assert not wholly_off.effects & {"lighting", "shadows", "light-switches"}
+    unseen = compile_scene(scene_of(floor(**MIRROR), lights=[switched(overhead_panel(), "visible_glossy")]))
+    assert "seen-lights" not in unseen.effects  # (nothing in the scene can see it)
+
+
+def test_editing_lights_to_switched_ones_renders_as_from_scratch(backend):
+    from tracer.edit import EditableScene
+    scene = switch_showcase()
+    editable = EditableScene(scene)
+    w, h = scaled(backend, 48, 36)
+    tracer.render(editable.compiled, w, h, backend=backend)
+    lights = [switched(light, off) for light, off in zip(scene.lights, ("visible_glossy", "cast_shadow",
+                                                                         "visible_diffuse"))]
+    editable.set_lights(lights)
+    edited = tracer.render(editable.compiled, w, h, backend=backend)
+    expected = tracer.render(switch_showcase(*lights), w, h, backend=backend)
+    assert np.array_equal(edited.image, expected.image)
+    assert edited.rays.as_dict() == expected.rays.as_dict()
+
+
+def test_model_refuses_switches_that_are_not_booleans():
+    for name in SWITCHES:
+        with pytest.raises(SceneError, match=name):
+            Light((0, 0, 0), (1, 1, 1), **{name: 0})
+    assert all(getattr(Light((0, 0, 0), (1, 1, 1)), name) for name in SWITCHES)  # (on by default)
+
+
+def test_sdl_and_usd_write_a_switched_light_as_the_light(tmp_path):
+    from tracer.usd import load_usd, save_usd
+    scene = parse_sdl(SDL_LIGHTS)
+    scene.lights = [switched(light, *SWITCHES) for light in scene.lights]
+    save_sdl(scene, tmp_path / "switched.sdl")
+    again = tracer.load(tmp_path / "switched.sdl").lights
+    assert again == parse_sdl(SDL_LIGHTS).lights  # (SDL has no words for the switches: on again)
+    save_usd(scene, tmp_path / "switched.usda")
+    assert load_usd(tmp_path / "switched.usda").lights == again  # (nor has USD: likewise)
 
 
 # ------------------------------------------------------------------------------------------------ SDL

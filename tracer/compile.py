@@ -1329,12 +1329,14 @@ def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_bo
     settings = scene.settings
     has = dict(zip(TRAITS, np.asarray(present, dtype=bool).tolist()))
     effects = {f"shape:{kind}" for kind in kinds}
-    if scene.lights and has["lit"]:
+    shining = [light for light in scene.lights if light.lights_surfaces]  # (lights switched off wholly do not)
+    if shining and has["lit"]:
         effects.add("lighting")
-        effects.add("shadows")
+        if any(light.cast_shadow for light in shining):
+            effects.add("shadows")
         if any(light.kind != "point" for light in scene.lights):
             effects.add("physical-lights")
-        if any(light.soft for light in scene.lights):
+        if any(light.soft and light.cast_shadow for light in shining):
             effects.add("soft-shadows")
     deep = settings.max_recursion_depth > 0
     if deep and has["reflects"]:
@@ -1353,9 +1355,35 @@ def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_bo
         effects.add("smooth-terminator")
     if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
         effects.add("fresnel")
-    if effects & {"reflection", "refraction"} and any(light.kind == "area" for light in scene.lights):
+    if _seen_lights_live(scene, effects):
         effects.add("seen-lights")  # (area lights seen in mirrors and through glass, as Cycles' are)
+    if _light_switches_live(scene, effects):
+        effects.add("light-switches")
     return frozenset(effects)
+
+
+def _seen_lights_live(scene: Scene, effects: set[str]) -> bool:
+    """Whether a reflected ray (a mirror's, or glass's total internal reflection) may see an area light that
+    glossy rays see, or a refracted ray one that transmission rays see."""
+    areas = [light for light in scene.lights if light.kind == "area"]
+    return bool((effects & {"reflection", "refraction"} and any(light.visible_glossy for light in areas))
+                or ("refraction" in effects and any(light.visible_transmission for light in areas)))
+
+
+def _light_switches_live(scene: Scene, effects: set[str]) -> bool:
+    """Whether a light's switch that is off changes what the live effects trace (the backends then read the
+    switches: a light that casts no shadow where shadows are live, one left out of the diffuse or glossy
+    shading where lighting is, an area light that reflected (or, where refraction is live, refracted) rays do
+    not see where seen-lights is)."""
+    for light in scene.lights:
+        if "shadows" in effects and not light.cast_shadow:
+            return True
+        if "lighting" in effects and not (light.visible_diffuse and light.visible_glossy):
+            return True
+        if "seen-lights" in effects and light.kind == "area" and (
+                not light.visible_glossy or ("refraction" in effects and not light.visible_transmission)):
+            return True
+    return False
 
 
 #: Built triangle meshes by content (see mesh_digest), kept while any compiled scene uses them: the same

@@ -13,12 +13,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import LIGHT_KINDS, Light
+from .model import LIGHT_KINDS, LIGHT_SWITCHES, Light
 from .numerics import dot3, norm3
 
 #: Each kind's code in the tables (the C core's LIGHT_* codes).
 LIGHT_CODES = {kind: code for code, kind in enumerate(LIGHT_KINDS)}
 POINT, SPHERE, SPOT, SUN, AREA = (LIGHT_CODES[k] for k in ("point", "sphere", "spot", "sun", "area"))
+#: Each switch's bit in LightTable.off, set where the light has it off (the C core's LIGHT_OFF_* bits).
+OFF_BITS = {switch: 1 << bit for bit, switch in enumerate(LIGHT_SWITCHES)}
+OFF_SHADOW, OFF_DIFFUSE, OFF_GLOSSY, OFF_TRANSMISSION = (OFF_BITS[s] for s in LIGHT_SWITCHES)
+#: A light with both of these off adds nothing to any surface's shading.
+OFF_SHADING = OFF_DIFFUSE | OFF_GLOSSY
 #: The lattice's step along v: the golden ratio's fractional part, (sqrt 5 - 1) / 2.
 GOLDEN = 0.6180339887498949
 TWO_PI = 6.283185307179586
@@ -37,7 +42,7 @@ class LightTable:
     V = (direction x axis) * height / 2 (axis made unit and perpendicular to the direction); ``param`` (L, 4):
     sphere [radius], spot [radius, cos(size / 2), (1 - cos(size / 2)) * blend], sun [1 - cos(angle / 2)],
     area [area, 1 for an ellipse]; ``samples`` (L,) int32: shadow rays per shaded point (1 for a light with
-    no extent)."""
+    no extent); ``off`` (L,) int32: the OFF_BITS of its switches that are off (0: all on)."""
 
     kind: np.ndarray
     position: np.ndarray
@@ -45,6 +50,7 @@ class LightTable:
     frame: np.ndarray
     param: np.ndarray
     samples: np.ndarray
+    off: np.ndarray
 
     @classmethod
     def of(cls, lights: list[Light]) -> "LightTable":
@@ -57,7 +63,13 @@ class LightTable:
                    color=np.array([light.color for light in lights], dtype=float).reshape(n, 3),
                    frame=frame, param=param,
                    samples=np.array([light.samples if light.soft else 1 for light in lights],
-                                    dtype=np.int32).reshape(n))
+                                    dtype=np.int32).reshape(n),
+                   off=np.array([off_bits(light) for light in lights], dtype=np.int32).reshape(n))
+
+
+def off_bits(light: Light) -> int:
+    """The OFF_BITS of the light's switches that are off."""
+    return sum(bit for switch, bit in OFF_BITS.items() if not getattr(light, switch))
 
 
 def _unit(v) -> np.ndarray:
@@ -94,15 +106,24 @@ def _param(light: Light) -> list[float]:
     return [0.0, 0.0, 0.0, 0.0]
 
 
-def seen_lights(table: LightTable, origins: np.ndarray, directions: np.ndarray,
-                t_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def seen_lights(table: LightTable, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray,
+                refracted: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Which rays meet the front of an area light before ``t_max`` (Cycles' area lights are seen by glossy and
     transmission rays, not by the camera's), and the nearest one's radiance in the tracer's units: pi times its
     colour (its colour is what the Lambert sum of a diffuse surface takes, radiance over pi, so that a white
-    surface under a sky of it would look like it).  The C core's seen_light, in its order of operations."""
+    surface under a sky of it would look like it).  The C core's seen_light, in its order of operations.
+    ``refracted``: which rays are transmitted ones (the others reflected), where the lights' switches count (the
+    effect light-switches): a light with visible_transmission off is not seen by the first, one with
+    visible_glossy off not by the second; None: every light is seen by every ray."""
     n = origins.shape[0]
     seen, color, nearest = np.zeros(n, dtype=bool), np.zeros((n, 3)), np.array(t_max, dtype=float)
     for light in np.flatnonzero(table.kind == AREA).tolist():
+        eligible = True
+        if refracted is not None:
+            off = int(table.off[light])
+            eligible = np.where(refracted, (off & OFF_TRANSMISSION) == 0, (off & OFF_GLOSSY) == 0)
+            if not eligible.any():
+                continue
         normal, u, v = table.frame[light, :3], table.frame[light, 3:6], table.frame[light, 6:9]
         position = table.position[light]
         facing = dot3(directions, normal)
@@ -111,7 +132,7 @@ def seen_lights(table: LightTable, origins: np.ndarray, directions: np.ndarray,
             q = origins + t[:, None] * directions - position
             a, b = dot3(q, u) / dot3(u, u), dot3(q, v) / dot3(v, v)
             inside = a * a + b * b <= 1.0 if table.param[light, 1] != 0.0 else (np.abs(a) <= 1.0) & (np.abs(b) <= 1.0)
-        met = (facing < 0.0) & (t > 0.0) & (t < nearest) & inside
+        met = (facing < 0.0) & (t > 0.0) & (t < nearest) & inside & eligible
         nearest[met] = t[met]
         seen |= met
         color[met] = np.pi * table.color[light]

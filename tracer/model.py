@@ -734,6 +734,9 @@ def iter_shapes(obj: SceneObject):
 LIGHT_KINDS = ("point", "sphere", "spot", "sun", "area")
 #: Light.shape's values, for area lights.
 AREA_SHAPES = ("rectangle", "ellipse")
+#: Light's switches, in the order of their bits in the tables (tracer.lights.LightTable.off): what Cycles lets a
+#: Blender user switch off per light (Cast Shadow, Ray Visibility's Diffuse, Glossy and Transmission).
+LIGHT_SWITCHES = ("cast_shadow", "visible_diffuse", "visible_glossy", "visible_transmission")
 
 
 @dataclass(frozen=True)
@@ -765,8 +768,20 @@ class Light:
     #: Shadow rays per shading point, stratified over the light (soft shadows): for a sphere or spot of some
     #: radius, a sun of some angle, and every area light.
     samples: int = 1
+    #: The switches of Blender scenes (docs/tracer.md, "Lights"; neither SDL nor USD carries them), all on by
+    #: default.  Off: ``cast_shadow``, no shadow rays (it lights a point as if nothing were in the way);
+    #: ``visible_diffuse``, no Lambert term; ``visible_glossy``, no highlight (Phong/Blinn or Cook-Torrance),
+    #: and an area light not seen by reflected rays; ``visible_transmission``, an area light not seen by
+    #: refracted rays.
+    cast_shadow: bool = True
+    visible_diffuse: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
 
     def __post_init__(self) -> None:
+        for switch in LIGHT_SWITCHES:
+            if not isinstance(getattr(self, switch), bool):
+                raise SceneError(f"light {switch} must be True or False, not {getattr(self, switch)!r}")
         if self.kind not in LIGHT_KINDS:
             raise SceneError(f"unknown light kind {self.kind!r} (expected one of {', '.join(LIGHT_KINDS)})")
         if self.shape not in AREA_SHAPES:
@@ -779,6 +794,16 @@ class Light:
         """Whether its shadows are soft (it has an extent: shadow rays go to several points of it)."""
         return (self.kind == "area" or (self.kind in ("sphere", "spot") and self.radius > 0.0)
                 or (self.kind == "sun" and self.angle > 0.0))
+
+    @property
+    def lights_surfaces(self) -> bool:
+        """Whether it adds anything to the shading of a surface (diffuse or highlight)."""
+        return self.visible_diffuse or self.visible_glossy
+
+    @property
+    def switched(self) -> bool:
+        """Whether any of its switches is off (the effect ``light-switches``)."""
+        return not all(getattr(self, switch) for switch in LIGHT_SWITCHES)
 
 
 #: The most shadow rays per shading point one light may ask for.

@@ -283,6 +283,9 @@ class RayTrees:
         direction = np.concatenate([r.direction[parent, slot] for r, (_, parent, slot) in zip(rays, parts)])
         weight = np.concatenate([r.weight[parent, slot] for r, (_, parent, slot) in zip(rays, parts)])
         level = np.concatenate([np.full(parent.size, self.level + g + 1) for g, parent, _ in parts])
+        # (a transmitted ray, not the mirror ray that total internal reflection sends in its place)
+        refracted = np.concatenate([(slot == THROUGH) & ~r.bounce[parent]
+                                    for r, (_, parent, slot) in zip(rays, parts)])
         media = _join_media([m for r, (_, parent, slot) in zip(rays, parts)
                              for m in (r.media.subset(parent[slot == MIRROR]),
                                        r.through_media.subset(parent[slot == THROUGH]))])
@@ -291,7 +294,7 @@ class RayTrees:
             rows = slice(begin, begin + CHUNK)
             self.batches += 1
             out.append(self.tracer.shade_batch(start[rows], direction[rows], level[rows], media.subset(rows),
-                                               weight[rows]))
+                                               weight[rows], refracted[rows]))
         return _join(out)
 
     def _add(self, g: int, parent: np.ndarray, slot: np.ndarray, shaded: Shaded) -> None:

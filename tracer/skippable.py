@@ -19,13 +19,20 @@ _CLOSED_CODES = np.array([e.keyword in CLOSED_KINDS for e in shapes.REGISTRY])
 _PROBE_DIRECTION = np.array([[0.5773, 0.5779, 0.5768]])
 
 
+def light_takers(compiled: CompiledScene) -> tuple[np.ndarray, np.ndarray]:
+    """Per material: whether it takes a light's diffuse term (some diffuse colour), and its highlight (some
+    specular colour, or a Cook-Torrance share)."""
+    mats = compiled.materials
+    glossy = (mats.specular != 0).any(axis=1)
+    if "cook-torrance" in compiled.effects:  # Schlick's Fresnel is not zero where the specular colour is
+        glossy |= mats.specular_fraction != 0
+    return (mats.diffuse != 0).any(axis=1), glossy
+
+
 def dark_materials(compiled: CompiledScene) -> np.ndarray:
     """Per material: takes nothing from a light (zero diffuse, zero specular, no Cook-Torrance share)."""
-    mats = compiled.materials
-    dark = ~(mats.diffuse != 0).any(axis=1) & ~(mats.specular != 0).any(axis=1)
-    if "cook-torrance" in compiled.effects:  # Schlick's Fresnel is not zero where the specular colour is
-        dark &= mats.specular_fraction == 0
-    return dark
+    diffuse, glossy = light_takers(compiled)
+    return ~diffuse & ~glossy
 
 
 def _closed(node) -> bool:

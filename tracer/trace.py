@@ -18,7 +18,7 @@ from . import fresnel, lights, numerics, terminator
 from .model import MEDIA_DEPTH, traced_depth
 from .raytree import MIRROR, THROUGH, RayTrees, Shaded, TooManyRays
 from .savings import SKIP_REASONS, RaySavings
-from .skippable import dark_materials, sealed_table
+from .skippable import light_takers, sealed_table
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction")
 
@@ -314,7 +314,11 @@ class Tracer:
         self.material_of = np.array([p.material_id for p in scene.primitives] or [0], dtype=int)
         self.background = np.asarray(scene.settings.background, dtype=float)
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
-        self.dark = dark_materials(scene)
+        #: Per material: whether it takes a light's diffuse term, and its highlight (tracer.skippable).
+        self.takes_diffuse, self.takes_glossy = light_takers(scene)
+        #: The lights' switches that are off (LightTable.off), where they count (the effect light-switches).
+        off = scene.lights.off
+        self.switched_off = off if "light-switches" in self.effects else np.zeros_like(off)
         self.sealed = sealed_table(scene) if self.savings.inside_shadows and "shadows" in self.effects else None
         #: ``cancel() -> bool``, asked now and then while a batch is traced: True stops it (RenderCancelled).
         self.cancel = None
@@ -348,17 +352,21 @@ class Tracer:
                                for a, b in zip(bounds[:-1], bounds[1:])])
 
     def shade_batch(self, origins: np.ndarray, directions: np.ndarray, level, media: Media,
-                    weight: np.ndarray) -> Shaded:
+                    weight: np.ndarray, refracted: np.ndarray | None = None) -> Shaded:
         """One batch of ray-tree nodes (``level``: theirs, one for all or one per ray): each ray's own colour
         (the background, or the local shading at its first hit) and, where it hits below the depth limit, the
-        children it wants (tracer.raytree traces those and adds their colours)."""
+        children it wants (tracer.raytree traces those and adds their colours).  ``refracted``: which rays are
+        transmitted rays (the other rays above level 0 are reflected ones; None: none is)."""
         self._check_cancel()
         out = Shaded.empty(self.background, media)
         if origins.shape[0] == 0:
             return out
         hits = first_hits(self.scene, origins, directions)
         if "seen-lights" in self.effects:  # (a reflected or refracted ray may see an area light instead)
-            seen, radiance = lights.seen_lights(self.scene.lights, origins, directions, hits.t)
+            if "light-switches" in self.effects and refracted is None:
+                refracted = np.zeros(origins.shape[0], dtype=bool)
+            seen, radiance = lights.seen_lights(self.scene.lights, origins, directions, hits.t,
+                                                refracted if "light-switches" in self.effects else None)
             seen &= np.broadcast_to(level, origins.shape[:1]) > 0
             out.color[seen] = radiance[seen]
             hits.hit &= ~seen
@@ -400,10 +408,13 @@ class Tracer:
         return out
 
     def _skip_shadow(self, mat, inside_of, light: int) -> np.ndarray:
-        """Rows whose feeler towards ``light`` need not be cast (counted per reason); they get no light."""
+        """Rows whose feeler towards ``light`` need not be cast (counted per reason); they get no light.  A
+        material is dark to a light when it takes neither of the terms the light adds (its switches)."""
         skip = np.zeros(mat.shape[0], dtype=bool)
         if self.savings.dark_materials:
-            skip = self.dark[mat]
+            off = int(self.switched_off[light])
+            skip = ~((self.takes_diffuse[mat] & ((off & lights.OFF_DIFFUSE) == 0))
+                     | (self.takes_glossy[mat] & ((off & lights.OFF_GLOSSY) == 0)))
             self.counts.skipped_dark_material += int(skip.sum())
         if self.sealed is not None:
             inside = (inside_of >= 0) & ~skip
@@ -419,8 +430,11 @@ class Tracer:
         kinds = self.scene.lights.kind
         shading = Shading(point, normal, to_eye, mat, diffuse, feeler_start, inside_of)
         for light, (light_pos, light_color) in enumerate(zip(self.scene.light_positions, self.scene.light_colors)):
+            off = int(self.switched_off[light])
+            if (off & lights.OFF_SHADING) == lights.OFF_SHADING:  # (it adds nothing to any surface)
+                continue
             if kinds[light] != lights.POINT:
-                self._physical_light(light, shading, total)
+                self._physical_light(light, shading, total, off)
                 continue
             to_light = light_pos - point
             distance = numerics.norm3(to_light)  # (a light at 1e300: |s|^2 overflows)
@@ -428,7 +442,7 @@ class Tracer:
             lambert = _dot(s, normal)
             # A light behind the surface does not reach it (the surface itself is in the way).
             lit = lambert > 0.0
-            if "shadows" in self.effects and lit.any():
+            if "shadows" in self.effects and not off & lights.OFF_SHADOW and lit.any():
                 rows = np.nonzero(lit)[0]
                 skip = self._skip_shadow(mat[rows], inside_of[rows], light)
                 lit[rows[skip]] = False
@@ -440,15 +454,17 @@ class Tracer:
             if rows.size == 0:
                 continue
             total[rows] += self._response(lambert[rows], s[rows], normal[rows], to_eye[rows], mat[rows],
-                                          diffuse[rows]) * light_color
+                                          diffuse[rows], off) * light_color
         return total
 
-    def _response(self, lambert, s, normal, to_eye, m, diffuse) -> np.ndarray:
+    def _response(self, lambert, s, normal, to_eye, m, diffuse, off: int) -> np.ndarray:
         """What a surface sends to the eye per unit light colour from unit direction ``s`` (rows lit by it,
         ``lambert`` = s . normal > 0): Lambert's diffuse term and Blinn's highlight (mixed with Cook-Torrance's
-        where it is live)."""
+        where it is live), each only where the light's switches ``off`` (LightTable.off) leave it on."""
         mats = self.scene.materials
         contribution = lambert[:, None] * diffuse
+        if off & lights.OFF_GLOSSY:
+            return contribution
         half = s + to_eye
         half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-300)
         h_dot_m = _dot(half, normal)
@@ -459,16 +475,19 @@ class Tracer:
             fraction = mats.specular_fraction[m][:, None]
             rough = cook_torrance(normal, s, to_eye, mats.specular[m], mats.surface_roughness[m])
             specular = (1.0 - fraction) * specular + fraction * rough
+        if off & lights.OFF_DIFFUSE:
+            return specular
         return contribution + specular
 
     # -- the physical lights (tracer.lights; docs/tracer.md, "Lights") -------------------------------------
 
-    def _physical_light(self, light: int, at: "Shading", total: np.ndarray) -> None:
-        """Add light number ``light`` (a sphere, spot, sun or area light) to ``total`` at the shaded points."""
+    def _physical_light(self, light: int, at: "Shading", total: np.ndarray, off: int) -> None:
+        """Add light number ``light`` (a sphere, spot, sun or area light) to ``total`` at the shaded points;
+        ``off``: its switches that are off (LightTable.off)."""
         table = self.scene.lights
         kind = table.kind[light]
         if kind == lights.AREA:
-            return self._area_light(light, at, total)
+            return self._area_light(light, at, total, off)
         if kind == lights.SUN:
             s = np.broadcast_to(-table.frame[light, :3], at.point.shape)
             scale = np.ones(len(at.point))
@@ -488,7 +507,7 @@ class Tracer:
             scale = factor / falloff
         rows = np.nonzero(lit)[0]
         visible = np.ones(rows.size)
-        if "shadows" in self.effects and rows.size:
+        if "shadows" in self.effects and not off & lights.OFF_SHADOW and rows.size:
             skip = self._skip_shadow(at.mat[rows], at.inside_of[rows], light)
             rows = rows[~skip]
             visible = self._visible_share(light, at.point[rows], s[rows], at.feeler_start[rows])
@@ -497,7 +516,7 @@ class Tracer:
         if rows.size == 0:
             return
         response = self._response(lambert[rows], s[rows], at.normal[rows], at.to_eye[rows], at.mat[rows],
-                                  at.diffuse[rows])
+                                  at.diffuse[rows], off)
         total[rows] += (response * table.color[light]) * (scale[rows] * visible)[:, None]
 
     def _visible_share(self, light: int, point, s, feeler_start) -> np.ndarray:
@@ -528,7 +547,7 @@ class Tracer:
             unblocked += ~occluded(self.scene, feeler_start, towards, reach)
         return unblocked / n
 
-    def _area_light(self, light: int, at: "Shading", total: np.ndarray) -> None:
+    def _area_light(self, light: int, at: "Shading", total: np.ndarray, off: int) -> None:
         """An area light: the sum over its stratified sample points, each a small light of its share of the
         area, facing along the light's direction (Lambert's cosine at both ends, 1/r^2)."""
         table = self.scene.lights
@@ -536,7 +555,8 @@ class Tracer:
         direction, u_side, v_side = table.frame[light, :3], table.frame[light, 3:6], table.frame[light, 6:9]
         area, ellipse = table.param[light, 0], table.param[light, 1] != 0.0
         rows = np.arange(len(at.point))
-        if "shadows" in self.effects:
+        shadows = "shadows" in self.effects and not off & lights.OFF_SHADOW
+        if shadows:
             rows = rows[~self._skip_shadow(at.mat, at.inside_of, light)]
         point = at.point[rows]
         xi1, xi2 = lights.sample_shifts(point, light)
@@ -555,7 +575,7 @@ class Tracer:
             lambert = numerics.dot3(s, at.normal[rows])
             cos_light = -numerics.dot3(s, direction)
             lit = np.nonzero((lambert > 0.0) & (cos_light > 0.0))[0]
-            if "shadows" in self.effects and lit.size:
+            if shadows and lit.size:
                 self.counts.shadow += lit.size
                 start = at.feeler_start[rows[lit]]
                 towards, reach = numerics.feeler_to(start, sample[lit])
@@ -563,7 +583,8 @@ class Tracer:
             if lit.size == 0:
                 continue
             r = rows[lit]
-            response = self._response(lambert[lit], s[lit], at.normal[r], at.to_eye[r], at.mat[r], at.diffuse[r])
+            response = self._response(lambert[lit], s[lit], at.normal[r], at.to_eye[r], at.mat[r], at.diffuse[r],
+                                      off)
             total[r] += (response * table.color[light]) * (cos_light[lit] * share / distance2[lit])[:, None]
 
     def _check_cancel(self) -> None:

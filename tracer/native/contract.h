@@ -10,9 +10,11 @@ enum { K_SPHERE = 0, K_CUBE = 1, K_SQUARE = 2, K_PLANE = 3, K_TAPERED = 4, K_TOR
 enum { OP_UNION = 0, OP_INTERSECTION = 1, OP_DIFFERENCE = 2 };
 enum { FX_LIGHTING = 1, FX_SHADOWS = 2, FX_REFLECTION = 4, FX_REFRACTION = 8, FX_COOK_TORRANCE = 16,
        FX_TEXTURES = 32, FX_PHYSICAL_LIGHTS = 64, FX_SOFT_SHADOWS = 128, FX_FRESNEL = 256,
-       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024, FX_SEEN_LIGHTS = 2048 };
+       FX_SMOOTH_TERMINATOR = 512, FX_MESH_UV = 1024, FX_SEEN_LIGHTS = 2048, FX_LIGHT_SWITCHES = 4096 };
 enum { RAY_CAMERA = 0, RAY_SHADOW = 1, RAY_REFLECTION = 2, RAY_REFRACTION = 3 };
 enum { LIGHT_POINT = 0, LIGHT_SPHERE = 1, LIGHT_SPOT = 2, LIGHT_SUN = 3, LIGHT_AREA = 4 };
+enum { LIGHT_OFF_CAST_SHADOW = 1, LIGHT_OFF_VISIBLE_DIFFUSE = 2, LIGHT_OFF_VISIBLE_GLOSSY = 4,
+       LIGHT_OFF_VISIBLE_TRANSMISSION = 8 };
 enum { FRESNEL_CONSTANT = 0, FRESNEL_METAL = 1, FRESNEL_DIELECTRIC = 2 };
 enum { SKIP_CUTOFF = 4, SKIP_INSIDE_SHADOW = 5, SKIP_SHARED_TIR = 6, SKIP_DARK_MATERIAL = 7,
        SKIP_BUDGET = 8 };
@@ -137,6 +139,7 @@ typedef struct {
     const int32_t *light_samples;            /* shadow rays per shaded point */
     const double *light_frame;               /* 9 each: unit direction, an area light's half sides U and V */
     const double *light_param;               /* 4 each: LightTable.param */
+    const int32_t *light_off;                /* LIGHT_OFF_* bits each: its switches that are off (LightTable.off; read only where the effect light-switches is live) */
     /* settings */
     double background[3];
     double global_ambient[3];
@@ -216,6 +219,7 @@ typedef struct {
     X(SceneDesc, light_samples) \
     X(SceneDesc, light_frame) \
     X(SceneDesc, light_param) \
+    X(SceneDesc, light_off) \
     X(SceneDesc, background) \
     X(SceneDesc, global_ambient) \
     X(SceneDesc, min_reflectivity) \
@@ -358,6 +362,6 @@ int64_t rt_sdl_material_width(void);
 
 /* The structs by number (rt_struct_size, rt_struct_layout's `which`), with their fields' X-macros. */
 #define RT_STRUCTS(X) X(0, SceneDesc, RT_SCENE_DESC_FIELDS) X(1, SdlResult, RT_SDL_RESULT_FIELDS)
-#define RT_CONTRACT_DIGEST "58d30be8fe05280b"
+#define RT_CONTRACT_DIGEST "3e8d975621403b8f"
 
 #endif

@@ -43,9 +43,12 @@ CSG_OPS = ("union", "intersection", "difference")
 #: Effect names (CompiledScene.effects) and their bits in SceneDesc.effects, in bit order.
 EFFECTS = ("lighting", "shadows", "reflection", "refraction", "cook-torrance", "textures",
            # the extensions for Blender scenes (docs/tracer.md): traced by one general shade function
-           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv", "seen-lights")
+           "physical-lights", "soft-shadows", "fresnel", "smooth-terminator", "mesh-uv", "seen-lights",
+           "light-switches")
 #: Light kinds in the order of their codes (tracer.lights.LIGHT_CODES; SceneDesc.light_kind).
 LIGHT_KINDS = _model.LIGHT_KINDS
+#: Light's switches in the order of their bits in SceneDesc.light_off (LIGHT_OFF_*: set where switched off).
+LIGHT_SWITCHES = _model.LIGHT_SWITCHES
 #: Material.fresnel modes in the order of their codes (SceneDesc.mat_fresnel).
 FRESNEL_MODES = _model.FRESNEL_MODES
 #: Ray kinds in the order of the C core's counters (tracer.trace.RAY_KINDS is the NumPy side).
@@ -242,6 +245,8 @@ SCENE_DESC: tuple[Field, ...] = (
     F("light_samples", "*i32", "shadow rays per shaded point"),
     F("light_frame", "*f64", "9 each: unit direction, an area light's half sides U and V"),
     F("light_param", "*f64", "4 each: LightTable.param"),
+    F("light_off", "*i32", "LIGHT_OFF_* bits each: its switches that are off (LightTable.off; read only where "
+      "the effect light-switches is live)"),
     F("background", "f64", length=3, section="settings"),
     F("global_ambient", "f64", length=3),
     F("min_reflectivity", "f64"),
@@ -545,6 +550,7 @@ def header_text() -> str:
     out.append(_enum("FX", EFFECTS, [EFFECT_BITS[e] for e in EFFECTS]))
     out.append(_enum("RAY", RAY_KINDS, range(len(RAY_KINDS))))
     out.append(_enum("LIGHT", LIGHT_KINDS, range(len(LIGHT_KINDS))))
+    out.append(_enum("LIGHT_OFF", LIGHT_SWITCHES, [1 << k for k in range(len(LIGHT_SWITCHES))]))
     out.append(_enum("FRESNEL", FRESNEL_MODES, range(len(FRESNEL_MODES))))
     out.append(_enum("SKIP", SKIP_REASONS, range(len(RAY_KINDS), len(RAY_KINDS) + len(SKIP_REASONS))))
     out.append(_enum("SAVE", SAVINGS_SWITCHES, [1 << k for k in range(len(SAVINGS_SWITCHES))]))

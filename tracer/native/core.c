@@ -140,6 +140,7 @@ typedef struct {
     const volatile int32_t *cancel;  /* non-zero: stop tracing (rt_trace's flag); may be NULL */
     int oom;
     int stopped;          /* stop_requested() was seen: the colours are not to be used */
+    int refracted;        /* the ray about to be shaded is a transmitted one (shade.h's secondary sets it) */
 } Work;
 
 /* Whether tracing should stop now: a signal was heard (interrupt.h) or the caller asked to cancel. */
@@ -804,7 +805,7 @@ static inline double world_unit_normal(const Scene *S, const Hit *h, double *n)
     static void NAME(const Scene *S, Work *w, const double *o, const double *d, int64_t level,             \
                      const Media *media, double weight, double *out)                                       \
     {                                                                                                      \
-        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, 0, 0, NAME);        \
+        shade_body(S, w, o, d, level, media, weight, out, L, SH, CT, RL, RR, TX, 0, 0, 0, 0, 0, NAME);     \
     }
 /* Each combination without textures (suffix 0) and with them (suffix 1). */
 #define SHADE_PAIR(BITS, L, SH, CT, RL, RR)                                                                 \
@@ -832,7 +833,8 @@ SHADE_PAIR(11110, 1, 1, 1, 1, 0)
 SHADE_PAIR(11111, 1, 1, 1, 1, 1)
 
 /* The effects of Blender scenes, traced by shade_general alone. */
-#define FX_GENERAL (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL | FX_SMOOTH_TERMINATOR | FX_SEEN_LIGHTS)
+#define FX_GENERAL                                                                                          \
+    (FX_PHYSICAL_LIGHTS | FX_SOFT_SHADOWS | FX_FRESNEL | FX_SMOOTH_TERMINATOR | FX_SEEN_LIGHTS | FX_LIGHT_SWITCHES)
 
 /* Any combination of effects, its flags read from the scene at run time: the scenes that use an effect of
  * FX_GENERAL pay for that choice per ray, the others never come here. */
@@ -844,7 +846,8 @@ static void shade_general(const Scene *S, Work *w, const double *o, const double
     shade_body(S, w, o, d, level, media, weight, out, l, l && (fx & FX_SHADOWS) != 0,
                l && (fx & FX_COOK_TORRANCE) != 0, (fx & FX_REFLECTION) != 0, (fx & FX_REFRACTION) != 0,
                (fx & FX_TEXTURES) != 0, (fx & FX_PHYSICAL_LIGHTS) != 0, (fx & FX_FRESNEL) != 0,
-               (fx & FX_SMOOTH_TERMINATOR) != 0, (fx & FX_SEEN_LIGHTS) != 0, shade_general);
+               (fx & FX_SMOOTH_TERMINATOR) != 0, (fx & FX_SEEN_LIGHTS) != 0, (fx & FX_LIGHT_SWITCHES) != 0,
+               shade_general);
 }
 
 static ShadeFn pick_shade(int64_t effects)

@@ -250,7 +250,8 @@ class FlatScene:
     def _take_lights(self, compiled: CompiledScene) -> None:
         lights = compiled.lights
         self.arrays.update(light_pos=lights.position, light_color=lights.color, light_kind=lights.kind,
-                           light_samples=lights.samples, light_frame=lights.frame, light_param=lights.param)
+                           light_samples=lights.samples, light_frame=lights.frame, light_param=lights.param,
+                           light_off=lights.off)
         self._counts["n_lights"] = len(lights.position)
 
     def _describe(self, compiled: CompiledScene) -> None:

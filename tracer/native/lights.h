@@ -129,12 +129,16 @@ static double visible_share(const Scene *S, Work *w, const ShadePoint *p, int64_
 /* tracer.lights.seen_lights: whether a reflected or refracted ray meets the front of an area light before
  * t_max (Cycles' area lights are seen by glossy and transmission rays, not by the camera's); then `out` is the
  * nearest one's radiance in the tracer's units: pi times its colour (its colour is what the Lambert sum of a
- * diffuse surface takes, radiance over pi, so that a white surface under a sky of it would look like it). */
-static int seen_light(const SceneDesc *D, const double *o, const double *d, double t_max, double *out)
+ * diffuse surface takes, radiance over pi, so that a white surface under a sky of it would look like it).
+ * Where use_switches, a refracted ray (`refracted`) does not see a light with visible_transmission off, a
+ * reflected one a light with visible_glossy off. */
+static int seen_light(const SceneDesc *D, const double *o, const double *d, double t_max, int use_switches,
+                      int refracted, double *out)
 {
     int seen = 0;
+    int32_t unseen = refracted ? LIGHT_OFF_VISIBLE_TRANSMISSION : LIGHT_OFF_VISIBLE_GLOSSY;
     for (int64_t l = 0; l < D->n_lights; l++) {
-        if (D->light_kind[l] != LIGHT_AREA)
+        if (D->light_kind[l] != LIGHT_AREA || (use_switches && (D->light_off[l] & unseen)))
             continue;
         const double *normal = D->light_frame + 9 * l, *u = normal + 3, *v = normal + 6;
         const double *pos = D->light_pos + 3 * l;
@@ -156,10 +160,10 @@ static int seen_light(const SceneDesc *D, const double *o, const double *d, doub
 
 /* Tracer._area_light: the sum over the light's stratified sample points. */
 static void area_light(const Scene *S, Work *w, const ShadePoint *p, int64_t l, int use_shadows,
-                       int use_cook_torrance, double *total)
+                       int use_cook_torrance, int32_t off, double *total)
 {
     const SceneDesc *D = &S->d;
-    if (use_shadows && skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance))
+    if (use_shadows && skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance, off))
         return;
     const double *frame = D->light_frame + 9 * l, *param = D->light_param + 4 * l;
     const double *pos = D->light_pos + 3 * l, *lc = D->light_color + 3 * l;
@@ -194,20 +198,21 @@ static void area_light(const Scene *S, Work *w, const ShadePoint *p, int64_t l, 
                 continue;
         }
         double response[3], weight = cos_light * share / distance2;
-        light_response(D, p, s, lambert, use_cook_torrance, response);
+        light_response(D, p, s, lambert, use_cook_torrance, off, response);
         for (int c = 0; c < 3; c++)
             total[c] += response[c] * lc[c] * weight;
     }
 }
 
-/* Tracer._physical_light: light `l` (a sphere, spot, sun or area light) added to `total`. */
+/* Tracer._physical_light: light `l` (a sphere, spot, sun or area light) added to `total`; `off`: its switches
+ * that are off (use_shadows already says whether it casts shadows). */
 static void physical_light(const Scene *S, Work *w, const ShadePoint *p, int64_t l, int use_shadows,
-                           int use_cook_torrance, double *total)
+                           int use_cook_torrance, int32_t off, double *total)
 {
     const SceneDesc *D = &S->d;
     int32_t kind = D->light_kind[l];
     if (kind == LIGHT_AREA) {
-        area_light(S, w, p, l, use_shadows, use_cook_torrance, total);
+        area_light(S, w, p, l, use_shadows, use_cook_torrance, off, total);
         return;
     }
     const double *frame = D->light_frame + 9 * l, *lc = D->light_color + 3 * l;
@@ -236,14 +241,14 @@ static void physical_light(const Scene *S, Work *w, const ShadePoint *p, int64_t
     }
     double visible = 1.0;
     if (use_shadows) {
-        if (skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance))
+        if (skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance, off))
             return;
         visible = visible_share(S, w, p, l, s);
     }
     if (!(visible > 0.0))
         return;
     double response[3], weight = scale * visible;
-    light_response(D, p, s, lambert, use_cook_torrance, response);
+    light_response(D, p, s, lambert, use_cook_torrance, off, response);
     for (int c = 0; c < 3; c++)
         total[c] += response[c] * lc[c] * weight;
 }

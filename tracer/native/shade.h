@@ -11,19 +11,25 @@
 typedef void (*ShadeFn)(const Scene *, Work *, const double *, const double *, int64_t, const Media *, double,
                         double *);
 
+/* A light with both switched off adds nothing to any surface (tracer.lights.OFF_SHADING). */
+#define LIGHT_OFF_SHADING (LIGHT_OFF_VISIBLE_DIFFUSE | LIGHT_OFF_VISIBLE_GLOSSY)
+
 /* tracer.savings, the shadow feelers: whether the feeler from a hit on material `mat` towards light `l`
  * need not be cast (counted per reason; the light then adds nothing).  `inside_of`: the object the ray
- * was inside when it hit (it left that object there), or -1. */
+ * was inside when it hit (it left that object there), or -1; `off`: the light's switches that are off
+ * (LIGHT_OFF_*: a material is dark to a light when it takes neither of the terms the light adds). */
 static inline int skip_feeler(const Scene *S, Work *w, int64_t mat, int64_t inside_of, int64_t l,
-                              const int use_cook_torrance)
+                              const int use_cook_torrance, int32_t off)
 {
     const SceneDesc *D = &S->d;
     if (w->savings & SAVE_DARK_MATERIALS) {
         const double *diffuse = D->mat_diffuse + 3 * mat, *specular = D->mat_specular + 3 * mat;
-        int dark = diffuse[0] == 0.0 && diffuse[1] == 0.0 && diffuse[2] == 0.0 && specular[0] == 0.0 &&
-                   specular[1] == 0.0 && specular[2] == 0.0 &&
-                   (!use_cook_torrance || D->mat_specular_fraction[mat] == 0.0);
-        if (dark) {
+        int no_diffuse = (diffuse[0] == 0.0 && diffuse[1] == 0.0 && diffuse[2] == 0.0) ||
+                         (off & LIGHT_OFF_VISIBLE_DIFFUSE);
+        int no_glossy = (specular[0] == 0.0 && specular[1] == 0.0 && specular[2] == 0.0 &&
+                         (!use_cook_torrance || D->mat_specular_fraction[mat] == 0.0)) ||
+                        (off & LIGHT_OFF_VISIBLE_GLOSSY);
+        if (no_diffuse && no_glossy) {
             w->counts[SKIP_DARK_MATERIAL]++;
             return 1;
         }
@@ -81,12 +87,18 @@ typedef struct {
 } ShadePoint;
 
 /* Tracer._response: what the surface sends to the eye per unit light colour from unit direction s
- * (lambert = s . facing > 0): Lambert's term and Blinn's highlight, mixed with Cook-Torrance's where live. */
+ * (lambert = s . facing > 0): Lambert's term and Blinn's highlight, mixed with Cook-Torrance's where live,
+ * each only where the light's switches `off` (LIGHT_OFF_*) leave it on. */
 static inline __attribute__((always_inline)) void
 light_response(const SceneDesc *D, const ShadePoint *p, const double *s, double lambert, const int use_cook_torrance,
-               double *out)
+               int32_t off, double *out)
 {
     int64_t mat = p->mat;
+    if (off & LIGHT_OFF_VISIBLE_GLOSSY) {
+        for (int c = 0; c < 3; c++)
+            out[c] = lambert * p->diffuse[c];
+        return;
+    }
     const double *specular = D->mat_specular + 3 * mat;
     double half[3] = {s[0] + p->to_eye[0], s[1] + p->to_eye[1], s[2] + p->to_eye[2]};
     double hl = sqrt(half[0] * half[0] + half[1] * half[1] + half[2] * half[2]);
@@ -107,7 +119,7 @@ light_response(const SceneDesc *D, const ShadePoint *p, const double *s, double 
             spec[c] = (1.0 - fraction) * spec[c] + fraction * rough[c];
     }
     for (int c = 0; c < 3; c++)
-        out[c] = lambert * p->diffuse[c] + spec[c];
+        out[c] = (off & LIGHT_OFF_VISIBLE_DIFFUSE) ? spec[c] : lambert * p->diffuse[c] + spec[c];
 }
 
 #include "lights.h"
@@ -129,16 +141,20 @@ static inline void feeler_base(const Scene *S, const Hit *h, const double *point
 }
 
 /* Tracer._direct_light: every light's share at the point, added to `color`.  SDL's point lights here, the
- * physical ones (only where use_physical) in lights.h. */
+ * physical ones (only where use_physical) in lights.h; the lights' switches read only where use_switches. */
 static inline __attribute__((always_inline)) void
 direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows, const int use_cook_torrance,
-             const int use_physical, double *color)
+             const int use_physical, const int use_switches, double *color)
 {
     const SceneDesc *D = &S->d;
     double total[3] = {0.0, 0.0, 0.0};
     for (int64_t l = 0; l < D->n_lights; l++) {
+        int32_t off = use_switches ? D->light_off[l] : 0;
+        if ((off & LIGHT_OFF_SHADING) == LIGHT_OFF_SHADING)  /* (it adds nothing to any surface) */
+            continue;
+        int shadows = use_shadows && !(off & LIGHT_OFF_CAST_SHADOW);
         if (use_physical && D->light_kind[l] != LIGHT_POINT) {
-            physical_light(S, w, p, l, use_shadows, use_cook_torrance, total);
+            physical_light(S, w, p, l, shadows, use_cook_torrance, off, total);
             continue;
         }
         const double *lp = D->light_pos + 3 * l, *lc = D->light_color + 3 * l;
@@ -150,8 +166,8 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
         double lambert = dot3(s, p->facing);
         if (!(lambert > 0.0))  /* a light behind the surface does not reach it */
             continue;
-        if (use_shadows) {
-            if (skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance))
+        if (shadows) {
+            if (skip_feeler(S, w, p->mat, p->inside_of, l, use_cook_torrance, off))
                 continue;
             w->counts[RAY_SHADOW]++;
             double to_light[3];
@@ -160,7 +176,7 @@ direct_light(const Scene *S, Work *w, const ShadePoint *p, const int use_shadows
                 continue;
         }
         double response[3];
-        light_response(D, p, s, lambert, use_cook_torrance, response);
+        light_response(D, p, s, lambert, use_cook_torrance, off, response);
         for (int c = 0; c < 3; c++)
             total[c] += response[c] * lc[c];
     }
@@ -339,6 +355,7 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
     if (want_mirror && take_ray(w, limit, want_through, mirror_weight, through_weight, chain)) {
         mirror_ray(d, facing, geo, smooth, point, offset, mirror, start);
         w->counts[RAY_REFLECTION]++;
+        w->refracted = 0;
         self(S, w, start, mirror, level + 1, media, mirror_weight, mirrored);
         w->ray_limit = limit;
     }
@@ -356,6 +373,7 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
         if (total_internal) {  /* total internal reflection: stays in the medium it came from */
             mirror_ray(d, facing, geo, smooth, point, offset, mirror, start);
             w->counts[RAY_REFLECTION]++;
+            w->refracted = 0;
             self(S, w, start, mirror, level + 1, media, through_weight, c);
         } else {
             double along = ratio * cos1 - sqrt(cos2_squared), next[3];
@@ -364,6 +382,7 @@ secondary(const Scene *S, Work *w, const double *d, const Hit *h, int64_t obj, c
                 start[i] = point[i] - offset * facing[i];
             }
             w->counts[RAY_REFRACTION]++;
+            w->refracted = 1;
             self(S, w, start, next, level + 1, &after, through_weight, c);
         }
         w->ray_limit = limit;
@@ -377,7 +396,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
            double weight, double *out,
            const int use_lighting, const int use_shadows, const int use_cook_torrance, const int use_reflection,
            const int use_refraction, const int use_textures, const int use_physical, const int use_fresnel,
-           const int use_terminator, const int use_seen_lights, ShadeFn self)
+           const int use_terminator, const int use_seen_lights, const int use_switches, ShadeFn self)
 {
     const SceneDesc *D = &S->d;
     out[0] = D->background[0];
@@ -390,7 +409,8 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
     Hit h;
     int64_t obj;
     int found = scene_first(S, w, o, d, &h, &obj);
-    if (use_seen_lights && level > 0 && seen_light(D, o, d, found ? h.t : INFINITY, out))
+    /* (w->refracted: set by the caller for this ray, read before this call shades any other) */
+    if (use_seen_lights && level > 0 && seen_light(D, o, d, found ? h.t : INFINITY, use_switches, w->refracted, out))
         return;
     if (!found)
         return;
@@ -433,7 +453,7 @@ shade_body(const Scene *S, Work *w, const double *o, const double *d, int64_t le
             p.to_eye[i] = -d[i] / length;
             p.feeler[i] = base[i] + offset * p.facing[i];
         }
-        direct_light(S, w, &p, use_shadows, use_cook_torrance, use_physical, color);
+        direct_light(S, w, &p, use_shadows, use_cook_torrance, use_physical, use_switches, color);
     }
     if ((use_reflection || use_refraction) && level < D->max_depth)
         secondary(S, w, d, &h, obj, p.point, p.facing, offset, level, media, weight, p.mat, use_reflection,

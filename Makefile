@@ -69,7 +69,7 @@ extension: setup
 CMAKE ?= cmake
 SANITIZED := build/sanitize/_core.so
 SANITIZE_TESTS := tests/test_native.py tests/test_contract.py tests/test_backend.py tests/test_mesh_intersect.py tests/fuzz \
-	tests/test_sdl_fastread.py
+	tests/test_sdl_fastread.py tests/test_instances.py tests/test_lights.py
 
 .PHONY: warnings sanitize wheel contract
 warnings:

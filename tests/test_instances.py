@@ -149,3 +149,51 @@ def test_one_row_asked_for_computes_that_row_alone():
         for i in (0, 7, 50):
             assert np.array_equal(one[i][name], column[i]), (name, i)
         assert np.array_equal(many[name], column[[50, 0, 7]]), name
+
+
+def test_a_singular_float32_matrix_is_refused_as_from_a_shape():
+    """Matrices whose third row is 0.5 r0 + 0.25 r1 exactly (float32 rows where that sum needs no rounding): the
+    cofactor determinant often rounds to a tiny non-zero number and gives a finite inverse, yet the table
+    refuses (by name) exactly the matrices that LAPACK refuses as a Shape's, and accepts the others."""
+    rng = np.random.default_rng(0)
+    refused = finite_cofactors = 0
+    for _ in range(600):
+        r0, r1 = rng.uniform(-1, 1, 3).astype(np.float32), rng.uniform(-1, 1, 3).astype(np.float32)
+        r2 = 0.5 * r0.astype(np.float64) + 0.25 * r1.astype(np.float64)
+        if not np.array_equal(r2.astype(np.float32), r2):
+            continue  # (not exactly dependent once in float32)
+        matrices = _affines(3, 8)
+        matrices[1, :3, :3] = [r0, r1, r2]
+        shapes = _scene(matrices)
+        shapes.objects = list(shapes.objects)
+        try:
+            compile_scene(shapes)
+        except TracerError:
+            refused += 1
+            finite_cofactors += bool(np.isfinite(instances.affine_inverses(matrices[1:2, :3].reshape(1, 12))).all())
+            with pytest.raises(TracerError, match="singular"):
+                compile_scene(_scene(matrices))
+        else:
+            compile_scene(_scene(matrices))
+    assert refused >= 20 and finite_cofactors >= 10
+
+
+def test_a_textured_instance_scene_compiles_without_making_a_primitive_per_row():
+    rows = TableRows()
+    checks = Material(diffuse=(0.8, 0.8, 0.8), texture=-1, parameters=(2.0,))
+    rows.add_block(_affines(300, 1), np.full(300, rows.part("mesh", read_3vn(PAWN), checks)))
+    compiled = compile_scene(Scene(objects=rows.table(), lights=[Light((3, 8, 5), (1, 1, 1))]))
+    assert "textures" in compiled.effects and isinstance(compiled.table, InstancedTable)
+    assert not compiled.primitives._made and "_every_row_arrays" not in vars(compiled.table)
+
+
+def test_a_whole_numpy_trace_computes_every_row_once():
+    """A few primitives asked for are computed alone; past _ROWS_ALONE the table computes all rows at once."""
+    from tracer.compile import _ROWS_ALONE
+
+    compiled = compile_scene(_scene(_affines(_ROWS_ALONE + 20, 6)))
+    for i in range(_ROWS_ALONE):
+        compiled.primitives[i]
+    assert "_every_row_arrays" not in vars(compiled.table)
+    render(compiled, 16, 12, backend="numpy")
+    assert "_every_row_arrays" in vars(compiled.table)

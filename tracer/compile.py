@@ -1039,9 +1039,10 @@ class InstancedTable(PrimitiveTable):
                 with np.errstate(all="ignore"):
                     lo, hi = bound.world_box(matrix[:, :3, :3], matrix[:, :3, 3])
                     boxes = instances.single_boxes(instances.padded_boxes(lo, hi))
-                # (a row whose numbers are not all finite is stored, and checked as any other shape is)
+                # (a row whose numbers are not all finite, or whose matrix LAPACK would refuse, is stored, and
+                # checked as any other shape is: a singular matrix is refused by name, as from a Shape)
                 instance[chosen] = (np.isfinite(inverse).all(axis=(1, 2)) & np.isfinite(error)
-                                    & np.isfinite(boxes).all(axis=1))
+                                    & np.isfinite(boxes).all(axis=1) & _invertible(matrix))
                 self.object_boxes[chosen] = boxes
         stored = np.flatnonzero(~instance)
         self.slot = np.full(n, -1, dtype=np.int32)
@@ -1057,7 +1058,8 @@ class InstancedTable(PrimitiveTable):
     def refill(self, rows, shapes) -> None:
         raise TypeError("an InstancedTable is not edited in place (tracer.edit compiles the scene's Shapes)")
 
-    resize = refill
+    def resize(self, keep, added, added_material_ids) -> None:
+        self.refill(keep, added)
 
     def mesh_groups(self) -> list[tuple[MeshData, np.ndarray]]:
         """PrimitiveTable.mesh_groups, made anew when asked (a few milliseconds for 10^5 rows), not kept: the
@@ -1072,6 +1074,10 @@ class InstancedTable(PrimitiveTable):
         """PrimitiveTable.numbers_of: of these rows alone (a query, a pass, the NumPy path's one primitive),
         not of every row (what the NumPy path's whole traces read, made once and kept)."""
         kept = self.__dict__.get("_every_row_arrays")
+        if kept is None and np.ndim(rows) == 0:  # (one primitive made: past a few, a whole NumPy trace's)
+            self._asked = getattr(self, "_asked", 0) + 1
+            if self._asked > _ROWS_ALONE:
+                kept = self._every_row()
         if kept is not None:
             return {name: kept[name][rows] for name in names or _NUMBERS}
         chosen = np.atleast_1d(np.asarray(rows))
@@ -1129,6 +1135,19 @@ class InstancedTable(PrimitiveTable):
 
 #: What PrimitiveTable.numbers_of gives of each row.
 _NUMBERS = ("inverses", "rounding_terms", "spheres", "boxes")
+#: Rows an InstancedTable computes one at a time (a query, a pass's few) before it computes every row's
+#: numbers at once and keeps them (a whole NumPy trace, which makes every primitive).
+_ROWS_ALONE = 64
+
+
+def _invertible(stack: np.ndarray) -> np.ndarray:
+    """Per (k, 4, 4) matrix, whether LAPACK inverts it to finite numbers (what _checked_inverse asks of a
+    Shape's matrix)."""
+    with np.errstate(all="ignore"):
+        try:
+            return np.isfinite(np.linalg.inv(stack)).all(axis=(1, 2))
+        except np.linalg.LinAlgError:  # (some matrix of the chunk is singular: each on its own)
+            return np.array([_invertible(m[None])[0] if len(stack) > 1 else False for m in stack], dtype=bool)
 
 
 def _empty_numbers(n: int) -> dict[str, np.ndarray]:

@@ -311,7 +311,9 @@ class Tracer:
         self.counts = RayCounts()
         self.effects = scene.effects
         self.savings = RaySavings() if savings is None else savings
-        self.material_of = np.array([p.material_id for p in scene.primitives] or [0], dtype=int)
+        table = scene.table  # (each primitive's material id, without making the primitives)
+        self.material_of = (np.asarray(table.material_ids, dtype=int) if table is not None and len(table) else
+                            np.array([p.material_id for p in scene.primitives] or [0], dtype=int))
         self.background = np.asarray(scene.settings.background, dtype=float)
         self.ambient_light = np.asarray(scene.settings.global_ambient, dtype=float)
         #: Per material: whether it takes a light's diffuse term, and its highlight (tracer.skippable).

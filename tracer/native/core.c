@@ -1379,6 +1379,8 @@ static int take_desc(Scene *S, const SceneDesc *desc, const int64_t *objects, in
         }
         return 1;
     }
+    if (D->instance_rows < 0 || D->instance_rows > D->n_prims)
+        REFUSE("%lld instance rows of %lld primitives", (long long)D->instance_rows, (long long)D->n_prims);
     for (int64_t p = 0; p < D->n_prims; p++)
         if (!prim_ok(D, p, error, capacity))
             return 0;

@@ -53,6 +53,15 @@ def texture_problems(scene, shapes=None) -> dict[int, str]:
     return problems
 
 
+def _texture_numbers(shapes) -> set:
+    """The texture numbers of the shapes' materials: of a table's rows (compile._RowShapes), from its distinct
+    materials, without making a Shape of each row."""
+    columns = getattr(shapes, "columns", None)
+    if columns is not None:
+        return {columns.materials[i].texture for i in np.unique(columns.material_ids).tolist()}
+    return {s.material.texture for s in shapes}
+
+
 def _where_used(scene, shapes, number: int) -> str:
     """Where texture ``number`` is first used (the shape's file:line:column), for messages."""
     first = next((s for s in shapes if s.material.texture == number), None)
@@ -90,8 +99,10 @@ class TextureSet:
         self.primitives = primitives
         self.images: dict[int, np.ndarray] = {}
         loaded: dict[str, np.ndarray] = {}  # one picture per file, however many numbers name it
-        shapes = [p.shape for p in primitives]
-        for number in sorted({s.material.texture for s in shapes}):
+        # (a compiled scene's shapes, not its primitives: the C core's scene makes none of those)
+        table = getattr(primitives, "table", None)
+        shapes = table.shapes if table is not None else [p.shape for p in primitives]
+        for number in sorted(_texture_numbers(shapes)):
             problem = _texture_problem(scene, shapes, number)
             if problem:
                 raise TracerError(problem)

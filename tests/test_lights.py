@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 import pytest
@@ -19,6 +20,10 @@ from tracer.model import Camera
 from tracer.sdl.parser import parse_sdl
 from tracer.sdl.writer import save_sdl
 from tracer.transforms import rotation, scaling, translation
+
+#: Under make sanitize (ASan's runtime preloaded) usd-core cannot be loaded: its C++ exceptions abort.
+needs_usd = pytest.mark.skipif("libasan" in os.environ.get("LD_PRELOAD", ""),
+                               reason="under make sanitize: usd-core's C++ exceptions abort with ASan's runtime")
 
 WHITE = dict(ambient=(0.0, 0.0, 0.0), diffuse=(1.0, 1.0, 1.0))
 
@@ -553,15 +558,22 @@ def test_model_refuses_switches_that_are_not_booleans():
     assert all(getattr(Light((0, 0, 0), (1, 1, 1)), name) for name in SWITCHES)  # (on by default)
 
 
-def test_sdl_and_usd_write_a_switched_light_as_the_light(tmp_path):
-    from tracer.usd import load_usd, save_usd
+def test_sdl_writes_a_switched_light_as_the_light(tmp_path):
     scene = parse_sdl(SDL_LIGHTS)
     scene.lights = [switched(light, *SWITCHES) for light in scene.lights]
     save_sdl(scene, tmp_path / "switched.sdl")
     again = tracer.load(tmp_path / "switched.sdl").lights
     assert again == parse_sdl(SDL_LIGHTS).lights  # (SDL has no words for the switches: on again)
+
+
+@needs_usd
+@needs_usd
+def test_usd_writes_a_switched_light_as_the_light(tmp_path):
+    from tracer.usd import load_usd, save_usd
+    scene = parse_sdl(SDL_LIGHTS)
+    scene.lights = [switched(light, *SWITCHES) for light in scene.lights]
     save_usd(scene, tmp_path / "switched.usda")
-    assert load_usd(tmp_path / "switched.usda").lights == again  # (nor has USD: likewise)
+    assert load_usd(tmp_path / "switched.usda").lights == parse_sdl(SDL_LIGHTS).lights  # (no words there either)
 
 
 # ------------------------------------------------------------------------------------------------ SDL
@@ -663,6 +675,8 @@ def test_editing_lights_in_place_renders_as_from_scratch(backend):
 # ------------------------------------------------------------------------------------------------ USD
 
 
+@needs_usd
+@needs_usd
 def test_usd_round_trip_keeps_every_light_exactly_and_its_name(tmp_path):
     from tracer.usd import load_usd, save_usd
     scene = parse_sdl(SDL_LIGHTS.replace("ellipseLight 0 3 0 0 -1 0 1 1 0 2 2 2 1 1 9",
@@ -673,6 +687,8 @@ def test_usd_round_trip_keeps_every_light_exactly_and_its_name(tmp_path):
     assert again.warnings == []
 
 
+@needs_usd
+@needs_usd
 def test_usd_lights_are_usdlux_for_other_tools(tmp_path):
     from pxr import Usd, UsdLux
     from tracer.usd import save_usd
@@ -700,6 +716,7 @@ def UsdGeom_world(prim) -> np.ndarray:
     return from_gf(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(0))
 
 
+@needs_usd
 def test_usd_lights_edited_in_another_tool_follow_the_edit(tmp_path):
     from pxr import Gf, Usd, UsdLux
     from tracer.usd import load_usd, save_usd
@@ -715,6 +732,7 @@ def test_usd_lights_edited_in_another_tool_follow_the_edit(tmp_path):
     assert sun_light.angle == 2.0 and sun_light.direction == (1.0, -2.0, -1.0)  # (the direction untouched)
 
 
+@needs_usd
 def test_usd_rect_and_disk_lights_of_other_tools_are_area_lights(tmp_path):
     from pxr import Gf, Usd, UsdGeom, UsdLux
     from tracer.usd import load_usd
@@ -745,6 +763,7 @@ def test_usd_rect_and_disk_lights_of_other_tools_are_area_lights(tmp_path):
     ("light_2", "inputs:shaping:cone:angle", 0.0, "spot size"),
     ("light_2", "inputs:shaping:cone:softness", float("nan"), "finite"),
 ])
+@needs_usd
 def test_usd_lights_with_numbers_sdl_refuses_are_refused_naming_the_prim(tmp_path, prim, attribute, value, message):
     """A light's numbers read from USD are checked as SDL's statements are (tracer.sdl.lights.light_problem):
     a NaN radius, a zero-width area light or a sun of 720 degrees is one error naming the file and prim
@@ -764,6 +783,7 @@ def test_usd_lights_with_numbers_sdl_refuses_are_refused_naming_the_prim(tmp_pat
     assert len(lenient.lights) == len(parse_sdl(SDL_LIGHTS).lights) - 1 and lenient.warnings
 
 
+@needs_usd
 def test_usd_spot_cone_edited_in_another_tool_follows_the_edit(tmp_path):
     from pxr import Usd, UsdLux
     from tracer.usd import load_usd, save_usd

@@ -175,8 +175,8 @@ def shown(linear: np.ndarray) -> np.ndarray:
 
 def cycles_without_lights_in_mirrors(samples: int) -> np.ndarray:
     """Cycles' picture with the lights hidden from glossy rays: what a mirror shows without the images of the
-    lights themselves (Whitted's rays do not see lights; a Cycles mirror shows an area light, a sphere light
-    or the sun's disk)."""
+    lights themselves (the book's Whitted rays do not see lights; a Cycles mirror, as the tracer's now, shows
+    an area light, a sphere light or the sun's disk): how much of a mirror's difference those images are."""
     lights = [obj for obj in bpy.data.objects if obj.type == "LIGHT"]
     for light in lights:
         light.visible_glossy = False

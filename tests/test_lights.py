@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +25,7 @@ from tracer.transforms import rotation, scaling, translation
 #: Under make sanitize (ASan's runtime preloaded) usd-core cannot be loaded: its C++ exceptions abort.
 needs_usd = pytest.mark.skipif("libasan" in os.environ.get("LD_PRELOAD", ""),
                                reason="under make sanitize: usd-core's C++ exceptions abort with ASan's runtime")
-
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
 WHITE = dict(ambient=(0.0, 0.0, 0.0), diffuse=(1.0, 1.0, 1.0))
 
 
@@ -551,6 +552,253 @@ def test_editing_lights_to_switched_ones_renders_as_from_scratch(backend):
     assert edited.rays.as_dict() == expected.rays.as_dict()
 
 
+# ------------------------------------------------------------------------------- seen sphere, spot and sun lights
+# (docs/tracer.md, "Seen lights": Cycles' mirrors and glass show a point light's sphere and the sun's disk)
+
+BULB = (0.3, 0.2, 0.1)
+BULB_AT, BULB_RADIUS = (0.4, 3.0, -0.2), 0.5
+
+
+def bulb(**fields):
+    """A sphere light of radius 0.5 three units above the mirror floor."""
+    return Light(**{"position": BULB_AT, "color": BULB, "kind": "sphere", "radius": BULB_RADIUS, "samples": 4,
+                    **fields})
+
+
+def over_a_mirror(*lights, objects=(), background=BACKDROP):
+    return scene_of(floor(**MIRROR), *objects, lights=list(lights), background=background,
+                    global_ambient=(0.0, 0.0, 0.0))
+
+
+def seen_showcase(hidden=None):
+    """A mirror floor and a glass ball (no highlights) under a sphere light, a spot light of some radius and a
+    sun of 10 degrees, each seen in the floor and in the ball from the camera; light number ``hidden`` with
+    visible_glossy and visible_transmission off."""
+    ground = shape("square", rotation(-90, 1, 0, 0) @ scaling(20, 20, 1), ambient=(0.05, 0.05, 0.05),
+                   diffuse=(0.2, 0.2, 0.2), specular=(0, 0, 0), reflectivity=0.7)
+    glass = shape("sphere", translation(0.6, 0.7, 0.5) @ scaling(0.7, 0.7, 0.7), ambient=(0, 0, 0),
+                  diffuse=(0, 0, 0), specular=(0, 0, 0), reflectivity=1.0, transparency=1.0, speed_of_light=1 / 1.5,
+                  fresnel="dielectric")
+    lights = [Light((-1.6, 2.2, -1.5), (2.0, 1.8, 1.5), kind="sphere", radius=0.4, samples=4),
+              Light((1.8, 2.0, -1.0), (3.0, 3.0, 2.0), kind="spot", radius=0.3, direction=(-0.3, -1.0, 0.4),
+                    spot_size=80.0, spot_blend=0.4, samples=4),
+              Light((0, 0, 0), (0.4, 0.35, 0.3), kind="sun", direction=(0.15, -0.3, 1.0), angle=10.0, samples=4)]
+    if hidden is not None:
+        lights[hidden] = switched(lights[hidden], "visible_glossy", "visible_transmission")
+    return scene_of(ground, glass, lights=lights, camera=Camera((0.0, 2.0, 6.0), (0.0, 0.6, 0.0), view_angle=50.0),
+                    background=(0.02, 0.03, 0.05), global_ambient=(0.05, 0.05, 0.05))
+
+
+def test_c_and_numpy_agree_bit_for_bit_where_spheres_spots_and_suns_are_seen():
+    from tracer import native
+    if native.load_error is not None:
+        pytest.skip(f"C core not available: {native.load_error}")
+    c = tracer.render(seen_showcase(), 96, 72, backend="c")
+    n = tracer.render(seen_showcase(), 96, 72, backend="numpy")
+    assert np.array_equal(c.image, n.image)
+    assert c.rays.as_dict() == n.rays.as_dict() and c.rays.skipped() == n.rays.skipped()
+    assert {"seen-lights", "reflection", "refraction"} <= set(c.stats()["effects"])
+    for index in range(3):  # (each light is seen: hidden from mirrors and glass, the picture changes)
+        hidden = seen_showcase(hidden=index)
+        c_hidden = tracer.render(hidden, 96, 72, backend="c")
+        assert not np.array_equal(c_hidden.image, c.image), index
+        assert np.array_equal(c_hidden.image, tracer.render(hidden, 96, 72, backend="numpy").image), index
+
+
+def test_a_mirror_shows_a_sphere_light_as_a_disk_of_colour_over_radius_squared(backend):
+    """Rays straight down at the mirror floor come back straight up: those from floor points within the
+    light's radius of the point under its centre meet its sphere and see colour / r^2 (its radiance in the
+    tracer's units), the others the background; the camera rays, which pass beside it, see nothing of it."""
+    grid = np.linspace(-1.0, 1.0, 41) * 1.6 * BULB_RADIUS
+    xs, zs = BULB_AT[0] + grid, BULB_AT[2] + grid[::4]
+    colour, t = shade_down(backend, over_a_mirror(bulb()), xs, zs=zs, height=1.0)
+    off_centre = np.hypot(*np.meshgrid(xs - BULB_AT[0], zs - BULB_AT[2]))
+    assert np.abs(off_centre - BULB_RADIUS).min() > 1e-6  # (no point on the disk's rim)
+    inside = off_centre < BULB_RADIUS
+    assert 0.2 < inside.mean() < 0.6
+    np.testing.assert_array_equal(colour[inside], np.broadcast_to(np.array(BULB) / BULB_RADIUS ** 2, colour[inside].shape))
+    np.testing.assert_array_equal(colour[~inside], np.broadcast_to(BACKDROP, colour[~inside].shape))
+    assert t.counts.reflection == inside.size
+    # the units: the radiance seen, over the disk of its radius facing a point below it at distance x (Cycles'
+    # sphere light), is the irradiance pi E there, E what the light gives a white diffuse floor at that point
+    below, _ = shade_down(backend, lit(bulb()), [BULB_AT[0]], zs=[BULB_AT[2]], height=1.0)
+    x2 = BULB_AT[1] ** 2
+    np.testing.assert_allclose(colour[inside][0] * np.pi * BULB_RADIUS ** 2 / (x2 + BULB_RADIUS ** 2),
+                               np.pi * below[0, 0], rtol=1e-12)
+
+
+def test_a_mirror_shows_the_sphere_of_an_oblique_light_where_geometry_says(backend):
+    """Rays from one eye fanned over the mirror floor: a reflected ray sees the light exactly where the mirror
+    image of the eye's ray (from the eye's image below the floor) passes within the radius of the centre."""
+    eye = np.array([-1.5, 1.2, 1.0])
+    aims = np.stack(np.meshgrid(np.linspace(-1.4, -0.5, 40), [0.0], np.linspace(0.3, 1.0, 40)), -1).reshape(-1, 3)
+    directions = aims - eye
+    colour, _ = shade_rays(backend, over_a_mirror(bulb()), np.tile(eye, (len(aims), 1)), directions)
+    image = eye * np.array([1.0, -1.0, 1.0])  # the eye's mirror image: the reflected ray is its line through aim
+    to_centre = np.asarray(BULB_AT) - image
+    unit = (aims - image) / np.linalg.norm(aims - image, axis=1, keepdims=True)
+    miss = np.linalg.norm(to_centre - (unit @ to_centre)[:, None] * unit, axis=1)
+    assert np.abs(miss - BULB_RADIUS).min() > 1e-6
+    inside = miss < BULB_RADIUS
+    assert inside.sum() > 50 and (~inside).sum() > 50
+    np.testing.assert_array_equal(colour[inside], np.broadcast_to(np.array(BULB) / BULB_RADIUS ** 2, colour[inside].shape))
+    np.testing.assert_array_equal(colour[~inside], np.broadcast_to(BACKDROP, colour[~inside].shape))
+
+
+def test_a_spot_lights_sphere_is_seen_only_within_its_cone(backend):
+    xs = BULB_AT[0] + np.array([-0.3, 0.0, 0.3])
+    down = bulb(kind="spot", direction=(0, -1, 0), spot_size=60.0)
+    colour, _ = shade_down(backend, over_a_mirror(down), xs, zs=[BULB_AT[2]], height=1.0)
+    np.testing.assert_array_equal(colour[0], np.broadcast_to(np.array(BULB) / BULB_RADIUS ** 2, (3, 3)))
+    for away in [(1, 0, 0), (0, 1, 0), (0.0, -1.0, 1.2)]:  # (the floor below it outside the cone: 90, 180, 50 degrees)
+        colour, _ = shade_down(backend, over_a_mirror(bulb(kind="spot", direction=away, spot_size=60.0)), xs,
+                               zs=[BULB_AT[2]], height=1.0)
+        np.testing.assert_array_equal(colour[0], np.broadcast_to(BACKDROP, (3, 3)))  # (and what is behind it shows)
+    # within the blend: times the factor of the direction from the light to the mirror point, as it lights it
+    tilted = bulb(kind="spot", direction=(0.0, -1.0, 0.5), spot_size=70.0, spot_blend=0.8)
+    colour, _ = shade_down(backend, over_a_mirror(tilted), xs, zs=[BULB_AT[2]], height=1.0)
+    axis = np.array([0.0, -1.0, 0.5]) / math.sqrt(1.25)
+    for column, x in enumerate(xs):
+        out = np.array([x, 0.0, BULB_AT[2]]) - np.asarray(BULB_AT)
+        factor = blender_spot(float(out @ axis) / np.linalg.norm(out), 70.0, 0.8)
+        assert 0.0 < factor < 1.0
+        np.testing.assert_allclose(colour[0, column], np.array(BULB) / BULB_RADIUS ** 2 * factor, rtol=1e-12)
+
+
+SUN_ANGLE = 10.0
+SKY = (0.4, 0.5, 0.6)
+
+
+def sun_over_a_mirror(angle=SUN_ANGLE, *others, tilt=(0.0, -1.0, 0.0), **fields):
+    sun = Light((0, 0, 0), SKY, kind="sun", direction=tilt, angle=angle, samples=4, **fields)
+    return over_a_mirror(sun, *others)
+
+
+def fan_down(degrees, height=1.0):
+    """Rays from (0, height, 0) down at the floor, each ``degrees`` from straight down (about the z axis): the
+    mirror sends each back up as many degrees from straight up."""
+    theta = np.radians(np.asarray(degrees, float))
+    directions = np.stack([np.sin(theta), -np.cos(theta), np.zeros_like(theta)], axis=1)
+    return np.tile([0.0, height, 0.0], (len(theta), 1)), directions
+
+
+def test_a_mirror_shows_the_suns_disk_with_its_radiance_and_angular_size(backend):
+    """A ray that escapes within angle / 2 of the direction to the sun sees colour / (2 (1 - cos(angle / 2))):
+    the irradiance pi colour with which the sun lights a white surface facing it, over the solid angle of its
+    disk, 2 pi (1 - cos(angle / 2)); beyond, the background."""
+    degrees = np.array([0.0, 1.0, 3.0, 4.9, 4.999, 5.001, 5.1, 7.0, 20.0, -4.99, -5.01])
+    colour, t = shade_rays(backend, sun_over_a_mirror(), *fan_down(degrees))
+    inside = np.abs(degrees) < SUN_ANGLE / 2
+    radiance = np.array(SKY) / (2.0 * (1.0 - math.cos(math.radians(SUN_ANGLE / 2))))
+    np.testing.assert_allclose(colour[inside], np.broadcast_to(radiance, colour[inside].shape), rtol=1e-12)
+    np.testing.assert_array_equal(colour[~inside], np.broadcast_to(BACKDROP, colour[~inside].shape))
+    # the units: radiance x solid angle is the irradiance pi E, E what the sun gives a white floor facing it
+    below, _ = shade_down(backend, lit(sun_over_a_mirror().lights[0]), [0.0])
+    solid_angle = 2 * np.pi * (1.0 - math.cos(math.radians(SUN_ANGLE / 2)))
+    np.testing.assert_allclose(colour[0] * solid_angle, np.pi * below[0, 0], rtol=1e-12)
+    # a tilted sun: the disk moves with it
+    tilted, _ = shade_rays(backend, sun_over_a_mirror(tilt=(-math.sin(0.5), -math.cos(0.5), 0.0)),
+                           *fan_down(np.degrees(0.5) + degrees))
+    np.testing.assert_array_equal(tilted[inside].min(axis=0) > BACKDROP, [True] * 3)
+    np.testing.assert_array_equal(tilted[~inside], np.broadcast_to(BACKDROP, tilted[~inside].shape))
+
+
+def test_the_sun_is_behind_everything_a_ray_meets(backend):
+    origins, directions = fan_down([0.0, 2.0])
+    ceiling = shape("square", translation(0, 2.5, 0) @ rotation(90, 1, 0, 0) @ scaling(50, 50, 1),
+                    ambient=(0, 0, 0), diffuse=(0, 0, 0), emissive=EMBER)
+    sun = Light((0, 0, 0), SKY, kind="sun", direction=(0, -1, 0), angle=SUN_ANGLE)
+    colour, _ = shade_rays(backend, over_a_mirror(sun, objects=[ceiling]), origins, directions)
+    np.testing.assert_array_equal(colour, np.broadcast_to(EMBER, colour.shape))  # (a surface: not the sky)
+    for lights in ([sun, bulb(position=(0.0, 3.0, 0.0))], [bulb(position=(0.0, 3.0, 0.0)), sun]):
+        colour, _ = shade_rays(backend, over_a_mirror(*lights), origins[:1], directions[:1])
+        np.testing.assert_array_equal(colour[0], np.array(BULB) / BULB_RADIUS ** 2)  # (the sphere, in either order)
+
+
+def test_the_nearest_seen_light_is_the_one_seen(backend):
+    lower_panel = Light((0.4, 2.0, -0.2), GLOW, kind="area", direction=(0, -1, 0), size=(0.4, 0.4), samples=4)
+    higher_panel = dataclasses.replace(lower_panel, position=(0.4, 4.0, -0.2))
+    for panel, expected in ((lower_panel, np.pi * np.array(GLOW)), (higher_panel, np.array(BULB) / BULB_RADIUS ** 2)):
+        for lights in ([panel, bulb()], [bulb(), panel]):
+            colour, _ = shade_down(backend, over_a_mirror(*lights), [BULB_AT[0]], zs=[BULB_AT[2]], height=1.0)
+            np.testing.assert_array_equal(colour[0, 0], expected)
+    ball = shape("sphere", translation(*BULB_AT) @ translation(0, -1.0, 0) @ scaling(0.2, 0.2, 0.2),
+                 ambient=(0, 0, 0), diffuse=(0, 0, 0), emissive=EMBER)
+    colour, _ = shade_down(backend, over_a_mirror(bulb(), objects=[ball]), [BULB_AT[0], BULB_AT[0] + 0.35],
+                           zs=[BULB_AT[2]], height=0.5)
+    np.testing.assert_array_equal(colour[0, 0], EMBER)  # (an object in front of it hides it)
+    np.testing.assert_array_equal(colour[0, 1], np.array(BULB) / BULB_RADIUS ** 2)
+
+
+def test_camera_rays_never_see_a_sphere_a_spot_or_the_sun(backend):
+    lights = [bulb(), bulb(kind="spot", position=(-2.0, 3.0, 0.0), direction=(0, -1, 0), spot_size=90.0),
+              Light((0, 0, 0), SKY, kind="sun", direction=(0, -1, 0), angle=SUN_ANGLE)]
+    scene = over_a_mirror(*lights)
+    assert "seen-lights" in compile_scene(scene).effects
+    origins = np.array([[0.4, 1.0, -0.2], [-2.0, 1.0, 0.0], [5.0, 1.0, 5.0], [0.4, 3.0, -0.2]])
+    colour, _ = shade_rays(backend, scene, origins, np.tile([0.0, 1.0, 0.0], (4, 1)))  # (up at each, one inside)
+    np.testing.assert_array_equal(colour, np.broadcast_to(BACKDROP, colour.shape))
+
+
+SEEN_KINDS = {"sphere": bulb(), "spot": bulb(kind="spot", direction=(0, -1, 0), spot_size=60.0),
+              "sun": Light((0, 0, 0), SKY, kind="sun", direction=(0, -1, 0), angle=SUN_ANGLE, samples=4)}
+
+
+@pytest.mark.parametrize("kind", sorted(SEEN_KINDS))
+def test_a_sphere_spot_or_sun_left_out_of_glossy_is_not_seen_in_a_mirror(backend, kind):
+    at = ([BULB_AT[0]], [BULB_AT[2]])
+    light = SEEN_KINDS[kind]
+    seen, _ = shade_down(backend, over_a_mirror(light), *at, height=1.0)
+    assert (seen > np.array(BACKDROP) + 0.1).all()
+    unseen, _ = shade_down(backend, over_a_mirror(switched(light, "visible_glossy")), *at, height=1.0)
+    np.testing.assert_array_equal(unseen[0, 0], BACKDROP)
+    still, _ = shade_down(backend, over_a_mirror(switched(light, "visible_transmission")), *at, height=1.0)
+    np.testing.assert_array_equal(still, seen)  # (a mirror ray is no transmission ray)
+
+
+@pytest.mark.parametrize("kind", sorted(SEEN_KINDS))
+def test_a_sphere_spot_or_sun_left_out_of_transmission_is_not_seen_through_glass(backend, kind):
+    slab = shape("cube", translation(0, 0.8, 0) @ scaling(3.0, 0.1, 3.0), ambient=(0, 0, 0), diffuse=(0, 0, 0),
+                 transparency=1.0)
+    origins, up = np.array([[BULB_AT[0], 0.2, BULB_AT[2]]]), np.array([[0.0, 1.0, 0.0]])
+    light = SEEN_KINDS[kind]
+
+    def through(*off):
+        return shade_rays(backend, scene_of(slab, lights=[switched(light, *off)], background=BACKDROP,
+                                            global_ambient=(0.0, 0.0, 0.0)), origins, up)[0]
+
+    seen = through()
+    assert (seen > np.array(BACKDROP) + 0.1).all()
+    np.testing.assert_array_equal(through("visible_transmission"), [BACKDROP])
+    np.testing.assert_array_equal(through("visible_glossy"), seen)  # (a refracted ray is no glossy ray)
+
+
+def test_lights_without_an_extent_are_never_seen_and_cost_nothing(backend):
+    """A sphere or spot of radius 0, a sun of angle 0 and SDL's point light: rays reflected straight at them see
+    the background, and the effect is not live (a scene of them, or of SDL's lights, pays nothing)."""
+    point_lights = [bulb(radius=0.0, samples=1), bulb(kind="spot", radius=0.0, samples=1, direction=(0, -1, 0)),
+                    Light(BULB_AT, BULB)]
+    for light in point_lights + [Light((0, 0, 0), SKY, kind="sun", direction=(0, -1, 0))]:
+        scene = over_a_mirror(light)
+        assert "seen-lights" not in compile_scene(scene).effects, light
+        colour, _ = shade_down(backend, scene, [BULB_AT[0]], zs=[BULB_AT[2]], height=1.0)
+        np.testing.assert_array_equal(colour[0, 0], BACKDROP)
+    for name in ("glass", "lecture", "textures"):  # (SDL's lights alone: their pictures stay as they were)
+        assert "seen-lights" not in compile_scene(tracer.load(SCENES / f"{name}.sdl")).effects, name
+
+
+def test_only_scenes_that_can_see_a_sphere_or_sun_pay_for_it():
+    for light in SEEN_KINDS.values():
+        assert "seen-lights" not in compile_scene(lit(light)).effects  # (nothing reflects or transmits)
+        assert "seen-lights" in compile_scene(over_a_mirror(light)).effects
+        assert "light-switches" not in compile_scene(over_a_mirror(light)).effects
+        hidden = compile_scene(over_a_mirror(switched(light, "visible_glossy"))).effects
+        assert "seen-lights" not in hidden  # (the mirror cannot see it)
+        other = SEEN_KINDS["sphere"] if light.kind == "sun" else SEEN_KINDS["sun"]
+        reads = compile_scene(over_a_mirror(switched(light, "visible_glossy"), other)).effects
+        assert {"seen-lights", "light-switches"} <= reads  # (the switch hides one of two seen lights)
+
+
 def test_model_refuses_switches_that_are_not_booleans():
     for name in SWITCHES:
         with pytest.raises(SceneError, match=name):
@@ -566,7 +814,6 @@ def test_sdl_writes_a_switched_light_as_the_light(tmp_path):
     assert again == parse_sdl(SDL_LIGHTS).lights  # (SDL has no words for the switches: on again)
 
 
-@needs_usd
 @needs_usd
 def test_usd_writes_a_switched_light_as_the_light(tmp_path):
     from tracer.usd import load_usd, save_usd
@@ -676,7 +923,6 @@ def test_editing_lights_in_place_renders_as_from_scratch(backend):
 
 
 @needs_usd
-@needs_usd
 def test_usd_round_trip_keeps_every_light_exactly_and_its_name(tmp_path):
     from tracer.usd import load_usd, save_usd
     scene = parse_sdl(SDL_LIGHTS.replace("ellipseLight 0 3 0 0 -1 0 1 1 0 2 2 2 1 1 9",
@@ -687,7 +933,6 @@ def test_usd_round_trip_keeps_every_light_exactly_and_its_name(tmp_path):
     assert again.warnings == []
 
 
-@needs_usd
 @needs_usd
 def test_usd_lights_are_usdlux_for_other_tools(tmp_path):
     from pxr import Usd, UsdLux

@@ -1377,31 +1377,33 @@ def effects_of_traits(scene: Scene, kinds: set[str], present: np.ndarray, any_bo
     if ("reflection" in effects and has["fresnel-reflects"]) or ("refraction" in effects and has["fresnel-transmits"]):
         effects.add("fresnel")
     if _seen_lights_live(scene, effects):
-        effects.add("seen-lights")  # (area lights seen in mirrors and through glass, as Cycles' are)
+        effects.add("seen-lights")  # (lights with an extent seen in mirrors and through glass, as Cycles' are)
     if _light_switches_live(scene, effects):
         effects.add("light-switches")
     return frozenset(effects)
 
 
 def _seen_lights_live(scene: Scene, effects: set[str]) -> bool:
-    """Whether a reflected ray (a mirror's, or glass's total internal reflection) may see an area light that
-    glossy rays see, or a refracted ray one that transmission rays see."""
-    areas = [light for light in scene.lights if light.kind == "area"]
-    return bool((effects & {"reflection", "refraction"} and any(light.visible_glossy for light in areas))
-                or ("refraction" in effects and any(light.visible_transmission for light in areas)))
+    """Whether a reflected ray (a mirror's, or glass's total internal reflection) may see a light with an
+    extent (an area light, a sphere or spot light of some radius, a sun of some angle: Light.seen_by_rays) that
+    glossy rays see, or a refracted ray one that transmission rays see.  Lights without one (SDL's, and a point
+    of radius 0) are never seen: a scene of them pays nothing."""
+    seen = [light for light in scene.lights if light.seen_by_rays]
+    return bool((effects & {"reflection", "refraction"} and any(light.visible_glossy for light in seen))
+                or ("refraction" in effects and any(light.visible_transmission for light in seen)))
 
 
 def _light_switches_live(scene: Scene, effects: set[str]) -> bool:
     """Whether a light's switch that is off changes what the live effects trace (the backends then read the
     switches: a light that casts no shadow where shadows are live, one left out of the diffuse or glossy
-    shading where lighting is, an area light that reflected (or, where refraction is live, refracted) rays do
-    not see where seen-lights is)."""
+    shading where lighting is, a light with an extent that reflected (or, where refraction is live, refracted)
+    rays do not see where seen-lights is)."""
     for light in scene.lights:
         if "shadows" in effects and not light.cast_shadow:
             return True
         if "lighting" in effects and not (light.visible_diffuse and light.visible_glossy):
             return True
-        if "seen-lights" in effects and light.kind == "area" and (
+        if "seen-lights" in effects and light.seen_by_rays and (
                 not light.visible_glossy or ("refraction" in effects and not light.visible_transmission)):
             return True
     return False

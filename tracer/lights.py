@@ -108,35 +108,101 @@ def _param(light: Light) -> list[float]:
 
 def seen_lights(table: LightTable, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray,
                 refracted: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Which rays meet the front of an area light before ``t_max`` (Cycles' area lights are seen by glossy and
-    transmission rays, not by the camera's), and the nearest one's radiance in the tracer's units: pi times its
-    colour (its colour is what the Lambert sum of a diffuse surface takes, radiance over pi, so that a white
-    surface under a sky of it would look like it).  The C core's seen_light, in its order of operations.
-    ``refracted``: which rays are transmitted ones (the others reflected), where the lights' switches count (the
-    effect light-switches): a light with visible_transmission off is not seen by the first, one with
-    visible_glossy off not by the second; None: every light is seen by every ray."""
+    """Which rays see a light with an extent (Cycles' lights are seen by glossy and transmission rays, not by
+    the camera's), and the nearest one's radiance in the tracer's units (a light's colour is what the Lambert
+    sum of a white diffuse surface takes: radiance over pi; docs/tracer.md, "Seen lights"):
+
+    * the front of an area light, met before ``t_max``: pi times its colour;
+    * the sphere of a sphere or spot light of radius r > 0, met before ``t_max``: colour / r^2 (its colour
+      lights a white surface facing it at distance x with colour / (x^2 + r^2): irradiance pi colour /
+      (x^2 + r^2), which a sphere of radiance L gives as pi L r^2 / (x^2 + r^2), a disk of its radius facing
+      the point as Cycles takes it; so L = colour / r^2, its intensity pi colour over the disk's area pi r^2);
+      a spot's times the spot factor of the direction from the light to the ray's origin, as its own light
+      is cut (outside its cone it is not seen);
+    * a sun of angle > 0, where the ray meets nothing else (``t_max`` infinite, no light met) and its
+      direction lies within angle / 2 of the sun's: colour / (2 (1 - cos(angle / 2))) (its colour lights a
+      white surface facing it with colour: irradiance pi colour over the solid angle 2 pi (1 - cos(angle / 2))).
+
+    The lights in their order, a later one seen where strictly nearer: the C core's seen_light, in its order
+    of operations.  ``refracted``: which rays are transmitted ones (the others reflected), where the lights'
+    switches count (the effect light-switches): a light with visible_transmission off is not seen by the
+    first, one with visible_glossy off not by the second; None: every light is seen by every ray."""
     n = origins.shape[0]
     seen, color, nearest = np.zeros(n, dtype=bool), np.zeros((n, 3)), np.array(t_max, dtype=float)
-    for light in np.flatnonzero(table.kind == AREA).tolist():
+    for light in np.flatnonzero(table.kind != POINT).tolist():
         eligible = True
         if refracted is not None:
             off = int(table.off[light])
             eligible = np.where(refracted, (off & OFF_TRANSMISSION) == 0, (off & OFF_GLOSSY) == 0)
             if not eligible.any():
                 continue
-        normal, u, v = table.frame[light, :3], table.frame[light, 3:6], table.frame[light, 6:9]
-        position = table.position[light]
-        facing = dot3(directions, normal)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t = dot3(position - origins, normal) / facing
-            q = origins + t[:, None] * directions - position
-            a, b = dot3(q, u) / dot3(u, u), dot3(q, v) / dot3(v, v)
-            inside = a * a + b * b <= 1.0 if table.param[light, 1] != 0.0 else (np.abs(a) <= 1.0) & (np.abs(b) <= 1.0)
-        met = (facing < 0.0) & (t > 0.0) & (t < nearest) & inside & eligible
+        kind, param, light_color = int(table.kind[light]), table.param[light], table.color[light]
+        if kind == SUN:
+            if not param[0] > 0.0:
+                continue
+            cos_alpha = -dot3(directions, table.frame[light, :3]) / np.sqrt(dot3(directions, directions))
+            met = eligible & ~seen & (nearest == np.inf) & (1.0 - cos_alpha <= param[0])
+            seen |= met  # (nearest stays infinite: a light met at any distance is in front of the sun)
+            color[met] = light_color / (2.0 * param[0])
+            continue
+        if kind == AREA:
+            t = _area_meets(table, light, origins, directions)
+            radiance = np.pi * light_color
+        else:
+            r2 = param[0] * param[0]
+            if not r2 > 0.0:
+                continue
+            t = _sphere_meets(table.position[light], r2, origins, directions)
+            factor = _spot_seen(table, light, origins) if kind == SPOT else 1.0
+            radiance = light_color / r2 * np.reshape(factor, (-1, 1))
+        met = (t > 0.0) & (t < nearest) & eligible
+        if kind == SPOT:
+            met &= factor > 0.0
         nearest[met] = t[met]
         seen |= met
-        color[met] = np.pi * table.color[light]
+        color[met] = np.broadcast_to(radiance, color.shape)[met]
     return seen, color
+
+
+def _area_meets(table: LightTable, light: int, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The distance along each ray (units of its direction) at which it meets the front of area light
+    ``light``, or 0 where it does not (its back, or its plane, is not seen): the C core's area_meets."""
+    normal, u, v = table.frame[light, :3], table.frame[light, 3:6], table.frame[light, 6:9]
+    position = table.position[light]
+    facing = dot3(directions, normal)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = dot3(position - origins, normal) / facing
+        q = origins + t[:, None] * directions - position
+        a, b = dot3(q, u) / dot3(u, u), dot3(q, v) / dot3(v, v)
+        inside = a * a + b * b <= 1.0 if table.param[light, 1] != 0.0 else (np.abs(a) <= 1.0) & (np.abs(b) <= 1.0)
+    return np.where((facing < 0.0) & (t > 0.0) & inside, t, 0.0)
+
+
+def _sphere_meets(centre: np.ndarray, r2: float, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The nearest positive root of |o + t d - centre|^2 = r2 per ray, or 0 where it misses the sphere (the
+    discriminant as r2 |d|^2 - |d x (o - centre)|^2: it keeps its digits for a light far from the origin); the
+    C core's sphere_meets."""
+    oc = origins - centre
+    d = directions
+    across = np.stack([d[:, 1] * oc[:, 2] - d[:, 2] * oc[:, 1], d[:, 2] * oc[:, 0] - d[:, 0] * oc[:, 2],
+                       d[:, 0] * oc[:, 1] - d[:, 1] * oc[:, 0]], axis=1)
+    a, b = dot3(d, d), dot3(d, oc)
+    disc = a * r2 - dot3(across, across)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        root = np.sqrt(disc)
+        near, far = (-b - root) / a, (-b + root) / a
+    t = np.where(near > 0.0, near, far)
+    return np.where((disc >= 0.0) & (t > 0.0), t, 0.0)
+
+
+def _spot_seen(table: LightTable, light: int, origins: np.ndarray) -> np.ndarray:
+    """Spot light ``light``'s cone factor towards each ray's origin (spot_factor of the direction from the light
+    to it, as the spot lights a point there)."""
+    to = table.position[light] - origins
+    with np.errstate(divide="ignore", invalid="ignore"):  # (an origin at the light's centre: no direction, 0)
+        s = to / np.sqrt(dot3(to, to))[:, None]
+    _, cos_half, blend_width, _ = table.param[light]
+    return spot_factor(-dot3(s, table.frame[light, :3]), cos_half, blend_width)
 
 
 # ------------------------------------------------------------------------------------------------ sampling

@@ -771,8 +771,8 @@ class Light:
     #: The switches of Blender scenes (docs/tracer.md, "Lights"; neither SDL nor USD carries them), all on by
     #: default.  Off: ``cast_shadow``, no shadow rays (it lights a point as if nothing were in the way);
     #: ``visible_diffuse``, no Lambert term; ``visible_glossy``, no highlight (Phong/Blinn or Cook-Torrance),
-    #: and an area light not seen by reflected rays; ``visible_transmission``, an area light not seen by
-    #: refracted rays.
+    #: and the light not seen by reflected rays; ``visible_transmission``, not seen by refracted rays (a light
+    #: with an extent, seen_by_rays, is seen by both: docs/tracer.md, "Seen lights").
     cast_shadow: bool = True
     visible_diffuse: bool = True
     visible_glossy: bool = True
@@ -794,6 +794,12 @@ class Light:
         """Whether its shadows are soft (it has an extent: shadow rays go to several points of it)."""
         return (self.kind == "area" or (self.kind in ("sphere", "spot") and self.radius > 0.0)
                 or (self.kind == "sun" and self.angle > 0.0))
+
+    @property
+    def seen_by_rays(self) -> bool:
+        """Whether reflected and refracted rays may see it (the effect ``seen-lights``): a light with an extent
+        (an area light, a sphere or spot of some radius, a sun of some angle); a point is never seen."""
+        return self.soft
 
     @property
     def lights_surfaces(self) -> bool:

@@ -364,7 +364,7 @@ class Tracer:
         if origins.shape[0] == 0:
             return out
         hits = first_hits(self.scene, origins, directions)
-        if "seen-lights" in self.effects:  # (a reflected or refracted ray may see an area light instead)
+        if "seen-lights" in self.effects:  # (a reflected or refracted ray may see a light instead)
             if "light-switches" in self.effects and refracted is None:
                 refracted = np.zeros(origins.shape[0], dtype=bool)
             seen, radiance = lights.seen_lights(self.scene.lights, origins, directions, hits.t,

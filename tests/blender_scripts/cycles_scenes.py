@@ -94,6 +94,27 @@ def soft_lights_scene() -> dict:
     return objects
 
 
+def mirrored_lights_scene(watts: float, radius: float, strength: float, angle_degrees: float) -> None:
+    """A mirror plane (Principled, Metallic 1, Roughness 0, white) seen from 2.5 above by a camera looking
+    straight down, a point light of ``watts`` and ``radius`` 2 above it to the left, a sun of ``strength`` and
+    ``angle_degrees`` tilted 12 degrees to the right, no world: the mirror shows the light's sphere in the
+    picture's left half and the sun's disk in its right half, on black."""
+    fresh()
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_plane_add(size=20)
+    _add(bpy.context.object, _material("mirror", **{"Base Color": (1.0, 1.0, 1.0, 1.0), "Metallic": 1.0,
+                                                    "Roughness": 0.0}))
+    bpy.ops.object.light_add(type="POINT", location=(-0.8, 0.0, 2.0))
+    point = bpy.context.object.data
+    point.energy, point.shadow_soft_size = watts, radius
+    bpy.ops.object.light_add(type="SUN", rotation=(0.0, math.radians(12.0), 0.0))
+    sun = bpy.context.object.data
+    sun.energy, sun.angle = strength, math.radians(angle_degrees)
+    bpy.ops.object.camera_add(location=(0.0, 0.0, 2.5))
+    scene.camera = bpy.context.object
+    scene.world = None
+
+
 def _pointing(direction):
     """Euler angles that turn a light's -Z to ``direction``."""
     from mathutils import Vector
@@ -154,8 +175,8 @@ def shown(linear: np.ndarray) -> np.ndarray:
 
 def cycles_without_lights_in_mirrors(samples: int) -> np.ndarray:
     """Cycles' picture with the lights hidden from glossy rays: what a mirror shows without the images of the
-    lights themselves (Whitted's rays do not see lights; a Cycles mirror shows an area light, a sphere light
-    or the sun's disk)."""
+    lights themselves (the book's Whitted rays do not see lights; a Cycles mirror, as the tracer's now, shows
+    an area light, a sphere light or the sun's disk): how much of a mirror's difference those images are."""
     lights = [obj for obj in bpy.data.objects if obj.type == "LIGHT"]
     for light in lights:
         light.visible_glossy = False

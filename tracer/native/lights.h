@@ -126,33 +126,96 @@ static double visible_share(const Scene *S, Work *w, const ShadePoint *p, int64_
     return unblocked / (double)n;
 }
 
-/* tracer.lights.seen_lights: whether a reflected or refracted ray meets the front of an area light before
- * t_max (Cycles' area lights are seen by glossy and transmission rays, not by the camera's); then `out` is the
- * nearest one's radiance in the tracer's units: pi times its colour (its colour is what the Lambert sum of a
- * diffuse surface takes, radiance over pi, so that a white surface under a sky of it would look like it).
- * Where use_switches, a refracted ray (`refracted`) does not see a light with visible_transmission off, a
- * reflected one a light with visible_glossy off. */
+/* tracer.lights._area_meets: the distance along the ray (units of d) at which it meets the front of area light
+ * `l`, or 0 where it does not (its back, or its plane, is not seen). */
+static double area_meets(const SceneDesc *D, int64_t l, const double *o, const double *d)
+{
+    const double *normal = D->light_frame + 9 * l, *u = normal + 3, *v = normal + 6;
+    const double *pos = D->light_pos + 3 * l;
+    double facing = dot3(d, normal), to[3] = {pos[0] - o[0], pos[1] - o[1], pos[2] - o[2]};
+    double t = dot3(to, normal) / facing, q[3];
+    for (int i = 0; i < 3; i++)
+        q[i] = o[i] + t * d[i] - pos[i];
+    double a = dot3(q, u) / dot3(u, u), b = dot3(q, v) / dot3(v, v);
+    int inside = D->light_param[4 * l + 1] != 0.0 ? a * a + b * b <= 1.0 : fabs(a) <= 1.0 && fabs(b) <= 1.0;
+    return facing < 0.0 && t > 0.0 && inside ? t : 0.0;
+}
+
+/* tracer.lights._sphere_meets: the nearest positive root of |o + t d - centre|^2 = radius^2 (the discriminant
+ * as radius^2 |d|^2 - |d x (o - centre)|^2, which keeps its digits for a light far from the ray's origin), or 0
+ * where the ray misses the sphere. */
+static double sphere_meets(const double *centre, double r2, const double *o, const double *d)
+{
+    double oc[3] = {o[0] - centre[0], o[1] - centre[1], o[2] - centre[2]}, across[3];
+    cross3(d, oc, across);
+    double a = dot3(d, d), b = dot3(d, oc), disc = a * r2 - dot3(across, across);
+    if (!(disc >= 0.0))
+        return 0.0;
+    double root = sqrt(disc), t = (-b - root) / a;
+    if (!(t > 0.0))
+        t = (-b + root) / a;
+    return t > 0.0 ? t : 0.0;
+}
+
+/* tracer.lights.seen_lights: whether a reflected or refracted ray sees a light with an extent (Cycles' lights
+ * are seen by glossy and transmission rays, not by the camera's); then `out` is the radiance of the nearest,
+ * in the tracer's units (a colour is what the Lambert sum of a white diffuse surface takes: radiance over pi):
+ * - the front of an area light, before t_max: pi times its colour (a white surface under a sky of it would
+ *   look like it);
+ * - the sphere of a sphere or spot light of radius r > 0, before t_max: colour / r^2 (its colour lights a white
+ *   surface facing it at distance x with colour / (x^2 + r^2), irradiance pi colour / (x^2 + r^2), which is
+ *   pi L r^2 / (x^2 + r^2) for a sphere (a disk facing the point, as Cycles takes it) of radiance L: L =
+ *   colour / r^2, the intensity pi colour over the disk's area pi r^2), a spot's times the spot factor of the
+ *   direction from the light to the ray's origin, as its own light is cut (not seen outside its cone);
+ * - a sun of angle > 0, where the ray meets nothing else (t_max infinite, no light before) and its direction
+ *   lies within angle/2 of the sun's: colour / (2 (1 - cos(angle/2))) (its colour lights a white surface facing
+ *   it with colour: irradiance pi colour, spread over the disk's solid angle 2 pi (1 - cos(angle/2))).
+ * The lights in their order; a later one is seen where it is strictly nearer.  Where use_switches, a refracted
+ * ray (`refracted`) does not see a light with visible_transmission off, a reflected one a light with
+ * visible_glossy off. */
 static int seen_light(const SceneDesc *D, const double *o, const double *d, double t_max, int use_switches,
                       int refracted, double *out)
 {
     int seen = 0;
     int32_t unseen = refracted ? LIGHT_OFF_VISIBLE_TRANSMISSION : LIGHT_OFF_VISIBLE_GLOSSY;
     for (int64_t l = 0; l < D->n_lights; l++) {
-        if (D->light_kind[l] != LIGHT_AREA || (use_switches && (D->light_off[l] & unseen)))
+        int32_t kind = D->light_kind[l];
+        const double *param = D->light_param + 4 * l, *lc = D->light_color + 3 * l;
+        if (kind == LIGHT_POINT || (use_switches && (D->light_off[l] & unseen)))
             continue;
-        const double *normal = D->light_frame + 9 * l, *u = normal + 3, *v = normal + 6;
-        const double *pos = D->light_pos + 3 * l;
-        double facing = dot3(d, normal), to[3] = {pos[0] - o[0], pos[1] - o[1], pos[2] - o[2]};
-        double t = dot3(to, normal) / facing, q[3];
-        for (int i = 0; i < 3; i++)
-            q[i] = o[i] + t * d[i] - pos[i];
-        double a = dot3(q, u) / dot3(u, u), b = dot3(q, v) / dot3(v, v);
-        int inside = D->light_param[4 * l + 1] != 0.0 ? a * a + b * b <= 1.0 : fabs(a) <= 1.0 && fabs(b) <= 1.0;
-        if (facing < 0.0 && t > 0.0 && t < t_max && inside) {  /* (its back, or its plane, is not seen) */
+        if (kind == LIGHT_AREA) {
+            double t = area_meets(D, l, o, d);
+            if (t > 0.0 && t < t_max) {
+                t_max = t;
+                seen = 1;
+                for (int c = 0; c < 3; c++)
+                    out[c] = M_PI_VALUE * lc[c];
+            }
+        } else if (kind == LIGHT_SUN) {
+            if (!(param[0] > 0.0) || seen || t_max != INFINITY)
+                continue;
+            double cos_alpha = -dot3(d, D->light_frame + 9 * l) / sqrt(dot3(d, d));
+            if (1.0 - cos_alpha <= param[0]) {
+                seen = 1;  /* (t_max stays infinite: a light met at any distance is in front of the sun) */
+                for (int c = 0; c < 3; c++)
+                    out[c] = lc[c] / (2.0 * param[0]);
+            }
+        } else {  /* a sphere or spot light */
+            const double *pos = D->light_pos + 3 * l;
+            double r2 = param[0] * param[0], t = r2 > 0.0 ? sphere_meets(pos, r2, o, d) : 0.0, factor = 1.0;
+            if (!(t > 0.0 && t < t_max))
+                continue;
+            if (kind == LIGHT_SPOT) {
+                double to[3] = {pos[0] - o[0], pos[1] - o[1], pos[2] - o[2]};
+                double length = sqrt(dot3(to, to)), s[3] = {to[0] / length, to[1] / length, to[2] / length};
+                factor = spot_factor(-dot3(s, D->light_frame + 9 * l), param[1], param[2]);
+                if (!(factor > 0.0))
+                    continue;
+            }
             t_max = t;
             seen = 1;
             for (int c = 0; c < 3; c++)
-                out[c] = M_PI_VALUE * D->light_color[3 * l + c];
+                out[c] = lc[c] / r2 * factor;
         }
     }
     return seen;

@@ -690,12 +690,7 @@ class PrimitiveTable:
         stacked (see _stacked_matrices) or a table's (N, 12) affines, None when some matrix is not a float64
         4x4."""
         n = len(shapes)
-        self.shapes = shapes
-        self.tolerances = numerics.TOLERANCES
-        self.material_ids = material_ids
-        self.kind = np.asarray(kind, dtype=np.int16)
-        self.meshes: dict[int, object] = {}
-        self._mesh_owners: dict[int, MeshData] = {}
+        self._take_rows(shapes, kind, material_ids)
         if matrices is None:  # (a matrix that is not a float64 4x4: _checked_inverse says which, or copes)
             matrices = _stack_checked(shapes)
         self._matrices = matrices
@@ -714,6 +709,16 @@ class PrimitiveTable:
         self.parameters = _traced_parameters(self.kind, parameters)
         self._fill_sizes_and_bounds()
         self._matrices = None  # (the shapes' or the table's own: not kept twice)
+
+    def _take_rows(self, shapes: Sequence[Shape], kind: np.ndarray, material_ids: np.ndarray) -> None:
+        """What every table keeps of its rows as given: the shapes, kinds and material ids; the tolerances;
+        no mesh built yet."""
+        self.shapes = shapes
+        self.tolerances = numerics.TOLERANCES
+        self.material_ids = material_ids
+        self.kind = np.asarray(kind, dtype=np.int16)
+        self.meshes: dict[int, object] = {}
+        self._mesh_owners: dict[int, MeshData] = {}
 
     def _fill_rows(self, rows, matrix: np.ndarray) -> None:
         """Inverses, their rounding and norms, and the bounds of the kinds with a fixed generic box, of
@@ -1002,21 +1007,18 @@ class InstancedTable(PrimitiveTable):
     same way.  10^5 instances of a mesh then cost ~30 compiled bytes each instead of 248.
 
     ``slot`` (N,) int32: each row's index into ``stored``, the PrimitiveTable of the other rows (analytic
-    shapes, and any mesh row whose cofactor inverse or box is not finite), or -1 for an instance row.
-    ``object_boxes`` (N, 6) float32: every row's padded world box rounded outward (flatten's object boxes).
-    The NumPy path reads every row's numbers as a PrimitiveTable's (``inverses``, ``rounding_terms``,
-    ``spheres``, ``boxes`` and their views), made for all rows when it first asks.  Never edited in place:
+    shapes, and any mesh row whose cofactor inverse or box is not finite or whose matrix LAPACK refuses), or
+    -1 for an instance row.  ``object_boxes`` (N, 6) float32: every row's padded world box rounded outward
+    (flatten's object boxes).  The NumPy path reads the numbers of the rows it asks for (numbers_of), and
+    every row's as a PrimitiveTable's (``inverses``, ``rounding_terms``, ``spheres``, ``boxes`` and their
+    views), made for all rows at once, past _ROWS_ALONE rows asked for one by one.  Never edited in place:
     tracer.edit makes a table into Shapes first."""
 
     def __init__(self, shapes: "_RowShapes", kind: np.ndarray, parameters: np.ndarray, material_ids: np.ndarray):
         columns = shapes.columns
         n = len(shapes)
-        self.shapes = shapes
-        self.tolerances = numerics.TOLERANCES
-        self.material_ids = material_ids
-        self.kind = np.asarray(kind, dtype=np.int16)
-        self.meshes: dict[int, object] = {}
-        self._mesh_owners: dict[int, MeshData] = {}
+        self._take_rows(shapes, kind, material_ids)
+        self._asked = 0  # (rows whose numbers numbers_of computed alone)
         self.affines = columns.affines
         traced = _traced_parameters(self.kind, parameters)
         # (the table's own where they are what the kinds trace, as a mesh's zeros: not held twice)
@@ -1075,7 +1077,7 @@ class InstancedTable(PrimitiveTable):
         not of every row (what the NumPy path's whole traces read, made once and kept)."""
         kept = self.__dict__.get("_every_row_arrays")
         if kept is None and np.ndim(rows) == 0:  # (one primitive made: past a few, a whole NumPy trace's)
-            self._asked = getattr(self, "_asked", 0) + 1
+            self._asked += 1
             if self._asked > _ROWS_ALONE:
                 kept = self._every_row()
         if kept is not None:
